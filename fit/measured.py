@@ -1,0 +1,283 @@
+"""In-memory measured BRDF types on the MERL (theta_h, theta_d, phi_d) grid and its projection.
+
+The MERL-MIT layout samples an isotropic BRDF on 90 x 90 x 180 bins:
+
+* theta_h in [0, pi/2): bin ``i`` covers ``sqrt(theta_h / (pi/2)) * 90`` in ``[i, i+1)``
+  (denser near the specular peak); bin centre ``((i + 0.5) / 90)**2 * pi/2``.
+* theta_d in [0, pi/2): bin ``j`` covers ``theta_d / (pi/2) * 90`` in ``[j, j+1)``;
+  centre ``(j + 0.5) / 90 * pi/2``.
+* phi_d in [0, pi) (reciprocity folds phi_d and phi_d + pi together): bin ``k`` covers
+  ``phi_d / pi * 180`` in ``[k, k+1)``; centre ``(k + 0.5) / 180 * pi``.
+
+Values are RGB reflectance in 1/sr, *without* the cosine factor (conventions.md).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .angles import directions_to_half_diff
+from .errors import BRDFFileError
+
+N_THETA_H = 90
+N_THETA_D = 90
+N_PHI_D = 180
+MERL_SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
+HALF_PI = 0.5 * np.pi
+
+
+def theta_h_centres() -> np.ndarray:
+    """Bin centres of theta_h in radians, shape (90,)."""
+    return ((np.arange(N_THETA_H) + 0.5) / N_THETA_H) ** 2 * HALF_PI
+
+
+def theta_d_centres() -> np.ndarray:
+    """Bin centres of theta_d in radians, shape (90,)."""
+    return (np.arange(N_THETA_D) + 0.5) / N_THETA_D * HALF_PI
+
+
+def phi_d_centres() -> np.ndarray:
+    """Bin centres of phi_d in radians in [0, pi), shape (180,)."""
+    return (np.arange(N_PHI_D) + 0.5) / N_PHI_D * np.pi
+
+
+def theta_h_index(theta_h) -> np.ndarray:
+    """MERL bin of theta_h (radians): ``floor(90 * sqrt(theta_h / (pi/2)))``, clamped."""
+    t = np.clip(np.asarray(theta_h, float), 0.0, None)
+    return np.clip(np.floor(np.sqrt(t / HALF_PI) * N_THETA_H), 0, N_THETA_H - 1).astype(np.intp)
+
+
+def theta_d_index(theta_d) -> np.ndarray:
+    """MERL bin of theta_d (radians): ``floor(theta_d / (pi/2) * 90)``, clamped."""
+    t = np.asarray(theta_d, float)
+    return np.clip(np.floor(t / HALF_PI * N_THETA_D), 0, N_THETA_D - 1).astype(np.intp)
+
+
+def phi_d_index(phi_d) -> np.ndarray:
+    """MERL bin of phi_d (radians), folded to [0, pi) by reciprocity, clamped."""
+    p = np.mod(np.asarray(phi_d, float), np.pi)
+    return np.clip(np.floor(p / np.pi * N_PHI_D), 0, N_PHI_D - 1).astype(np.intp)
+
+
+def _above_horizon(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    return (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+
+
+@dataclass
+class MeasuredBRDF:
+    """An isotropic RGB BRDF tabulated on the MERL (theta_h, theta_d, phi_d) grid.
+
+    Attributes
+    ----------
+    values : float64 array (90, 90, 180, 3)
+        Reflectance in 1/sr, channel scales already applied. Entries where ``valid`` is
+        False hold 0 and are never used by statistics.
+    valid : bool array (90, 90, 180, 3)
+        True where the bin holds a measured sample (False: no sample / below horizon).
+    name : str
+        Material name (file stem by default).
+    source : str
+        Path of the file it was read from ("" if built in memory).
+    source_sha256 : str
+        sha256 of the source file's bytes ("" if built in memory).
+    """
+
+    values: np.ndarray
+    valid: np.ndarray
+    name: str = "brdf"
+    source: str = ""
+    source_sha256: str = ""
+    metadata: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.values = np.asarray(self.values, dtype=np.float64)
+        self.valid = np.asarray(self.valid, dtype=bool)
+        if self.values.shape != MERL_SHAPE + (3,):
+            raise BRDFFileError(self.source or None,
+                                f"values must have shape {MERL_SHAPE + (3,)}, got {self.values.shape}")
+        if self.valid.shape != self.values.shape:
+            raise BRDFFileError(self.source or None, "valid mask shape differs from values shape")
+        self.values = np.where(self.valid, self.values, 0.0)
+
+    # Bin-centre coordinates -------------------------------------------------------------
+    @property
+    def theta_h(self) -> np.ndarray:
+        """theta_h bin centres (radians), shape (90,)."""
+        return theta_h_centres()
+
+    @property
+    def theta_d(self) -> np.ndarray:
+        """theta_d bin centres (radians), shape (90,)."""
+        return theta_d_centres()
+
+    @property
+    def phi_d(self) -> np.ndarray:
+        """phi_d bin centres (radians, [0, pi)), shape (180,)."""
+        return phi_d_centres()
+
+    @property
+    def valid_fraction(self) -> float:
+        return float(self.valid.mean())
+
+    # Evaluation -------------------------------------------------------------------------
+    def lookup(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        """Nearest-bin values for Rusinkiewicz angles; shape ``broadcast(...) + (3,)``.
+
+        Bins without a sample return 0.
+        """
+        i = theta_h_index(theta_h)
+        j = theta_d_index(theta_d)
+        k = phi_d_index(phi_d)
+        i, j, k = np.broadcast_arrays(i, j, k)
+        return self.values[i, j, k]
+
+    def evaluate(self, wi, wo) -> np.ndarray:
+        """rho(wi, wo) in 1/sr by nearest-bin lookup with the MERL conventions.
+
+        ``wi``, ``wo``: unit vectors ``(..., 3)`` in the local frame. Returns ``(..., 3)``;
+        0 where either direction is at or below the tangent plane.
+        """
+        wi = np.asarray(wi, float)
+        wo = np.asarray(wo, float)
+        th, _, td, pd = directions_to_half_diff(wi, wo)
+        out = self.lookup(th, td, pd)
+        return np.where(_above_horizon(*np.broadcast_arrays(wi, wo))[..., None], out, 0.0)
+
+    @classmethod
+    def from_function(cls, func, name: str = "analytic") -> "MeasuredBRDF":
+        """Tabulate ``func(wi, wo) -> (..., 3)`` at the bin centres.
+
+        Triplets whose light or view direction is at or below the horizon are marked invalid,
+        as in measured MERL files.
+        """
+        from .angles import half_diff_to_directions
+
+        th = theta_h_centres()[:, None, None]
+        td = theta_d_centres()[None, :, None]
+        pd = phi_d_centres()[None, None, :]
+        wi, wo = half_diff_to_directions(th, 0.0, td, pd)
+        vals = np.asarray(func(wi, wo), dtype=np.float64)
+        vals = np.broadcast_to(vals, MERL_SHAPE + (3,)).copy()
+        valid = np.broadcast_to(_above_horizon(wi, wo)[..., None], vals.shape).copy()
+        return cls(values=vals, valid=valid, name=name)
+
+
+@dataclass
+class ProjectedBRDF:
+    """A BRDF projected onto the (theta_h, theta_d) plane: one statistic per cluster.
+
+    Each (theta_h, theta_d) cluster gathers the valid samples of its 180 phi_d bins.
+
+    Attributes
+    ----------
+    value : float64 (90, 90, 3)
+        The representative value of each cluster (the ``statistic``; median by default),
+        NaN where the cluster has no valid sample.
+    median, mean, variance : float64 (90, 90, 3)
+        Per-cluster median, arithmetic mean and population variance (NaN when empty).
+    count : int (90, 90, 3)
+        Number of valid samples in each cluster, per channel.
+    n_below_horizon : int (90, 90)
+        Number of phi_d triplets of each cluster whose light or view direction is at or
+        below the tangent plane (computed from geometry at bin centres).
+    statistic : str
+        Which statistic ``value`` holds.
+    grazing_cutoff_deg : float or None
+        If set, samples with max(theta_i, theta_o) (or theta_d, see ``grazing_angle``)
+        above this angle were dropped before the statistics.
+    """
+
+    value: np.ndarray
+    median: np.ndarray
+    mean: np.ndarray
+    variance: np.ndarray
+    count: np.ndarray
+    n_below_horizon: np.ndarray
+    statistic: str = "median"
+    grazing_cutoff_deg: float | None = None
+    grazing_angle: str = "theta_io"
+    name: str = "brdf"
+    source: str = ""
+    source_sha256: str = ""
+
+    @property
+    def theta_h(self) -> np.ndarray:
+        """theta_h cluster centres (radians), shape (90,)."""
+        return theta_h_centres()
+
+    @property
+    def theta_d(self) -> np.ndarray:
+        """theta_d cluster centres (radians), shape (90,)."""
+        return theta_d_centres()
+
+    @property
+    def normalized_variance(self) -> np.ndarray:
+        """variance / mean**2 per cluster (NaN where the mean is 0 or the cluster empty)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nv = self.variance / self.mean**2
+        return np.where(np.isfinite(nv), nv, np.nan)
+
+    def lookup(self, theta_h, theta_d) -> np.ndarray:
+        """Nearest-cluster ``value`` for (theta_h, theta_d) in radians; empty clusters give 0."""
+        i = theta_h_index(theta_h)
+        j = theta_d_index(theta_d)
+        v = self.value[np.broadcast_arrays(i, j)]
+        return np.nan_to_num(v, nan=0.0)
+
+    def evaluate(self, wi, wo) -> np.ndarray:
+        """rho(wi, wo) in 1/sr from the projected table (nearest cluster); ``(..., 3)``."""
+        wi = np.asarray(wi, float)
+        wo = np.asarray(wo, float)
+        th, _, td, _ = directions_to_half_diff(wi, wo)
+        out = self.lookup(th, td)
+        return np.where(_above_horizon(*np.broadcast_arrays(wi, wo))[..., None], out, 0.0)
+
+    # Persistence ------------------------------------------------------------------------
+    def save(self, path) -> None:
+        """Write an ``.npz`` with every array and the metadata (format ``rbrdf-projected/1``)."""
+        np.savez_compressed(
+            path, format="rbrdf-projected", version=1,
+            value=self.value, median=self.median, mean=self.mean, variance=self.variance,
+            count=self.count, n_below_horizon=self.n_below_horizon,
+            theta_h=self.theta_h, theta_d=self.theta_d,
+            statistic=self.statistic,
+            grazing_cutoff_deg=np.nan if self.grazing_cutoff_deg is None else self.grazing_cutoff_deg,
+            grazing_angle=self.grazing_angle, name=self.name, source=self.source,
+            source_sha256=self.source_sha256,
+        )
+
+    @classmethod
+    def load(cls, path) -> "ProjectedBRDF":
+        """Read a file written by :meth:`save`; clear error if it is not one."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if str(z["format"]) != "rbrdf-projected":
+                    raise BRDFFileError(path, "not an rbrdf projected-BRDF file")
+                if int(z["version"]) != 1:
+                    raise BRDFFileError(path, f"unsupported projected-BRDF version {int(z['version'])}")
+                cut = float(z["grazing_cutoff_deg"])
+                return cls(
+                    value=z["value"], median=z["median"], mean=z["mean"], variance=z["variance"],
+                    count=z["count"], n_below_horizon=z["n_below_horizon"],
+                    statistic=str(z["statistic"]),
+                    grazing_cutoff_deg=None if np.isnan(cut) else cut,
+                    grazing_angle=str(z["grazing_angle"]), name=str(z["name"]),
+                    source=str(z["source"]), source_sha256=str(z["source_sha256"]),
+                )
+        except BRDFFileError:
+            raise
+        except (OSError, KeyError, ValueError) as e:
+            raise BRDFFileError(path, f"cannot read projected BRDF ({e.__class__.__name__}: {e})") from None
+
+
+def file_sha256(path) -> str:
+    """Hex sha256 of a file's bytes."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(Path(path), "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()

@@ -1,0 +1,48 @@
+"""Shared test fixtures.
+
+Data are found through ``RBRDF_DATA`` (default ``../shared/data`` from the project root).
+Locally, tests that need data skip when it is missing; under CI (``CI=true``) a missing data
+file is a failure, never a skip.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
+IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
+
+RGL_MATERIALS = (
+    "cc_ibiza_sunset_rgb",
+    "cc_iris_purple_gem_rgb",
+    "colodur_napoli_4f_rgb",
+    "paper_white_rgb",
+    "satin_rosaline_rgb",
+    "vch_golden_yellow_rgb",
+)
+
+
+def data_file(relative: str) -> Path:
+    """Path of a shared data file; skip (locally) or fail (CI) if it is missing."""
+    p = DATA / relative
+    if not p.exists():
+        msg = f"shared data file missing: {p} (set RBRDF_DATA)"
+        if IN_CI:
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return p
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    return DATA
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _warp_cache(tmp_path_factory):
+    """Keep Warp's kernel cache inside the checkout unless the caller chose one."""
+    os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
+    yield
