@@ -82,7 +82,8 @@ def project(brdf: MeasuredBRDF, statistic: str = "median",
         x0 = np.where(v, x, 0.0)
         total = x0.sum(axis=-1)
         mean = total / n
-        variance = np.maximum((x0 * x0).sum(axis=-1) / n - mean * mean, 0.0)
+        dev = np.where(v, x - mean[..., None], 0.0)  # two-pass: no cancellation
+        variance = (dev * dev).sum(axis=-1) / n
         stats = {"median": median, "mean": mean}
         if statistic == "geometric":
             logs = np.where(v, np.log(np.where(v, x, 1.0)), 0.0)

@@ -1,0 +1,31 @@
+"""Analytic BRDFs used to build exact-layout MERL files in the tests (1/sr, RGB)."""
+from __future__ import annotations
+
+import numpy as np
+
+from fit.angles import directions_to_half_diff
+
+
+def lambert(albedo=(0.8, 0.5, 0.2)):
+    a = np.asarray(albedo, float) / np.pi
+
+    def f(wi, wo):
+        shape = np.broadcast_shapes(np.shape(wi), np.shape(wo))[:-1]
+        return np.broadcast_to(a, shape + (3,))
+
+    return f
+
+
+def glossy_lobe(exponent=80.0, kd=(0.05, 0.04, 0.03), ks=(0.6, 0.7, 0.8), phi_mod=0.0):
+    """Blinn-Phong-like lobe in theta_h, with an optional cos(2 phi_d) term that makes the
+    value depend on phi_d (reciprocal: invariant under phi_d -> phi_d + pi)."""
+    kd = np.asarray(kd, float) / np.pi
+    ks = np.asarray(ks, float) * (exponent + 2) / (2 * np.pi)
+
+    def f(wi, wo):
+        th, _, td, pd = directions_to_half_diff(wi, wo)
+        lobe = np.cos(np.clip(th, 0, np.pi / 2)) ** exponent
+        mod = 1.0 + phi_mod * np.cos(2 * pd) * np.sin(td)
+        return (kd + ks * lobe[..., None]) * mod[..., None]
+
+    return f
