@@ -1,0 +1,1 @@
+"""warp-rbrdf renderer: NVIDIA Warp kernels (CPU device) for measured and rational BRDFs."""
