@@ -1,0 +1,160 @@
+"""Tabulated sampling densities of rho(v, l) cos(theta_l) and their inverse CDFs.
+
+For a view direction at polar angle ``theta_v`` (azimuth 0), a light direction is written
+``(theta_l, phi_l)`` with ``phi_l`` measured from the view's azimuth (isotropy). The sampling
+density in solid angle is factored as
+
+    pdf(l) = p_theta(theta_l) * p_phi(phi_l | theta_l) / sin(theta_l)
+
+with ``p_theta`` a density per radian on [0, pi/2] and ``p_phi`` a density per radian on
+[-pi, pi], symmetric in phi_l (only [0, pi] is tabulated). Both are piecewise constant on a
+regular (theta_l, phi_l) grid of cells; the cell masses are integrals of the luminance of
+``rho * cos(theta_l) * sin(theta_l)`` by a midpoint rule with ``sub x sub`` points per cell.
+
+Each theta_v row is a mixture ``(1 - eps) * BRDF part + eps * cosine part`` (cosine-weighted
+hemisphere discretized on the same cells), so every direction of the upper hemisphere has a
+positive density: the estimators stay unbiased even where the table misses a thin lobe. Rows
+whose BRDF mass is zero or below ``noise`` times the largest row mass (grazing views, black
+materials) fall back to the pure cosine part; they are listed in ``row_fallback``.
+
+Arrays: ``theta_v`` (n_v,) row angles (bin centres on [0, pi/2)); ``cdf_theta`` (n_v, n_t + 1);
+``cdf_phi`` (n_v, n_t, n_p + 1) over phi in [0, pi]. Angles are in radians.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .angles import spherical_to_direction
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec.709
+
+
+@dataclass
+class CDFTable:
+    theta_v: np.ndarray
+    cdf_theta: np.ndarray
+    cdf_phi: np.ndarray
+    row_fallback: np.ndarray
+    eps: float
+    albedo: np.ndarray  # (n_v,) luminance directional albedo estimated from the table
+
+    @property
+    def n_v(self) -> int:
+        return self.theta_v.size
+
+    @property
+    def n_t(self) -> int:
+        return self.cdf_theta.shape[1] - 1
+
+    @property
+    def n_p(self) -> int:
+        return self.cdf_phi.shape[2] - 1
+
+    def row(self, theta_v) -> np.ndarray:
+        """Row index for view angle(s) ``theta_v`` (bins of width (pi/2)/n_v)."""
+        t = np.asarray(theta_v, float)
+        return np.clip(np.floor(t / (0.5 * np.pi) * self.n_v), 0, self.n_v - 1).astype(np.intp)
+
+    # --- sampling --------------------------------------------------------------------------
+    def sample(self, theta_v, mu, tau):
+        """Inverse-CDF sampling. Returns ``(theta_l, phi_l, pdf)`` with pdf in 1/sr.
+
+        ``mu`` picks theta_l (inverse of the marginal CDF, linear inside a cell); ``tau`` picks
+        phi_l in [-pi, pi] through the symmetric conditional CDF (tau < 1/2: negative phi_l).
+        """
+        v = self.row(theta_v)
+        mu, tau = np.broadcast_arrays(np.asarray(mu, float), np.asarray(tau, float))
+        v = np.broadcast_to(v, mu.shape)
+        cdf_t = self.cdf_theta[v]  # (..., n_t + 1)
+        j = np.clip((cdf_t <= mu[..., None]).sum(-1) - 1, 0, self.n_t - 1)
+        c0 = np.take_along_axis(cdf_t, j[..., None], -1)[..., 0]
+        c1 = np.take_along_axis(cdf_t, (j + 1)[..., None], -1)[..., 0]
+        m_t = c1 - c0
+        dt = 0.5 * np.pi / self.n_t
+        frac = np.where(m_t > 0, (mu - c0) / np.where(m_t > 0, m_t, 1), 0.5)
+        theta_l = (j + np.clip(frac, 0, 1)) * dt
+        # symmetric conditional in phi
+        s = np.where(tau < 0.5, -1.0, 1.0)
+        u = np.abs(2.0 * tau - 1.0)
+        cdf_p = self.cdf_phi[v, j]  # (..., n_p + 1)
+        k = np.clip((cdf_p <= u[..., None]).sum(-1) - 1, 0, self.n_p - 1)
+        q0 = np.take_along_axis(cdf_p, k[..., None], -1)[..., 0]
+        q1 = np.take_along_axis(cdf_p, (k + 1)[..., None], -1)[..., 0]
+        m_p = q1 - q0
+        dp = np.pi / self.n_p
+        fp = np.where(m_p > 0, (u - q0) / np.where(m_p > 0, m_p, 1), 0.5)
+        phi_l = s * (k + np.clip(fp, 0, 1)) * dp
+        pdf = (m_t / dt) * (0.5 * m_p / dp) / np.maximum(np.sin(theta_l), 1e-300)
+        return theta_l, phi_l, pdf
+
+    def pdf(self, theta_v, theta_l, phi_l) -> np.ndarray:
+        """Density in 1/sr of :meth:`sample` at light direction ``(theta_l, phi_l)``; 0 below
+        the horizon."""
+        v = self.row(theta_v)
+        tl = np.asarray(theta_l, float)
+        pl = np.abs(np.angle(np.exp(1j * np.asarray(phi_l, float))))  # fold to [0, pi]
+        v, tl, pl = np.broadcast_arrays(v, tl, pl)
+        dt = 0.5 * np.pi / self.n_t
+        dp = np.pi / self.n_p
+        j = np.clip(np.floor(tl / dt), 0, self.n_t - 1).astype(np.intp)
+        k = np.clip(np.floor(pl / dp), 0, self.n_p - 1).astype(np.intp)
+        m_t = self.cdf_theta[v, j + 1] - self.cdf_theta[v, j]
+        m_p = self.cdf_phi[v, j, k + 1] - self.cdf_phi[v, j, k]
+        p = (m_t / dt) * (0.5 * m_p / dp) / np.maximum(np.sin(tl), 1e-300)
+        return np.where((tl >= 0) & (tl < 0.5 * np.pi), p, 0.0)
+
+
+def _cosine_cell_masses(n_t: int, n_p: int):
+    """Exact masses of the cosine-weighted hemisphere density on the (theta, phi in [0, pi]) cells."""
+    edges = np.linspace(0, 0.5 * np.pi, n_t + 1)
+    m_t = 0.5 * (np.sin(edges[1:]) ** 2 - np.sin(edges[:-1]) ** 2)  # sums to 1/2 ... normalized below
+    m_t = m_t / m_t.sum()
+    m_p = np.full(n_p, 1.0 / n_p)
+    return m_t, m_p
+
+
+def tabulate(evaluate, n_v: int = 32, n_t: int = 64, n_p: int = 64, sub: int = 3,
+             eps: float = 0.02, noise: float = 1e-6, chunk_rows: int = 4) -> CDFTable:
+    """Tabulate the inverse-CDF sampler of ``evaluate(wi, wo) -> (..., 3)`` (1/sr, RGB).
+
+    ``wi`` is the light, ``wo`` the view. Cell masses use the Rec.709 luminance of
+    ``rho * cos(theta_l) * sin(theta_l)`` (negative values clamped to 0).
+    """
+    if not 0.0 < eps <= 1.0:
+        raise ValueError("eps must be in (0, 1]: it keeps every direction sampleable")
+    theta_v = (np.arange(n_v) + 0.5) / n_v * 0.5 * np.pi
+    dt = 0.5 * np.pi / n_t
+    dp = np.pi / n_p
+    # sub-sample points inside each cell (midpoint rule)
+    ft = (np.arange(n_t * sub) + 0.5) / (n_t * sub) * 0.5 * np.pi
+    fp = (np.arange(n_p * sub) + 0.5) / (n_p * sub) * np.pi
+    tt, pp = np.meshgrid(ft, fp, indexing="ij")
+    wi = spherical_to_direction(tt, pp)
+    weight = np.cos(tt) * np.sin(tt) * (dt / sub) * (dp / sub)
+    mass = np.empty((n_v, n_t, n_p))
+    for r0 in range(0, n_v, chunk_rows):
+        rows = theta_v[r0:r0 + chunk_rows]
+        wo = spherical_to_direction(rows, np.zeros_like(rows))[:, None, None, :]
+        f = np.asarray(evaluate(wi[None], wo), float) @ LUMINANCE
+        f = np.maximum(np.nan_to_num(f, nan=0.0, posinf=0.0), 0.0) * weight
+        mass[r0:r0 + chunk_rows] = f.reshape(len(rows), n_t, sub, n_p, sub).sum(axis=(2, 4))
+    total = mass.sum(axis=(1, 2))  # half-hemisphere luminance albedo / 2
+    albedo = 2.0 * total
+    fallback = (total <= 0) | (total < noise * max(total.max(), 0.0))
+    cm_t, cm_p = _cosine_cell_masses(n_t, n_p)
+    cos_mass = cm_t[:, None] * cm_p[None, :]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        brdf_mass = np.where(fallback[:, None, None], 0.0, mass / np.where(total > 0, total, 1)[:, None, None])
+    w_brdf = np.where(fallback, 0.0, 1.0 - eps)
+    mix = w_brdf[:, None, None] * brdf_mass + (1.0 - w_brdf)[:, None, None] * cos_mass
+    # marginal in theta, conditional in phi
+    m_t = mix.sum(axis=2)
+    cdf_theta = np.concatenate([np.zeros((n_v, 1)), np.cumsum(m_t, axis=1)], axis=1)
+    cdf_theta /= cdf_theta[:, -1:]
+    cond = mix / m_t[..., None]
+    cdf_phi = np.concatenate([np.zeros((n_v, n_t, 1)), np.cumsum(cond, axis=2)], axis=2)
+    cdf_phi /= cdf_phi[..., -1:]
+    return CDFTable(theta_v=theta_v, cdf_theta=cdf_theta, cdf_phi=cdf_phi, row_fallback=fallback,
+                    eps=eps, albedo=albedo)
