@@ -649,10 +649,14 @@ class RGLBRDF:
         return r.reshape(shape[:-1])
 
     # -- MERL grid ------------------------------------------------------------------------
-    def to_measured(self):
+    def to_measured(self, horizon_margin_deg: float = 1.0):
         """Resample at the MERL (theta_h, theta_d, phi_d) bin centres (phi_h = 0).
 
-        Bins whose light or view direction is at or below the horizon are invalid (value 0).
+        Bins whose light or view direction is at or below the horizon are invalid (value 0),
+        and so are bins within ``horizon_margin_deg`` of it: there the stored f*cos(theta_o)
+        is divided by a cosine below sin(margin) and the values explode (up to ~1e7 1/sr on
+        the glossy films at cos(theta_o) ~ 1e-5, against <= 31 in the file). Set 0 to keep
+        every above-horizon bin.
         """
         from .angles import half_diff_to_directions
         from .measured import MERL_SHAPE, MeasuredBRDF, phi_d_centres, theta_d_centres, theta_h_centres
@@ -662,7 +666,9 @@ class RGLBRDF:
         pd = phi_d_centres()[None, None, :]
         wi, wo = half_diff_to_directions(th, 0.0, td, pd)
         vals = self.evaluate(wi, wo)
-        valid = np.broadcast_to(((wi[..., 2] > 0.0) & (wo[..., 2] > 0.0))[..., None],
+        c_min = max(np.sin(np.radians(horizon_margin_deg)), 0.0)
+        above = (wi[..., 2] > c_min) & (wo[..., 2] > c_min)
+        valid = np.broadcast_to(above[..., None],
                                 MERL_SHAPE + (3,)).copy()
         m = MeasuredBRDF(values=vals, valid=valid, name=self.name, source=self.source,
                          source_sha256=self.source_sha256)
@@ -673,6 +679,7 @@ class RGLBRDF:
             "rgb_resolution": [int(self.rgb.shape[2]), int(self.rgb.shape[3])],
             "n_theta_i": int(self.theta_i.size),
             "negative_values_clamped": self.n_negative_clamped,
+            "horizon_margin_deg": float(horizon_margin_deg),
         })
         return m
 
