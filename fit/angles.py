@@ -38,7 +38,8 @@ def spherical_to_direction(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
 def direction_to_spherical(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(theta, phi)`` of unit vector(s) ``v`` (shape ``(..., 3)``); phi in (-pi, pi]."""
     v = np.asarray(v, float)
-    theta = np.arccos(np.clip(v[..., 2], -1.0, 1.0))
+    # atan2 keeps full precision near the poles, where acos loses half the digits.
+    theta = np.arctan2(np.hypot(v[..., 0], v[..., 1]), v[..., 2])
     phi = np.arctan2(v[..., 1], v[..., 0])
     return theta, phi
 

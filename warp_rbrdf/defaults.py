@@ -1,0 +1,68 @@
+"""The embedded default scene: a sphere on a plane under a procedural sky.
+
+It needs no file outside the package, so ``rbrdf render`` works on a fresh clone. The sphere
+uses a rational BRDF shipped in ``warp_rbrdf/data/*.json`` when one exists (and the rational
+material is available); otherwise a Lambert fallback.
+"""
+from __future__ import annotations
+
+from .paths import PACKAGE_DATA
+from .scene import Scene, parse_scene
+
+DEFAULT_TOML = """
+[camera]
+origin = [0.0, 1.6, 4.2]
+target = [0.0, 0.8, 0.0]
+up = [0.0, 1.0, 0.0]
+fov = 35.0
+resolution = [256, 256]
+
+[integrator]
+spp = 16
+seed = 0
+max_depth = 1
+sampler = "mis"
+
+[materials.sphere]
+{sphere_material}
+
+[materials.floor]
+type = "lambert"
+albedo = [0.45, 0.45, 0.45]
+
+[[shapes]]
+type = "sphere"
+center = [0.0, 0.8, 0.0]
+radius = 0.8
+material = "sphere"
+
+[[shapes]]
+type = "plane"
+size = [8.0, 8.0]
+material = "floor"
+
+[[lights]]
+type = "sky"
+sun_elevation = 40.0
+sun_azimuth = 140.0
+"""
+
+LAMBERT_FALLBACK = 'type = "lambert"\nalbedo = [0.7, 0.35, 0.2]'
+
+
+def shipped_coefficient_files():
+    return sorted(PACKAGE_DATA.glob("*.json")) if PACKAGE_DATA.is_dir() else []
+
+
+def default_material_toml() -> str:
+    from .rational_material import rational_available
+
+    files = shipped_coefficient_files()
+    if files and rational_available():
+        return f'type = "rational"\nfile = "pkg:{files[0].name}"'
+    return LAMBERT_FALLBACK
+
+
+def default_scene() -> Scene:
+    return parse_scene(DEFAULT_TOML.format(sphere_material=default_material_toml()),
+                       path="<default scene>")

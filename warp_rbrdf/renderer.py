@@ -1,0 +1,210 @@
+"""Python API: build a scene for Warp and render it.
+
+>>> from warp_rbrdf import load_scene, render
+>>> img = render(load_scene("scenes/sphere.toml"), spp=16, seed=1)   # (H, W, 3) float32, linear
+
+:class:`Renderer` keeps the built scene (BVH, tables, compiled kernels) for repeated renders and
+reports setup, compile and render times separately.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import RenderError, SceneError
+from .scene import Scene
+
+
+@dataclass
+class RenderStats:
+    width: int
+    height: int
+    spp: int
+    threads: int
+    device: str
+    setup_seconds: float      # loading files, building tables and the BVH
+    compile_seconds: float    # code generation + Warp compile (or kernel-cache load)
+    render_seconds: float     # the render itself (wall clock, all tiles)
+    tiles: int
+
+    @property
+    def samples(self) -> int:
+        return self.width * self.height * self.spp
+
+    @property
+    def samples_per_second(self) -> float:
+        return self.samples / self.render_seconds if self.render_seconds > 0 else float("inf")
+
+
+class Renderer:
+    """A scene built for one Warp device. ``render()`` can be called many times."""
+
+    def __init__(self, scene: Scene, device: str = "cpu"):
+        from .runtime import get_device, init_warp
+
+        wp = init_warp()
+        self.wp = wp
+        self.scene = scene
+        self.device = get_device(device)
+        t0 = time.perf_counter()
+        self._build()
+        self.setup_seconds = time.perf_counter() - t0
+        self.compile_seconds = None
+
+    # ------------------------------------------------------------------------------------------
+    def _build(self):
+        from . import camera, geometry, lights, materials
+
+        wp, dev, sc = self.wp, self.device, self.scene
+        used = []
+        for sh in sc.shapes:
+            if sh.material not in used:
+                used.append(sh.material)
+        self.material_data = materials.build_material_data(sc, used)
+        index = {n: i for i, n in enumerate(used)}
+        geom = geometry.build_geometry(sc, index)
+        self.geometry = geom
+        if geom.num_triangles == 0:  # a degenerate triangle far away: never hit
+            geom = geometry.Geometry(points=np.full((3, 3), 1e20, np.float32),
+                                     indices=np.arange(3, dtype=np.int32), normals=np.tile([0, 1, 0], (3, 1)).astype(np.float32),
+                                     material=np.zeros(1, np.int32), smooth=np.zeros(1, np.int32),
+                                     bbox_min=np.zeros(3), bbox_max=np.zeros(3))
+        self.mesh = geometry.make_warp_mesh(geom, dev)
+        self.indices = wp.array(geom.indices, dtype=int, device=dev)
+        self.normals = wp.array(geom.normals, dtype=wp.vec3, device=dev)
+        self.tri_mat = wp.array(geom.material, dtype=int, device=dev)
+        self.tri_smooth = wp.array(geom.smooth, dtype=int, device=dev)
+        eps = sc.integrator.ray_epsilon
+        if eps <= 0:
+            extent = max(self.geometry.diagonal, 1e-3) if self.geometry.num_triangles else 1.0
+            eps = 1e-5 * extent
+        self.ray_epsilon = float(eps)
+
+        self.camera = camera.make_camera_struct(sc.camera)
+        env_spec = sc.environment
+        self.env_data = None
+        if env_spec is not None:
+            img = lights.environment_image(env_spec, sc.path, f"lights[{sc.lights.index(env_spec)}]")
+            self.env_data = lights.build_env_distribution(img, env_spec.rotation)
+        self.env = lights.make_env_struct(self.env_data, dev)
+        dirs, irr = [], []
+        o = np.asarray(sc.camera.origin, float)
+        t = np.asarray(sc.camera.target, float)
+        for l in sc.directional_lights:
+            to_light = (o - t) if l.colinear_with_view else -np.asarray(l.direction, float)
+            dirs.append(to_light / np.linalg.norm(to_light))
+            irr.append(l.irradiance)
+        self.directional = lights.make_directional_struct(np.array(dirs, np.float32).reshape(-1, 3),
+                                                          np.array(irr, np.float32).reshape(-1, 3), dev)
+        self.materials = materials.make_materials_struct(self.material_data, dev)
+
+    def compile(self):
+        """Generate and compile (or load from the kernel cache) the scene's kernels."""
+        if self.compile_seconds is not None:
+            return self.compile_seconds
+        from . import integrator, rational_material
+
+        t0 = time.perf_counter()
+        rfuncs = rational_material.generate_functions(self.material_data.rational)
+        src = integrator.generate_source(self.material_data.kinds_used, rfuncs)
+        self.module = integrator.load_generated_module(src)
+        self.wp.load_module(self.module, device=self.device)
+        self.compile_seconds = time.perf_counter() - t0
+        return self.compile_seconds
+
+    # ------------------------------------------------------------------------------------------
+    def render(self, spp: int | None = None, seed: int | None = None, threads: int | None = None,
+               progress: bool = False, return_variance: bool = False):
+        """Render; returns the (H, W, 3) float32 linear image (the mean of ``spp`` samples).
+
+        With ``return_variance=True`` also returns the per-pixel sample variance (H, W, 3)
+        (divide by spp for the variance of the pixel mean). ``self.stats`` holds the timings.
+        """
+        from . import integrator, sampling
+
+        wp = self.wp
+        self.compile()
+        it = self.scene.integrator
+        spp = int(it.spp if spp is None else spp)
+        seed = int(it.seed if seed is None else seed)
+        if spp < 1:
+            raise RenderError(f"spp must be >= 1, got {spp}")
+        if not 0 <= seed < 2**32:
+            raise RenderError(f"seed must be in [0, 2^32), got {seed}")
+        threads = int(threads or os.cpu_count() or 1)
+        W, H = self.scene.camera.resolution
+        dev = self.device
+        mean = wp.zeros(W * H, dtype=wp.vec3, device=dev)
+        sq = wp.zeros(W * H, dtype=wp.vec3, device=dev)
+        tile = it.tile_size if dev.is_cpu else max(W, H)
+        tl = integrator.tiles(W, H, tile)
+        k = self.module.render_tile
+        fixed = [self.mesh.id, self.indices, self.normals, self.tri_mat, self.tri_smooth,
+                 self.camera, self.env, self.directional, self.materials,
+                 spp, seed, sampling.PATTERN_CODES[it.pattern], it.max_depth,
+                 1 if it.hide_environment else 0, self.ray_epsilon]
+
+        def one(t):
+            x0, y0, tw, th = t
+            wp.launch(k, dim=tw * th, inputs=fixed + [x0, y0, tw], outputs=[mean, sq], device=dev)
+            if not dev.is_cpu:
+                wp.synchronize_device(dev)
+
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(tl), unit="tile", desc="render", leave=False)
+        t0 = time.perf_counter()
+        try:
+            integrator.launch_tiles(one, tl, threads if dev.is_cpu else 1, bar)
+            wp.synchronize_device(dev)
+        finally:
+            if bar is not None:
+                bar.close()
+        dt = time.perf_counter() - t0
+        self.stats = RenderStats(W, H, spp, threads if dev.is_cpu else 1, str(dev), self.setup_seconds,
+                                 self.compile_seconds, dt, len(tl))
+        img = mean.numpy().reshape(H, W, 3)
+        if return_variance:
+            var = np.maximum(sq.numpy().reshape(H, W, 3) - img.astype(np.float64) ** 2, 0.0)
+            var *= spp / max(spp - 1, 1)
+            return img, var.astype(np.float32)
+        return img
+
+    def eval_material(self, name: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+        """Evaluate material ``name`` with the Warp code at local direction pairs (N, 3)."""
+        wp = self.wp
+        self.compile()
+        if name not in self.material_data.names:
+            raise RenderError(f"material {name!r} is not used by any shape of the scene")
+        m = self.material_data.names.index(name)
+        wi = np.ascontiguousarray(wi, np.float32).reshape(-1, 3)
+        wo = np.ascontiguousarray(wo, np.float32).reshape(-1, 3)
+        out = wp.zeros(len(wi), dtype=wp.vec3, device=self.device)
+        wp.launch(self.module.eval_bsdf_kernel, dim=len(wi),
+                  inputs=[self.materials, m, wp.array(wi, dtype=wp.vec3, device=self.device),
+                          wp.array(wo, dtype=wp.vec3, device=self.device)],
+                  outputs=[out], device=self.device)
+        return out.numpy()
+
+
+def render(scene, spp: int | None = None, seed: int | None = None, device: str = "cpu",
+           threads: int | None = None, progress: bool = False) -> np.ndarray:
+    """Render ``scene`` (a :class:`~warp_rbrdf.scene.Scene`, a TOML path, or None for the
+    embedded default) and return the linear (H, W, 3) float32 image."""
+    if scene is None:
+        from .defaults import default_scene
+
+        scene = default_scene()
+    elif not isinstance(scene, Scene):
+        from .scene import load_scene
+
+        scene = load_scene(scene)
+    return Renderer(scene, device=device).render(spp=spp, seed=seed, threads=threads, progress=progress)
+
+
+__all__ = ["Renderer", "RenderStats", "render", "RenderError", "SceneError"]

@@ -1,0 +1,44 @@
+"""Warp initialisation: kernel cache folder, quiet logging, device selection."""
+from __future__ import annotations
+
+import os
+import threading
+
+from .errors import RenderError
+from .paths import PROJECT_ROOT
+
+_lock = threading.Lock()
+_initialised = False
+
+
+def init_warp():
+    """Initialise Warp once: cache in ``$WARP_CACHE_PATH`` (default ``<project>/.warp_cache``)."""
+    global _initialised
+    import warp as wp
+
+    with _lock:
+        if not _initialised:
+            wp.config.kernel_cache_dir = os.environ.get("WARP_CACHE_PATH",
+                                                        str(PROJECT_ROOT / ".warp_cache"))
+            wp.config.log_level = wp.LOG_WARNING
+            wp.config.quiet = True
+            wp.init()
+            _initialised = True
+    return wp
+
+
+def get_device(name: str = "cpu"):
+    """The Warp device for ``name`` (``"cpu"``, ``"cuda"``, ``"cuda:N"``); clear error if absent."""
+    wp = init_warp()
+    name = (name or "cpu").strip().lower()
+    if name.startswith("cuda"):
+        if not wp.is_cuda_available():
+            raise RenderError(f"device {name!r} requested but CUDA is not available on this "
+                              "machine (no CUDA driver/GPU found); use --device cpu")
+        try:
+            return wp.get_device(name)
+        except Exception as e:  # noqa: BLE001 - Warp raises plain exceptions for bad ordinals
+            raise RenderError(f"device {name!r}: {e}") from None
+    if name != "cpu":
+        raise RenderError(f"unknown device {name!r}; expected 'cpu', 'cuda' or 'cuda:N'")
+    return wp.get_device("cpu")
