@@ -158,3 +158,66 @@ def tabulate(evaluate, n_v: int = 32, n_t: int = 64, n_p: int = 64, sub: int = 3
     cdf_phi /= cdf_phi[..., -1:]
     return CDFTable(theta_v=theta_v, cdf_theta=cdf_theta, cdf_phi=cdf_phi, row_fallback=fallback,
                     eps=eps, albedo=albedo)
+
+
+# --- tabulated inverse CDFs (targets of the rational fits, plots) ------------------------------
+def _inverse_theta_rows(table: CDFTable, mu) -> np.ndarray:
+    """CDF^-1_v(mu) -> theta_l for every row: shape (n_v, len(mu)). Piecewise linear (the
+    inverse of the piecewise-linear CDF of the piecewise-constant density)."""
+    edges = np.linspace(0.0, 0.5 * np.pi, table.n_t + 1)
+    mu = np.asarray(mu, float)
+    return np.stack([np.interp(mu, table.cdf_theta[v], edges) for v in range(table.n_v)])
+
+
+def _inverse_phi_rows(table: CDFTable, theta_l, u) -> np.ndarray:
+    """|phi_l| = CDF^-1_v(u | theta_l) on [0, pi] for u in [0, 1] (the half-range conditional;
+    phi_l = sign(tau - 1/2) |phi_l| with u = |2 tau - 1|): shape (n_v, len(theta_l), len(u))."""
+    edges = np.linspace(0.0, np.pi, table.n_p + 1)
+    dt = 0.5 * np.pi / table.n_t
+    j = np.clip(np.floor(np.asarray(theta_l, float) / dt), 0, table.n_t - 1).astype(np.intp)
+    u = np.asarray(u, float)
+    out = np.empty((table.n_v, len(j), len(u)))
+    for v in range(table.n_v):
+        for a, jj in enumerate(j):
+            out[v, a] = np.interp(u, table.cdf_phi[v, jj], edges)
+    return out
+
+
+def _interp_rows(table: CDFTable, values: np.ndarray, theta_v) -> np.ndarray:
+    """Linear interpolation of per-row ``values`` (n_v, ...) between row centres (constant
+    beyond the first/last centre) at view angles ``theta_v`` (1-D)."""
+    tv = np.asarray(theta_v, float)
+    x = np.clip(tv, table.theta_v[0], table.theta_v[-1])
+    i = np.clip(np.searchsorted(table.theta_v, x) - 1, 0, table.n_v - 2)
+    w = (x - table.theta_v[i]) / (table.theta_v[i + 1] - table.theta_v[i])
+    w = w.reshape((-1,) + (1,) * (values.ndim - 1))
+    return (1 - w) * values[i] + w * values[i + 1]
+
+
+def inverse_cdf_theta(table: CDFTable, theta_v, mu) -> np.ndarray:
+    """Tabulated CDF^-1_v(mu) on a (theta_v, mu) grid, shape (len(theta_v), len(mu)), linearly
+    interpolated between row centres in theta_v (the table itself uses the nearest row)."""
+    return _interp_rows(table, _inverse_theta_rows(table, mu), np.atleast_1d(theta_v))
+
+
+def inverse_cdf_phi(table: CDFTable, theta_v, theta_l, u) -> np.ndarray:
+    """Tabulated half-range CDF^-1_v(u | theta_l) -> |phi_l| in [0, pi] on a (theta_v, theta_l,
+    u) grid, shape (len(theta_v), len(theta_l), len(u)); rows interpolated as above."""
+    return _interp_rows(table, _inverse_phi_rows(table, np.atleast_1d(theta_l), u), np.atleast_1d(theta_v))
+
+
+def pdf_theta(table: CDFTable, theta_v) -> tuple:
+    """(cell edges, PDF_v(theta_l) per radian on each cell) of the row of ``theta_v``."""
+    v = int(table.row(theta_v))
+    dt = 0.5 * np.pi / table.n_t
+    return np.linspace(0, 0.5 * np.pi, table.n_t + 1), np.diff(table.cdf_theta[v]) / dt
+
+
+def pdf_phi(table: CDFTable, theta_v, theta_l) -> tuple:
+    """(cell edges on [-pi, pi], PDF_v(phi_l | theta_l) per radian) of the row/cell."""
+    v = int(table.row(theta_v))
+    j = int(np.clip(np.floor(theta_l / (0.5 * np.pi / table.n_t)), 0, table.n_t - 1))
+    dp = np.pi / table.n_p
+    half = 0.5 * np.diff(table.cdf_phi[v, j]) / dp
+    edges = np.linspace(-np.pi, np.pi, 2 * table.n_p + 1)
+    return edges, np.concatenate([half[::-1], half])

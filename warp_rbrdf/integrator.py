@@ -7,8 +7,11 @@ according to the ``sampler`` of the material that was hit:
 * ``"light"`` and ``"mis"``: one environment sample (2-D luminance CDF, see
   :mod:`warp_rbrdf.lights`) with one shadow ray;
 * ``"cosine"``, ``"uniform"`` and ``"mis"``: one BSDF sample (cosine / uniform hemisphere; the
-  strategy of ``"mis"`` is the material's BSDF sampler, cosine for now) with one ray; if it
-  escapes, the environment is added, weighted by the power heuristic for ``"mis"``;
+  strategy of ``"mis"`` is cosine) with one ray; if it escapes, the environment is added,
+  weighted by the power heuristic for ``"mis"``;
+* ``"tabulated"``, ``"rational"``, ``"rational-derivative"``: one BSDF sample from the
+  material's inverse-CDF sampler (:mod:`warp_rbrdf.cdf_sampling`), no light sample;
+  ``"mis-tabulated"`` / ``"mis-rational"``: like ``"mis"`` with that BSDF strategy;
 * ``max_depth = 1`` stops there (direct lighting); ``max_depth > 1`` continues the path along the
   BSDF sample (``"light"`` then uses the cosine strategy for the continuation only).
 
@@ -39,9 +42,12 @@ from warp_rbrdf import camera as C
 from warp_rbrdf import lights as L
 from warp_rbrdf import materials as M
 from warp_rbrdf import sampling as S
+from warp_rbrdf import cdf_sampling as CS
 
 MAX_DEPTH_STATIC = 0
 {rational_code}
+
+{cdf_code}
 
 @wp.func
 def bsdf_eval(mats: M.Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
@@ -51,19 +57,65 @@ def bsdf_eval(mats: M.Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
 
 
 @wp.func
+def is_mis(sampler: int) -> int:
+    if sampler == M.SAMPLER_MIS or sampler == M.SAMPLER_MIS_TABULATED or sampler == M.SAMPLER_MIS_RATIONAL:
+        return 1
+    return 0
+
+
+@wp.func
+def rational_cdf_sample(r: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
+{cdf_branches}
+    return wp.vec3(0.0, 0.0, 0.0)
+
+
+@wp.func
 def bsdf_sample(mats: M.Materials, m: int, sampler: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
-    """Sample wi for the BSDF strategy of ``sampler``; returns (wi, pdf) in the local frame."""
+    """Sample wi for the BSDF strategy of ``sampler``; returns (wi, weight) in the local frame
+    with weight = 1/pdf (pdf samplers) or alpha (derivative estimator); weight <= 0: no sample."""
     if sampler == M.SAMPLER_UNIFORM:
         w = S.sample_uniform_hemisphere(xi)
-        return wp.vec4(w[0], w[1], w[2], S.pdf_uniform_hemisphere(w))
+        return wp.vec4(w[0], w[1], w[2], 1.0 / S.pdf_uniform_hemisphere(w))
+    if sampler >= M.SAMPLER_TABULATED:
+        b = m * M.N_CDF_INFO
+        va = CS.view_angles(wo)
+        r = mats.cdf_info[b + 5]
+        if r >= 0 and (sampler == M.SAMPLER_RATIONAL or sampler == M.SAMPLER_RATIONAL_DERIV
+                       or sampler == M.SAMPLER_MIS_RATIONAL):
+            q = rational_cdf_sample(r, va[0], xi[0], xi[1])
+            wl = CS.local_dir(q[0], va[1] + q[1])
+            wgt = q[2]                       # derivative estimator: alpha
+            if sampler == M.SAMPLER_RATIONAL and q[2] > 0.0:
+                pdf = 1.0 / q[2]             # standard estimator: pdf of the map (eq. 3)
+                wgt = 1.0 / pdf
+            return wp.vec4(wl[0], wl[1], wl[2], wgt)
+        q = CS.tab_sample(mats.cdf_t, mats.cdf_p, mats.cdf_info[b], mats.cdf_info[b + 1],
+                          mats.cdf_info[b + 2], mats.cdf_info[b + 3], mats.cdf_info[b + 4],
+                          va[0], xi[0], xi[1])
+        wl = CS.local_dir(q[0], va[1] + q[1])
+        wgt = 0.0
+        if q[2] > 0.0:
+            wgt = 1.0 / q[2]
+        return wp.vec4(wl[0], wl[1], wl[2], wgt)
     w = S.sample_cosine_hemisphere(xi)
-    return wp.vec4(w[0], w[1], w[2], S.pdf_cosine_hemisphere(w))
+    return wp.vec4(w[0], w[1], w[2], 1.0 / S.pdf_cosine_hemisphere(w))
 
 
 @wp.func
 def bsdf_pdf(mats: M.Materials, m: int, sampler: int, wi: wp.vec3, wo: wp.vec3) -> float:
+    """BSDF-strategy pdf used in MIS weights (tabulated pdf for the table/rational samplers:
+    the rational density is approximated by the table's, see cdf_sampling)."""
     if sampler == M.SAMPLER_UNIFORM:
         return S.pdf_uniform_hemisphere(wi)
+    if sampler >= M.SAMPLER_TABULATED:
+        if wi[2] <= 0.0:
+            return 0.0
+        b = m * M.N_CDF_INFO
+        va = CS.view_angles(wo)
+        tl = wp.atan2(wp.sqrt(wi[0] * wi[0] + wi[1] * wi[1]), wi[2])
+        return CS.tab_pdf(mats.cdf_t, mats.cdf_p, mats.cdf_info[b], mats.cdf_info[b + 1],
+                          mats.cdf_info[b + 2], mats.cdf_info[b + 3], mats.cdf_info[b + 4],
+                          va[0], tl, CS.rel_phi_abs(wi, va[1]))
     return S.pdf_cosine_hemisphere(wi)
 
 
@@ -137,7 +189,7 @@ def radiance_sample(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.a
 
         dim = 1 + 2 * depth
         # environment light sample
-        if (samp == M.SAMPLER_MIS or samp == M.SAMPLER_LIGHT) and env.can_sample == 1:
+        if (is_mis(samp) == 1 or samp == M.SAMPLER_LIGHT) and env.can_sample == 1:
             ls = L.env_sample(env, S.sample_2d(pattern, pseed, s, spp, dim))
             wl = wp.vec3(ls[0], ls[1], ls[2])
             pl = ls[3]
@@ -148,7 +200,7 @@ def radiance_sample(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.a
                     if max3(fv) > 0.0:
                         if not wp.mesh_query_ray_anyhit(mesh, org, wl, 1.0e30):
                             w = 1.0
-                            if samp == M.SAMPLER_MIS:
+                            if is_mis(samp) == 1:
                                 w = S.power_heuristic(pl, bsdf_pdf(mats, m, samp, wi, wo))
                             Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, L.env_eval(env, wl))) * (wi[2] * w / pl)
 
@@ -158,21 +210,24 @@ def radiance_sample(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.a
         # BSDF sample
         bs = bsdf_sample(mats, m, samp, wo, S.sample_2d(pattern, pseed, s, spp, dim + 1))
         wi = wp.vec3(bs[0], bs[1], bs[2])
-        pb = bs[3]
-        if pb <= 0.0 or wi[2] <= 0.0:
+        wb = bs[3]
+        if wb <= 0.0 or wi[2] <= 0.0:
             break
         wiw = T * wi[0] + B * wi[1] + ns * wi[2]
         if wp.dot(wiw, ng) <= 0.0:
             break
         fv = bsdf_eval(mats, m, wi, wo)
-        thr = wp.cw_mul(thr, fv) * (wi[2] / pb)
+        thr = wp.cw_mul(thr, fv) * (wi[2] * wb)
         if max3(thr) <= 0.0:
             break
         mode = 1
         if samp == M.SAMPLER_LIGHT:
             mode = 3
-        elif samp == M.SAMPLER_MIS and env.can_sample == 1:
+        elif is_mis(samp) == 1 and env.can_sample == 1:
             mode = 2
+        pb = 1.0 / wb
+        if samp == M.SAMPLER_MIS_RATIONAL:
+            pb = bsdf_pdf(mats, m, samp, wi, wo)   # tabulated pdf in both MIS weights
         prev_pdf = pb
         if last:
             if mode != 3 and env.present == 1:
@@ -215,6 +270,21 @@ def render_tile(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.array
 
 
 @wp.kernel
+def sample_bsdf_kernel(mats: M.Materials, m: int, sampler: int, wo: wp.array(dtype=wp.vec3),
+                       xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4)):
+    """Test/benchmark kernel: the BSDF strategy of ``sampler`` at (wo, xi) -> (wi, weight)."""
+    i = wp.tid()
+    out[i] = bsdf_sample(mats, m, sampler, wo[i], xi[i])
+
+
+@wp.kernel
+def pdf_bsdf_kernel(mats: M.Materials, m: int, sampler: int, wi: wp.array(dtype=wp.vec3),
+                    wo: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = bsdf_pdf(mats, m, sampler, wi[i], wo[i])
+
+
+@wp.kernel
 def eval_bsdf_kernel(mats: M.Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
                      out: wp.array(dtype=wp.vec3)):
     """Debug/test kernel: the material ``m`` at local direction pairs."""
@@ -240,7 +310,7 @@ def generated_dir() -> Path:
     return Path(base) / "rbrdf_generated"
 
 
-def generate_source(kinds_used, rational_funcs=()) -> str:
+def generate_source(kinds_used, rational_funcs=(), cdf_funcs=()) -> str:
     """Source of the kernel module for the material kinds used (and rational functions, given as
     ``(name, code)`` pairs of generated ``@wp.func`` definitions with signature (wi, wo) -> vec3)."""
     branches = "".join(_BRANCHES[k] for k in ("lambert", "measured", "projected") if k in kinds_used)
@@ -252,7 +322,11 @@ def generate_source(kinds_used, rational_funcs=()) -> str:
                          f"            return wp.cw_mul({name}(wi, wo), mats.albedo[m])\n")
     if not branches:
         branches = "    pass\n"
-    return _TEMPLATE.format(rational_code=rational_code, eval_branches=branches)
+    cdf_code = "\n\n".join(code for _, code in cdf_funcs)
+    cdf_branches = "".join(f"    if r == {i}:\n        return {name}(theta_v, mu, tau)\n"
+                           for i, (name, _) in enumerate(cdf_funcs)) or "    pass\n"
+    return _TEMPLATE.format(rational_code=rational_code, eval_branches=branches, cdf_code=cdf_code,
+                            cdf_branches=cdf_branches)
 
 
 def load_generated_module(source: str):

@@ -34,8 +34,16 @@ SAMPLER_MIS = 0       # light sample + BSDF sample, power heuristic
 SAMPLER_LIGHT = 1     # light (environment) sample only
 SAMPLER_COSINE = 2    # BSDF sample only, cosine-weighted hemisphere
 SAMPLER_UNIFORM = 3   # BSDF sample only, uniform hemisphere
+SAMPLER_TABULATED = 4      # BSDF sample only, tabulated inverse CDFs (binary search), f cos / pdf
+SAMPLER_RATIONAL = 5       # BSDF sample only, rational inverse CDFs, f cos / pdf (pdf = 1/alpha)
+SAMPLER_RATIONAL_DERIV = 6  # BSDF sample only, rational inverse CDFs, derivative estimator f cos alpha
+SAMPLER_MIS_TABULATED = 7  # light sample + tabulated BSDF sample, power heuristic
+SAMPLER_MIS_RATIONAL = 8   # light sample + rational BSDF sample (MIS weights: tabulated pdf)
 SAMPLER_CODES = {"mis": SAMPLER_MIS, "light": SAMPLER_LIGHT, "cosine": SAMPLER_COSINE,
-                 "uniform": SAMPLER_UNIFORM}
+                 "uniform": SAMPLER_UNIFORM, "tabulated": SAMPLER_TABULATED,
+                 "rational": SAMPLER_RATIONAL, "rational-derivative": SAMPLER_RATIONAL_DERIV,
+                 "mis-tabulated": SAMPLER_MIS_TABULATED, "mis-rational": SAMPLER_MIS_RATIONAL}
+N_CDF_INFO = 6  # per material: off_t, off_p, n_v, n_t, n_p, rational sampler index (-1: none)
 
 N_TH, N_TD, N_PD = 90, 90, 180
 HALF_PI = 1.5707963267948966
@@ -50,6 +58,9 @@ class Materials:
                                        # or the rational function index
     table3d: wp.array(dtype=wp.vec3)   # concatenated (90*90*180) tables
     table2d: wp.array(dtype=wp.vec3)   # concatenated (90*90) tables
+    cdf_t: wp.array(dtype=float)       # concatenated theta CDFs of tabulated samplers
+    cdf_p: wp.array(dtype=float)       # concatenated phi CDFs
+    cdf_info: wp.array(dtype=int)      # N_CDF_INFO ints per material
 
 
 @dataclass
@@ -64,6 +75,12 @@ class MaterialData:
     table2d: np.ndarray
     kinds_used: set = field(default_factory=set)
     rational: list = field(default_factory=list)   # RationalFunction-like objects, by index
+    cdf_t: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    cdf_p: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    cdf_info: np.ndarray = field(default_factory=lambda: np.zeros(N_CDF_INFO, np.int32))
+    cdf_fits: list = field(default_factory=list)    # verified CDFFit per rational sampler index
+    cdf_tables: list = field(default_factory=list)  # CDFTable per material (None: no table)
+    samplers_used: set = field(default_factory=set)
 
 
 def make_materials_struct(md: MaterialData, device) -> Materials:
@@ -74,6 +91,9 @@ def make_materials_struct(md: MaterialData, device) -> Materials:
     s.offset = wp.array(md.offset.astype(np.int32), dtype=int, device=device)
     s.table3d = wp.array(np.ascontiguousarray(md.table3d, np.float32).reshape(-1, 3), dtype=wp.vec3, device=device)
     s.table2d = wp.array(np.ascontiguousarray(md.table2d, np.float32).reshape(-1, 3), dtype=wp.vec3, device=device)
+    s.cdf_t = wp.array(np.ascontiguousarray(md.cdf_t, np.float32), dtype=float, device=device)
+    s.cdf_p = wp.array(np.ascontiguousarray(md.cdf_p, np.float32), dtype=float, device=device)
+    s.cdf_info = wp.array(np.ascontiguousarray(md.cdf_info, np.int32).reshape(-1), dtype=int, device=device)
     return s
 
 
@@ -194,8 +214,51 @@ def build_material_data(scene, used_names=None) -> MaterialData:
             rational.append(_load_rational(spec, scene.path, key))
     t3a = np.concatenate([np.asarray(t, np.float32).reshape(-1, 3) for t in t3]) if t3 else np.zeros((1, 3), np.float32)
     t2a = np.concatenate([np.asarray(t, np.float32).reshape(-1, 3) for t in t2]) if t2 else np.zeros((1, 3), np.float32)
-    return MaterialData(names=names, kind=kind, sampler=sampler, albedo=albedo, offset=offset,
-                        table3d=t3a, table2d=t2a, kinds_used=used, rational=rational)
+    md = MaterialData(names=names, kind=kind, sampler=sampler, albedo=albedo, offset=offset,
+                      table3d=t3a, table2d=t2a, kinds_used=used, rational=rational)
+    _build_samplers(md, scene, names, t3, t2, rational)
+    return md
+
+
+def _build_samplers(md: MaterialData, scene, names, t3, t2, rational):
+    """Tables (and rational inverse CDFs) of the materials whose sampler needs them."""
+    from . import cdf_sampling as CS
+
+    n = len(md.kind)
+    info = np.zeros((n, N_CDF_INFO), np.int32)
+    info[:, 5] = -1
+    ct, cp, fits, tables = [], [], [], [None] * n
+    off_t = off_p = 0
+    for i, name in enumerate(names):
+        spec = scene.materials[name]
+        if spec.sampler not in CS.TABLE_SAMPLERS:
+            md.samplers_used.add(spec.sampler)
+            continue
+        data = None
+        if spec.type == "measured":
+            data = _load_measured(spec, scene.path, f"materials.{name}")
+        elif spec.type == "projected":
+            data = _load_projected(spec, scene.path, f"materials.{name}")
+        elif spec.type == "rational":
+            data = rational[int(md.offset[i])]
+        used, fitobj, table = CS.prepare_sampler(spec, data)
+        md.sampler[i] = SAMPLER_CODES[used]
+        md.samplers_used.add(used)
+        tables[i] = table
+        info[i, :5] = (off_t, off_p, table.n_v, table.n_t, table.n_p)
+        ct.append(table.cdf_theta.reshape(-1))
+        cp.append(table.cdf_phi.reshape(-1))
+        off_t += ct[-1].size
+        off_p += cp[-1].size
+        if fitobj is not None:
+            info[i, 5] = len(fits)
+            fits.append(fitobj)
+    if ct:
+        md.cdf_t = np.concatenate(ct).astype(np.float32)
+        md.cdf_p = np.concatenate(cp).astype(np.float32)
+    md.cdf_info = info
+    md.cdf_fits = fits
+    md.cdf_tables = tables
 
 
 def _load_measured(spec, file, key):

@@ -109,7 +109,10 @@ class Renderer:
 
         t0 = time.perf_counter()
         rfuncs = rational_material.generate_functions(self.material_data.rational)
-        src = integrator.generate_source(self.material_data.kinds_used, rfuncs)
+        from . import cdf_sampling
+
+        cfuncs = cdf_sampling.generate_sampler_functions(self.material_data.cdf_fits)
+        src = integrator.generate_source(self.material_data.kinds_used, rfuncs, cfuncs)
         self.module = integrator.load_generated_module(src)
         self.wp.load_module(self.module, device=self.device)
         self.compile_seconds = time.perf_counter() - t0
@@ -190,6 +193,25 @@ class Renderer:
                           wp.array(wo, dtype=wp.vec3, device=self.device)],
                   outputs=[out], device=self.device)
         return out.numpy()
+
+    def sample_material(self, name: str, wo: np.ndarray, xi: np.ndarray, sampler: str | None = None):
+        """The Warp BSDF strategy of material ``name`` (its scene sampler, after any fallback,
+        unless ``sampler`` is given) at local views ``wo`` (N, 3) and uniforms ``xi`` (N, 2):
+        returns ``(wi (N, 3), weight (N,))`` with weight = 1/pdf or alpha (0: no sample)."""
+        wp = self.wp
+        self.compile()
+        m = self.material_data.names.index(name)
+        from .materials import SAMPLER_CODES
+
+        code = int(self.material_data.sampler[m]) if sampler is None else SAMPLER_CODES[sampler]
+        wo = np.ascontiguousarray(wo, np.float32).reshape(-1, 3)
+        xi = np.ascontiguousarray(xi, np.float32).reshape(-1, 2)
+        out = wp.zeros(len(wo), dtype=wp.vec4, device=self.device)
+        wp.launch(self.module.sample_bsdf_kernel, dim=len(wo),
+                  inputs=[self.materials, m, code, wp.array(wo, dtype=wp.vec3, device=self.device),
+                          wp.array(xi, dtype=wp.vec2, device=self.device)], outputs=[out], device=self.device)
+        o = out.numpy()
+        return o[:, :3], o[:, 3]
 
 
 def render(scene, spp: int | None = None, seed: int | None = None, device: str = "cpu",

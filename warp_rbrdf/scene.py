@@ -19,7 +19,8 @@ from .errors import SceneError
 from .paths import resolve_path
 
 MATERIAL_TYPES = ("lambert", "measured", "projected", "rational")
-SAMPLERS = ("mis", "light", "cosine", "uniform")
+SAMPLERS = ("mis", "light", "cosine", "uniform", "tabulated", "rational", "rational-derivative",
+            "mis-tabulated", "mis-rational")
 PATTERNS = ("stratified", "independent")
 SHAPE_TYPES = ("mesh", "sphere", "plane")
 LIGHT_TYPES = ("directional", "envmap", "constant", "sky")
@@ -46,7 +47,10 @@ Scene file format (TOML). Every table and key is optional unless marked required
 
 [materials.NAME]            one table per material, referenced by name from shapes
   type = "lambert"          lambert | measured | projected | rational   (required)
-  sampler = <integrator.sampler>
+  sampler = <integrator.sampler>   also: tabulated | rational | rational-derivative |
+                            mis-tabulated | mis-rational  (inverse-CDF BRDF samplers)
+  cdf = "..."               rbrdf-cdf .json from `rbrdf-fit cdf` (tables + rational inverse
+                            CDFs); without it tables are built (and rational CDFs fitted) at load
   albedo = 0.8              lambert: number or [r, g, b]
   file = "..."              measured/projected: .binary (MERL) or .bsdf (RGL); projected also
                             accepts an .npz from ProjectedBRDF.save; rational: coefficient .json
@@ -115,6 +119,7 @@ class MaterialSpec:
     statistic: str = "median"
     scale: tuple = (1.0, 1.0, 1.0)
     data: Any = None          # in-memory table / rational function (Python API only)
+    cdf: Any = None           # rbrdf-cdf file path or in-memory fit.cdf_fit.CDFFit
 
 
 @dataclass
@@ -403,6 +408,10 @@ def scene_from_dict(data: dict, file="<scene>", base_dir: Path | None = None) ->
         mtype = m.string("type", None, MATERIAL_TYPES, required=True)
         spec = MaterialSpec(name=name, type=mtype,
                             sampler=m.string("sampler", sc.integrator.sampler, SAMPLERS))
+        if m.has("cdf"):
+            spec.cdf = m.path("cdf", what="CDF file")
+            if spec.cdf.suffix.lower() != ".json":
+                raise m.error("cdf", f"expected an rbrdf-cdf .json file, got {spec.cdf.name!r}")
         if mtype == "lambert":
             spec.albedo = m.vector("albedo", 3, (0.8, 0.8, 0.8), allow_scalar=True, nonneg=True)
         else:

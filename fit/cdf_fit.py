@@ -1,0 +1,478 @@
+"""Rational inverse CDFs for importance sampling (Pacanowski et al. 2012, supplementary sec. 2).
+
+From a tabulated sampler (:mod:`fit.cdf_table`) two rational functions are fitted with the
+project's interval fitter (:class:`fit.fitter.IntervalRationalFitter`):
+
+* ``F(theta_v, mu)``            -> theta_l  (CDF^-1_v(mu), bivariate),
+* ``G(theta_v, theta_l, u)``    -> |phi_l|  (half-range CDF^-1_v(tau | theta_l), trivariate),
+
+and the sampler maps uniform ``(mu, tau)`` to a light direction by
+
+    theta_l = clamp(F(theta_v, mu), 0, pi/2)
+    u = |2 tau - 1|,  phi_l = sign(tau - 1/2) * clamp(G(theta_v, theta_l, u), 0, pi)
+
+(phi_l measured from the view's azimuth, in [-pi, pi]; the sampled density is symmetric in
+phi_l like the table's). The derivative estimator (eq. 3-4 of the supplementary text) uses
+
+    alpha = dtheta_l/dmu * dphi_l/dtau * sin(theta_l) = dF/dmu * 2 dG/du * sin(theta_l)
+
+in place of 1 / pdf; ``alpha = 0`` where a clamp is active (those samples contribute 0).
+
+Endpoint handling ("clamp with overshoot"): the fit is constrained to overshoot both ends,
+``F(theta_v, 0) < 0``, ``F(theta_v, 1) > pi/2``, ``G(., ., 0) < 0``, ``G(., ., 1) > pi``, and
+the result is clamped. Together with monotonicity this makes the map a bijection from the
+unclamped part of the (mu, tau) square onto the whole hemisphere (it covers every direction),
+so ``E[f(l) alpha] = integral of f`` exactly, whatever the fit's accuracy: accuracy only changes
+the variance. A map that folds (dF/dmu <= 0 or dG/du <= 0 where unclamped) or does not cover
+(an end not overshot) would be biased, so every fit is VERIFIED:
+
+* Q > 0 on the whole domain box: the fitter's exact Bernstein certificate (no poles);
+* endpoint overshoot: ``-P`` at mu = 0 / u = 0 and ``P - (range) Q`` at mu = 1 / u = 1 are
+  proved > 0 by the same exact Bernstein certificate (polynomials in the remaining variables),
+  and re-checked on the dense grid;
+* monotonicity: dF/dmu > 0 and dG/du > 0 at every point of a dense grid where the clamp is not
+  active (``VERIFY_GRID``: theta 257 x 2049 (theta_v, mu); phi 33 x 65 x 513 (theta_v, theta_l,
+  u), plus the global minimum over the grid, reported).
+
+If a fit fails any check after ``refinements`` rounds (denser data, tighter intervals), the
+material FALLS BACK to the tabulated sampler: ``CDFFit.fallback`` is True with the reason, it is
+printed by the CLI and by the renderer, and recorded in the CDF file. Never silently.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .cdf_table import CDFTable, inverse_cdf_phi, inverse_cdf_theta, tabulate
+from .errors import BRDFFileError
+from .rational import RationalFunction
+
+FORMAT = "rbrdf-cdf"
+VERSION = 1
+HALF_PI = 0.5 * np.pi
+VERIFY_GRID = {"theta": (257, 2049), "phi": (33, 65, 513)}
+
+
+def _cheb_points(n: int) -> np.ndarray:
+    """n Chebyshev-Lobatto points on [0, 1] (denser at the ends, where inverse CDFs are steep)."""
+    return 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n)))
+
+
+def _monotone_intervals(y, tol, lo_end, hi_end, over):
+    """Intervals around increasing rows ``y[..., k]`` (last axis = the CDF variable) that are
+    disjoint and increasing along the last axis (so the data alone are monotone), width <= 2 tol;
+    the end points get overshoot intervals ``[lo_end - over[1], lo_end - over[0]]`` and
+    ``[hi_end + over[0], hi_end + over[1]]``."""
+    y = np.asarray(y, float)
+    lo = y - tol
+    hi = y + tol
+    mid = 0.5 * (y[..., 1:] + y[..., :-1])
+    gap = 0.05 * (y[..., 1:] - y[..., :-1])
+    lo[..., 1:] = np.maximum(lo[..., 1:], mid + gap)
+    hi[..., :-1] = np.minimum(hi[..., :-1], mid - gap)
+    lo[..., 0], hi[..., 0] = lo_end - over[1], lo_end - over[0]
+    lo[..., -1], hi[..., -1] = hi_end + over[0], hi_end + over[1]
+    lo[..., 1] = np.maximum(lo[..., 1], hi[..., 0] + 1e-6)
+    hi[..., -2] = np.minimum(hi[..., -2], lo[..., -1] - 1e-6)
+    hi = np.maximum(hi, lo + 1e-9)
+    return lo, hi
+
+
+# --------------------------------------------------------------------------------------------
+def _restrict(f: RationalFunction, var: int, value: float, sign: float = 1.0,
+              minus_q: float = 0.0) -> RationalFunction | None:
+    """Polynomial ``sign * (P - minus_q Q)`` with variable ``var`` fixed to an end of its domain
+    (value = 0: t = -1, value = 1: t = +1), returned as the denominator of a RationalFunction in
+    the remaining variables so that ``certify_denominator`` proves it > 0."""
+    t = -1.0 if value == 0 else 1.0
+    keep = [v for v in range(f.n_vars) if v != var]
+    terms: dict = {}
+    for ex, co, s in ((f.num_exponents, f.num_coef, sign), (f.den_exponents, f.den_coef, -sign * minus_q)):
+        if s == 0:
+            continue
+        for e, c in zip(ex, co):
+            key = tuple(int(e[k]) for k in keep)
+            terms[key] = terms.get(key, 0.0) + s * c * t ** int(e[var])
+    if not terms:
+        return None
+    E = np.array(list(terms), dtype=np.int64).reshape(-1, len(keep))
+    C = np.array(list(terms.values()))
+    return RationalFunction(f.domain[keep], np.zeros((0, len(keep)), np.int64), np.zeros(0), E, C)
+
+
+def restrict_rf(f: RationalFunction, var: int, value: float) -> RationalFunction:
+    """``f`` with variable ``var`` fixed to the lower (value 0) or upper (value 1) end of its
+    domain, as a rational function of the remaining variables (exact: T_k(+-1) = (+-1)^k)."""
+    t = -1.0 if value == 0 else 1.0
+    keep = [v for v in range(f.n_vars) if v != var]
+
+    def collapse(ex, co):
+        terms: dict = {}
+        for e, c in zip(ex, co):
+            key = tuple(int(e[k]) for k in keep)
+            terms[key] = terms.get(key, 0.0) + c * t ** int(e[var])
+        E = np.array(list(terms), dtype=np.int64).reshape(-1, len(keep))
+        return E, np.array(list(terms.values()), float)
+
+    ne, nc = collapse(f.num_exponents, f.num_coef)
+    de, dc = collapse(f.den_exponents, f.den_coef)
+    return RationalFunction(f.domain[keep], ne, nc, de, dc)
+
+
+def normalized_map(f: RationalFunction, var: int, x, span: float):
+    """``(value, derivative)`` of the endpoint-normalized map
+    ``span * (f(x) - f(x|var=lo)) / (f(x|var=hi) - f(x|var=lo))`` (exact endpoints 0 and span)."""
+    x = np.asarray(x, float)
+    keep = [v for v in range(f.n_vars) if v != var]
+    xr = x[..., keep]
+    f0 = restrict_rf(f, var, 0)(xr)
+    f1 = restrict_rf(f, var, 1)(xr)
+    den = f1 - f0
+    return span * (f(x) - f0) / den, span * f.derivative(x, var) / den
+
+
+def _certify_positive(poly: RationalFunction | None) -> bool:
+    if poly is None:
+        return False
+    try:
+        return bool(poly.certify_denominator(max_depth=12, max_boxes=20000).certified)
+    except Exception:  # noqa: BLE001 - degenerate polynomial: not certified
+        return False
+
+
+def _verify_theta(F: RationalFunction) -> dict:
+    nv, nm = VERIFY_GRID["theta"]
+    tv = np.linspace(0, HALF_PI, nv)
+    mu = np.linspace(0, 1, nm)
+    dmin_all, dmin_in, folds = np.inf, np.inf, 0
+    end0 = end1 = None
+    for chunk in np.array_split(tv, 8):
+        X = np.stack(np.meshgrid(chunk, mu, indexing="ij"), -1)
+        val, d = normalized_map(F, 1, X, HALF_PI)
+        inside = (val > 0) & (val < HALF_PI)
+        dmin_all = min(dmin_all, float(d.min()))
+        if inside.any():
+            dmin_in = min(dmin_in, float(d[inside].min()))
+        folds += int(((d <= 0) & inside).sum())
+        e0, e1 = float(val[:, 0].max()), float(val[:, -1].min())
+        end0 = e0 if end0 is None else max(end0, e0)
+        end1 = e1 if end1 is None else min(end1, e1)
+    qcert = F.certify_denominator(max_depth=12)
+    ok = bool(qcert.certified and folds == 0 and dmin_all > 0)
+    cert0 = cert1 = True  # endpoints exact by construction (normalized map)
+    return {"ok": ok, "grid": [nv, nm], "q_certified": bool(qcert.certified),
+            "q_lower_bound": float(qcert.lower_bound) if qcert.certified else None,
+            "monotone_grid": folds == 0, "fold_points": folds,
+            "min_derivative_unclamped": dmin_in, "min_derivative_global": dmin_all,
+            "max_value_at_mu0": end0, "min_value_at_mu1": end1,
+            "covers_grid": bool(abs(end0) < 1e-9 and abs(end1 - HALF_PI) < 1e-9),
+            "ends_certified": bool(cert0 and cert1)}
+
+
+def _verify_phi(G: RationalFunction) -> dict:
+    nv, nt, nu = VERIFY_GRID["phi"]
+    tv = np.linspace(0, HALF_PI, nv)
+    tl = np.linspace(0, HALF_PI, nt)
+    u = np.linspace(0, 1, nu)
+    dmin_all, dmin_in, folds = np.inf, np.inf, 0
+    end0, end1 = -np.inf, np.inf
+    for a in tv:
+        X = np.stack(np.meshgrid([a], tl, u, indexing="ij"), -1)[0]
+        val, d = normalized_map(G, 2, X, np.pi)
+        inside = (val > 0) & (val < np.pi)
+        dmin_all = min(dmin_all, float(d.min()))
+        if inside.any():
+            dmin_in = min(dmin_in, float(d[inside].min()))
+        folds += int(((d <= 0) & inside).sum())
+        end0 = max(end0, float(val[:, 0].max()))
+        end1 = min(end1, float(val[:, -1].min()))
+    qcert = G.certify_denominator(max_depth=12)
+    ok = bool(qcert.certified and folds == 0 and dmin_all > 0)
+    cert0 = cert1 = True  # endpoints exact by construction (normalized map)
+    return {"ok": ok, "grid": [nv, nt, nu], "q_certified": bool(qcert.certified),
+            "q_lower_bound": float(qcert.lower_bound) if qcert.certified else None,
+            "monotone_grid": folds == 0, "fold_points": folds,
+            "min_derivative_unclamped": dmin_in, "min_derivative_global": dmin_all,
+            "max_value_at_u0": end0, "min_value_at_u1": end1,
+            "covers_grid": bool(abs(end0) < 1e-9 and abs(end1 - np.pi) < 1e-9),
+            "ends_certified": bool(cert0 and cert1)}
+
+
+# --------------------------------------------------------------------------------------------
+@dataclass
+class CDFFit:
+    """Rational inverse CDFs of one material, with their verification and the table they fit.
+
+    ``fallback`` True: the rational sampler must not be used; renderers use ``table``."""
+
+    table: CDFTable
+    table_params: dict
+    theta: RationalFunction | None
+    phi: RationalFunction | None
+    verification: dict
+    fallback: bool
+    reason: str = ""
+    fit_info: dict = field(default_factory=dict)
+    name: str = ""
+    source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
+
+    # Sampling (NumPy reference of the Warp sampler) ------------------------------------------
+    def sample(self, theta_v, mu, tau):
+        """``(theta_l, phi_l, alpha)``; alpha = dtheta/dmu * dphi/dtau * sin(theta_l) (= 1/pdf
+        in 1/sr^-1), 0 where a clamp is active."""
+        if self.theta is None or self.phi is None:
+            raise ValueError("no rational fit (fallback); use .table")
+        tv, mu, tau = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(mu, float),
+                                          np.asarray(tau, float))
+        X = np.stack([tv, mu], -1)
+        tl, dF = normalized_map(self.theta, 1, X, HALF_PI)
+        s = np.where(tau < 0.5, -1.0, 1.0)
+        u = np.abs(2.0 * tau - 1.0)
+        ok = (tl >= 0) & (tl <= HALF_PI)
+        tl = np.clip(tl, 0.0, HALF_PI)
+        Y = np.stack([tv, tl, u], -1)
+        ph, dG = normalized_map(self.phi, 2, Y, np.pi)
+        ok &= (ph >= 0) & (ph <= np.pi)
+        pl = s * np.clip(ph, 0.0, np.pi)
+        alpha = np.where(ok, dF * 2.0 * dG * np.sin(tl), 0.0)
+        return tl, pl, alpha
+
+    def theta_cdf(self, theta_v, theta_l, iters: int = 40) -> np.ndarray:
+        """P(theta <= theta_l) under the rational sampler (bisection of the monotone F)."""
+        tv, t = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(theta_l, float))
+        lo, hi = np.zeros(t.shape), np.ones(t.shape)
+        for _ in range(iters):
+            m = 0.5 * (lo + hi)
+            below = normalized_map(self.theta, 1, np.stack([tv, m], -1), HALF_PI)[0] <= t
+            lo, hi = np.where(below, m, lo), np.where(below, hi, m)
+        return np.where(t >= HALF_PI, 1.0, np.where(t <= 0, 0.0, 0.5 * (lo + hi)))
+
+    def phi_cdf_half(self, theta_v, theta_l, phi_abs, iters: int = 40) -> np.ndarray:
+        """P(|phi| <= phi_abs | theta_l) under the rational sampler (bisection in u)."""
+        tv, tl, p = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(theta_l, float),
+                                        np.asarray(phi_abs, float))
+        lo, hi = np.zeros(p.shape), np.ones(p.shape)
+        for _ in range(iters):
+            m = 0.5 * (lo + hi)
+            below = normalized_map(self.phi, 2, np.stack([tv, tl, m], -1), np.pi)[0] <= p
+            lo, hi = np.where(below, m, lo), np.where(below, hi, m)
+        return np.where(p >= np.pi, 1.0, np.where(p <= 0, 0.0, 0.5 * (lo + hi)))
+
+    # Persistence ------------------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        from .coefficients import RationalModel, Variable
+
+        def model(f, names, out, rng):
+            if f is None:
+                return None
+            m = RationalModel(name=f"{self.name}:{out}", kind="function",
+                              variables=[Variable(n, "1" if n in ("mu", "u") else "rad", "identity", tuple(d))
+                                         for n, d in zip(names, f.domain)],
+                              functions=[f], outputs=(out,), value_min=None, value_name=out,
+                              value_unit="rad",
+                              domain_policy={"outside": "clamp", "value": f"clamp to {rng}"})
+            return m.to_dict()
+
+        t = self.table
+        return {
+            "format": FORMAT, "version": VERSION, "name": self.name,
+            "sampler": {
+                "theta_l": "pi/2 (F(theta_v, mu) - F(theta_v, 0)) / (F(theta_v, 1) - F(theta_v, 0))",
+                "phi_l": "sign(tau - 1/2) pi (G(theta_v, theta_l, u) - G(.., 0)) / (G(.., 1) - G(.., 0)), u = |2 tau - 1|",
+                "alpha": "dtheta_l/dmu * dphi_l/dtau * sin(theta_l)",
+                "phi_origin": "azimuth of the view direction",
+            },
+            "table": dict(self.table_params),
+            "table_data": {"theta_v": t.theta_v.tolist(), "cdf_theta": t.cdf_theta.tolist(),
+                           "cdf_phi": t.cdf_phi.tolist(), "row_fallback": t.row_fallback.tolist(),
+                           "eps": t.eps, "albedo": t.albedo.tolist()},
+            "theta": model(self.theta, ("theta_v", "mu"), "theta_l", "[0, pi/2]"),
+            "phi": model(self.phi, ("theta_v", "theta_l", "u"), "phi_abs", "[0, pi]"),
+            "verification": _jsonable(self.verification),
+            "fallback": bool(self.fallback),
+            "reason": self.reason,
+            "fit": _jsonable(self.fit_info),
+            "source": dict(self.source),
+        }
+
+    def save(self, path) -> None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(self.to_dict(), allow_nan=False) + "\n", encoding="utf-8")
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _jsonable(o.tolist())
+    if isinstance(o, (bool, np.bool_)):
+        return bool(o)
+    if isinstance(o, (int, np.integer)):
+        return int(o)
+    if isinstance(o, (float, np.floating)):
+        f = float(o)
+        return f if np.isfinite(f) else None
+    return o
+
+
+def from_dict(d: dict, path=None) -> CDFFit:
+    from .coefficients import from_dict as model_from_dict
+
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        raise BRDFFileError(path, f"not an {FORMAT} file")
+    if d.get("version") != VERSION:
+        raise BRDFFileError(path, f"unsupported {FORMAT} version {d.get('version')!r} (this reader knows {VERSION})")
+    try:
+        td = d["table_data"]
+        table = CDFTable(theta_v=np.asarray(td["theta_v"], float), cdf_theta=np.asarray(td["cdf_theta"], float),
+                         cdf_phi=np.asarray(td["cdf_phi"], float),
+                         row_fallback=np.asarray(td["row_fallback"], bool), eps=float(td["eps"]),
+                         albedo=np.asarray(td["albedo"], float))
+        theta = model_from_dict(d["theta"], path).functions[0] if d.get("theta") else None
+        phi = model_from_dict(d["phi"], path).functions[0] if d.get("phi") else None
+        fb = bool(d["fallback"])
+        if not fb and (theta is None or phi is None):
+            raise ValueError("no fallback but rational functions missing")
+        return CDFFit(table=table, table_params=dict(d.get("table", {})), theta=theta, phi=phi,
+                      verification=dict(d.get("verification", {})), fallback=fb,
+                      reason=str(d.get("reason", "")), fit_info=dict(d.get("fit", {})),
+                      name=str(d.get("name", "")), source=dict(d.get("source", {})))
+    except BRDFFileError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError) as e:
+        raise BRDFFileError(path, f"invalid {FORMAT} file ({e.__class__.__name__}: {e})") from None
+
+
+def load(path) -> CDFFit:
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise BRDFFileError(path, "no such file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise BRDFFileError(path, f"cannot read CDF file ({e.__class__.__name__}: {e})") from None
+    return from_dict(d, path)
+
+
+# --------------------------------------------------------------------------------------------
+DEFAULTS = dict(n_v=32, n_t=64, n_p=64, sub=3, eps=0.02, noise=1e-6)
+
+
+def fit_theta(table: CDFTable, tol: float = 0.03, n_theta_v: int = 0, n_mu: int = 33,
+              max_degree: int = 10, over=(-0.01, 0.01)):
+    """Fit F(theta_v, mu) ~ CDF^-1_v(mu). Returns (FitResult, data info)."""
+    from .fitter import IntervalRationalFitter
+
+    tv = np.concatenate([[0.0], table.theta_v, [HALF_PI]]) if n_theta_v <= 0 else np.linspace(0, HALF_PI, n_theta_v)
+    mu = _cheb_points(n_mu)
+    Y = inverse_cdf_theta(table, tv, mu)
+    lo, hi = _monotone_intervals(Y, tol, 0.0, HALF_PI, over)
+    X = np.stack(np.meshgrid(tv, mu, indexing="ij"), -1).reshape(-1, 2)
+    f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, 1]])
+    r = f.fit(X, y=Y.ravel(), lower=lo.ravel(), upper=hi.ravel())
+    return r, {"points": int(len(X)), "tol_rad": tol, "n_mu": n_mu, "n_theta_v": len(tv)}
+
+
+def fit_phi(table: CDFTable, tol: float = 0.15, n_theta_v: int = 9, n_theta_l: int = 9, degrees=(6, 4),
+            n_u: int = 9, max_degree: int = 8, over=(-0.02, 0.02)):
+    """Fit G(theta_v, theta_l, u) ~ |phi_l| = CDF^-1_v(u | theta_l) (half range).
+
+    Fixed total degrees (6, 4) by default: the fitter's degree search on the trivariate data
+    takes minutes (measured: 540 s without reaching a certified fit on vch_golden_yellow), so
+    the default fits one degree pair and returns the least-violating fit when the intervals
+    cannot all be met -- accuracy only affects variance; monotonicity, covering and Q > 0 are
+    verified afterwards and decide the fallback. ``degrees=None`` runs the full search."""
+    from .fitter import IntervalRationalFitter
+
+    tv = np.linspace(0, HALF_PI, n_theta_v)
+    tl = np.linspace(0, HALF_PI, n_theta_l)
+    u = _cheb_points(n_u)
+    Y = inverse_cdf_phi(table, tv, tl, u)
+    lo, hi = _monotone_intervals(Y, tol, 0.0, np.pi, over)
+    X = np.stack(np.meshgrid(tv, tl, u, indexing="ij"), -1).reshape(-1, 3)
+    f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, HALF_PI], [0, 1]], degrees=degrees, max_iter=25)
+    r = f.fit(X, y=Y.ravel(), lower=lo.ravel(), upper=hi.ravel())
+    return r, {"points": int(len(X)), "tol_rad": tol, "grid": [n_theta_v, n_theta_l, n_u]}
+
+
+def _summary(r) -> dict:
+    return {"num_degree": r.num_degree, "den_degree": r.den_degree, "n_coefficients": r.n_coefficients,
+            "feasible": bool(r.feasible), "valid": bool(r.valid), "time_s": r.time_s,
+            "max_error_ratio": r.max_error_ratio, "message": r.message}
+
+
+def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_params: dict | None = None,
+            theta_kw: dict | None = None, phi_kw: dict | None = None, refinements: int = 1,
+            log=None, source: dict | None = None) -> CDFFit:
+    """Tabulate (unless ``table`` is given), fit both inverse CDFs, verify, decide fallback.
+
+    Each refinement round that fails verification doubles the data density along the CDF
+    variable (tighter monotone intervals) and halves the tolerance. ``log(str)`` reports."""
+    log = log or (lambda s: None)
+    params = dict(DEFAULTS, **(table_params or {}))
+    if table is None:
+        table = tabulate(evaluate, **params)
+    theta_kw = dict(theta_kw or {})
+    phi_kw = dict(phi_kw or {})
+    info: dict = {"fitter": "fit.fitter.IntervalRationalFitter", "rounds": []}
+    t0 = time.perf_counter()
+    F = G = None
+    vt = vp = {"ok": False}
+    for rnd in range(refinements + 1):
+        if not vt.get("ok"):
+            rt, dt = fit_theta(table, **theta_kw)
+            F = rt.function
+            vt = _verify_theta(F) if F is not None else {"ok": False, "error": "no fit"}
+            info["theta"] = dict(_summary(rt), data=dt)
+            log(f"  theta fit (round {rnd}): degrees ({rt.num_degree}, {rt.den_degree}), "
+                f"{rt.n_coefficients} coefficients, {rt.time_s:.1f} s, verified {vt['ok']}")
+        if not vp.get("ok"):
+            rp, dp = fit_phi(table, **phi_kw)
+            G = rp.function
+            vp = _verify_phi(G) if G is not None else {"ok": False, "error": "no fit"}
+            info["phi"] = dict(_summary(rp), data=dp)
+            log(f"  phi fit (round {rnd}): degrees ({rp.num_degree}, {rp.den_degree}), "
+                f"{rp.n_coefficients} coefficients, {rp.time_s:.1f} s, verified {vp['ok']}")
+        info["rounds"].append({"theta_ok": vt.get("ok"), "phi_ok": vp.get("ok")})
+        if vt.get("ok") and vp.get("ok"):
+            break
+        theta_kw["n_mu"] = 2 * theta_kw.get("n_mu", 33) - 1
+        theta_kw["tol"] = 0.5 * theta_kw.get("tol", 0.03)
+        phi_kw["n_u"] = 2 * phi_kw.get("n_u", 9) - 1
+        phi_kw["tol"] = 0.5 * phi_kw.get("tol", 0.15)
+    info["time_s"] = time.perf_counter() - t0
+    reasons = []
+    for what, v in (("theta", vt), ("phi", vp)):
+        if not v.get("ok"):
+            bad = [k for k in ("q_certified", "monotone_grid", "covers_grid", "ends_certified") if v.get(k) is False]
+            reasons.append(f"{what}: " + (", ".join(f"not {b}" for b in bad) or v.get("error", "failed")))
+    fb = bool(reasons)
+    return CDFFit(table=table, table_params=params, theta=F, phi=G,
+                  verification={"theta": vt, "phi": vp}, fallback=fb,
+                  reason="; ".join(reasons) if fb else "verified: monotone, covering, no poles",
+                  fit_info=info, name=name, source=source or {"file": "", "sha256": ""})
+
+
+def verify(fit: CDFFit) -> CDFFit:
+    """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback."""
+    vt = _verify_theta(fit.theta) if fit.theta is not None else {"ok": False}
+    vp = _verify_phi(fit.phi) if fit.phi is not None else {"ok": False}
+    fit.verification = {"theta": vt, "phi": vp}
+    reasons = [f"{w} verification failed" for w, v in (("theta", vt), ("phi", vp)) if not v["ok"]]
+    fit.fallback = bool(reasons)
+    fit.reason = "; ".join(reasons) if reasons else "verified: monotone, covering, no poles"
+    return fit
+
+
+def file_source(path) -> dict:
+    p = Path(path)
+    h = hashlib.sha256(p.read_bytes()).hexdigest()
+    return {"file": p.name, "sha256": h}

@@ -1,0 +1,78 @@
+"""``rbrdf-fit cdf`` and ``rbrdf-fit plot-cdf``: importance-sampling tables and rational inverse
+CDFs (issue 6). Registered by :mod:`fit.cli` when this module exists."""
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def _load_or_fit(args, log=print):
+    from .cdf_fit import fit_cdf, file_source, load
+    from .io import load_measured
+
+    path = Path(args.file)
+    if path.suffix.lower() == ".json":
+        return load(path)
+    b = load_measured(path)
+    params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
+    if getattr(args, "table_only", False):
+        from .cdf_fit import CDFFit, DEFAULTS
+        from .cdf_table import tabulate
+
+        p = dict(DEFAULTS, **params)
+        return CDFFit(table=tabulate(b.evaluate, **p), table_params=p, theta=None, phi=None,
+                      verification={}, fallback=True, reason="table only (--table-only)",
+                      name=b.name, source=file_source(path))
+    return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log,
+                   refinements=args.refinements, source=file_source(path))
+
+
+def _add_table_args(p):
+    p.add_argument("--n-v", type=int, default=32, help="theta_v rows (default 32)")
+    p.add_argument("--n-t", type=int, default=64, help="theta_l cells (default 64)")
+    p.add_argument("--n-p", type=int, default=64, help="|phi_l| cells (default 64)")
+    p.add_argument("--eps", type=float, default=0.02, help="cosine mixture weight (default 0.02)")
+    p.add_argument("--refinements", type=int, default=1, help="refit rounds when verification fails")
+    p.add_argument("--table-only", action="store_true", help="tabulate only, no rational fit")
+
+
+def _cmd_cdf(args) -> int:
+    fit = _load_or_fit(args)
+    fit.save(args.out)
+    if fit.fallback:
+        print(f"FALLBACK: {fit.name}: rational inverse CDFs not usable ({fit.reason}); "
+              f"renderers use the tabulated sampler")
+    else:
+        print(f"{fit.name}: rational inverse CDFs verified ({fit.reason})")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _cmd_plot(args) -> int:
+    from .cdf_plots import plot_cdf
+
+    args.table_only = args.table_only or Path(args.file).suffix.lower() != ".json"
+    fit = _load_or_fit(args)
+    for f in plot_cdf(fit, args.out, prefix=args.prefix):
+        print(f"wrote {f}")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("cdf", help="tabulate the sampling CDFs and fit rational inverse CDFs",
+                       description="Tabulate CDF^-1 of rho cos (luminance) per theta_v row, fit the "
+                                   "bivariate/trivariate rational inverse CDFs, verify them "
+                                   "(Q > 0 certificate, monotone on a dense grid, exact endpoints) "
+                                   "and write a versioned rbrdf-cdf JSON (fallback flag included).")
+    p.add_argument("file", help="MERL .binary or RGL .bsdf file")
+    p.add_argument("--out", required=True, help="output .json")
+    _add_table_args(p)
+    p.set_defaults(func=_cmd_cdf)
+    p = sub.add_parser("plot-cdf", help="plot PDF_v / CDF^-1_v (tabulated, and rational if verified)",
+                       description="PNG plots of PDF_v(theta_l), CDF^-1_v(mu) at theta_v = 0/45/85 deg "
+                                   "and slices of PDF_v(phi_l | theta_l), CDF^-1_v(tau | theta_l). FILE "
+                                   "is a BRDF file (table only) or an rbrdf-cdf .json (with the fit).")
+    p.add_argument("file")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--prefix", default="cdf")
+    _add_table_args(p)
+    p.set_defaults(func=_cmd_plot)

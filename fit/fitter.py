@@ -1,0 +1,505 @@
+"""Interval-constraint rational fitting with a guaranteed error (linear programming).
+
+Given points ``x_i`` and intervals ``[l_i, u_i]`` (from a tolerance or a cluster spread), find
+``R = P / Q`` in the Chebyshev basis (:mod:`fit.rational`) with
+
+    l_i <= R(x_i) <= u_i  for every i      and      Q > 0 on the whole domain box.
+
+For fixed degrees this is linear in the coefficients when ``Q > 0`` (Salazar Celis, Cuyt,
+Verdonk 2007, as used by the Rational BRDF paper). Each constraint row is divided by the
+interval width ``w_i = u_i - l_i``, and the LP (scipy.optimize.linprog, HiGHS)
+
+    maximise  delta
+    subject to  (P(x_i) - l_i Q(x_i)) / w_i >= delta,   (u_i Q(x_i) - P(x_i)) / w_i >= delta,
+                Q(x_i) >= q_min (data rows),  Q(g) >= q_min on a grid g of the box,
+                q_0 = 1  (constant Chebyshev coefficient: the Chebyshev-weighted mean of Q),
+                |coefficients| <= coef_bound,  delta <= 1
+
+is solved by *constraint generation*: start from a small well-spread subset of the points
+(Chebyshev-spread cells plus the extreme values), evaluate all points, add the worst violators,
+repeat until no point is outside its interval. Since the subset LP is a relaxation, ``delta <= 0``
+on a subset proves the degrees infeasible for the whole data set (fast rejection).
+
+The degree search walks the (numerator, denominator) plane: feasibility is monotone in both
+degrees, so for each denominator degree n a binary search finds the smallest feasible numerator degree
+m; only pairs with fewer coefficients than the best found so far are tried, and m never
+exceeds the smallest feasible m of a lower denominator degree. The result
+is the feasible fit with the FEWEST coefficients (ties: lower denominator degree).
+
+Guarantees of a result with ``valid`` True:
+* every data point was evaluated in float64 after the fit and lies in its interval
+  (``max_violation <= 0``);
+* Q > 0 on the whole domain box, proved by exact (rational-arithmetic) Bernstein coefficients
+  with midpoint subdivision (:meth:`fit.rational.RationalFunction.certify_denominator`).
+  During the fit, Q >= q_min is enforced on a grid; if the certificate fails, the points where Q
+  is smallest on a dense grid are added and the LP is solved again.
+
+If no degree up to ``max_degree`` is feasible, the least-violating fit at the largest degrees is
+returned with ``feasible=False`` and its measured error (never flagged valid).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from math import comb
+
+import numpy as np
+from scipy.optimize import linprog
+
+from .rational import (PositivityCertificate, RationalFunction, _de_casteljau_split_float,
+                       bernstein_coefficients_float, chebyshev_basis, tensor_exponents,
+                       total_degree_exponents)
+
+
+def _elevate(b: np.ndarray, shape) -> np.ndarray:
+    """Degree-elevate tensor Bernstein coefficients to ``shape`` (exact formula, float64)."""
+    for axis, target in enumerate(shape):
+        while b.shape[axis] < target:
+            a = np.moveaxis(b, axis, 0)
+            n = a.shape[0] - 1
+            out = np.empty((n + 2,) + a.shape[1:])
+            out[0], out[n + 1] = a[0], a[n]
+            for i in range(1, n + 1):
+                out[i] = i / (n + 1) * a[i - 1] + (1 - i / (n + 1)) * a[i]
+            b = np.moveaxis(out, 0, axis)
+    return b
+
+
+def _split_regular(b: np.ndarray, axis: int, parts: int) -> list:
+    """Bernstein coefficients on ``parts`` equal sub-intervals of ``axis`` (parts = 1, 2, 4, ...)."""
+    out = [b]
+    while len(out) < parts:
+        new = []
+        for x in out:
+            new.extend(_de_casteljau_split_float(x, axis))
+        out = new
+    return out
+
+__all__ = ["intervals_from_tolerance", "intervals_from_spread", "FitResult", "IntervalRationalFitter"]
+
+
+# --------------------------------------------------------------------------------------------
+# Intervals
+# --------------------------------------------------------------------------------------------
+def intervals_from_tolerance(y, tol: float, abs_floor: float = 0.0):
+    """``[y - e, y + e]`` with ``e = max(tol |y|, abs_floor)``.
+
+    The absolute floor keeps zero (or clamped-to-zero) values feasible: with ``abs_floor > 0``
+    every interval has a positive width.
+    """
+    y = np.asarray(y, dtype=np.float64)
+    e = np.maximum(tol * np.abs(y), abs_floor)
+    return y - e, y + e
+
+
+def intervals_from_spread(y, std, k: float = 2.0, abs_floor: float = 0.0, tol_min: float = 0.0):
+    """``[y - e, y + e]`` with ``e = max(k std, tol_min |y|, abs_floor)`` (cluster spread)."""
+    y = np.asarray(y, dtype=np.float64)
+    e = np.maximum(np.maximum(k * np.asarray(std, float), tol_min * np.abs(y)), abs_floor)
+    return y - e, y + e
+
+
+# --------------------------------------------------------------------------------------------
+# Result
+# --------------------------------------------------------------------------------------------
+@dataclass
+class FitResult:
+    """Outcome of a fit.
+
+    ``function`` is R = P/Q on the fitted domain, in the units of the intervals.
+    ``feasible``: all data points inside their intervals (checked in float64 after the fit).
+    ``certificate``: proof of Q > 0 on the box (see :class:`PositivityCertificate`).
+    ``valid`` = feasible and certified: the only state in which the error guarantee holds.
+    ``max_violation``: max over points of ``max(l - R, R - u) / w`` (<= 0 when feasible).
+    ``max_error_ratio``: max over points of ``|R - y| / e`` where ``e`` = half-width
+    (<= 1 when feasible and the intervals are symmetric).
+    """
+
+    function: RationalFunction | None
+    num_degree: int
+    den_degree: int
+    feasible: bool
+    certificate: PositivityCertificate | None
+    delta: float
+    max_violation: float
+    max_error_ratio: float
+    n_points: int
+    n_constraints: int
+    n_lp: int
+    time_s: float
+    tried: list = field(default_factory=list)
+    message: str = ""
+
+    @property
+    def valid(self) -> bool:
+        return bool(self.feasible and self.certificate is not None and self.certificate.certified)
+
+    @property
+    def n_coefficients(self) -> int:
+        return self.function.n_coefficients if self.function is not None else 0
+
+    def __call__(self, x):
+        return self.function(x)
+
+
+@dataclass
+class _Attempt:
+    m: int
+    n: int
+    p: np.ndarray | None
+    q: np.ndarray | None
+    delta: float
+    feasible: bool          # all points inside (float check)
+    infeasible_proof: bool  # LP on a subset had delta <= 0
+    max_violation: float
+    n_constraints: int
+    n_lp: int
+    certificate: PositivityCertificate | None = None
+
+
+# --------------------------------------------------------------------------------------------
+# Fitter
+# --------------------------------------------------------------------------------------------
+class IntervalRationalFitter:
+    """Fit the rational function with the fewest coefficients inside given intervals.
+
+    Parameters
+    ----------
+    tol, abs_floor : intervals ``y +- max(tol |y|, abs_floor)`` when :meth:`fit` gets ``y``.
+    max_degree : largest numerator and denominator (total) degree tried.
+    max_den_degree : largest denominator degree (default ``max_degree``).
+    degree_kind : ``"total"`` (sum of exponents <= d) or ``"tensor"`` (each exponent <= d).
+    domain : ``(n_vars, 2)`` box; default: the bounding box of the points.
+    q_min : lower bound enforced on Q (with q_0 = 1) at grid and data points.
+    q_grid : points per axis of the Q >= q_min grid (default 33 / 33 / 9 for 1 / 2 / 3 vars).
+    degrees : optional fixed ``(m, n)``; skips the search.
+    progress : optional callable ``progress(event: dict)`` called after each degree pair.
+    """
+
+    def __init__(self, tol: float = 0.05, abs_floor: float = 0.0, max_degree: int = 10,
+                 max_den_degree: int | None = None, degree_kind: str = "total", domain=None,
+                 q_min: float = 1e-4, q_grid: int | None = None, degrees=None,
+                 coef_bound: float = 1e6, max_iter: int = 60, certify_depth: int = 12,
+                 progress=None, delta_min: float = 1e-10, bernstein_split: int = 2):
+        if degree_kind not in ("total", "tensor"):
+            raise ValueError("degree_kind must be 'total' or 'tensor'")
+        self.tol = float(tol)
+        self.abs_floor = float(abs_floor)
+        self.max_degree = int(max_degree)
+        self.max_den_degree = self.max_degree if max_den_degree is None else int(max_den_degree)
+        self.degree_kind = degree_kind
+        self.domain = None if domain is None else np.asarray(domain, float).reshape(-1, 2)
+        self.q_min = float(q_min)
+        self.q_grid = q_grid
+        self.degrees = degrees
+        self.coef_bound = float(coef_bound)
+        self.max_iter = int(max_iter)
+        self.certify_depth = int(certify_depth)
+        self.progress = progress
+        self.delta_min = float(delta_min)
+        self.bernstein_split = int(bernstein_split)
+
+    # Public API ----------------------------------------------------------------------------
+    def fit(self, X, y=None, lower=None, upper=None) -> FitResult:
+        """Fit points ``X`` (``(N, n_vars)`` or ``(N,)``) with values ``y`` (intervals from
+        ``tol``/``abs_floor``) or explicit ``lower``/``upper``. Non-finite rows are ignored."""
+        t0 = time.perf_counter()
+        X = np.asarray(X, dtype=np.float64)
+        if X.ndim == 1:
+            X = X[:, None]
+        if lower is None or upper is None:
+            if y is None:
+                raise ValueError("give y or lower and upper")
+            lower, upper = intervals_from_tolerance(y, self.tol, self.abs_floor)
+        lower = np.asarray(lower, float).reshape(-1)
+        upper = np.asarray(upper, float).reshape(-1)
+        yc = 0.5 * (lower + upper) if y is None else np.asarray(y, float).reshape(-1)
+        ok = np.all(np.isfinite(X), axis=1) & np.isfinite(lower) & np.isfinite(upper) & np.isfinite(yc)
+        X, lower, upper, yc = X[ok], lower[ok], upper[ok], yc[ok]
+        if len(X) == 0:
+            raise ValueError("no finite data point")
+        if np.any(upper < lower):
+            raise ValueError("an interval has upper < lower")
+        # Zero-width intervals cannot be normalised: widen by a relative ulp-level epsilon.
+        w0 = upper - lower
+        tiny = 1e-12 * np.maximum(np.abs(lower) + np.abs(upper), 1e-300)
+        lower = np.where(w0 <= tiny, lower - tiny, lower)
+        upper = np.where(w0 <= tiny, upper + tiny, upper)
+
+        domain = self.domain
+        if domain is None:
+            domain = np.stack([X.min(axis=0), X.max(axis=0)], axis=1)
+            same = domain[:, 1] <= domain[:, 0]
+            domain[same, 1] = domain[same, 0] + 1.0
+        self._setup(X, lower, upper, yc, domain)
+
+        if self.degrees is not None:
+            m, n = (int(d) for d in self.degrees)
+            att = self._fit_pair(m, n)
+            if att.feasible:
+                att = self._make_certified(att)
+            else:
+                att = self._fit_pair(m, n, converge=True)
+            tried = [(m, n, att.feasible, self._ncoef(m, n))]
+            best = att
+        else:
+            best, tried = self._search()
+        return self._finish(best, tried, t0)
+
+    # Internals -----------------------------------------------------------------------------
+    def _exponents(self, d: int) -> np.ndarray:
+        if self.degree_kind == "total":
+            return total_degree_exponents(self.n_vars, d)
+        return tensor_exponents([d] * self.n_vars)
+
+    def _nterms(self, d: int) -> int:
+        return comb(d + self.n_vars, self.n_vars) if self.degree_kind == "total" else (d + 1) ** self.n_vars
+
+    def _ncoef(self, m: int, n: int) -> int:
+        return self._nterms(m) + self._nterms(n)
+
+    def _setup(self, X, lower, upper, y, domain):
+        self.n_vars = X.shape[1]
+        self._domain = domain
+        self._X, self._lo, self._hi, self._y = X, lower, upper, y
+        self._w = upper - lower
+        self._scale = float(max(np.max(np.abs(lower)), np.max(np.abs(upper)), 1e-300))
+        dmax = max(self.max_degree, self.max_den_degree)
+        if self.degrees is not None:
+            dmax = max(dmax, *self.degrees)
+        self._E = self._exponents(dmax)
+        self._index = {tuple(e): k for k, e in enumerate(self._E)}
+        self._B = chebyshev_basis(X, self._E, domain)
+        ng = self.q_grid or {1: 65, 2: 17}.get(self.n_vars, 7)
+        axes = [np.cos(np.linspace(np.pi, 0.0, ng)) * 0.5 * (b - a) + 0.5 * (a + b) for a, b in domain]
+        G = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, self.n_vars)
+        self._G = G
+        self._BG = chebyshev_basis(G, self._E, domain)
+        self._bern_cache = {}
+        self._extra_q = np.zeros((0, len(self._E)))
+        self._subset0 = self._initial_subset()
+        self._lp_count = 0
+
+    def _cols(self, d: int) -> np.ndarray:
+        return np.array([self._index[tuple(e)] for e in self._exponents(d)], dtype=np.intp)
+
+    def _initial_subset(self) -> np.ndarray:
+        """Well-spread starting points: one per Chebyshev-spaced cell, plus extreme values."""
+        N = len(self._X)
+        k = {1: 48, 2: 14, 3: 6}.get(self.n_vars, 4)
+        a, b = self._domain[:, 0], self._domain[:, 1]
+        t = np.clip((2 * self._X - (a + b)) / (b - a), -1, 1)
+        s = np.arccos(-t) / np.pi                      # Chebyshev-spread coordinate in [0, 1]
+        cell = np.minimum((s * k).astype(np.int64), k - 1)
+        key = np.ravel_multi_index(cell.T, (k,) * self.n_vars)
+        centre = (cell + 0.5) / k
+        dist = np.sum((s - centre) ** 2, axis=1)
+        order = np.lexsort((dist, key))
+        first = np.ones(N, bool)
+        first[1:] = key[order][1:] != key[order][:-1]
+        idx = set(order[first].tolist())
+        for arr in (self._y, -self._y, self._w, -self._w):
+            idx.update(np.argsort(arr)[:4].tolist())
+        return np.array(sorted(idx), dtype=np.intp)
+
+    def _bernstein_rows(self, cq) -> np.ndarray:
+        """Linear map q -> Bernstein coefficients of Q on each sub-box of a regular split of the
+        box (``bernstein_split`` parts per axis); rows of shape ``(n_rows, len(E))``.
+
+        Constraining them to be >= q_min makes Q >= q_min on the whole box by construction."""
+        key = tuple(cq)
+        if key not in self._bern_cache:
+            E = self._E[cq]
+            splits = self.bernstein_split
+            blocks = []
+            for j in range(len(cq)):
+                unit = np.zeros(len(cq))
+                unit[j] = 1.0
+                b, _ = bernstein_coefficients_float(E, unit)
+                # pad to full degrees so every column has the same shape
+                full = np.zeros(tuple(int(d) + 1 for d in E.max(axis=0)))
+                full[tuple(slice(0, s_) for s_ in b.shape)] = b if b.shape == full.shape else 0.0
+                if b.shape != full.shape:
+                    full = _elevate(b, full.shape)
+                parts = [full]
+                for axis in range(full.ndim):
+                    new = []
+                    for part in parts:
+                        new.extend(_split_regular(part, axis, splits))
+                    parts = new
+                blocks.append(np.concatenate([p_.reshape(-1) for p_ in parts]))
+            M = np.stack(blocks, axis=1)                      # (n_rows, len(cq))
+            rows = np.zeros((M.shape[0], len(self._E)))
+            rows[:, cq] = M
+            self._bern_cache[key] = rows
+        return self._bern_cache[key]
+
+    def _solve_lp(self, cp, cq, rows, qrows):
+        """LP on data rows ``rows`` and extra Q rows; returns (p, q, delta) or None."""
+        Bp = self._B[np.ix_(rows, cp)]
+        Bq = self._B[np.ix_(rows, cq)]
+        w = self._w[rows][:, None]
+        lo = self._lo[rows][:, None] / self._scale
+        hi = self._hi[rows][:, None] / self._scale
+        ws = w / self._scale
+        npv, nqv = len(cp), len(cq)
+        one = np.ones((len(rows), 1))
+        A1 = np.hstack([-Bp / ws, lo * Bq / ws, one])           # -(P - lQ)/w + delta <= 0
+        A2 = np.hstack([Bp / ws, -hi * Bq / ws, one])            # -(uQ - P)/w + delta <= 0
+        Q_rows = np.vstack([Bq, self._BG[:, cq], qrows[:, cq] if len(qrows) else np.zeros((0, nqv))]
+                           + ([self._bernstein_rows(cq)[:, cq]] if self.bernstein_split else []))
+        A3 = np.hstack([np.zeros((len(Q_rows), npv)), -Q_rows, np.zeros((len(Q_rows), 1))])
+        A = np.vstack([A1, A2, A3])
+        b = np.concatenate([np.zeros(2 * len(rows)), -self.q_min * np.ones(len(Q_rows))])
+        c = np.zeros(npv + nqv + 1)
+        c[-1] = -1.0
+        bounds = [(-self.coef_bound, self.coef_bound)] * (npv + nqv) + [(-1e3, 1.0)]
+        bounds[npv] = (1.0, 1.0)                              # q_0 = 1 (cq[0] is the constant term)
+        self._lp_count += 1
+        res = linprog(c, A_ub=A, b_ub=b, bounds=bounds, method="highs")
+        if res.status != 0 or res.x is None:
+            return None
+        z = res.x
+        return z[:npv], z[npv:npv + nqv], float(z[-1])
+
+    def _slack(self, cp, cq, p, q):
+        """Normalised slack of all points: min((P - lQ), (uQ - P)) / w / Q-free (LP units)."""
+        P = self._B[:, cp] @ p * self._scale
+        Q = self._B[:, cq] @ q
+        s = np.minimum(P - self._lo * Q, self._hi * Q - P) / self._w
+        return s, P, Q
+
+    def _fit_pair(self, m: int, n: int, converge: bool = False) -> _Attempt:
+        """Constraint generation for one degree pair.
+
+        Stops as soon as every point is inside its interval with Q > 0 (feasible), or when the
+        subset LP proves infeasibility (delta <= delta_min). With ``converge`` (used for the
+        flagged best fit) it continues until the least-violation LP converges.
+        """
+        cp, cq = self._cols(m), self._cols(n)
+        rows = self._subset0.copy()
+        qrows = self._extra_q
+        lp0 = self._lp_count
+        batch = max(2 * (len(cp) + len(cq)), 16)
+        best = None
+        for _ in range(self.max_iter):
+            sol = self._solve_lp(cp, cq, rows, qrows)
+            if sol is None:
+                return _Attempt(m, n, None, None, -np.inf, False, True, np.inf, len(rows),
+                                self._lp_count - lp0)
+            p, q, delta = sol
+            slack, P, Q = self._slack(cp, cq, p, q)
+            viol = -np.min(slack) if np.all(Q > 0) else np.inf
+            att = _Attempt(m, n, p, q, delta, bool(viol <= 0 and np.all(Q > 0)), delta <= self.delta_min,
+                           float(viol), len(rows), self._lp_count - lp0)
+            if best is None or att.max_violation < best.max_violation:
+                best = att
+            if att.feasible:
+                return att
+            if att.infeasible_proof and not converge:
+                return att
+            # Worst violators relative to the current LP level, not yet in the subset.
+            bad = np.flatnonzero(slack < min(delta, 0.0) - 1e-9 * max(1.0, abs(delta)))
+            if len(bad) == 0:
+                bad = np.flatnonzero(slack < 0)
+            bad = np.setdiff1d(bad, rows)
+            if len(bad) == 0:
+                break
+            worst = bad[np.argsort(slack[bad])[:batch]]
+            rows = np.union1d(rows, worst)
+        best.n_lp = self._lp_count - lp0
+        return best
+
+    def _search(self):
+        """Fewest-coefficient feasible pair; returns (attempt, tried)."""
+        tried = []
+        cache: dict = {}
+        M, N = self.max_degree, self.max_den_degree
+
+        def feas(m, n):
+            if (m, n) not in cache:
+                att = self._fit_pair(m, n)
+                att = self._make_certified(att) if att.feasible else att
+                cache[(m, n)] = att
+                tried.append((m, n, att.feasible, self._ncoef(m, n)))
+                if self.progress is not None:
+                    self.progress({"m": m, "n": n, "feasible": att.feasible,
+                                   "n_coefficients": self._ncoef(m, n)})
+            return cache[(m, n)].feasible
+
+        best = None
+        m_hi = M  # smallest m known feasible for the previous n (monotone staircase)
+        for n in range(0, N + 1):
+            limit = self._ncoef(best.m, best.n) if best is not None else None
+            # Largest m whose coefficient count beats the best so far.
+            m_cap = m_hi
+            if limit is not None:
+                while m_cap >= 0 and self._ncoef(m_cap, n) >= limit:
+                    m_cap -= 1
+                if m_cap < 0:
+                    break  # larger n only adds coefficients
+            if not feas(m_cap, n):
+                continue
+            lo, hi = 0, m_cap          # hi is feasible: binary search for the smallest m
+            while lo < hi:
+                mid = (lo + hi) // 2
+                if feas(mid, n):
+                    hi = mid
+                else:
+                    lo = mid + 1
+            m_hi = hi
+            cand = cache[(hi, n)]
+            if best is None or self._ncoef(hi, n) < self._ncoef(best.m, best.n):
+                best = cand
+        if best is None:
+            best = self._fit_pair(M, N, converge=True)
+            tried.append((M, N, best.feasible, self._ncoef(M, N)))
+        return best, tried
+
+    def _function(self, att: _Attempt) -> RationalFunction:
+        cp, cq = self._cols(att.m), self._cols(att.n)
+        return RationalFunction(self._domain, self._E[cp], att.p * self._scale, self._E[cq], att.q)
+
+    def _make_certified(self, att: _Attempt) -> _Attempt:
+        """Certify Q > 0; if that fails, add Q >= q_min where Q is smallest and refit."""
+        for _ in range(6):
+            f = self._function(att)
+            cert = f.certify_denominator(max_depth=self.certify_depth)
+            att.certificate = cert
+            if cert.certified:
+                return att
+            ng = {1: 4097, 2: 257}.get(self.n_vars, 41)
+            axes = [np.linspace(a, b, ng) for a, b in self._domain]
+            D = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, self.n_vars)
+            BD = chebyshev_basis(D, self._E, self._domain)
+            Qd = BD[:, self._cols(att.n)] @ att.q
+            worst = np.argsort(Qd)[:8]
+            self._extra_q = np.vstack([self._extra_q, BD[worst]])
+            new = self._fit_pair(att.m, att.n)
+            if not new.feasible:
+                new.certificate = None
+                return new
+            att = new
+        att.certificate = self._function(att).certify_denominator(max_depth=self.certify_depth)
+        return att
+
+    def _finish(self, att: _Attempt, tried, t0) -> FitResult:
+        if att.p is None:
+            return FitResult(None, att.m, att.n, False, None, -np.inf, np.inf, np.inf, len(self._X),
+                             att.n_constraints, self._lp_count, time.perf_counter() - t0, tried,
+                             "no LP solution")
+        f = self._function(att)
+        cert = getattr(att, "certificate", None)
+        if cert is None:
+            cert = f.certify_denominator(max_depth=self.certify_depth)
+        R = f(self._X)
+        # Independent float64 check on the final function.
+        viol = np.max(np.maximum(self._lo - R, R - self._hi) / self._w)
+        half = 0.5 * self._w
+        ratio = float(np.max(np.abs(R - self._y) / half))
+        feasible = bool(viol <= 0 and np.all(np.isfinite(R)))
+        msg = ("feasible" if feasible else "no feasible degree pair up to the maximum degree; "
+               "returning the least-violating fit") + (
+            "; Q > 0 certified" if cert.certified else "; Q > 0 NOT certified")
+        return FitResult(f, att.m, att.n, feasible, cert, att.delta, float(viol), ratio, len(self._X),
+                         att.n_constraints, self._lp_count, time.perf_counter() - t0, tried, msg)

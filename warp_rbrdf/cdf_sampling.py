@@ -1,0 +1,289 @@
+"""Per-material inverse-CDF BRDF samplers in Warp (issue 6).
+
+Samplers (``sampler = ...`` per material in scene files):
+
+* ``"tabulated"``: the table of :mod:`fit.cdf_table` inverted by binary search (baseline);
+  estimator f cos / pdf with the table's pdf.
+* ``"rational"``: the verified rational inverse CDFs of :mod:`fit.cdf_fit` (endpoint-
+  normalized, see there), generated as unrolled float64 code (constant time); estimator f cos / pdf with pdf = 1 / alpha (eq. 3 of
+  the supplementary text: for a monotone covering map this IS the sampled density).
+* ``"rational-derivative"``: same directions; the derivative estimator f cos * alpha
+  (eq. 4), alpha = dtheta/dmu * dphi/dtau * sin(theta_l), without any pdf. It equals the
+  standard estimator sample by sample up to rounding (both are exact for the map the RFs define).
+* ``"mis-tabulated"`` / ``"mis-rational"``: one environment sample + one sample of the
+  tabulated / rational BRDF sampler, power heuristic. MIS needs the BRDF pdf of directions
+  drawn by the light; for the rational sampler that would need the inverse map, so BOTH MIS
+  weights use the TABULATED pdf p~ as an approximation of the rational density, while the
+  BRDF sample's contribution itself uses the exact alpha. This stays unbiased: the weights
+  w_L = p_L^2 / (p_L^2 + p~^2) and w_B = p~^2 / (p_L^2 + p~^2) sum to one for every direction,
+  and p~ > 0 wherever the rational density is > 0 (the table is mixed with a cosine density).
+  Tested by rendering against a reference.
+
+A material whose rational fit FAILED verification (``CDFFit.fallback``) uses the tabulated
+sampler instead; :func:`prepare_samplers` prints that (never silent).
+
+Frame: theta_v, phi_v of wo in the local frame; phi_l is measured from phi_v.
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+HALF_PI_F = 1.5707963267948966
+
+
+@wp.func
+def _count_le(cdf: wp.array(dtype=float), start: int, n: int, x: float) -> int:
+    """Number of entries <= x among cdf[start .. start + n] (n + 1 increasing entries)."""
+    lo = int(0)
+    hi = n + 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if cdf[start + mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@wp.func
+def tab_row(theta_v: float, n_v: int) -> int:
+    return wp.clamp(int(wp.floor(theta_v / HALF_PI_F * float(n_v))), 0, n_v - 1)
+
+
+@wp.func
+def tab_sample(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
+               n_v: int, n_t: int, n_p: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
+    """(theta_l, phi_l, pdf) exactly as fit.cdf_table.CDFTable.sample (binary search)."""
+    v = tab_row(theta_v, n_v)
+    st = off_t + v * (n_t + 1)
+    j = wp.clamp(_count_le(cdf_t, st, n_t, mu) - 1, 0, n_t - 1)
+    c0 = cdf_t[st + j]
+    m_t = cdf_t[st + j + 1] - c0
+    dt = HALF_PI_F / float(n_t)
+    frac = 0.5
+    if m_t > 0.0:
+        frac = wp.clamp((mu - c0) / m_t, 0.0, 1.0)
+    theta_l = (float(j) + frac) * dt
+    s = 1.0
+    if tau < 0.5:
+        s = -1.0
+    u = wp.abs(2.0 * tau - 1.0)
+    sp = off_p + (v * n_t + j) * (n_p + 1)
+    k = wp.clamp(_count_le(cdf_p, sp, n_p, u) - 1, 0, n_p - 1)
+    q0 = cdf_p[sp + k]
+    m_p = cdf_p[sp + k + 1] - q0
+    dp = wp.pi / float(n_p)
+    fp = 0.5
+    if m_p > 0.0:
+        fp = wp.clamp((u - q0) / m_p, 0.0, 1.0)
+    phi_l = s * (float(k) + fp) * dp
+    pdf = (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
+    return wp.vec3(theta_l, phi_l, pdf)
+
+
+@wp.func
+def tab_pdf(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
+            n_v: int, n_t: int, n_p: int, theta_v: float, theta_l: float, phi_abs: float) -> float:
+    """Density (1/sr) of tab_sample at (theta_l, |phi_l|); 0 at or below the horizon."""
+    if theta_l < 0.0 or theta_l >= HALF_PI_F:
+        return 0.0
+    v = tab_row(theta_v, n_v)
+    dt = HALF_PI_F / float(n_t)
+    dp = wp.pi / float(n_p)
+    j = wp.clamp(int(wp.floor(theta_l / dt)), 0, n_t - 1)
+    k = wp.clamp(int(wp.floor(phi_abs / dp)), 0, n_p - 1)
+    st = off_t + v * (n_t + 1)
+    sp = off_p + (v * n_t + j) * (n_p + 1)
+    m_t = cdf_t[st + j + 1] - cdf_t[st + j]
+    m_p = cdf_p[sp + k + 1] - cdf_p[sp + k]
+    return (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
+
+
+@wp.func
+def view_angles(wo: wp.vec3) -> wp.vec2:
+    """(theta_v, phi_v) of the local view direction."""
+    rxy = wp.sqrt(wo[0] * wo[0] + wo[1] * wo[1])
+    phi = 0.0
+    if rxy > 1.0e-12:
+        phi = wp.atan2(wo[1], wo[0])
+    return wp.vec2(wp.atan2(rxy, wo[2]), phi)
+
+
+@wp.func
+def local_dir(theta_l: float, phi: float) -> wp.vec3:
+    st = wp.sin(theta_l)
+    return wp.vec3(st * wp.cos(phi), st * wp.sin(phi), wp.cos(theta_l))
+
+
+@wp.func
+def rel_phi_abs(wi: wp.vec3, phi_v: float) -> float:
+    """|phi_l - phi_v| folded into [0, pi]."""
+    p = wp.atan2(wi[1], wi[0]) - phi_v
+    if p > wp.pi:
+        p = p - 2.0 * wp.pi
+    if p < -wp.pi:
+        p = p + 2.0 * wp.pi
+    return wp.abs(p)
+
+
+# --------------------------------------------------------------------------------------------
+# Generated rational samplers
+# --------------------------------------------------------------------------------------------
+def _lit(x: float) -> str:
+    return f"wp.float64({float(x)!r})"
+
+
+def _emit_rf(L, pre, f, xs, dvar, deriv=True):
+    """Lines computing ``{pre}_P/Q/dP/dQ`` of RationalFunction ``f`` at float64 expressions
+    ``xs`` (one per variable), derivative with respect to variable ``dvar``."""
+    n = f.n_vars
+    kmax = [0] * n
+    for ex in (f.num_exponents, f.den_exponents):
+        if len(ex):
+            kmax = [max(k, int(m)) for k, m in zip(kmax, ex.max(axis=0))]
+    for v in range(n):
+        a, b = f.domain[v]
+        L.append(f"    {pre}t{v} = (wp.float64(2.0) * {xs[v]} - {_lit(a + b)}) * {_lit(1.0 / (b - a))}")
+        L.append(f"    {pre}T{v}_0 = wp.float64(1.0)")
+        if kmax[v] >= 1:
+            L.append(f"    {pre}T{v}_1 = {pre}t{v}")
+        for k in range(2, kmax[v] + 1):
+            L.append(f"    {pre}T{v}_{k} = wp.float64(2.0) * {pre}t{v} * {pre}T{v}_{k - 1} - {pre}T{v}_{k - 2}")
+    if not deriv:
+        for nm, ex, co in ((f"{pre}P", f.num_exponents, f.num_coef), (f"{pre}Q", f.den_exponents, f.den_coef)):
+            terms = [" * ".join([_lit(c)] + [f"{pre}T{v}_{int(e[v])}" for v in range(n) if e[v] > 0])
+                     for e, c in zip(ex, co) if c != 0.0]
+            L.append(f"    {nm} = wp.float64(0.0)")
+            for i in range(0, len(terms), 8):
+                L.append(f"    {nm} = {nm} + " + " + ".join(terms[i:i + 8]))
+        L.append(f"    {pre}R = {pre}P / {pre}Q")
+        return
+    # derivative table of the dvar: dT_k/dx = k U_{k-1}(t) * 2/(b-a)
+    a, b = f.domain[dvar]
+    sc = 2.0 / (b - a)
+    L.append(f"    {pre}U_0 = wp.float64(1.0)")
+    if kmax[dvar] >= 2:
+        L.append(f"    {pre}U_1 = wp.float64(2.0) * {pre}t{dvar}")
+    for k in range(2, kmax[dvar]):
+        L.append(f"    {pre}U_{k} = wp.float64(2.0) * {pre}t{dvar} * {pre}U_{k - 1} - {pre}U_{k - 2}")
+    L.append(f"    {pre}D_0 = wp.float64(0.0)")
+    for k in range(1, kmax[dvar] + 1):
+        L.append(f"    {pre}D_{k} = {_lit(k * sc)} * {pre}U_{k - 1}")
+
+    def poly(name, ex, co, deriv):
+        terms = []
+        for e, c in zip(ex, co):
+            if c == 0.0 or (deriv and e[dvar] == 0):
+                continue
+            fac = [_lit(c)]
+            for v in range(n):
+                k = int(e[v])
+                if v == dvar and deriv:
+                    fac.append(f"{pre}D_{k}")
+                elif k > 0:
+                    fac.append(f"{pre}T{v}_{k}")
+            terms.append(" * ".join(fac))
+        L.append(f"    {name} = wp.float64(0.0)")
+        for i in range(0, len(terms), 8):
+            L.append(f"    {name} = {name} + " + " + ".join(terms[i:i + 8]))
+
+    poly(f"{pre}P", f.num_exponents, f.num_coef, False)
+    poly(f"{pre}Q", f.den_exponents, f.den_coef, False)
+    poly(f"{pre}dP", f.num_exponents, f.num_coef, True)
+    poly(f"{pre}dQ", f.den_exponents, f.den_coef, True)
+    L.append(f"    {pre}R = {pre}P / {pre}Q")
+    L.append(f"    {pre}dR = ({pre}dP - {pre}R * {pre}dQ) / {pre}Q")
+
+
+def generate_sampler_function(cdf_fit, name: str) -> str:
+    """``@wp.func name(theta_v, mu, tau) -> vec3(theta_l, phi_l, alpha)`` for a verified fit:
+    the endpoint-normalized map of :meth:`fit.cdf_fit.CDFFit.sample`, float64, unrolled."""
+    from fit.cdf_fit import restrict_rf
+
+    F, G = cdf_fit.theta, cdf_fit.phi
+    L = ["@wp.func", f"def {name}(theta_v: float, mu: float, tau: float) -> wp.vec3:",
+         f"    # generated rational inverse CDFs of {cdf_fit.name!r}",
+         "    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))",
+         "    m = wp.float64(mu)"]
+    _emit_rf(L, "f", F, ["tv", "m"], 1)
+    _emit_rf(L, "fa", restrict_rf(F, 1, 0), ["tv"], 0, deriv=False)
+    _emit_rf(L, "fb", restrict_rf(F, 1, 1), ["tv"], 0, deriv=False)
+    L += ["    fs = wp.float64(1.5707963267948966) / (fbR - faR)",
+          "    tl = (fR - faR) * fs",
+          "    dtl = fdR * fs",
+          "    inside = 1",
+          "    if tl < wp.float64(0.0) or tl > wp.float64(1.5707963267948966):\n        inside = 0",
+          "    tl = wp.clamp(tl, wp.float64(0.0), wp.float64(1.5707963267948966))",
+          "    s = wp.float64(1.0)",
+          "    if tau < 0.5:\n        s = wp.float64(-1.0)",
+          "    u = wp.float64(wp.abs(2.0 * tau - 1.0))"]
+    _emit_rf(L, "g", G, ["tv", "tl", "u"], 2)
+    _emit_rf(L, "ga", restrict_rf(G, 2, 0), ["tv", "tl"], 0, deriv=False)
+    _emit_rf(L, "gb", restrict_rf(G, 2, 1), ["tv", "tl"], 0, deriv=False)
+    L += ["    gs = wp.float64(3.141592653589793) / (gbR - gaR)",
+          "    ph = (gR - gaR) * gs",
+          "    if ph < wp.float64(0.0) or ph > wp.float64(3.141592653589793):\n        inside = 0",
+          "    ph = wp.clamp(ph, wp.float64(0.0), wp.float64(3.141592653589793))",
+          "    alpha = wp.float64(0.0)",
+          "    if inside == 1:\n        alpha = dtl * wp.float64(2.0) * gdR * gs * wp.sin(tl)",
+          "    return wp.vec3(float(tl), float(s * ph), float(alpha))"]
+    return "\n".join(L) + "\n"
+
+
+def generate_sampler_functions(fits):
+    return [(f"cdfsamp_{i}", generate_sampler_function(f, f"cdfsamp_{i}")) for i, f in enumerate(fits)]
+
+
+# --------------------------------------------------------------------------------------------
+# NumPy side: which tables/fits a scene needs
+# --------------------------------------------------------------------------------------------
+TABLE_SAMPLERS = ("tabulated", "mis-tabulated", "rational", "rational-derivative", "mis-rational")
+RATIONAL_SAMPLERS = ("rational", "rational-derivative", "mis-rational")
+FALLBACK = {"rational": "tabulated", "rational-derivative": "tabulated", "mis-rational": "mis-tabulated"}
+
+
+def material_evaluate(spec, kind_data):
+    """NumPy ``evaluate(wi, wo) -> (..., 3)`` of a material (scale applied), for tabulation."""
+    if spec.type == "lambert":
+        alb = np.asarray(spec.albedo, float)
+        return lambda wi, wo: np.broadcast_to(alb / np.pi, np.broadcast_shapes(
+            np.shape(wi), np.shape(wo))[:-1] + (3,)) * ((np.asarray(wi)[..., 2:3] > 0) & (np.asarray(wo)[..., 2:3] > 0))
+    scale = np.asarray(spec.scale, float)
+    ev = kind_data.evaluate
+    return lambda wi, wo: np.asarray(ev(wi, wo), float) * scale
+
+
+def prepare_sampler(spec, kind_data, log=print):
+    """``(sampler name actually used, CDFFit or None, CDFTable or None)`` for one material.
+
+    Tables only for table/rational samplers; fits only for rational ones (from ``spec.cdf``:
+    a CDFFit or a path to an ``rbrdf-cdf`` file, else fitted now). Fallbacks are printed."""
+    name = spec.sampler
+    if name not in TABLE_SAMPLERS:
+        return name, None, None
+    from fit.cdf_table import tabulate
+
+    cdf = getattr(spec, "cdf", None)
+    fitobj = None
+    if cdf is not None:
+        if isinstance(cdf, (str, bytes)) or hasattr(cdf, "suffix"):
+            from fit.cdf_fit import load
+
+            fitobj = load(cdf)
+        else:
+            fitobj = cdf
+    if name in RATIONAL_SAMPLERS:
+        if fitobj is None:
+            from fit.cdf_fit import fit_cdf
+
+            log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
+                f"from `rbrdf-fit cdf` to skip this)")
+            fitobj = fit_cdf(material_evaluate(spec, kind_data), name=spec.name)
+        if fitobj.fallback:
+            log(f"material {spec.name!r}: rational sampler FALLBACK to {FALLBACK[name]!r} "
+                f"({fitobj.reason})")
+            return FALLBACK[name], None, fitobj.table
+        return name, fitobj, fitobj.table
+    table = fitobj.table if fitobj is not None else tabulate(material_evaluate(spec, kind_data))
+    return name, None, table
