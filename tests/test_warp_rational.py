@@ -8,8 +8,8 @@ from warp_rbrdf import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.scene import MaterialSpec
 
-coefficients = pytest.importorskip("fit.coefficients")
-rational = pytest.importorskip("fit.rational")
+import fit.coefficients as coefficients  # noqa: E402
+import fit.rational as rational  # noqa: E402
 
 
 def random_model(value_transform="linear", seed=0):

@@ -50,8 +50,14 @@ sun_azimuth = 140.0
 LAMBERT_FALLBACK = 'type = "lambert"\nalbedo = [0.7, 0.35, 0.2]'
 
 
+#: The shipped fit the default sphere prefers (glossy, fitted by ``rbrdf-fit brdf``).
+PREFERRED_DEFAULT = "satin_rosaline_rgb.json"
+
+
 def shipped_coefficient_files():
-    return sorted(PACKAGE_DATA.glob("*.json")) if PACKAGE_DATA.is_dir() else []
+    """Shipped coefficient files, the preferred default first."""
+    files = sorted(PACKAGE_DATA.glob("*.json")) if PACKAGE_DATA.is_dir() else []
+    return sorted(files, key=lambda p: p.name != PREFERRED_DEFAULT)
 
 
 def default_material_toml() -> str:

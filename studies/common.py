@@ -1,0 +1,312 @@
+"""Shared helpers of the studies: data paths, in-memory scenes, sampler discovery, timed renders,
+image metrics (RMSE on an object mask, CIE ΔE2000 with colour-science) and small writers.
+
+Every study builds its scenes in memory (no TOML files), with the object alone in front of a
+hidden environment (``hide_environment = true``) so that errors are measured on the object's
+pixels only; :func:`object_mask` gives those pixels.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import sys
+import time
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # `python studies/x.py` from anywhere
+    sys.path.insert(0, str(ROOT))
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
+
+from warp_rbrdf.paths import data_root  # noqa: E402
+from warp_rbrdf.scene import (CameraSpec, IntegratorSpec, LightSpec, MaterialSpec,  # noqa: E402
+                              Scene, ShapeSpec)
+
+#: Samplers of the first renderer (issue 5); anything else in ``warp_rbrdf.scene.SAMPLERS`` is an
+#: inverse-CDF sampler added later and is included automatically.
+BASE_SAMPLERS = ("uniform", "cosine", "light", "mis")
+
+MATERIALS = {
+    "ibiza": "rgl/cc_ibiza_sunset_rgb.bsdf",      # glossy vinyl
+    "satin": "rgl/satin_rosaline_rgb.bsdf",       # glossy satin
+    "paper": "rgl/paper_white_rgb.bsdf",          # diffuse
+    "gold": "rgl/vch_golden_yellow_rgb.bsdf",
+    "napoli": "rgl/colodur_napoli_4f_rgb.bsdf",
+    "iris": "rgl/cc_iris_purple_gem_rgb.bsdf",
+}
+ENVMAPS = {
+    "rooitou": "envmaps/rooitou_park_1k.hdr",      # tiny, very bright sun
+    "studio": "envmaps/studio_small_03_1k.hdr",
+    "potsdamer": "envmaps/potsdamer_platz_1k.hdr",
+}
+#: Rotation (degrees about +Y) of each map so that its brightest light faces the camera side.
+ENV_ROTATION = {"rooitou": 80.0, "studio": 0.0, "potsdamer": 0.0}
+
+
+def data_path(rel: str) -> Path:
+    p = data_root() / rel
+    if not p.exists():
+        raise FileNotFoundError(f"shared data file missing: {p} (set RBRDF_DATA)")
+    return p
+
+
+def has_data(*rels) -> bool:
+    return all((data_root() / r).exists() for r in rels)
+
+
+def all_samplers() -> tuple:
+    """Sampler names the renderer accepts now (base ones first)."""
+    from warp_rbrdf import scene as S
+
+    names = tuple(getattr(S, "SAMPLERS", BASE_SAMPLERS))
+    return tuple(s for s in BASE_SAMPLERS if s in names) + tuple(s for s in names if s not in BASE_SAMPLERS)
+
+
+# --------------------------------------------------------------------------------------------
+# Materials
+@lru_cache(maxsize=16)
+def measured(name: str):
+    """The 3-D MERL-grid table (fit.measured.MeasuredBRDF) of a material key or a file path."""
+    from fit.io import load_measured
+
+    path = data_path(MATERIALS[name]) if name in MATERIALS else Path(name)
+    return load_measured(path)
+
+
+@lru_cache(maxsize=16)
+def projected(name: str, statistic: str = "median"):
+    from fit.projection import project
+
+    return project(measured(name), statistic=statistic)
+
+
+def material_spec(kind: str, data, sampler: str = "mis", scale=1.0, name="obj") -> MaterialSpec:
+    """``kind``: lambert (data = albedo), measured, projected, rational (data = in-memory object)."""
+    sc = tuple(np.broadcast_to(np.asarray(scale, float), 3))
+    if kind == "lambert":
+        return MaterialSpec(name=name, type="lambert", albedo=tuple(np.broadcast_to(np.asarray(data, float), 3)),
+                            sampler=sampler)
+    return MaterialSpec(name=name, type=kind, data=data, sampler=sampler, scale=sc)
+
+
+# --------------------------------------------------------------------------------------------
+# Scenes
+GEOMETRY = {
+    # object, camera origin, target, fov
+    "sphere": dict(origin=(0.0, 0.9, 3.6), target=(0.0, 0.0, 0.0), fov=34.0),
+    "bunny": dict(origin=(0.0, 0.95, 3.4), target=(0.0, 0.72, 0.0), fov=30.0),
+    # a plane seen at a grazing angle (view ~80 deg from the normal at the image centre)
+    "grazing_plane": dict(origin=(0.0, 0.35, 2.0), target=(0.0, 0.0, 0.0), fov=30.0),
+    # the same plane seen from above (view ~10 deg from the normal)
+    "normal_plane": dict(origin=(0.0, 2.0, 0.35), target=(0.0, 0.0, 0.0), fov=30.0),
+}
+
+
+def make_scene(geometry: str, light: str, material: MaterialSpec, resolution: int = 64,
+               spp: int = 16, seed: int = 0, light_scale: float = 1.0, sun_dir=None) -> Scene:
+    """One object with ``material``; ``light``: an ENVMAPS key, ``"colinear"`` (one directional
+    light travelling along the view, irradiance 3) or ``"directional"`` (direction ``sun_dir``)."""
+    g = GEOMETRY[geometry]
+    cam = CameraSpec(origin=g["origin"], target=g["target"], up=(0.0, 1.0, 0.0), fov=g["fov"],
+                     resolution=(int(resolution), int(resolution)))
+    if geometry == "sphere":
+        shapes = [ShapeSpec(type="sphere", material=material.name, center=(0.0, 0.0, 0.0), radius=0.8,
+                            subdivisions=6)]
+    elif geometry == "bunny":
+        from warp_rbrdf import transforms
+
+        shapes = [ShapeSpec(type="mesh", material=material.name, file=data_path("meshes/bun_zipper.ply"),
+                            transform=transforms.compose(scale=(10.0, 10.0, 10.0),
+                                                         translate=(0.17, -0.33, 0.0)))]
+    else:
+        shapes = [ShapeSpec(type="plane", material=material.name, size=(6.0, 6.0))]
+    if light == "colinear":
+        lights = [LightSpec(type="directional", irradiance=(3.0, 3.0, 3.0), colinear_with_view=True)]
+    elif light == "directional":
+        d = -np.asarray(sun_dir, float)
+        lights = [LightSpec(type="directional", irradiance=(3.0, 3.0, 3.0),
+                            direction=tuple(d / np.linalg.norm(d)))]
+    else:
+        from warp_rbrdf import transforms
+
+        rot = transforms.compose(rotate=[[ENV_ROTATION.get(light, 0.0), 0.0, 1.0, 0.0]])[:3, :3]
+        lights = [LightSpec(type="envmap", file=data_path(ENVMAPS[light]), scale=float(light_scale),
+                            rotation=rot)]
+    return Scene(camera=cam,
+                 integrator=IntegratorSpec(spp=spp, seed=seed, max_depth=1, sampler=material.sampler,
+                                           hide_environment=True, tile_size=16),
+                 materials={material.name: material}, shapes=shapes, lights=lights,
+                 path=f"<study {geometry}/{light}>")
+
+
+def with_sampler(scene: Scene, sampler: str) -> Scene:
+    import copy
+
+    sc = copy.copy(scene)
+    sc.materials = {k: copy.copy(v) for k, v in scene.materials.items()}
+    for m in sc.materials.values():
+        m.sampler = sampler
+    sc.integrator = copy.copy(scene.integrator)
+    sc.integrator.sampler = sampler if sampler in BASE_SAMPLERS else sc.integrator.sampler
+    return sc
+
+
+def with_material(scene: Scene, material: MaterialSpec) -> Scene:
+    import copy
+
+    sc = copy.copy(scene)
+    material = copy.copy(material)
+    material.name = next(iter(scene.materials))
+    sc.materials = {material.name: material}
+    return sc
+
+
+_MASKS: dict = {}
+
+
+def object_mask(scene: Scene, renderer=None) -> np.ndarray:
+    """Boolean (H, W): pixels fully covered by the object (all 4x4 sub-pixel camera rays hit it),
+    so silhouette pixels, whose anti-aliasing noise is the same for every sampler and
+    representation, are left out. Cached per camera and geometry."""
+    key = (scene.camera.origin, scene.camera.target, scene.camera.fov, scene.camera.resolution,
+           tuple((s.type, str(s.file), s.size, s.radius) for s in scene.shapes))
+    if key not in _MASKS:
+        from studies.coverage import coverage
+
+        if renderer is None:
+            from warp_rbrdf import Renderer
+
+            renderer = Renderer(scene)
+        _MASKS[key] = coverage(renderer, 4) >= 1.0
+    return _MASKS[key]
+
+
+# --------------------------------------------------------------------------------------------
+# Rendering
+def renderer(scene: Scene):
+    """A compiled :class:`warp_rbrdf.Renderer`; returns (renderer, compile_seconds)."""
+    from warp_rbrdf import Renderer
+
+    r = Renderer(scene)
+    c = r.compile()
+    return r, c
+
+
+def timed_render(r, spp: int, seed: int, threads: int | None = None, variance: bool = False):
+    """Render once; returns (image, render_seconds[, variance])."""
+    out = r.render(spp=spp, seed=seed, threads=threads, return_variance=variance)
+    if variance:
+        img, var = out
+        return img, r.stats.render_seconds, var
+    return out, r.stats.render_seconds
+
+
+def rmse(img, ref, mask) -> float:
+    d = (np.asarray(img, np.float64) - np.asarray(ref, np.float64))[mask]
+    return float(np.sqrt(np.mean(d * d))) if d.size else float("nan")
+
+
+# --------------------------------------------------------------------------------------------
+# Colour: linear Rec.709 -> XYZ -> CIE Lab -> ΔE2000, all with colour-science.
+def exposure_for(ref, mask, percentile: float = 99.0) -> float:
+    """Scale that maps the ``percentile`` of the reference's luminance on ``mask`` to Y = 1
+    (the Lab white), so ΔE is measured at a fixed, stated exposure per scene."""
+    Y = np.asarray(ref, np.float64)[mask] @ np.array([0.2126, 0.7152, 0.0722])
+    v = np.percentile(Y, percentile) if Y.size else 1.0
+    return float(1.0 / v) if v > 0 else 1.0
+
+
+def rgb_to_lab(img, exposure: float = 1.0) -> np.ndarray:
+    import colour
+
+    cs = colour.RGB_COLOURSPACES["ITU-R BT.709"]
+    rgb = np.asarray(img, np.float64) * exposure
+    xyz = colour.RGB_to_XYZ(rgb, cs, illuminant=cs.whitepoint, chromatic_adaptation_transform=None,
+                            apply_cctf_decoding=False)
+    return colour.XYZ_to_Lab(xyz, cs.whitepoint)
+
+
+def delta_e2000(img, ref, exposure: float = 1.0) -> np.ndarray:
+    """Per-pixel CIE ΔE2000 between two linear Rec.709 images at the same exposure."""
+    import colour
+
+    return colour.delta_E(rgb_to_lab(img, exposure), rgb_to_lab(ref, exposure), method="CIE 2000")
+
+
+def de_stats(de, mask) -> dict:
+    v = np.asarray(de)[mask]
+    return {"mean": float(v.mean()), "p99": float(np.percentile(v, 99)), "max": float(v.max())} if v.size \
+        else {"mean": float("nan"), "p99": float("nan"), "max": float("nan")}
+
+
+# --------------------------------------------------------------------------------------------
+# Writers
+def write_csv(path, rows: list[dict]):
+    path = Path(path)
+    keys = []
+    for r in rows:
+        keys += [k for k in r if k not in keys]
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys)
+        w.writeheader()
+        w.writerows(rows)
+
+
+def write_json(path, obj):
+    Path(path).write_text(json.dumps(obj, indent=1, default=_json_default))
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(type(o))
+
+
+def md_table(rows: list[list], header: list[str]) -> str:
+    out = ["| " + " | ".join(header) + " |", "|" + "|".join(" --- " for _ in header) + "|"]
+    for r in rows:
+        out.append("| " + " | ".join(_fmt(x) for x in r) + " |")
+    return "\n".join(out) + "\n"
+
+
+def _fmt(x):
+    if isinstance(x, float):
+        if not np.isfinite(x):
+            return "–"
+        a = abs(x)
+        if a != 0 and (a < 1e-3 or a >= 1e5):
+            return f"{x:.2e}"
+        return f"{x:.3g}" if a < 100 else f"{x:.0f}"
+    return str(x)
+
+
+def save_png(path, img, exposure=1.0):
+    """sRGB PNG of a linear image (exposure stated by the caller)."""
+    import matplotlib.image as mpimg
+
+    x = np.clip(np.asarray(img, np.float64) * exposure, 0, None)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    mpimg.imsave(str(path), np.clip(srgb, 0, 1))
+
+
+def machine_info() -> dict:
+    import platform
+
+    return {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
+            "time": time.strftime("%Y-%m-%d %H:%M:%S")}
+
+
+def progress(iterable=None, **kw):
+    from tqdm import tqdm
+
+    kw.setdefault("leave", False)
+    kw.setdefault("file", sys.stderr)
+    return tqdm(iterable, **kw)

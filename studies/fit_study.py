@@ -1,0 +1,242 @@
+"""Fit study: per material, rational coefficients vs tolerance vs render error (ΔE2000) vs
+evaluation cost.
+
+For each material and tolerance a rational fit is obtained through :mod:`studies.fits` (the
+project's fitter ``rbrdf-fit brdf`` when it exists; with ``--direct-fallback`` a labelled
+stand-in built on :class:`fit.fitter.IntervalRationalFitter`). Then:
+
+* coefficients (total over R, G, B), fit seconds, whether every channel met its intervals;
+* render error: a sphere under the environment map (sampler "light", same seed for every
+  representation), CIE ΔE2000 (colour-science) of the rational render against the 3-D table
+  render and against the 2-D projection render (the fit's own target), mean and 99th percentile
+  on the object's fully covered pixels; exposure as in :mod:`studies.comparison`;
+* evaluation cost: nanoseconds per BRDF evaluation in the renderer's Warp code (``eval_material``
+  on ``n_eval`` random direction pairs, median of 5, one CPU thread) for the 3-D table, the
+  2-D table and each fit; and the render seconds of the sphere.
+
+    python studies/fit_study.py --out results/fit_study                    # full size
+    python studies/fit_study.py --out results/fit_study --smoke
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from studies import common as C  # noqa: E402
+from studies import fits as F  # noqa: E402
+
+PRESETS = {
+    "smoke": dict(materials=["paper"], tols=[0.2], resolution=16, spp=8, n_eval=1 << 14, stride=9,
+                  max_degree=3),
+    "moderate": dict(materials=["paper", "ibiza", "satin"], tols=[0.2, 0.1, 0.05], resolution=64, spp=256,
+                     n_eval=1 << 20, stride=3, max_degree=8),
+    "full": dict(materials=list(C.MATERIALS), tols=[0.2, 0.1, 0.05, 0.02], resolution=128, spp=1024,
+                 n_eval=1 << 21, stride=1, max_degree=10),
+}
+SEED = 5
+
+
+def random_pairs(n: int, seed: int = 0):
+    """``n`` pairs of cosine-distributed local directions (upper hemisphere)."""
+    rng = np.random.default_rng(seed)
+
+    def cos_dirs():
+        u, v = rng.random(n), rng.random(n)
+        r, p = np.sqrt(u), 2 * np.pi * v
+        return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - u, 0))], -1).astype(np.float32)
+
+    return cos_dirs(), cos_dirs()
+
+
+def eval_ns(renderer, wi, wo, reps: int = 5) -> float:
+    """Nanoseconds per evaluation of the scene's (first) material in the renderer's Warp code:
+    one launch of its ``eval_bsdf_kernel`` over preallocated arrays (median of ``reps``)."""
+    wp = renderer.wp
+    renderer.compile()
+    dev = renderer.device
+    a = wp.array(np.ascontiguousarray(wi, np.float32), dtype=wp.vec3, device=dev)
+    b = wp.array(np.ascontiguousarray(wo, np.float32), dtype=wp.vec3, device=dev)
+    o = wp.zeros(len(wi), dtype=wp.vec3, device=dev)
+    k = renderer.module.eval_bsdf_kernel
+    ts = []
+    for i in range(reps + 1):
+        t0 = time.perf_counter()
+        wp.launch(k, dim=len(wi), inputs=[renderer.materials, 0, a, b], outputs=[o], device=dev)
+        wp.synchronize_device(dev)
+        if i:  # the first launch is a warm-up
+            ts.append(time.perf_counter() - t0)
+    return float(np.median(ts) / len(wi) * 1e9)
+
+
+def run(preset="full", out="results/fit_study", materials=None, tols=None, env="studio", resolution=None,
+        spp=None, allow_fit=True, allow_direct=False, fit_timeout=1800.0, charts=True, quiet=False) -> dict:
+    cfg = dict(PRESETS[preset])
+    for k, v in dict(materials=materials, tols=tols, resolution=resolution, spp=spp).items():
+        if v is not None:
+            cfg[k] = v
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fit_dir = out / "fits" if preset == "smoke" else None
+    t_start = time.perf_counter()
+    wi, wo = random_pairs(cfg["n_eval"])
+    rows, base_rows = [], []
+    avail = F.brdf_fit_available()
+    bar = C.progress(total=len(cfg["materials"]) * (len(cfg["tols"]) + 1), desc="fit study", disable=quiet)
+    for mname in cfg["materials"]:
+        bar.set_postfix_str(f"{mname} tables")
+        base = C.make_scene("sphere", env, C.material_spec("measured", C.measured(mname), "light"),
+                            resolution=cfg["resolution"])
+        imgs, cost = {}, {}
+        for rep, spec in (("measured", C.material_spec("measured", C.measured(mname), "light")),
+                          ("projected", C.material_spec("projected", C.projected(mname), "light"))):
+            r, _ = C.renderer(C.with_material(base, spec))
+            r.render(spp=1, seed=0)
+            imgs[rep], sec = C.timed_render(r, cfg["spp"], SEED)
+            cost[rep] = dict(eval_ns=eval_ns(r, wi, wo), render_seconds=sec)
+            if rep == "measured":
+                mask = C.object_mask(base, r)
+                noise, _ = C.timed_render(r, cfg["spp"], SEED + 1)
+        expo = C.exposure_for(imgs["measured"], mask)
+        de_pm = C.de_stats(C.delta_e2000(imgs["projected"], imgs["measured"], expo), mask)
+        de_noise = C.de_stats(C.delta_e2000(noise, imgs["measured"], expo), mask)
+        base_rows.append(dict(material=mname, exposure=expo, de_proj_vs_meas_mean=de_pm["mean"],
+                              de_proj_vs_meas_p99=de_pm["p99"], noise_de_mean=de_noise["mean"],
+                              **{f"{k}_{q}": v for k, d in cost.items() for q, v in d.items()}))
+        bar.update(1)
+        for tol in cfg["tols"]:
+            bar.set_postfix_str(f"{mname} tol {tol:g}")
+            model, info = _model(mname, tol, allow_fit, allow_direct, fit_timeout, fit_dir, cfg)
+            row = dict(material=mname, tol=tol, source=info.get("source"), fit_seconds=info.get("fit_seconds"),
+                       error=info.get("error", ""))
+            if model is not None:
+                s = F.model_summary(model)
+                row.update(n_coefficients=s["n_coefficients"], feasible=s["feasible_all"],
+                           coefficients_rgb="/".join(map(str, s["per_channel"])))
+                r, csec = C.renderer(C.with_material(base, C.material_spec("rational", model, "light")))
+                r.render(spp=1, seed=0)
+                img, sec = C.timed_render(r, cfg["spp"], SEED)
+                row.update(compile_seconds=csec, render_seconds=sec, eval_ns=eval_ns(r, wi, wo))
+                for ref in ("measured", "projected"):
+                    d = C.de_stats(C.delta_e2000(img, imgs[ref], expo), mask)
+                    row.update({f"de_vs_{ref}_{k}": v for k, v in d.items()})
+                np.save(out / f"{mname}_tol{tol:g}.npy", img)
+            rows.append(row)
+            bar.update(1)
+    bar.close()
+    meta = dict(preset=preset, config=cfg, env=env, seed=SEED, fitter=avail,
+                machine=C.machine_info(), wall_seconds=time.perf_counter() - t_start)
+    C.write_csv(out / "fit_study.csv", rows)
+    C.write_csv(out / "fit_study_tables.csv", base_rows)
+    C.write_json(out / "fit_study.json", dict(meta=meta, rows=rows, tables=base_rows))
+    md = summary_markdown(rows, base_rows, meta)
+    (out / "fit_study.md").write_text(md)
+    if charts and any("n_coefficients" in r for r in rows):
+        plot(rows, base_rows, out / "fit_study.png")
+    return dict(rows=rows, tables=base_rows, meta=meta, markdown=md)
+
+
+def _model(mname, tol, allow_fit, allow_direct, timeout, fit_dir, cfg):
+    return F.rational_model(mname, tol, allow_fit=allow_fit, allow_direct=allow_direct, timeout=timeout,
+                            fit_dir=fit_dir, direct_stride=cfg["stride"], direct_max_degree=cfg["max_degree"])
+
+
+def summary_markdown(rows, base_rows, meta) -> str:
+    cfg = meta["config"]
+    L = [f"Sphere under `{meta['env']}`, {cfg['resolution']}×{cfg['resolution']} px, sampler `light` at "
+         f"{cfg['spp']} spp, same seed for all representations; ΔE2000 on fully covered object pixels. "
+         f"Evaluation cost: ns per BRDF evaluation in the renderer's Warp kernel ({cfg['n_eval']} random "
+         f"direction pairs, one thread, median of 5). Fitter: {meta['fitter'][1]}.\n"]
+    hdr = ["material", "tol", "fit", "coefficients (R/G/B)", "all in tol.", "fit s", "ΔE vs 3-D mean/p99",
+           "ΔE vs 2-D mean/p99", "ns / eval", "render s"]
+    body = []
+    for b in base_rows:
+        body.append([b["material"], "3-D table", "–", "1 458 000 × 3 values", "–", "–", "noise %.2f" % b["noise_de_mean"],
+                     "%.2f / %.2f" % (b["de_proj_vs_meas_mean"], b["de_proj_vs_meas_p99"]) + " (2-D vs 3-D)",
+                     b["measured_eval_ns"], b["measured_render_seconds"]])
+        body.append([b["material"], "2-D table", "–", "8 100 × 3 values", "–", "–", "–", "–",
+                     b["projected_eval_ns"], b["projected_render_seconds"]])
+        for r in rows:
+            if r["material"] != b["material"]:
+                continue
+            if "n_coefficients" not in r:
+                body.append([r["material"], r["tol"], "none", r.get("error", "")[:60], "", "", "", "", "", ""])
+                continue
+            body.append([r["material"], r["tol"], r["source"], f"{r['n_coefficients']} ({r['coefficients_rgb']})",
+                         "yes" if r["feasible"] else "no", r["fit_seconds"] or float("nan"),
+                         "%.2f / %.2f" % (r["de_vs_measured_mean"], r["de_vs_measured_p99"]),
+                         "%.2f / %.2f" % (r["de_vs_projected_mean"], r["de_vs_projected_p99"]),
+                         r["eval_ns"], r["render_seconds"]])
+    L.append(C.md_table(body, hdr))
+    return "\n".join(L)
+
+
+def plot(rows, base_rows, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    mats = list(dict.fromkeys(r["material"] for r in rows if "n_coefficients" in r))
+    fig, axes = plt.subplots(1, 3, figsize=(10, 3.0))
+    for i, m in enumerate(mats):
+        rs = sorted([r for r in rows if r["material"] == m and "n_coefficients" in r], key=lambda r: -r["tol"])
+        c = plt.cm.tab10(i)
+        tol = [r["tol"] for r in rs]
+        axes[0].plot(tol, [r["n_coefficients"] for r in rs], "o-", color=c, label=m)
+        axes[1].plot([r["n_coefficients"] for r in rs], [r["de_vs_measured_mean"] for r in rs], "o-", color=c, label=f"{m} vs 3-D")
+        axes[1].plot([r["n_coefficients"] for r in rs], [r["de_vs_projected_mean"] for r in rs], "s--", color=c, alpha=0.6,
+                     label=f"{m} vs 2-D")
+        axes[2].plot([r["n_coefficients"] for r in rs], [r["eval_ns"] for r in rs], "o-", color=c, label=m)
+        b = [x for x in base_rows if x["material"] == m][0]
+        axes[1].axhline(b["de_proj_vs_meas_mean"], color=c, ls=":", lw=1)
+    for b in base_rows[:1]:
+        axes[2].axhline(b["measured_eval_ns"], color="k", ls=":", lw=1, label="3-D table")
+        axes[2].axhline(b["projected_eval_ns"], color="0.5", ls="--", lw=1, label="2-D table")
+    axes[0].set_xscale("log")
+    axes[0].invert_xaxis()
+    axes[0].set_xlabel("tolerance", fontsize=8)
+    axes[0].set_ylabel("coefficients (R+G+B)", fontsize=8)
+    axes[1].set_xlabel("coefficients", fontsize=8)
+    axes[1].set_ylabel("mean ΔE2000 (dotted: 2-D vs 3-D)", fontsize=8)
+    axes[2].set_xlabel("coefficients", fontsize=8)
+    axes[2].set_ylabel("ns per evaluation", fontsize=8)
+    for ax in axes:
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=72)
+    plt.close(fig)
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--out", default="results/fit_study")
+    p.add_argument("--preset", choices=sorted(PRESETS), default="full")
+    p.add_argument("--smoke", action="store_true")
+    p.add_argument("--materials", nargs="*", choices=sorted(C.MATERIALS))
+    p.add_argument("--tols", nargs="*", type=float)
+    p.add_argument("--env", default="studio", choices=sorted(C.ENVMAPS))
+    p.add_argument("--resolution", type=int)
+    p.add_argument("--spp", type=int)
+    p.add_argument("--no-fit", action="store_true", help="only cached/shipped fits")
+    p.add_argument("--direct-fallback", action="store_true",
+                   help="if the project's fitter is unavailable, use studies.fits.direct_fit (labelled)")
+    p.add_argument("--fit-timeout", type=float, default=1800.0)
+    a = p.parse_args(argv)
+    res = run("smoke" if a.smoke else a.preset, a.out, a.materials, a.tols, a.env, a.resolution, a.spp,
+              not a.no_fit, a.direct_fallback, a.fit_timeout)
+    print(res["markdown"])
+    print(f"wrote {a.out}/fit_study.csv, .json, .md, fit_study.png ({res['meta']['wall_seconds']:.0f} s)")
+
+
+if __name__ == "__main__":
+    main()

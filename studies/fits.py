@@ -1,0 +1,150 @@
+"""Rational fits for the studies: find or make a coefficient file for a material and tolerance.
+
+Order of preference (the first that works):
+
+1. ``results/fits/<material>_tol<t>.json`` made earlier by this module;
+2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t``;
+3. the project's fitter: ``rbrdf-fit brdf FILE --tol t --out X.json`` (``fit.brdf_fit``; run in a
+   subprocess with a time limit, so a slow fit cannot hang a study);
+4. only with ``allow_direct=True`` (the fit study's ``--direct-fallback``): a stand-in made here
+   with :class:`fit.fitter.IntervalRationalFitter` on the median projection (one function per
+   channel over (sqrt theta_h, theta_d), theta_d <= 80 deg, intervals ``y +- max(t |y|, floor)``).
+   It is labelled ``source = "direct"`` everywhere it is reported; it is not the shipped fitter.
+
+Returns ``(model, info)``; ``model`` is ``None`` (and ``info["error"]`` says why) when nothing
+works.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from studies import common as C
+
+FIT_DIR = C.ROOT / "results" / "fits"
+
+
+def brdf_fit_available() -> tuple[bool, str]:
+    """Whether ``fit.brdf_fit`` imports and the CLI has a ``brdf`` command."""
+    try:
+        import fit.brdf_fit  # noqa: F401
+    except Exception as e:  # noqa: BLE001
+        return False, f"fit.brdf_fit not importable ({type(e).__name__}: {e})"
+    from fit import cli
+
+    cli._register_optional_commands()
+    parser = cli.build_parser()
+    choices = next(a.choices for a in parser._actions if getattr(a, "choices", None))
+    if "brdf" not in choices:
+        return False, "rbrdf-fit has no 'brdf' command"
+    return True, "fit.brdf_fit + rbrdf-fit brdf"
+
+
+def _tag(tol: float) -> str:
+    return f"{tol:g}".replace(".", "p")
+
+
+def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, allow_direct: bool = False,
+                   timeout: float = 900.0, fit_dir: Path | None = None, extra_args=(),
+                   direct_stride: int = 3, direct_max_degree: int = 8):
+    from fit.coefficients import load
+
+    fit_dir = Path(fit_dir or FIT_DIR)
+    fit_dir.mkdir(parents=True, exist_ok=True)
+    stem = Path(C.MATERIALS.get(material, material)).stem
+    info = {"material": material, "tol": tol}
+    direct_name = f"{stem}_tol{_tag(tol)}_direct_s{direct_stride}_d{direct_max_degree}.json"
+    for src, name in (("cli", f"{stem}_tol{_tag(tol)}_cli.json"), ("direct", direct_name)):
+        p = fit_dir / name
+        if p.exists() and (src == "cli" or allow_direct):
+            m = load(p)
+            return m, dict(info, source=f"{src} (cached)", file=str(p), fit_seconds=m.fit_info.get("time_s"))
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    for p in sorted(PACKAGE_DATA.glob(f"{stem}*.json")) if PACKAGE_DATA.is_dir() else []:
+        try:
+            m = load(p)
+        except Exception:  # noqa: BLE001
+            continue
+        if abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12:
+            return m, dict(info, source="shipped", file=str(p), fit_seconds=m.fit_info.get("time_s"))
+    errors = []
+    if allow_fit:
+        ok, why = brdf_fit_available()
+        if ok:
+            out = fit_dir / f"{stem}_tol{_tag(tol)}_cli.json"
+            cmd = [sys.executable, "-c", "import sys; from fit.cli import main; sys.exit(main())", "brdf",
+                   str(C.data_path(C.MATERIALS[material]) if material in C.MATERIALS else material),
+                   "--tol", str(tol), "--out", str(out), *extra_args]
+            t0 = time.perf_counter()
+            try:
+                r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=C.ROOT)
+                dt = time.perf_counter() - t0
+                if r.returncode == 0 and out.exists():
+                    m = load(out)
+                    return m, dict(info, source="cli", file=str(out), fit_seconds=dt)
+                errors.append(f"rbrdf-fit brdf exit {r.returncode}: {(r.stderr or r.stdout).strip()[-300:]}")
+            except subprocess.TimeoutExpired:
+                errors.append(f"rbrdf-fit brdf timed out after {timeout:.0f} s")
+        else:
+            errors.append(why)
+    if allow_direct:
+        out = fit_dir / direct_name
+        t0 = time.perf_counter()
+        try:
+            m = direct_fit(material, tol, stride=direct_stride, max_degree=direct_max_degree)
+        except Exception as e:  # noqa: BLE001
+            errors.append(f"direct fit failed: {type(e).__name__}: {e}")
+        else:
+            m.fit_info["time_s"] = time.perf_counter() - t0
+            m.save(out)
+            return m, dict(info, source="direct", file=str(out), fit_seconds=m.fit_info["time_s"])
+    return None, dict(info, source=None, error="; ".join(errors) or "no fit available")
+
+
+def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_max_deg: float = 80.0,
+               max_degree: int = 8, stride: int = 1, proj=None):
+    """Stand-in fit (see the module docstring): IntervalRationalFitter per channel on the median
+    projection. ``abs_floor`` = ``abs_floor_rel`` x the channel's largest value."""
+    from fit.coefficients import RationalModel, Variable
+    from fit.fitter import IntervalRationalFitter
+
+    pj = proj if proj is not None else C.projected(material)
+    th = pj.theta_h[::stride]
+    td = pj.theta_d[::stride]
+    val = np.asarray(pj.value, float)[::stride, ::stride]
+    keep_d = td <= np.radians(theta_d_max_deg)
+    TH, TD = np.meshgrid(th, td[keep_d], indexing="ij")
+    X = np.stack([np.sqrt(TH.ravel()), TD.ravel()], -1)
+    dom_x = [(float(th.min()), float(th.max())), (float(td[keep_d].min()), float(td[keep_d].max()))]
+    dom_u = np.array([[np.sqrt(dom_x[0][0]), np.sqrt(dom_x[0][1])], list(dom_x[1])])
+    funcs, infos = [], []
+    for c in range(3):
+        y = val[:, keep_d, c].ravel()
+        ok = np.isfinite(y)
+        floor = abs_floor_rel * float(np.nanmax(y))
+        res = IntervalRationalFitter(tol=tol, abs_floor=floor, max_degree=max_degree, domain=dom_u).fit(X[ok], y[ok])
+        f = res.function
+        f.var_names = ("theta_h", "theta_d")
+        funcs.append(f)
+        infos.append({"feasible": bool(res.feasible), "valid": bool(res.valid), "degrees": [res.num_degree, res.den_degree],
+                      "max_error_ratio": float(res.max_error_ratio), "fit_seconds": float(res.time_s)})
+    return RationalModel(name=f"{Path(C.MATERIALS.get(material, material)).stem}", variables=[
+        Variable("theta_h", "rad", "sqrt", dom_x[0]), Variable("theta_d", "rad", "identity", dom_x[1])],
+        functions=funcs, fit_info={"tolerance": tol, "tolerance_kind": "relative", "fitter": "studies.fits.direct_fit",
+                                   "abs_floor_rel": abs_floor_rel, "theta_d_max_deg": theta_d_max_deg},
+        function_info=infos, domain_policy={"outside": "clamp", "below_horizon": "zero",
+                                            "theta_d_max_deg": theta_d_max_deg})
+
+
+def model_summary(model) -> dict:
+    fi = model.function_info or [{} for _ in model.functions]
+    feas = [bool(i.get("feasible", i.get("valid", True))) for i in fi]
+    return {"n_coefficients": int(model.n_coefficients), "feasible_all": all(feas),
+            "per_channel": [int(f.n_coefficients) for f in model.functions],
+            "info": json.loads(json.dumps(fi, default=str))}
