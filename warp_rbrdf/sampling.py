@@ -176,11 +176,17 @@ def pdf_uniform_hemisphere(w: wp.vec3) -> float:
 
 @wp.func
 def power_heuristic(pa: float, pb: float) -> float:
-    a = pa * pa
-    b = pb * pb
-    if a + b <= 0.0:
+    """pa^2 / (pa^2 + pb^2), computed from the ratio so that huge pdfs (a tabulated density
+    near theta_l = 0 grows like 1/sin theta) never overflow float32 into inf/inf = NaN."""
+    if pa <= 0.0:
         return 0.0
-    return a / (a + b)
+    if pb <= 0.0:
+        return 1.0
+    if pa >= pb:
+        r = pb / pa
+        return 1.0 / (1.0 + r * r)
+    r = pa / pb
+    return r * r / (1.0 + r * r)
 
 
 @wp.func
