@@ -302,12 +302,10 @@ _lock = threading.Lock()
 
 
 def generated_dir() -> Path:
-    base = os.environ.get("WARP_CACHE_PATH")
-    if not base:
-        from .paths import PROJECT_ROOT
+    """Folder of the generated kernel modules: inside Warp's kernel cache (see runtime.init_warp)."""
+    from .runtime import init_warp
 
-        base = str(PROJECT_ROOT / ".warp_cache")
-    return Path(base) / "rbrdf_generated"
+    return Path(init_warp().config.kernel_cache_dir) / "rbrdf_generated"
 
 
 def generate_source(kinds_used, rational_funcs=(), cdf_funcs=()) -> str:

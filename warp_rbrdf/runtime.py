@@ -12,14 +12,18 @@ _initialised = False
 
 
 def init_warp():
-    """Initialise Warp once: cache in ``$WARP_CACHE_PATH`` (default ``<project>/.warp_cache``)."""
+    """Initialise Warp once. Kernel cache: ``$WARP_CACHE_PATH``; else ``<checkout>/.warp_cache``
+    when running from a source checkout; else Warp's own per-user default."""
     global _initialised
     import warp as wp
 
     with _lock:
         if not _initialised:
-            wp.config.kernel_cache_dir = os.environ.get("WARP_CACHE_PATH",
-                                                        str(PROJECT_ROOT / ".warp_cache"))
+            cache = os.environ.get("WARP_CACHE_PATH")
+            if cache is None and (PROJECT_ROOT / "pyproject.toml").is_file():
+                cache = str(PROJECT_ROOT / ".warp_cache")
+            if cache is not None:
+                wp.config.kernel_cache_dir = cache
             wp.config.log_level = wp.LOG_WARNING
             wp.config.quiet = True
             wp.init()
