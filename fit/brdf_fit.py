@@ -116,8 +116,11 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol+spread", theta_h_tra
         hi = apply_value_transform(d.upper, value_transform, offset)
         yt = apply_value_transform(d.y, value_transform, offset)
         cb = None if progress is None else (lambda e, c=c: progress(CHANNELS[c], e))
+        # R, G and B usually need the same degrees: start G and B from the previous channel's
+        # pair (a feasible start only prunes the search; the fewest-coefficient pair is kept).
+        start = (results[-1].num_degree, results[-1].den_degree) if results and results[-1].valid else None
         fitter = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
-                                        domain=rf_domain, progress=cb)
+                                        domain=rf_domain, progress=cb, start_degrees=start)
         r = fitter.fit(U, y=yt, lower=lo, upper=hi)
         results.append(r)
         functions.append(r.function)

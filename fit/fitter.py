@@ -11,19 +11,27 @@ interval width ``w_i = u_i - l_i``, and the LP (scipy.optimize.linprog, HiGHS)
 
     maximise  delta
     subject to  (P(x_i) - l_i Q(x_i)) / w_i >= delta,   (u_i Q(x_i) - P(x_i)) / w_i >= delta,
-                Q(x_i) >= q_min (data rows),  Q(g) >= q_min on a grid g of the box,
+                Q >= q_min on the box: Bernstein coefficients of Q on a regular split of the
+                box >= q_min (``bernstein_split`` > 0; this implies Q >= q_min at every data and
+                grid point, so those rows are only added for data points outside the box), or
+                Q(x_i) >= q_min and Q(g) >= q_min on a grid g (``bernstein_split`` = 0),
                 q_0 = 1  (constant Chebyshev coefficient: the Chebyshev-weighted mean of Q),
                 |coefficients| <= coef_bound,  delta <= 1
 
 is solved by *constraint generation*: start from a small well-spread subset of the points
 (Chebyshev-spread cells plus the extreme values), evaluate all points, add the worst violators,
 repeat until no point is outside its interval. Since the subset LP is a relaxation, ``delta <= 0``
-on a subset proves the degrees infeasible for the whole data set (fast rejection).
+on a subset proves the degrees infeasible for the whole data set (fast rejection). The rounds
+of one degree pair share one HiGHS model (SciPy's bindings): new rows are appended and the dual
+simplex restarts from the previous optimal basis (falls back to ``linprog`` from scratch if the
+bindings are missing or a warm solve does not end optimal).
 
 The degree search walks the (numerator, denominator) plane: feasibility is monotone in both
 degrees, so for each denominator degree n a binary search finds the smallest feasible numerator degree
 m; only pairs with fewer coefficients than the best found so far are tried, and m never
-exceeds the smallest feasible m of a lower denominator degree. The result
+exceeds the smallest feasible m of a lower denominator degree. An optional ``start_degrees``
+pair (e.g. the previous colour channel's degrees) is tried first: if feasible it is the initial
+best, which prunes most of the walk without changing its result. The result
 is the feasible fit with the FEWEST coefficients (ties: lower denominator degree).
 
 Guarantees of a result with ``valid`` True:
@@ -45,6 +53,22 @@ from math import comb
 
 import numpy as np
 from scipy.optimize import linprog
+
+# Incremental LP (add rows, warm-started dual simplex) through HiGHS's official Python bindings
+# (`highspy`, a declared dependency); SciPy's bundled private copy is the second choice; without
+# either, every round is solved from scratch with `linprog` (same LP, same result, slower).
+try:
+    import highspy as _hs
+
+    _HighsModel, _HighsStatus = _hs.Highs, _hs.HighsModelStatus
+except Exception:  # pragma: no cover
+    try:
+        from scipy.optimize._highspy import _core as _hs
+
+        _HighsModel, _HighsStatus = _hs._Highs, _hs.HighsModelStatus
+    except Exception:
+        _HighsModel = _HighsStatus = None
+_highs = _HighsModel  # truthy when incremental solves are available
 
 from .rational import (PositivityCertificate, RationalFunction, _de_casteljau_split_float,
                        bernstein_coefficients_float, chebyshev_basis, tensor_exponents,
@@ -157,6 +181,65 @@ class _Attempt:
     certificate: PositivityCertificate | None = None
 
 
+_HIGHS_OPTIONS: dict = {}   # extra HiGHS options for the incremental model (defaults measured best)
+
+
+class _LPSession:
+    """One HiGHS model per degree pair, grown by constraint generation.
+
+    Same LP as :meth:`IntervalRationalFitter._solve_lp` (identical rows and bounds), but rows are
+    added to the live model so every re-solve is a warm-started dual simplex from the previous
+    basis instead of a solve from scratch.
+    """
+
+    def __init__(self, fitter, cp, cq, qrows):
+        self.f, self.cp, self.cq = fitter, cp, cq
+        self.npv, self.nqv = len(cp), len(cq)
+        self.nv = self.npv + self.nqv + 1
+        h = _HighsModel()
+        h.setOptionValue("output_flag", False)
+        for k_, v_ in _HIGHS_OPTIONS.items():
+            h.setOptionValue(k_, v_)
+        lo = np.full(self.nv, -fitter.coef_bound)
+        hi = np.full(self.nv, fitter.coef_bound)
+        lo[self.npv] = hi[self.npv] = 1.0                   # q_0 = 1
+        lo[-1], hi[-1] = -1e3, 1.0
+        h.addVars(self.nv, lo, hi)
+        cost = np.zeros(self.nv)
+        cost[-1] = -1.0
+        h.changeColsCost(self.nv, np.arange(self.nv, dtype=np.int32), cost)
+        self.h = h
+        self._add_q(fitter._static_q_rows(cq, qrows))
+
+    def _add(self, A, ub):
+        m = A.shape[0]
+        if m == 0:
+            return
+        A = np.ascontiguousarray(A, dtype=np.float64)
+        starts = (np.arange(m, dtype=np.int32) * self.nv).astype(np.int32)
+        idx = np.tile(np.arange(self.nv, dtype=np.int32), m)
+        self.h.addRows(m, np.full(m, -np.inf), np.ascontiguousarray(ub, dtype=np.float64),
+                       m * self.nv, starts, idx, A.reshape(-1))
+
+    def _add_q(self, Qr):
+        A = np.hstack([np.zeros((len(Qr), self.npv)), -Qr, np.zeros((len(Qr), 1))])
+        self._add(A, np.full(len(Qr), -self.f.q_min))
+
+    def add_points(self, rows):
+        A1, A2, Qd = self.f._point_rows(self.cp, self.cq, rows)
+        self._add(np.vstack([A1, A2]), np.zeros(2 * len(rows)))
+        if len(Qd):
+            self._add_q(Qd)
+
+    def solve(self):
+        self.f._lp_count += 1
+        self.h.run()
+        if self.h.getModelStatus() != _HighsStatus.kOptimal:
+            return None
+        z = np.asarray(self.h.getSolution().col_value, dtype=np.float64)
+        return z[:self.npv], z[self.npv:self.npv + self.nqv], float(z[-1])
+
+
 # --------------------------------------------------------------------------------------------
 # Fitter
 # --------------------------------------------------------------------------------------------
@@ -174,13 +257,21 @@ class IntervalRationalFitter:
     q_grid : points per axis of the Q >= q_min grid (default 33 / 33 / 9 for 1 / 2 / 3 vars).
     degrees : optional fixed ``(m, n)``; skips the search.
     progress : optional callable ``progress(event: dict)`` called after each degree pair.
+    start_degrees : optional ``(m, n)`` tried first in the search (e.g. the degrees of another
+        colour channel); if feasible it prunes the search, which still returns the
+        fewest-coefficient pair.
+    incremental : grow one HiGHS model per degree pair (warm-started re-solves) instead of
+        solving every constraint-generation LP from scratch (same LP, same result).
     """
+
+    _batch_mult = 2.0   # violators added per constraint-generation round, per coefficient
 
     def __init__(self, tol: float = 0.05, abs_floor: float = 0.0, max_degree: int = 10,
                  max_den_degree: int | None = None, degree_kind: str = "total", domain=None,
                  q_min: float = 1e-4, q_grid: int | None = None, degrees=None,
                  coef_bound: float = 1e6, max_iter: int = 60, certify_depth: int = 12,
-                 progress=None, delta_min: float = 1e-10, bernstein_split: int = 2):
+                 progress=None, delta_min: float = 1e-10, bernstein_split: int = 2,
+                 incremental: bool = True, start_degrees=None):
         if degree_kind not in ("total", "tensor"):
             raise ValueError("degree_kind must be 'total' or 'tensor'")
         self.tol = float(tol)
@@ -198,6 +289,8 @@ class IntervalRationalFitter:
         self.progress = progress
         self.delta_min = float(delta_min)
         self.bernstein_split = int(bernstein_split)
+        self.incremental = bool(incremental)
+        self.start_degrees = start_degrees
 
     # Public API ----------------------------------------------------------------------------
     def fit(self, X, y=None, lower=None, upper=None) -> FitResult:
@@ -278,6 +371,8 @@ class IntervalRationalFitter:
         self._bern_cache = {}
         self._extra_q = np.zeros((0, len(self._E)))
         self._subset0 = self._initial_subset()
+        a, b = domain[:, 0], domain[:, 1]
+        self._outside = np.any((X < a) | (X > b), axis=1)
         self._lp_count = 0
 
     def _cols(self, d: int) -> np.ndarray:
@@ -334,20 +429,35 @@ class IntervalRationalFitter:
             self._bern_cache[key] = rows
         return self._bern_cache[key]
 
-    def _solve_lp(self, cp, cq, rows, qrows):
-        """LP on data rows ``rows`` and extra Q rows; returns (p, q, delta) or None."""
+    def _static_q_rows(self, cq, qrows) -> np.ndarray:
+        """Q >= q_min rows that do not depend on the data subset: the Bernstein rows (which
+        imply Q >= q_min on the whole box) or, without them, the grid; plus the extra rows."""
+        parts = [self._bernstein_rows(cq)[:, cq]] if self.bernstein_split else [self._BG[:, cq]]
+        if len(qrows):
+            parts.append(qrows[:, cq])
+        return np.vstack(parts)
+
+    def _point_rows(self, cp, cq, rows):
+        """Interval rows of the data points ``rows`` and their Q >= q_min rows. With Bernstein
+        rows, Q >= q_min already holds on the whole box, so data Q rows are only kept for points
+        outside it (the LP feasible set is unchanged)."""
         Bp = self._B[np.ix_(rows, cp)]
         Bq = self._B[np.ix_(rows, cq)]
-        w = self._w[rows][:, None]
+        ws = self._w[rows][:, None] / self._scale
         lo = self._lo[rows][:, None] / self._scale
         hi = self._hi[rows][:, None] / self._scale
-        ws = w / self._scale
-        npv, nqv = len(cp), len(cq)
         one = np.ones((len(rows), 1))
-        A1 = np.hstack([-Bp / ws, lo * Bq / ws, one])           # -(P - lQ)/w + delta <= 0
-        A2 = np.hstack([Bp / ws, -hi * Bq / ws, one])            # -(uQ - P)/w + delta <= 0
-        Q_rows = np.vstack([Bq, self._BG[:, cq], qrows[:, cq] if len(qrows) else np.zeros((0, nqv))]
-                           + ([self._bernstein_rows(cq)[:, cq]] if self.bernstein_split else []))
+        Bpw, Bqw = Bp / ws, Bq / ws
+        A1 = np.hstack([-Bpw, lo * Bqw, one])                   # -(P - lQ)/w + delta <= 0
+        A2 = np.hstack([Bpw, -hi * Bqw, one])                   # -(uQ - P)/w + delta <= 0
+        Qd = Bq[self._outside[rows]] if self.bernstein_split else Bq
+        return A1, A2, Qd
+
+    def _solve_lp(self, cp, cq, rows, qrows):
+        """LP on data rows ``rows`` and extra Q rows; returns (p, q, delta) or None."""
+        npv, nqv = len(cp), len(cq)
+        A1, A2, Qd = self._point_rows(cp, cq, rows)
+        Q_rows = np.vstack([Qd, self._static_q_rows(cq, qrows)])
         A3 = np.hstack([np.zeros((len(Q_rows), npv)), -Q_rows, np.zeros((len(Q_rows), 1))])
         A = np.vstack([A1, A2, A3])
         b = np.concatenate([np.zeros(2 * len(rows)), -self.q_min * np.ones(len(Q_rows))])
@@ -380,10 +490,16 @@ class IntervalRationalFitter:
         rows = self._subset0.copy()
         qrows = self._extra_q
         lp0 = self._lp_count
-        batch = max(2 * (len(cp) + len(cq)), 16)
+        batch = max(int(self._batch_mult * (len(cp) + len(cq))), 16)
         best = None
+        sess = None
+        if _highs is not None and self.incremental:
+            sess = _LPSession(self, cp, cq, qrows)
+            sess.add_points(rows)
         for _ in range(self.max_iter):
-            sol = self._solve_lp(cp, cq, rows, qrows)
+            sol = sess.solve() if sess is not None else None
+            if sol is None:   # no incremental model, or it did not reach optimality: solve afresh
+                sol = self._solve_lp(cp, cq, rows, qrows)
             if sol is None:
                 return _Attempt(m, n, None, None, -np.inf, False, True, np.inf, len(rows),
                                 self._lp_count - lp0)
@@ -407,6 +523,8 @@ class IntervalRationalFitter:
                 break
             worst = bad[np.argsort(slack[bad])[:batch]]
             rows = np.union1d(rows, worst)
+            if sess is not None:
+                sess.add_points(np.sort(worst))
         best.n_lp = self._lp_count - lp0
         return best
 
@@ -427,20 +545,37 @@ class IntervalRationalFitter:
                                    "n_coefficients": self._ncoef(m, n)})
             return cache[(m, n)].feasible
 
+        def better(m, n, ref):
+            k, kr = self._ncoef(m, n), self._ncoef(ref.m, ref.n)
+            return k < kr or (k == kr and n < ref.n)
+
         best = None
+        hint = None
+        if self.start_degrees is not None:
+            hm, hn = (int(d) for d in self.start_degrees)
+            if 0 <= hm <= M and 0 <= hn <= N:
+                hint = (hm, hn)
+                # A feasible hint (e.g. the previous colour channel's degrees) bounds the
+                # coefficient count from the start; the walk below still visits every pair that
+                # could beat it (ties: lower denominator degree), so the result is unchanged.
+                if feas(hm, hn):
+                    best = cache[(hm, hn)]
         m_hi = M  # smallest m known feasible for the previous n (monotone staircase)
         for n in range(0, N + 1):
-            limit = self._ncoef(best.m, best.n) if best is not None else None
             # Largest m whose coefficient count beats the best so far.
             m_cap = m_hi
-            if limit is not None:
-                while m_cap >= 0 and self._ncoef(m_cap, n) >= limit:
+            if best is not None:
+                if n >= best.n:
+                    m_cap = min(m_cap, best.m)
+                while m_cap >= 0 and not better(m_cap, n, best):
                     m_cap -= 1
                 if m_cap < 0:
                     break  # larger n only adds coefficients
             if not feas(m_cap, n):
                 continue
             lo, hi = 0, m_cap          # hi is feasible: binary search for the smallest m
+            if hint is not None and n <= hint[1] and not cache[hint].feasible:
+                lo = min(max(lo, hint[0] + 1), hi)   # (m <= hm, n <= hn) infeasible by monotonicity
             while lo < hi:
                 mid = (lo + hi) // 2
                 if feas(mid, n):
@@ -449,7 +584,7 @@ class IntervalRationalFitter:
                     lo = mid + 1
             m_hi = hi
             cand = cache[(hi, n)]
-            if best is None or self._ncoef(hi, n) < self._ncoef(best.m, best.n):
+            if best is None or better(hi, n, best):
                 best = cand
         if best is None:
             best = self._fit_pair(M, N, converge=True)
