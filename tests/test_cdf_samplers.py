@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from conftest import RGL_MATERIALS, data_file
 from fit.albedo import directional_albedo
 from fit.angles import spherical_to_direction
 from fit.cdf_fit import CDFFit, fit_cdf, verify
 from fit.cdf_table import LUMINANCE, tabulate
-from test_cdf_table import _expected_cell_probs
+from test_cdf_table import _chi2_pvalue, _expected_cell_probs
 
 from analytic import lambert
 
@@ -36,17 +35,6 @@ def lambert_fit():
                   phi_kw=dict(degrees=(2, 1)), refinements=0)
     assert not fit.fallback, fit.reason
     return f, fit
-
-
-def _chi2_pvalue(counts, probs, n):
-    exp = probs.ravel() / probs.sum() * n
-    keep = exp > 5
-    obs = counts.ravel()
-    chi2 = ((obs[keep] - exp[keep]) ** 2 / exp[keep]).sum()
-    rest = exp[~keep].sum()
-    if rest > 0:
-        chi2 += (obs[~keep].sum() - rest) ** 2 / rest
-    return stats.chi2.sf(chi2, keep.sum())
 
 
 @pytest.mark.parametrize("name", RGL_MATERIALS)
