@@ -191,6 +191,7 @@ def build_material_data(scene, used_names=None) -> MaterialData:
     albedo = np.ones((n, 3), np.float32)
     offset = np.zeros(n, np.int32)
     t3, t2, rational = [], [], []
+    loaded = [None] * len(names)  # what each material read, reused by the samplers
     used = set()
     for i, name in enumerate(names):
         spec = scene.materials[name]
@@ -203,25 +204,31 @@ def build_material_data(scene, used_names=None) -> MaterialData:
         elif spec.type == "measured":
             albedo[i] = spec.scale
             offset[i] = len(t3) * N_TH * N_TD * N_PD
-            t3.append(_load_measured(spec, scene.path, key).values)
+            loaded[i] = _load_measured(spec, scene.path, key)
+            t3.append(loaded[i].values)
         elif spec.type == "projected":
             albedo[i] = spec.scale
             offset[i] = len(t2) * N_TH * N_TD
-            t2.append(np.nan_to_num(_load_projected(spec, scene.path, key).value, nan=0.0))
+            loaded[i] = _load_projected(spec, scene.path, key)
+            t2.append(np.nan_to_num(loaded[i].value, nan=0.0))
         else:
             albedo[i] = spec.scale
             offset[i] = len(rational)
-            rational.append(_load_rational(spec, scene.path, key))
+            loaded[i] = _load_rational(spec, scene.path, key)
+            rational.append(loaded[i])
     t3a = np.concatenate([np.asarray(t, np.float32).reshape(-1, 3) for t in t3]) if t3 else np.zeros((1, 3), np.float32)
     t2a = np.concatenate([np.asarray(t, np.float32).reshape(-1, 3) for t in t2]) if t2 else np.zeros((1, 3), np.float32)
     md = MaterialData(names=names, kind=kind, sampler=sampler, albedo=albedo, offset=offset,
                       table3d=t3a, table2d=t2a, kinds_used=used, rational=rational)
-    _build_samplers(md, scene, names, t3, t2, rational)
+    _build_samplers(md, scene, names, loaded)
     return md
 
 
-def _build_samplers(md: MaterialData, scene, names, t3, t2, rational):
-    """Tables (and rational inverse CDFs) of the materials whose sampler needs them."""
+def _build_samplers(md: MaterialData, scene, names, loaded):
+    """Tables (and rational inverse CDFs) of the materials whose sampler needs them.
+
+    ``loaded[i]``: the measured table, projection or rational model already read for material
+    ``i`` (None for Lambert), so no file is read or resampled twice."""
     from . import cdf_sampling as CS
 
     n = len(md.kind)
@@ -234,14 +241,7 @@ def _build_samplers(md: MaterialData, scene, names, t3, t2, rational):
         if spec.sampler not in CS.TABLE_SAMPLERS:
             md.samplers_used.add(spec.sampler)
             continue
-        data = None
-        if spec.type == "measured":
-            data = _load_measured(spec, scene.path, f"materials.{name}")
-        elif spec.type == "projected":
-            data = _load_projected(spec, scene.path, f"materials.{name}")
-        elif spec.type == "rational":
-            data = rational[int(md.offset[i])]
-        used, fitobj, table = CS.prepare_sampler(spec, data)
+        used, fitobj, table = CS.prepare_sampler(spec, loaded[i])
         md.sampler[i] = SAMPLER_CODES[used]
         md.samplers_used.add(used)
         tables[i] = table
