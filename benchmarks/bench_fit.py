@@ -1,11 +1,15 @@
 """Benchmark of the rational BRDF fitter.
 
-For each material and tolerance: fit time of the three channels (median of --repeat runs, one
-core), coefficient counts, max / RMS relative error; a coefficients-vs-tolerance chart; and the
-evaluation throughput of a fitted model (NumPy, points per second, median of 5).
+For each material and tolerance: fit time of the three channels (median of --repeat runs; run
+it under ``taskset -c 0`` for one core), coefficients, the guaranteed theta_d core, whether the
+grazing band met its intervals, max / RMS relative error on the core; a coefficients-vs-tolerance
+chart; and the evaluation throughput of a fitted model (NumPy, points per second, median of 5).
+``--transforms`` instead compares the value / theta_h transforms (log or linear value, sqrt or
+identity theta_h) at the first tolerance.
 
-    python benchmarks/bench_fit.py --materials satin_rosaline_rgb paper_white_rgb \
-        --tols 0.01 0.05 0.1 --chart docs/images/fit_coefficients_vs_tol.png
+    taskset -c 0 python benchmarks/bench_fit.py --tols 0.01 0.05 0.1 \
+        --chart docs/images/fit_coefficients_vs_tol.png --json results/bench_fit.json
+    taskset -c 0 python benchmarks/bench_fit.py --tols 0.05 --transforms --json results/fit_transforms.json
 """
 from __future__ import annotations
 
@@ -26,11 +30,15 @@ sys.path.insert(0, str(ROOT))
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=os.environ.get("RBRDF_DATA", str(ROOT.parent / "shared" / "data")))
-    ap.add_argument("--materials", nargs="+", default=["paper_white_rgb", "satin_rosaline_rgb"])
+    ap.add_argument("--materials", nargs="+", default=["paper_white_rgb", "satin_rosaline_rgb",
+                    "colodur_napoli_4f_rgb", "vch_golden_yellow_rgb", "cc_ibiza_sunset_rgb",
+                    "cc_iris_purple_gem_rgb"])
     ap.add_argument("--tols", nargs="+", type=float, default=[0.01, 0.05, 0.1])
-    ap.add_argument("--intervals", default="tol+spread", choices=("tol", "tol+spread"))
+    ap.add_argument("--intervals", default="tol", choices=("tol", "tol+spread"), help="core intervals")
     ap.add_argument("--value", default="log", choices=("log", "linear"))
     ap.add_argument("--theta-h", default="sqrt", choices=("sqrt", "identity"))
+    ap.add_argument("--transforms", action="store_true",
+                    help="compare log/linear value x sqrt/identity theta_h at the first tolerance")
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--chart", default=None, help="PNG of coefficients vs tolerance")
     ap.add_argument("--json", default=None, help="write all rows as JSON")
@@ -41,25 +49,37 @@ def main(argv=None) -> int:
 
     rows = []
     model = None
-    print("| material | tol | coefficients (R/G/B) | max rel. error | RMS rel. error | guaranteed | fit time (s, 3 ch.) |")
-    print("|---|---|---|---|---|---|---|")
+    combos = ([(v, t) for v in ("log", "linear") for t in ("sqrt", "identity")] if args.transforms
+              else [(args.value, args.theta_h)])
+    tols = args.tols[:1] if args.transforms else args.tols
+    print("| material | tol | value | theta_h | coefficients | guaranteed core (theta_d) | grazing band | "
+          "max / RMS rel. error (core) | fit time (s, 3 ch.) |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for mat in args.materials:
         b = load_measured(Path(args.data) / "rgl" / f"{mat}.bsdf")
-        for tol in args.tols:
-            times = []
-            for _ in range(args.repeat):
-                fit = fit_brdf(b, tol=tol, intervals=args.intervals, value_transform=args.value,
-                               theta_h_transform=args.theta_h)
-                times.append(fit.time_s)
-            model = fit.model
-            row = {"material": mat, "tol": tol, "n_coef": [r.n_coefficients for r in fit.results],
-                   "max_rel": max(e["max_rel_error"] for e in fit.errors),
-                   "rms_rel": max(e["rms_rel_error"] for e in fit.errors),
-                   "valid": fit.valid, "time_s": statistics.median(times)}
-            rows.append(row)
-            print(f"| {mat} | {tol:g} | {'/'.join(map(str, row['n_coef']))} | {100 * row['max_rel']:.1f} % | "
-                  f"{100 * row['rms_rel']:.2f} % | {'yes' if row['valid'] else 'no'} | {row['time_s']:.1f} |",
-                  flush=True)
+        for tol in tols:
+            for value, theta_h in combos:
+                times = []
+                for _ in range(args.repeat):
+                    fit = fit_brdf(b, tol=tol, intervals=args.intervals, value_transform=value,
+                                   theta_h_transform=theta_h)
+                    times.append(fit.time_s)
+                model = fit.model
+                core = fit.pieces[0].theta_d_range_deg[1]
+                row = {"material": mat, "tol": tol, "value": value, "theta_h": theta_h,
+                       "n_coef": fit.n_coefficients,
+                       "n_coef_pieces": [[r.n_coefficients for r in pc.results] for pc in fit.pieces],
+                       "core_theta_d_deg": core, "core_valid": fit.valid,
+                       "band_valid": fit.pieces[-1].valid if len(fit.pieces) > 1 else None,
+                       "max_rel": max(e["max_rel_error"] for e in fit.errors),
+                       "rms_rel": max(e["rms_rel_error"] for e in fit.errors),
+                       "time_s": statistics.median(times)}
+                rows.append(row)
+                band = {None: "-", True: "met", False: "NOT met"}[row["band_valid"]]
+                guar = f"0-{core:g} deg" if fit.valid else f"NOT met (tried down to {core:g} deg)"
+                print(f"| {mat} | {tol:g} | {value} | {theta_h} | {row['n_coef']} | {guar} | {band} | "
+                      f"{100 * row['max_rel']:.1f} / {100 * row['rms_rel']:.2f} % | {row['time_s']:.1f} |",
+                      flush=True)
     if model is not None:
         rng = np.random.default_rng(0)
         n = 1_000_000
@@ -80,17 +100,23 @@ def main(argv=None) -> int:
         fig, ax = plt.subplots(figsize=(5, 3.5), dpi=120)
         for mat in args.materials:
             r = [x for x in rows if x["material"] == mat]
-            ax.plot([x["tol"] * 100 for x in r], [sum(x["n_coef"]) for x in r], "o-", label=mat)
+            ok = [x for x in r if x["core_valid"]]
+            line, = ax.plot([x["tol"] * 100 for x in r], [x["n_coef"] for x in r], "-", label=mat)
+            ax.plot([x["tol"] * 100 for x in ok], [x["n_coef"] for x in ok], "o", color=line.get_color())
+            bad = [x for x in r if not x["core_valid"]]
+            ax.plot([x["tol"] * 100 for x in bad], [x["n_coef"] for x in bad], "x", color=line.get_color())
         ax.set_xlabel("relative tolerance (%)")
         ax.set_ylabel("coefficients (R+G+B)")
         ax.set_xscale("log")
         ax.legend(fontsize=7)
-        ax.set_title(f"Rational BRDF fit ({args.intervals}, {args.value} value, {args.theta_h} theta_h)", fontsize=8)
+        ax.set_title(f"Rational BRDF fit ({args.intervals} core, {args.value} value, {args.theta_h} theta_h;"
+                     f" x = not guaranteed)", fontsize=7)
         fig.tight_layout()
         Path(args.chart).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(args.chart)
         print(f"wrote {args.chart}")
     if args.json:
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(rows, indent=1))
     return 0
 

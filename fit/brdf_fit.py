@@ -1,20 +1,34 @@
-"""Fit a projected BRDF (theta_h, theta_d) with one rational function per RGB channel.
+"""Fit a projected BRDF (theta_h, theta_d) with rational functions per RGB channel.
 
-Domain and grazing policy (stored in the coefficient file):
+Domain and grazing policy (stored in the coefficient file's ``domain_policy`` and ``fit``):
 
 * The BRDF is projected with the cluster **median** after dropping every sample whose light or
   view direction is more than ``GRAZING_CUTOFF_DEG`` = 79 deg from the normal (the RGL files'
   last measured incidence is 78.5 deg; beyond it the tables are extrapolations and values grow
   like 1/cos theta_o). Clusters left without a sample (NaN) are not fitted.
-* The fitted box is ``theta_h in [0, 90] deg`` x ``theta_d in [0, THETA_D_MAX_DEG = 78.5] deg``.
-  Outside it the inputs are clamped onto the box (``"outside": "clamp"``): at grazing theta_d
+* The fitted box is ``theta_h in [0, 90] deg`` x ``theta_d in [0, THETA_D_MAX_DEG = 78.5] deg``,
+  split in theta_d into a **guaranteed core** ``[0, core]`` and a **grazing band**
+  ``[core, 78.5]``, each with its own rational functions (file version 2, see
+  :class:`fit.coefficients.PiecewiseRationalModel`). ``core`` is the largest of
+  ``CORE_CANDIDATES_DEG`` (60, 50, 40 deg) on which every channel meets the tolerance, or a
+  value given by the caller (78.5: one function per channel over the whole box, version 1).
+  Why: near grazing the median clusters keep only the phi_d samples that survive the cut-off,
+  so neighbouring clusters jump by more than 5 % (satin: 1.2 -> 5.9 between bins at theta_d
+  77.5 deg) and no smooth function meets 5 % there (measured: satin's band alone is infeasible
+  up to degrees (12, 6)); the band is therefore fitted to the clusters' own spread.
+* Outside the box the inputs are clamped onto it (``"outside": "clamp"``): at grazing theta_d
   the function returns its value at 78.5 deg instead of growing without bound.
-* Intervals: ``"tol"``: ``y +- max(tol y, abs_floor)``; ``"tol+spread"`` (default):
-  ``y +- max(tol y, abs_floor, spread_k * sigma)`` where sigma is the cluster's standard
-  deviation over phi_d (the projection cannot be more precise than the spread it averages).
-  ``abs_floor = floor_frac * tol * median(y)`` keeps zero and tiny values feasible.
-* The guarantee (every fitted cluster inside its interval, Q > 0 on the whole box by a
-  Bernstein certificate) holds on that box.
+* Intervals: ``"tol"`` (core default): ``y +- max(tol y, abs_floor)``; ``"tol+spread"`` (band
+  default): ``y +- max(tol y, abs_floor, spread_k * sigma)`` where sigma is the cluster's
+  standard deviation over phi_d (the projection cannot be more precise than the spread it
+  averages). ``abs_floor = floor_frac * tol * A_Y / pi`` (A_Y: white-sky luminance albedo,
+  :func:`white_sky_albedo`): below the value of the equally bright Lambertian the bound is
+  absolute, so zero, clipped and tiny values stay feasible and an error there shifts the
+  light reflected from a uniform white sky by at most ``tol * A_Y``.
+* The guarantee (every fitted cluster inside its interval, Q > 0 on each piece's box by a
+  Bernstein certificate) holds on the core; the band's status (met or best effort, with its
+  measured maximum interval ratio) is recorded per piece and never reported as guaranteed
+  when it is not.
 """
 from __future__ import annotations
 
@@ -23,9 +37,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .coefficients import RationalModel, Variable, apply_input_transform, apply_value_transform
+from .coefficients import (PiecewiseRationalModel, RationalModel, Variable, apply_input_transform,
+                           apply_value_transform)
 from .fitter import FitResult, IntervalRationalFitter, intervals_from_spread, intervals_from_tolerance
-from .measured import MeasuredBRDF, ProjectedBRDF
+from .cdf_table import LUMINANCE
+from .measured import N_PHI_D, MeasuredBRDF, ProjectedBRDF
 
 GRAZING_CUTOFF_DEG = 79.0
 THETA_D_MAX_DEG = 78.5
@@ -44,17 +60,47 @@ class ChannelData:
 
 
 @dataclass
-class BRDFFit:
-    """Result of :func:`fit_brdf`: the model (with its file metadata) and per-channel results."""
+class PieceFit:
+    """One theta_d piece of a BRDF fit: its range, interval policy and per-channel results."""
 
-    model: RationalModel
-    results: list
-    errors: list = field(default_factory=list)   # per channel dict
-    time_s: float = 0.0
+    theta_d_range_deg: tuple
+    intervals: str
+    results: list                                  # FitResult per channel
+    errors: list = field(default_factory=list)     # per channel dict (:func:`brdf_errors`)
+    partial: tuple | None = None                   # (min fraction, factor) or None
 
     @property
     def valid(self) -> bool:
         return all(r.valid for r in self.results)
+
+
+@dataclass
+class BRDFFit:
+    """Result of :func:`fit_brdf`: the model (with its file metadata) and per-piece results.
+
+    ``pieces[0]`` is the guaranteed core; ``results``/``errors`` are the core's per channel.
+    """
+
+    model: object                                  # RationalModel or PiecewiseRationalModel
+    pieces: list
+    time_s: float = 0.0
+
+    @property
+    def results(self) -> list:
+        return self.pieces[0].results
+
+    @property
+    def errors(self) -> list:
+        return self.pieces[0].errors
+
+    @property
+    def valid(self) -> bool:
+        """The core piece meets its intervals with Q > 0 certified (the stated guarantee)."""
+        return self.pieces[0].valid
+
+    @property
+    def all_valid(self) -> bool:
+        return all(p.valid for p in self.pieces)
 
     @property
     def n_coefficients(self) -> int:
@@ -70,17 +116,52 @@ def project_for_fit(brdf, grazing_cutoff_deg: float = GRAZING_CUTOFF_DEG) -> Pro
     return project(brdf, statistic="median", grazing_cutoff_deg=grazing_cutoff_deg, grazing_angle="theta_io")
 
 
+def white_sky_albedo(p: ProjectedBRDF, n_incidence: int = 9) -> np.ndarray:
+    """Bihemispherical reflectance A per channel, shape (3,): the fraction of uniform white
+    sky light reflected, ``A = 2 int_0^{pi/2} a(theta_i) cos(theta_i) sin(theta_i) d theta_i``
+    with ``a`` the directional albedo of the projected table (:mod:`fit.albedo`; midpoint
+    rule, ``n_incidence`` nodes in theta_i; empty clusters count as 0)."""
+    from .albedo import directional_albedo
+
+    def ev(wi, wo):
+        return np.nan_to_num(p.evaluate(wi, wo), nan=0.0)
+
+    t = (np.arange(n_incidence) + 0.5) / n_incidence * (0.5 * np.pi)
+    a = np.array([directional_albedo(ev, ti, n_theta=45, n_phi=180) for ti in t])
+    w = 2.0 * np.cos(t) * np.sin(t) * (0.5 * np.pi / n_incidence)
+    return (a * w[:, None]).sum(axis=0)
+
+
 def channel_data(p: ProjectedBRDF, c: int, tol: float, intervals: str = "tol+spread",
-                 floor_frac: float = 0.01, spread_k: float = 1.0,
-                 theta_d_max_deg: float = THETA_D_MAX_DEG) -> ChannelData:
+                 floor_frac: float = 1.0, spread_k: float = 1.0,
+                 theta_d_range_deg=(0.0, THETA_D_MAX_DEG), rho_ref: float | None = None,
+                 partial_min_fraction: float | None = None, partial_factor: float = 2.0) -> ChannelData:
+    """Clusters of channel ``c`` with ``theta_d`` in ``theta_d_range_deg`` and their intervals.
+
+    The absolute floor is ``floor_frac * tol * rho_ref`` with ``rho_ref = A_Y / pi`` by default
+    (A_Y: Rec.709 luminance of :func:`white_sky_albedo`), the value of the Lambertian that
+    reflects as much uniform white sky light: below ``rho_ref`` the guarantee is an absolute
+    error of at most ``tol * rho_ref`` (same in R, G, B), which changes the radiance reflected
+    from a uniform white sky by at most ``tol * A_Y``.
+
+    ``partial_min_fraction``: clusters that kept fewer than this fraction of their
+    above-horizon phi_d samples (180 minus ``n_below_horizon``) after the grazing cut-off hold
+    the median of a biased subset; their intervals are widened to at least
+    ``[y / partial_factor, y * partial_factor]``.
+    """
     th, td = np.meshgrid(p.theta_h, p.theta_d, indexing="ij")
     v = p.value[..., c]
-    ok = np.isfinite(v) & (td <= np.deg2rad(theta_d_max_deg) + 1e-12)
+    a, b = (np.deg2rad(float(x)) for x in theta_d_range_deg)
+    ok = np.isfinite(v) & (td >= a - 1e-12) & (td <= b + 1e-12)
     y = np.maximum(v[ok], 0.0)
     if y.size == 0:
         raise ValueError("no finite cluster in the fitted domain")
-    pos = y[y > 0]
-    floor = floor_frac * tol * float(np.median(pos) if pos.size else 1.0)
+    if rho_ref is None:
+        rho_ref = float(LUMINANCE @ white_sky_albedo(p)) / np.pi
+    if not rho_ref > 0:
+        pos = y[y > 0]
+        rho_ref = float(np.median(pos)) if pos.size else 1.0
+    floor = floor_frac * tol * rho_ref
     if intervals == "tol":
         lo, hi = intervals_from_tolerance(y, tol, floor)
     elif intervals == "tol+spread":
@@ -88,92 +169,181 @@ def channel_data(p: ProjectedBRDF, c: int, tol: float, intervals: str = "tol+spr
         lo, hi = intervals_from_spread(y, sd, k=spread_k, abs_floor=floor, tol_min=tol)
     else:
         raise ValueError(f"intervals must be one of {INTERVALS}")
+    if partial_min_fraction is not None:
+        avail = (N_PHI_D - p.n_below_horizon)[ok]
+        partial = p.count[..., c][ok] < partial_min_fraction * avail
+        lo = np.where(partial, np.minimum(lo, y / partial_factor), lo)
+        hi = np.where(partial, np.maximum(hi, y * partial_factor), hi)
     # BRDF values are >= 0: a lower bound below -floor carries no information (and would make
     # the log transform undefined); clip it there.
     lo = np.maximum(lo, -floor)
     return ChannelData(np.stack([th[ok], td[ok]], axis=-1), y, lo, hi, floor)
 
 
-def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol+spread", theta_h_transform: str = "sqrt",
+CORE_CANDIDATES_DEG = (60.0, 50.0, 40.0)
+
+
+def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="auto",
+             band_intervals: str = "tol+spread", band_partial=(0.5, 2.0), theta_h_transform: str = "sqrt",
              value_transform: str = "log", max_degree: int = 12, max_den_degree: int = 6,
-             floor_frac: float = 0.01, spread_k: float = 1.0, name: str | None = None,
+             floor_frac: float = 1.0, spread_k: float = 1.0, name: str | None = None,
              progress=None, source_file: str = "") -> BRDFFit:
-    """Fit R, G, B of a measured (or already projected) BRDF. ``progress(channel, event)``
-    is called after every degree pair tried."""
+    """Fit R, G, B of a measured (or already projected) BRDF over theta_h x theta_d.
+
+    ``core_theta_d_deg``: the guaranteed core ``theta_d <= core`` is fitted with ``intervals``
+    (default pure tolerance); the grazing band ``core < theta_d <= 78.5 deg`` gets its own
+    functions with ``band_intervals`` (best effort, flagged in the file if not met). ``"auto"``
+    tries the cores of :data:`CORE_CANDIDATES_DEG` in turn and keeps the first (largest) one
+    every channel meets; a number fixes it; ``THETA_D_MAX_DEG`` (78.5) fits one function per
+    channel over the whole box (file version 1). ``band_partial = (fraction, factor)``: in the
+    band, clusters that kept fewer than ``fraction`` of their above-horizon samples after the
+    grazing cut-off only have to be met within ``factor`` (see :func:`channel_data`; None:
+    no exception). ``progress(label, event)`` is called after every degree pair tried.
+    """
     t0 = time.perf_counter()
     p = project_for_fit(brdf)
     name = name or p.name
-    variables = [Variable("theta_h", "rad", theta_h_transform, (0.0, THETA_H_MAX)),
-                 Variable("theta_d", "rad", "identity", (0.0, float(np.deg2rad(THETA_D_MAX_DEG))))]
-    rf_domain = np.array([v.rf_domain for v in variables])
-    functions, results, infos, errors, floors, offsets = [], [], [], [], [], []
-    data = [channel_data(p, c, tol, intervals, floor_frac, spread_k) for c in range(3)]
-    # One value offset for all channels (log transform): twice the largest floor.
-    offset = 2.0 * max(d.abs_floor for d in data) if value_transform == "log" else 0.0
-    for c, d in enumerate(data):
+    # Floor reference: the Lambertian with the material's white-sky *luminance* albedo, the
+    # same in R, G and B (errors are seen against luminance; a channel that is near zero where
+    # the others peak, e.g. blue of a yellow highlight clipped by the RGB conversion, gets no
+    # tighter absolute bound than the others).
+    rho_ref = np.full(3, float(LUMINANCE @ white_sky_albedo(p)) / np.pi)
+    floors = [floor_frac * tol * float(r) for r in rho_ref]
+    # One value offset for all channels and pieces (log transform): twice the largest floor.
+    offset = 2.0 * max(floors) if value_transform == "log" else 0.0
+    kw = dict(tol=tol, theta_h_transform=theta_h_transform, value_transform=value_transform,
+              offset=offset, max_degree=max_degree, max_den_degree=max_den_degree,
+              floor_frac=floor_frac, spread_k=spread_k, rho_ref=rho_ref, progress=progress)
+    if core_theta_d_deg == "auto":
+        cores = CORE_CANDIDATES_DEG
+    else:
+        cores = (min(float(core_theta_d_deg), THETA_D_MAX_DEG),)
+    for core in cores:
+        core_fit = _fit_piece(p, (0.0, core), intervals, stop_on_infeasible=core != cores[-1], **kw)
+        if core_fit.valid:
+            break
+    pieces = [core_fit]
+    if core < THETA_D_MAX_DEG:
+        pieces.append(_fit_piece(p, (core, THETA_D_MAX_DEG), band_intervals, partial=band_partial, **kw))
+    total = time.perf_counter() - t0
+    model = _model(p, name, pieces, kw, intervals, band_intervals, total, source_file)
+    return BRDFFit(model, pieces, total)
+
+
+def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,
+               max_degree, max_den_degree, floor_frac, spread_k, rho_ref, progress,
+               stop_on_infeasible=False, partial=None) -> PieceFit:
+    a, b = theta_d_range_deg
+    rf_domain = np.array([Variable("theta_h", "rad", theta_h_transform, (0.0, THETA_H_MAX)).rf_domain,
+                          (np.deg2rad(a), np.deg2rad(b))])
+    piece = PieceFit((a, b), intervals, [], [], partial=partial)
+    label = f"theta_d {a:g}-{b:g}"
+    for c in range(3):
+        d = channel_data(p, c, tol, intervals, floor_frac, spread_k, (a, b), rho_ref=float(rho_ref[c]),
+                         partial_min_fraction=None if partial is None else partial[0],
+                         partial_factor=2.0 if partial is None else partial[1])
         U = np.stack([apply_input_transform(d.X[:, 0], theta_h_transform), d.X[:, 1]], axis=-1)
         lo = apply_value_transform(d.lower, value_transform, offset)
         hi = apply_value_transform(d.upper, value_transform, offset)
         yt = apply_value_transform(d.y, value_transform, offset)
-        cb = None if progress is None else (lambda e, c=c: progress(CHANNELS[c], e))
+        cb = None if progress is None else (lambda e, c=c: progress(f"{label} {CHANNELS[c]}", e))
         # R, G and B usually need the same degrees: start G and B from the previous channel's
         # pair (a feasible start only prunes the search; the fewest-coefficient pair is kept).
-        start = (results[-1].num_degree, results[-1].den_degree) if results and results[-1].valid else None
+        prev = piece.results[-1] if piece.results else None
+        start = (prev.num_degree, prev.den_degree) if prev is not None and prev.valid else None
         fitter = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
-                                        domain=rf_domain, progress=cb, start_degrees=start)
+                                        domain=rf_domain, progress=cb, start_degrees=start,
+                                        quick_reject=stop_on_infeasible)
         r = fitter.fit(U, y=yt, lower=lo, upper=hi)
-        results.append(r)
-        functions.append(r.function)
-        err = brdf_errors(r, U, d, value_transform, offset, tol)
-        errors.append(err)
-        infos.append({"feasible": bool(r.feasible), "valid": bool(r.valid),
-                      "num_degree": r.num_degree, "den_degree": r.den_degree, **err,
-                      "q_certificate": {"certified": bool(r.certificate and r.certificate.certified),
-                                        "lower_bound": r.certificate.lower_bound if r.certificate else None,
-                                        "method": r.certificate.method if r.certificate else ""},
-                      "fit_time_s": r.time_s})
-        floors.append(d.abs_floor)
-    total = time.perf_counter() - t0
-    model = RationalModel(
-        name=name, variables=variables, functions=functions, outputs=CHANNELS, kind="brdf",
-        value_transform=value_transform, value_offset=offset, value_min=0.0,
-        domain_policy={
-            "outside": "clamp", "below_horizon": "zero", "theta_d_max_deg": THETA_D_MAX_DEG,
-            "grazing": (f"samples with max(theta_i, theta_o) > {GRAZING_CUTOFF_DEG} deg dropped before the "
-                        f"median projection; theta_d > {THETA_D_MAX_DEG} deg is clamped to "
-                        f"{THETA_D_MAX_DEG} deg (value at the cut-off, no 1/cos growth)"),
-            "guarantee": "every fitted (theta_h, theta_d) cluster inside its interval; Q > 0 on the whole box",
-        },
-        fit_info={"tolerance": tol, "tolerance_kind": "relative", "intervals": intervals,
-                  "spread_k": spread_k if intervals == "tol+spread" else None,
-                  "abs_floor": floors, "statistic": "median",
-                  "grazing_cutoff_deg": GRAZING_CUTOFF_DEG, "time_s": total,
-                  "fitter": "fit.fitter.IntervalRationalFitter (LP, HiGHS, constraint generation)",
-                  "max_degree": max_degree, "max_den_degree": max_den_degree,
-                  "feasible": [bool(r.feasible) for r in results],
-                  "valid": [bool(r.valid) for r in results]},
-        function_info=infos,
-        source={"file": source_file or (p.source.split("/")[-1] if p.source else ""),
-                "sha256": p.source_sha256},
-    )
-    return BRDFFit(model, results, errors, total)
+        piece.results.append(r)
+        piece.errors.append(brdf_errors(r, U, d, value_transform, offset, tol))
+        if stop_on_infeasible and not r.valid:
+            break
+    return piece
+
+
+def _model(p, name, pieces, kw, intervals, band_intervals, total, source_file):
+    tol, vt, offset = kw["tol"], kw["value_transform"], kw["offset"]
+    floors = [kw["floor_frac"] * tol * float(r) for r in kw["rho_ref"]]
+    core = pieces[0].theta_d_range_deg[1]
+    models, infos = [], []
+    for pc in pieces:
+        variables = [Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
+                     Variable("theta_d", "rad", "identity", tuple(np.deg2rad(pc.theta_d_range_deg)))]
+        finfo = []
+        for r, err in zip(pc.results, pc.errors):
+            finfo.append({"feasible": bool(r.feasible), "valid": bool(r.valid),
+                          "num_degree": r.num_degree, "den_degree": r.den_degree, **err,
+                          "q_certificate": {"certified": bool(r.certificate and r.certificate.certified),
+                                            "lower_bound": r.certificate.lower_bound if r.certificate else None,
+                                            "method": r.certificate.method if r.certificate else ""},
+                          "fit_time_s": r.time_s})
+        models.append(RationalModel(name=name, variables=variables, functions=[r.function for r in pc.results],
+                                    outputs=CHANNELS, kind="brdf", value_transform=vt, value_offset=offset,
+                                    value_min=0.0, function_info=finfo))
+        infos.append({"theta_d_range_deg": list(pc.theta_d_range_deg), "intervals": pc.intervals,
+                      "partial_clusters": (None if pc.partial is None else
+                                           {"min_sample_fraction": pc.partial[0], "factor": pc.partial[1]}),
+                      "guaranteed": pc.valid,
+                      "max_interval_ratio": max(e["max_interval_ratio"] for e in pc.errors),
+                      "max_rel_error": max(e["max_rel_error"] for e in pc.errors)})
+    policy = {
+        "outside": "clamp", "below_horizon": "zero", "theta_d_max_deg": THETA_D_MAX_DEG,
+        "guaranteed_theta_d_max_deg": core if pieces[0].valid else None,
+        "grazing": (f"samples with max(theta_i, theta_o) > {GRAZING_CUTOFF_DEG} deg dropped before the "
+                    f"median projection; theta_d > {THETA_D_MAX_DEG} deg is clamped to "
+                    f"{THETA_D_MAX_DEG} deg (value at the cut-off, no 1/cos growth)"),
+        "guarantee": (f"theta_d <= {core:g} deg: every cluster within {intervals!r} intervals "
+                      f"(relative {tol:g}, absolute floor tol * A / pi per channel, A = white-sky albedo)"
+                      + (f"; {core:g} < theta_d <= {THETA_D_MAX_DEG} deg: {band_intervals!r} intervals"
+                         + (f" (clusters with < {pieces[1].partial[0]:g} of their samples left by the "
+                            f"grazing cut-off: within a factor {pieces[1].partial[1]:g})"
+                            if len(pieces) > 1 and pieces[1].partial else "") + ", "
+                         f"{'met' if len(pieces) > 1 and pieces[1].valid else 'best effort (NOT met, see pieces)'}"
+                         if len(pieces) > 1 else "") + "; Q > 0 on every piece's box (Bernstein certificate)"),
+    }
+    fit_info = {"tolerance": tol, "tolerance_kind": "relative", "intervals": intervals,
+                "band_intervals": band_intervals if len(pieces) > 1 else None,
+                "spread_k": kw["spread_k"], "abs_floor": floors, "floor_frac": kw["floor_frac"],
+                "white_sky_albedo": [float(np.pi * r) for r in kw["rho_ref"]],
+                "statistic": "median", "grazing_cutoff_deg": GRAZING_CUTOFF_DEG, "time_s": total,
+                "fitter": "fit.fitter.IntervalRationalFitter (LP, HiGHS, constraint generation)",
+                "max_degree": kw["max_degree"], "max_den_degree": kw["max_den_degree"],
+                "core_theta_d_deg": core,
+                "feasible": [bool(r.feasible) for r in pieces[0].results],
+                "valid": [bool(r.valid) for r in pieces[0].results]}
+    source = {"file": source_file or (p.source.split("/")[-1] if p.source else ""), "sha256": p.source_sha256}
+    if len(pieces) == 1:
+        m = models[0]
+        m.domain_policy, m.fit_info, m.source = policy, fit_info, source
+        return m
+    return PiecewiseRationalModel(
+        name=name, variables=[Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
+                              Variable("theta_d", "rad", "identity", (0.0, float(np.deg2rad(THETA_D_MAX_DEG))))],
+        split_variable="theta_d", edges=[float(np.deg2rad(x)) for x in (0.0, core, THETA_D_MAX_DEG)],
+        pieces=models, kind="brdf", domain_policy=policy, fit_info=fit_info, piece_info=infos, source=source)
 
 
 def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: float, tol: float) -> dict:
     """Errors in 1/sr space of one channel on its fitted clusters.
 
     ``max_rel_error``/``rms_rel_error``: |fit - y| / y over clusters with tol*y >= abs_floor
-    (where the relative tolerance applies); ``max_interval_ratio``: max |fit - y| / half-width
-    (<= 1: every cluster inside its interval); ``inside``: fraction of clusters inside.
+    (where the relative tolerance applies); ``max_interval_ratio``: max over clusters of
+    |fit - y| / (distance from y to the interval's bound on the side of fit) (<= 1: every
+    cluster inside its interval); ``inside``: fraction of clusters inside.
     """
     from .coefficients import invert_value_transform
 
     f = np.maximum(invert_value_transform(r.function(U), value_transform, offset), 0.0)
     e = np.abs(f - d.y)
+    # Distance to y over the distance from y to the bound on that side (intervals may be
+    # asymmetric where the lower bound is clipped at -floor): <= 1 exactly when inside.
+    room = np.where(f >= d.y, d.upper - d.y, d.y - d.lower)
+    ratio = np.where(e > 0, e / np.maximum(room, 1e-300), 0.0)
     rel_ok = tol * d.y >= d.abs_floor
     rel = e[rel_ok] / d.y[rel_ok]
     inside = (f >= d.lower * (1 - 1e-12) - 1e-300) & (f <= d.upper * (1 + 1e-12))
     return {"max_rel_error": float(rel.max()) if rel.size else 0.0,
             "rms_rel_error": float(np.sqrt(np.mean(rel ** 2))) if rel.size else 0.0,
-            "max_interval_ratio": float(np.max(e / (0.5 * (d.upper - d.lower)))),
+            "max_interval_ratio": float(np.max(ratio)),
             "inside_fraction": float(inside.mean()), "n_points": int(d.y.size)}

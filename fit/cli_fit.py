@@ -24,8 +24,10 @@ def _cmd_brdf(args) -> int:
                             f"{'ok' if event['feasible'] else 'no'}")
         bar.update(1)
 
+    core = args.core_theta_d if args.core_theta_d == "auto" else float(args.core_theta_d)
     try:
-        fit = fit_brdf(b, tol=args.tol, intervals=args.intervals, theta_h_transform=args.theta_h,
+        fit = fit_brdf(b, tol=args.tol, intervals=args.intervals, core_theta_d_deg=core,
+                       band_intervals=args.band_intervals, theta_h_transform=args.theta_h,
                        value_transform=args.value, max_degree=args.max_degree,
                        max_den_degree=args.max_den_degree, progress=progress,
                        source_file=Path(args.file).name)
@@ -35,15 +37,23 @@ def _cmd_brdf(args) -> int:
         bar.close()
     out = Path(args.out)
     save(fit.model, out)
-    print(f"{b.name}: tol {args.tol:g} ({args.intervals}), theta_h {args.theta_h}, value {args.value}")
-    print(f"{'channel':8s}{'degrees':>9s}{'coefs':>7s}{'max rel':>9s}{'rms rel':>9s}{'inside':>8s}"
-          f"{'Q>0':>6s}{'time s':>8s}")
-    for ch, r, e in zip("RGB", fit.results, fit.errors):
-        print(f"{ch:8s}{f'({r.num_degree},{r.den_degree})':>9s}{r.n_coefficients:7d}"
-              f"{100 * e['max_rel_error']:8.2f}%{100 * e['rms_rel_error']:8.2f}%"
-              f"{100 * e['inside_fraction']:7.1f}%{'yes' if r.certificate and r.certificate.certified else 'NO':>6s}"
-              f"{r.time_s:8.2f}")
-    status = "guaranteed" if fit.valid else "NOT guaranteed (best fit found, flagged infeasible)"
+    print(f"{b.name}: tol {args.tol:g}, theta_h {args.theta_h}, value {args.value}, "
+          f"floor {fit.model.fit_info['abs_floor'][0]:.3g} 1/sr")
+    print(f"{'theta_d deg':12s}{'intervals':>11s}{'ch':>3s}{'degrees':>9s}{'coefs':>7s}{'max rel':>9s}"
+          f"{'rms rel':>9s}{'inside':>8s}{'Q>0':>5s}{'time s':>8s}")
+    for pc in fit.pieces:
+        rng = f"{pc.theta_d_range_deg[0]:g}-{pc.theta_d_range_deg[1]:g}"
+        for ch, r, e in zip("RGB", pc.results, pc.errors):
+            print(f"{rng:12s}{pc.intervals:>11s}{ch:>3s}{f'({r.num_degree},{r.den_degree})':>9s}"
+                  f"{r.n_coefficients:7d}{100 * e['max_rel_error']:8.2f}%{100 * e['rms_rel_error']:8.2f}%"
+                  f"{100 * e['inside_fraction']:7.1f}%"
+                  f"{'yes' if r.certificate and r.certificate.certified else 'NO':>5s}{r.time_s:8.2f}")
+    core_rng = fit.pieces[0].theta_d_range_deg
+    status = (f"guaranteed on theta_d <= {core_rng[1]:g} deg" if fit.valid
+              else "NOT guaranteed (best fit found, flagged infeasible)")
+    if len(fit.pieces) > 1:
+        status += ("; grazing band met" if fit.pieces[1].valid
+                   else "; grazing band best effort (NOT within its intervals, flagged)")
     print(f"total {fit.n_coefficients} coefficients, {fit.time_s:.1f} s, {status}; wrote {out}")
     return 0 if fit.valid or args.allow_infeasible else 1
 
@@ -55,14 +65,23 @@ def register(subparsers) -> None:
         "brdf", help="fit R, G, B with rational functions inside a tolerance; write JSON coefficients",
         description="Project the BRDF onto (theta_h, theta_d) (median, grazing samples beyond 79 deg "
                     "dropped), fit each channel with the rational function with the fewest "
-                    "coefficients inside the intervals (LP with constraint generation), certify "
-                    "Q > 0 and write an rbrdf-rational v1 JSON file (see fit.coefficients).")
+                    "coefficients inside the intervals (LP with constraint generation) on a "
+                    "guaranteed core theta_d <= core and, separately, on the grazing band up to "
+                    "78.5 deg; certify Q > 0 and write an rbrdf-rational JSON file (version 2 when "
+                    "piecewise; see fit.coefficients). Absolute floor: tol * A_Y / pi (A_Y = white-"
+                    "sky luminance albedo).")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
     p.add_argument("--tol", type=float, default=0.05, help="relative tolerance (default 0.05)")
     p.add_argument("--out", required=True, help="output .json coefficient file")
-    p.add_argument("--intervals", choices=INTERVALS, default="tol+spread",
-                   help="interval policy: 'tol' = y +- max(tol y, floor); 'tol+spread' (default) also "
-                        "widens to the cluster's phi_d standard deviation")
+    p.add_argument("--intervals", choices=INTERVALS, default="tol",
+                   help="interval policy of the guaranteed core: 'tol' (default) = y +- max(tol y, floor); "
+                        "'tol+spread' also widens to the cluster's phi_d standard deviation")
+    p.add_argument("--core-theta-d", dest="core_theta_d", default="auto", metavar="DEG|auto",
+                   help="theta_d (deg) up to which the tolerance is guaranteed; the grazing band above "
+                        "it, up to 78.5 deg, gets its own functions. 'auto' (default): the largest of "
+                        "60, 50, 40 that every channel meets; 78.5: one function per channel")
+    p.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default="tol+spread",
+                   help="interval policy of the grazing band (default tol+spread)")
     p.add_argument("--theta-h", dest="theta_h", choices=("sqrt", "identity"), default="sqrt",
                    help="input transform of theta_h (default sqrt)")
     p.add_argument("--value", choices=("log", "linear"), default="log", help="value transform (default log)")

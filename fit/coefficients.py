@@ -1,4 +1,5 @@
-"""Versioned JSON coefficient files of fitted rational functions: format ``rbrdf-rational``, version 1.
+"""Versioned JSON coefficient files of fitted rational functions: format ``rbrdf-rational``,
+version 1 (one function per output) and version 2 (pieces along one variable).
 
 Specification (version 1)
 =========================
@@ -53,6 +54,22 @@ For a BRDF the variables are exactly ``theta_h`` then ``theta_d`` (radians, Rusi
 as in conventions.md) and rho is in 1/sr without the cosine; rho = 0 when the light or view
 direction is at or below the tangent plane ("below_horizon": "zero").
 
+Version 2 (piecewise)
+=====================
+Same keys, except that ``functions`` is replaced by::
+
+      "split":  {"variable": "theta_d", "edges": [e0, e1, ..., eK]},   # increasing, in the
+                                                   # variable's unit; e0, eK = its domain
+      "pieces": [{"variables": [...],              # as above, split variable's domain [e_k, e_k+1]
+                  "functions": [...],              # as in version 1, on the piece's box
+                  "info": {"theta_d_range_deg": [..], "intervals": "tol", "guaranteed": true, ...}},
+                 ...]
+
+Evaluation: clamp every input onto the top-level ``variables`` domains, pick the piece ``k``
+with ``e_k <= x <= e_k+1`` (the lower piece at a shared edge), then apply steps 1-6 with that
+piece's variables and functions. Readers of version 1 reject version 2 files (they would
+evaluate only part of the model).
+
 Outside the fitted domain the inputs are clamped onto it (step 1), so the function is continuous
 and bounded everywhere: e.g. for theta_d above ``theta_d_max_deg`` (grazing, where measurements
 are unreliable and grow like 1/cos theta_o) it returns the value at the cut-off. Q > 0 holds on
@@ -74,7 +91,9 @@ from .errors import BRDFFileError
 from .rational import RationalFunction
 
 FORMAT = "rbrdf-rational"
-VERSION = 1
+VERSION = 1            # single rational function per output
+VERSION_PIECEWISE = 2  # pieces along one variable (see PiecewiseRationalModel)
+VERSIONS = (VERSION, VERSION_PIECEWISE)
 INPUT_TRANSFORMS = ("identity", "sqrt")
 VALUE_TRANSFORMS = ("linear", "log")
 
@@ -127,8 +146,29 @@ class Variable:
         return tuple(float(apply_input_transform(v, self.transform)) for v in self.domain)
 
 
+class _BRDFEvaluation:
+    """``evaluate_brdf`` / ``evaluate`` for models whose ``__call__`` takes ``(theta_h, theta_d)``."""
+
+    def evaluate_brdf(self, theta_h, theta_d) -> np.ndarray:
+        """rho in 1/sr at Rusinkiewicz angles (radians); shape ``broadcast + (3,)``."""
+        th, td = np.broadcast_arrays(np.asarray(theta_h, float), np.asarray(theta_d, float))
+        return self(np.stack([th, td], axis=-1))
+
+    def evaluate(self, wi, wo) -> np.ndarray:
+        """rho(wi, wo) in 1/sr for local unit directions ``(..., 3)``; 0 below the horizon."""
+        from .angles import directions_to_half_diff
+
+        wi = np.asarray(wi, float)
+        wo = np.asarray(wo, float)
+        th, _, td, _ = directions_to_half_diff(wi, wo)
+        out = self.evaluate_brdf(th, td)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        above = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+        return np.where(above[..., None], out, 0.0)
+
+
 @dataclass
-class RationalModel:
+class RationalModel(_BRDFEvaluation):
     """Rational functions with their input/value transforms and domain policy (one file).
 
     ``model(x)`` evaluates all outputs at physical inputs ``x`` of shape ``(..., n_vars)``,
@@ -192,23 +232,6 @@ class RationalModel:
             out = np.maximum(out, self.value_min)
         return out
 
-    def evaluate_brdf(self, theta_h, theta_d) -> np.ndarray:
-        """rho in 1/sr at Rusinkiewicz angles (radians); shape ``broadcast + (3,)``."""
-        th, td = np.broadcast_arrays(np.asarray(theta_h, float), np.asarray(theta_d, float))
-        return self(np.stack([th, td], axis=-1))
-
-    def evaluate(self, wi, wo) -> np.ndarray:
-        """rho(wi, wo) in 1/sr for local unit directions ``(..., 3)``; 0 below the horizon."""
-        from .angles import directions_to_half_diff
-
-        wi = np.asarray(wi, float)
-        wo = np.asarray(wo, float)
-        th, _, td, _ = directions_to_half_diff(wi, wo)
-        out = self.evaluate_brdf(th, td)
-        wi, wo = np.broadcast_arrays(wi, wo)
-        above = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
-        return np.where(above[..., None], out, 0.0)
-
     # Persistence ---------------------------------------------------------------------------
     def to_dict(self) -> dict:
         funcs = []
@@ -242,6 +265,123 @@ class RationalModel:
         save(self, path)
 
 
+@dataclass
+class PiecewiseRationalModel(_BRDFEvaluation):
+    """Rational models on consecutive intervals of one variable (file version 2).
+
+    ``pieces[k]`` is a :class:`RationalModel` whose domain in ``split_variable`` is
+    ``[edges[k], edges[k + 1]]`` (same other variables, outputs and value transform).
+    Evaluation: clamp the inputs onto the whole box (``variables``), then evaluate the piece
+    ``k`` with ``edges[k] <= x <= edges[k + 1]`` (the lower piece at a shared edge). Each
+    piece carries its own guarantee in ``piece_info`` (e.g. the interval policy it meets).
+    """
+
+    name: str
+    variables: list
+    split_variable: str
+    edges: list
+    pieces: list
+    kind: str = "brdf"
+    domain_policy: dict = field(default_factory=lambda: {"outside": "clamp", "below_horizon": "zero"})
+    fit_info: dict = field(default_factory=dict)
+    piece_info: list = field(default_factory=list)
+    source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
+
+    def __post_init__(self):
+        self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]
+        names = [v.name for v in self.variables]
+        if self.split_variable not in names:
+            raise ValueError(f"split variable {self.split_variable!r} is not among {names}")
+        self.edges = [float(e) for e in self.edges]
+        if len(self.edges) != len(self.pieces) + 1 or np.any(np.diff(self.edges) <= 0):
+            raise ValueError("edges must be increasing, one more than the pieces")
+        self._axis = names.index(self.split_variable)
+        var = self.variables[self._axis]
+        if not (np.isclose(self.edges[0], var.domain[0]) and np.isclose(self.edges[-1], var.domain[1])):
+            raise ValueError(f"edges {self.edges} do not span the domain {var.domain} of {var.name}")
+        for k, piece in enumerate(self.pieces):
+            if [v.name for v in piece.variables] != names or piece.outputs != self.pieces[0].outputs:
+                raise ValueError(f"piece {k}: variables or outputs differ from the model's")
+            if not np.allclose(piece.variables[self._axis].domain, self.edges[k:k + 2]):
+                raise ValueError(f"piece {k}: {var.name} domain {piece.variables[self._axis].domain} "
+                                 f"!= [{self.edges[k]}, {self.edges[k + 1]}]")
+            if (piece.value_transform, piece.value_offset) != (self.pieces[0].value_transform,
+                                                               self.pieces[0].value_offset):
+                raise ValueError(f"piece {k}: value transform differs from piece 0")
+        if not self.piece_info:
+            self.piece_info = [{} for _ in self.pieces]
+
+    @property
+    def outputs(self) -> tuple:
+        return self.pieces[0].outputs
+
+    @property
+    def n_vars(self) -> int:
+        return len(self.variables)
+
+    @property
+    def n_coefficients(self) -> int:
+        return sum(p.n_coefficients for p in self.pieces)
+
+    @property
+    def functions(self) -> list:
+        """Every piece's functions, piece by piece."""
+        return [f for p in self.pieces for f in p.functions]
+
+    @property
+    def value_transform(self) -> str:
+        return self.pieces[0].value_transform
+
+    @property
+    def value_offset(self) -> float:
+        return self.pieces[0].value_offset
+
+    @property
+    def value_min(self):
+        return self.pieces[0].value_min
+
+    def piece_index(self, x_split) -> np.ndarray:
+        """Index of the piece that evaluates each value of the split variable (clamped)."""
+        inner = np.asarray(self.edges[1:-1])
+        return np.searchsorted(inner, np.asarray(x_split, float), side="left")
+
+    def __call__(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if self.domain_policy.get("outside", "clamp") == "clamp":
+            lo = np.array([v.domain[0] for v in self.variables])
+            hi = np.array([v.domain[1] for v in self.variables])
+            x = np.clip(x, lo, hi)
+        k = self.piece_index(x[..., self._axis])
+        out = np.zeros(x.shape[:-1] + (len(self.outputs),))
+        for i, piece in enumerate(self.pieces):
+            sel = k == i
+            if np.any(sel):
+                out[sel] = piece(x[sel])
+        return out
+
+    def to_dict(self) -> dict:
+        base = self.pieces[0].to_dict()
+        pieces = []
+        for piece, info in zip(self.pieces, self.piece_info):
+            d = piece.to_dict()
+            pieces.append({"variables": d["variables"], "functions": d["functions"],
+                           "info": _jsonable(info)})
+        return {
+            "format": FORMAT, "version": VERSION_PIECEWISE, "name": self.name, "kind": self.kind,
+            "variables": [{"name": v.name, "unit": v.unit, "transform": v.transform,
+                           "domain": list(v.domain)} for v in self.variables],
+            "value": base["value"], "basis": base["basis"], "outputs": base["outputs"],
+            "split": {"variable": self.split_variable, "edges": list(self.edges)},
+            "pieces": pieces,
+            "domain_policy": _jsonable(self.domain_policy),
+            "fit": _jsonable(self.fit_info),
+            "source": _jsonable(self.source),
+        }
+
+    def save(self, path) -> None:
+        save(self, path)
+
+
 def _jsonable(obj):
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
@@ -259,22 +399,26 @@ def _jsonable(obj):
     return obj
 
 
-def save(model: RationalModel, path) -> None:
-    """Write ``model`` as an ``rbrdf-rational`` version-1 JSON file."""
+def save(model, path) -> None:
+    """Write ``model`` as an ``rbrdf-rational`` JSON file (version 1, or 2 if piecewise)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     text = json.dumps(model.to_dict(), indent=1, allow_nan=False)
     path.write_text(text + "\n", encoding="utf-8")
 
 
-def from_dict(d: dict, path=None) -> RationalModel:
-    """Build a model from a parsed file; :class:`BRDFFileError` on any problem."""
+def from_dict(d: dict, path=None):
+    """Build a model from a parsed file (:class:`RationalModel` for version 1,
+    :class:`PiecewiseRationalModel` for version 2); :class:`BRDFFileError` on any problem."""
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise BRDFFileError(path, f"not an {FORMAT} coefficient file (format key is "
                                   f"{d.get('format') if isinstance(d, dict) else None!r})")
     ver = d.get("version")
-    if ver != VERSION:
-        raise BRDFFileError(path, f"unsupported {FORMAT} version {ver!r} (this reader knows version {VERSION})")
+    if ver not in VERSIONS:
+        raise BRDFFileError(path, f"unsupported {FORMAT} version {ver!r} (this reader knows versions "
+                                  f"{', '.join(map(str, VERSIONS))})")
+    if ver == VERSION_PIECEWISE:
+        return _piecewise_from_dict(d, path)
     try:
         if d.get("basis", "chebyshev") != "chebyshev":
             raise ValueError(f"unsupported basis {d.get('basis')!r}")
@@ -314,7 +458,33 @@ def from_dict(d: dict, path=None) -> RationalModel:
         raise BRDFFileError(path, f"invalid {FORMAT} coefficient file ({e.__class__.__name__}: {e})") from None
 
 
-def load(path) -> RationalModel:
+def _piecewise_from_dict(d: dict, path=None) -> PiecewiseRationalModel:
+    try:
+        split = d["split"]
+        pieces, infos = [], []
+        for k, pd in enumerate(d["pieces"]):
+            sub = {key: d[key] for key in ("name", "kind", "value", "basis", "outputs") if key in d}
+            sub.update(format=FORMAT, version=VERSION, variables=pd["variables"], functions=pd["functions"],
+                       domain_policy=d.get("domain_policy", {"outside": "clamp"}))
+            pieces.append(from_dict(sub, path))
+            infos.append(dict(pd.get("info", {})))
+        variables = [Variable(name=str(v["name"]), unit=str(v.get("unit", "")),
+                              transform=str(v.get("transform", "identity")), domain=v["domain"])
+                     for v in d["variables"]]
+        return PiecewiseRationalModel(
+            name=str(d.get("name", "")), variables=variables, split_variable=str(split["variable"]),
+            edges=list(split["edges"]), pieces=pieces, kind=str(d.get("kind", "function")),
+            domain_policy=dict(d.get("domain_policy", {"outside": "clamp"})),
+            fit_info=dict(d.get("fit", {})), piece_info=infos,
+            source=dict(d.get("source", {"file": "", "sha256": ""})))
+    except BRDFFileError:
+        raise
+    except (KeyError, TypeError, ValueError, IndexError) as e:
+        raise BRDFFileError(path, f"invalid {FORMAT} version-2 coefficient file "
+                                  f"({e.__class__.__name__}: {e})") from None
+
+
+def load(path):
     """Read an ``rbrdf-rational`` JSON file; :class:`BRDFFileError` if missing, corrupt or of
     an unknown version."""
     path = Path(path)

@@ -260,6 +260,9 @@ class IntervalRationalFitter:
     start_degrees : optional ``(m, n)`` tried first in the search (e.g. the degrees of another
         colour channel); if feasible it prunes the search, which still returns the
         fewest-coefficient pair.
+    quick_reject : try the largest pair first (unless ``start_degrees`` is feasible): if it is
+        infeasible nothing is (feasibility is monotone), which one LP proves instead of a whole
+        walk; costs one extra solve when the data are feasible.
     incremental : grow one HiGHS model per degree pair (warm-started re-solves) instead of
         solving every constraint-generation LP from scratch (same LP, same result).
     """
@@ -271,7 +274,7 @@ class IntervalRationalFitter:
                  q_min: float = 1e-4, q_grid: int | None = None, degrees=None,
                  coef_bound: float = 1e6, max_iter: int = 60, certify_depth: int = 12,
                  progress=None, delta_min: float = 1e-10, bernstein_split: int = 2,
-                 incremental: bool = True, start_degrees=None):
+                 incremental: bool = True, start_degrees=None, quick_reject: bool = False):
         if degree_kind not in ("total", "tensor"):
             raise ValueError("degree_kind must be 'total' or 'tensor'")
         self.tol = float(tol)
@@ -291,6 +294,7 @@ class IntervalRationalFitter:
         self.bernstein_split = int(bernstein_split)
         self.incremental = bool(incremental)
         self.start_degrees = start_degrees
+        self.quick_reject = bool(quick_reject)
 
     # Public API ----------------------------------------------------------------------------
     def fit(self, X, y=None, lower=None, upper=None) -> FitResult:
@@ -560,6 +564,15 @@ class IntervalRationalFitter:
                 # could beat it (ties: lower denominator degree), so the result is unchanged.
                 if feas(hm, hn):
                     best = cache[(hm, hn)]
+                elif hm < M and feas(hm + 1, hn):
+                    # One numerator degree more usually suffices for a sibling channel: a
+                    # feasible pair early prunes the walk (which still finds the fewest).
+                    best = cache[(hm + 1, hn)]
+        if best is None and self.quick_reject and not feas(M, N):
+            # Feasibility is monotone in both degrees: nothing below (M, N) can be feasible.
+            best = self._fit_pair(M, N, converge=True)
+            tried.append((M, N, best.feasible, self._ncoef(M, N)))
+            return best, tried
         m_hi = M  # smallest m known feasible for the previous n (monotone staircase)
         for n in range(0, N + 1):
             # Largest m whose coefficient count beats the best so far.

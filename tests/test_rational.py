@@ -120,3 +120,48 @@ def test_json_errors(tmp_path):
         load(tmp_path / "o.json")
     with pytest.raises(BRDFFileError, match="no such file"):
         load(tmp_path / "missing.json")
+
+
+def _piecewise():
+    from fit.coefficients import PiecewiseRationalModel
+
+    edges = [0.0, 0.6, 1.3]
+    pieces = []
+    for k in range(2):
+        f = _random_rf(2, 3, 2)
+        f = RationalFunction([[0, np.sqrt(np.pi / 2)], edges[k:k + 2]], f.num_exponents,
+                             np.abs(f.num_coef) + k, f.den_exponents, f.den_coef)
+        pieces.append(RationalModel("p", [Variable("theta_h", "rad", "sqrt", (0, np.pi / 2)),
+                                          Variable("theta_d", "rad", "identity", edges[k:k + 2])],
+                                    [f, f.scaled(0.5), f.scaled(0.25)], value_transform="log",
+                                    value_offset=1e-3))
+    return PiecewiseRationalModel("pw", [Variable("theta_h", "rad", "sqrt", (0, np.pi / 2)),
+                                         Variable("theta_d", "rad", "identity", (0.0, 1.3))],
+                                  "theta_d", edges, pieces,
+                                  piece_info=[{"guaranteed": True}, {"guaranteed": False}])
+
+
+def test_piecewise_evaluation_and_round_trip(tmp_path):
+    m = _piecewise()
+    th = np.linspace(0, 1.5, 11)
+    for td, k in ((0.2, 0), (0.6, 0), (0.61, 1), (1.2, 1), (1.5, 1)):   # edge -> lower piece
+        got = m.evaluate_brdf(th, td)
+        assert np.array_equal(got, m.pieces[k].evaluate_brdf(th, min(td, 1.3)))
+    assert not np.allclose(m.evaluate_brdf(th, 0.6), m.evaluate_brdf(th, 0.6 + 1e-9))  # a real jump
+    save(m, tmp_path / "pw.json")
+    d = json.loads((tmp_path / "pw.json").read_text())
+    assert d["version"] == 2 and d["split"]["variable"] == "theta_d" and len(d["pieces"]) == 2
+    assert "functions" not in d and d["pieces"][1]["info"]["guaranteed"] is False
+    m2 = load(tmp_path / "pw.json")
+    x = np.random.default_rng(1).uniform([0, 0], [1.6, 1.5], size=(200, 2))
+    assert np.array_equal(m2(x), m(x)) and m2.n_coefficients == m.n_coefficients
+    assert m2.piece_info[1]["guaranteed"] is False
+    # corrupt version-2 files: edges that do not match the pieces
+    d["split"]["edges"] = [0.0, 0.7, 1.3]
+    (tmp_path / "bad.json").write_text(json.dumps(d))
+    with pytest.raises(BRDFFileError, match="version-2.*piece 0"):
+        load(tmp_path / "bad.json")
+    del d["split"]
+    (tmp_path / "nosplit.json").write_text(json.dumps(d))
+    with pytest.raises(BRDFFileError, match="version-2"):
+        load(tmp_path / "nosplit.json")

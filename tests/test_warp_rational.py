@@ -12,9 +12,9 @@ import fit.coefficients as coefficients  # noqa: E402
 import fit.rational as rational  # noqa: E402
 
 
-def random_model(value_transform="linear", seed=0):
+def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radians(80.0))):
     rng = np.random.default_rng(seed)
-    dom = [(0.0, np.pi / 2), (0.0, np.radians(80.0))]
+    dom = [(0.0, np.pi / 2), tuple(theta_d_range)]
     variables = [coefficients.Variable("theta_h", "rad", "sqrt", dom[0]),
                  coefficients.Variable("theta_d", "rad", "identity", dom[1])]
     rf_dom = np.array([v.rf_domain for v in variables])
@@ -31,9 +31,19 @@ def random_model(value_transform="linear", seed=0):
                                       value_transform=value_transform, value_offset=0.01 if value_transform == "log" else 0.0)
 
 
-@pytest.mark.parametrize("value_transform", ["linear", "log"])
+def piecewise_model(value_transform="log"):
+    """Three theta_d pieces with different coefficients (a visible jump at each edge)."""
+    e = np.radians([0.0, 30.0, 60.0, 80.0])
+    pieces = [random_model(value_transform, seed=k, theta_d_range=(e[k], e[k + 1])) for k in range(3)]
+    return coefficients.PiecewiseRationalModel(
+        name="pieces", variables=[coefficients.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                                  coefficients.Variable("theta_d", "rad", "identity", (e[0], e[-1]))],
+        split_variable="theta_d", edges=list(e), pieces=pieces)
+
+
+@pytest.mark.parametrize("value_transform", ["linear", "log", "piecewise"])
 def test_rational_matches_numpy(value_transform):
-    model = random_model(value_transform)
+    model = piecewise_model() if value_transform == "piecewise" else random_model(value_transform)
     spec = MaterialSpec(name="m", type="rational", data=model)
     r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
     rng = np.random.default_rng(5)

@@ -52,8 +52,8 @@ def check_model(model, file="<scene>", key="materials"):
     if bad:
         raise SceneError(file, f"{key}.file", f"unsupported rational-BRDF variable {bad[0]!r}; expected "
                                               f"variables among {', '.join(SUPPORTED_VARIABLES)}")
-    if len(model.functions) != 3:
-        raise SceneError(file, f"{key}.file", f"expected 3 outputs (R, G, B), got {len(model.functions)}")
+    if len(model.outputs) != 3:
+        raise SceneError(file, f"{key}.file", f"expected 3 outputs (R, G, B), got {len(model.outputs)}")
 
 
 def _lit(x: float) -> str:
@@ -78,7 +78,26 @@ def _poly(lines, name, exps, coefs, tvars):
 
 
 def generate_function(model, name: str) -> str:
-    """Source of one ``@wp.func name(wi, wo) -> wp.vec3`` for a rational BRDF model."""
+    """Source of ``@wp.func name(wi, wo) -> wp.vec3`` for a rational BRDF model; a piecewise
+    model (file version 2) gets one function per piece (``name_p0``, ...) and a dispatcher
+    that picks the piece from the split variable, clamped as in :mod:`fit.coefficients`."""
+    pieces = getattr(model, "pieces", None)
+    if pieces is None:
+        return _generate_single(model, name)
+    parts = [_generate_single(p, f"{name}_p{k}") for k, p in enumerate(pieces)]
+    src = SUPPORTED_VARIABLES[model.split_variable]
+    L = ["@wp.func", f"def {name}(wi: wp.vec3, wo: wp.vec3) -> wp.vec3:",
+         f"    # piecewise rational BRDF {model.name!r}: {len(pieces)} pieces along {model.split_variable}",
+         "    if wi[2] <= 0.0 or wo[2] <= 0.0:", "        return wp.vec3(0.0)",
+         "    a = M.half_diff(wi, wo)", f"    x = wp.float64(a[{src}])"]
+    for k in range(len(pieces) - 1):
+        L.append(f"    if x <= {_lit(model.edges[k + 1])}:")
+        L.append(f"        return {name}_p{k}(wi, wo)")
+    L.append(f"    return {name}_p{len(pieces) - 1}(wi, wo)")
+    return "\n\n".join(parts) + "\n\n" + "\n".join(L) + "\n"
+
+
+def _generate_single(model, name: str) -> str:
     nv = len(model.variables)
     kmax = [0] * nv
     for f in model.functions:
