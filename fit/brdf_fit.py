@@ -68,10 +68,11 @@ class PieceFit:
     results: list                                  # FitResult per channel
     errors: list = field(default_factory=list)     # per channel dict (:func:`brdf_errors`)
     partial: tuple | None = None                   # (min fraction, factor) or None
+    rejected: bool = False                         # a channel failed the pre-check: not fitted
 
     @property
     def valid(self) -> bool:
-        return all(r.valid for r in self.results)
+        return not self.rejected and len(self.results) == 3 and all(r.valid for r in self.results)
 
 
 @dataclass
@@ -195,10 +196,10 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     functions with ``band_intervals`` (best effort, flagged in the file if not met). ``"auto"``
     tries the cores of :data:`CORE_CANDIDATES_DEG` in turn and keeps the first (largest) one
     every channel meets; a number fixes it; ``THETA_D_MAX_DEG`` (78.5) fits one function per
-    channel over the whole box (file version 1). ``band_partial = (fraction, factor)``: in the
-    band, clusters that kept fewer than ``fraction`` of their above-horizon samples after the
-    grazing cut-off only have to be met within ``factor`` (see :func:`channel_data`; None:
-    no exception). ``progress(label, event)`` is called after every degree pair tried.
+    channel over the whole box (file version 1). ``band_partial = (fraction, factor)``: if the
+    band cannot meet its intervals everywhere, it is fitted again with the clusters that kept
+    fewer than ``fraction`` of their above-horizon samples after the grazing cut-off only held
+    within ``factor`` (see :func:`channel_data`; None: never). ``progress(label, event)`` is called after every degree pair tried.
     """
     t0 = time.perf_counter()
     p = project_for_fit(brdf)
@@ -224,7 +225,11 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
             break
     pieces = [core_fit]
     if core < THETA_D_MAX_DEG:
-        pieces.append(_fit_piece(p, (core, THETA_D_MAX_DEG), band_intervals, partial=band_partial, **kw))
+        band = (core, THETA_D_MAX_DEG)
+        band_fit = _fit_piece(p, band, band_intervals, stop_on_infeasible=band_partial is not None, **kw)
+        if not band_fit.valid and band_partial is not None:
+            band_fit = _fit_piece(p, band, band_intervals, partial=band_partial, **kw)
+        pieces.append(band_fit)
     total = time.perf_counter() - t0
     model = _model(p, name, pieces, kw, intervals, band_intervals, total, source_file)
     return BRDFFit(model, pieces, total)
@@ -238,27 +243,40 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
                           (np.deg2rad(a), np.deg2rad(b))])
     piece = PieceFit((a, b), intervals, [], [], partial=partial)
     label = f"theta_d {a:g}-{b:g}"
+    data = []
     for c in range(3):
         d = channel_data(p, c, tol, intervals, floor_frac, spread_k, (a, b), rho_ref=float(rho_ref[c]),
                          partial_min_fraction=None if partial is None else partial[0],
                          partial_factor=2.0 if partial is None else partial[1])
         U = np.stack([apply_input_transform(d.X[:, 0], theta_h_transform), d.X[:, 1]], axis=-1)
-        lo = apply_value_transform(d.lower, value_transform, offset)
-        hi = apply_value_transform(d.upper, value_transform, offset)
-        yt = apply_value_transform(d.y, value_transform, offset)
+        data.append((d, U, apply_value_transform(d.lower, value_transform, offset),
+                     apply_value_transform(d.upper, value_transform, offset),
+                     apply_value_transform(d.y, value_transform, offset)))
+    if stop_on_infeasible:
+        # Cheap pre-check of every channel at the largest degrees before any degree search: a
+        # piece that one channel provably cannot meet is abandoned without fitting the others
+        # (a channel that passes the pre-check but fails its search also rejects the piece).
+        for c, (d, U, lo, hi, yt) in enumerate(data):
+            pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
+                                         domain=rf_domain)
+            ok = not pre.proves_infeasible(U, (max_degree, max_den_degree), y=yt, lower=lo, upper=hi)
+            if progress is not None:
+                progress(f"{label} {CHANNELS[c]}", {"m": max_degree, "n": max_den_degree, "feasible": ok,
+                                                    "n_coefficients": None})
+            if not ok:
+                piece.rejected = True
+                return piece
+    for c, (d, U, lo, hi, yt) in enumerate(data):
         cb = None if progress is None else (lambda e, c=c: progress(f"{label} {CHANNELS[c]}", e))
         # R, G and B usually need the same degrees: start G and B from the previous channel's
         # pair (a feasible start only prunes the search; the fewest-coefficient pair is kept).
         prev = piece.results[-1] if piece.results else None
         start = (prev.num_degree, prev.den_degree) if prev is not None and prev.valid else None
         fitter = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
-                                        domain=rf_domain, progress=cb, start_degrees=start,
-                                        quick_reject=stop_on_infeasible)
+                                        domain=rf_domain, progress=cb, start_degrees=start)
         r = fitter.fit(U, y=yt, lower=lo, upper=hi)
         piece.results.append(r)
         piece.errors.append(brdf_errors(r, U, d, value_transform, offset, tol))
-        if stop_on_infeasible and not r.valid:
-            break
     return piece
 
 

@@ -260,9 +260,6 @@ class IntervalRationalFitter:
     start_degrees : optional ``(m, n)`` tried first in the search (e.g. the degrees of another
         colour channel); if feasible it prunes the search, which still returns the
         fewest-coefficient pair.
-    quick_reject : try the largest pair first (unless ``start_degrees`` is feasible): if it is
-        infeasible nothing is (feasibility is monotone), which one LP proves instead of a whole
-        walk; costs one extra solve when the data are feasible.
     incremental : grow one HiGHS model per degree pair (warm-started re-solves) instead of
         solving every constraint-generation LP from scratch (same LP, same result).
     """
@@ -274,7 +271,7 @@ class IntervalRationalFitter:
                  q_min: float = 1e-4, q_grid: int | None = None, degrees=None,
                  coef_bound: float = 1e6, max_iter: int = 60, certify_depth: int = 12,
                  progress=None, delta_min: float = 1e-10, bernstein_split: int = 2,
-                 incremental: bool = True, start_degrees=None, quick_reject: bool = False):
+                 incremental: bool = True, start_degrees=None):
         if degree_kind not in ("total", "tensor"):
             raise ValueError("degree_kind must be 'total' or 'tensor'")
         self.tol = float(tol)
@@ -294,13 +291,41 @@ class IntervalRationalFitter:
         self.bernstein_split = int(bernstein_split)
         self.incremental = bool(incremental)
         self.start_degrees = start_degrees
-        self.quick_reject = bool(quick_reject)
 
     # Public API ----------------------------------------------------------------------------
     def fit(self, X, y=None, lower=None, upper=None) -> FitResult:
         """Fit points ``X`` (``(N, n_vars)`` or ``(N,)``) with values ``y`` (intervals from
         ``tol``/``abs_floor``) or explicit ``lower``/``upper``. Non-finite rows are ignored."""
         t0 = time.perf_counter()
+        self._prepare(X, y, lower, upper)
+        if self.degrees is not None:
+            m, n = (int(d) for d in self.degrees)
+            att = self._fit_pair(m, n)
+            if att.feasible:
+                att = self._make_certified(att)
+            else:
+                att = self._fit_pair(m, n, converge=True)
+            tried = [(m, n, att.feasible, self._ncoef(m, n))]
+            best = att
+        else:
+            best, tried = self._search()
+        return self._finish(best, tried, t0)
+
+    def proves_infeasible(self, X, degrees, y=None, lower=None, upper=None, max_rounds: int = 6) -> bool:
+        """True if at most ``max_rounds`` constraint-generation rounds prove that no rational
+        function of ``degrees = (m, n)`` meets every interval (the LP on a subset of the points
+        has no positive margin). False means "not refuted" (feasible, or not proved in time).
+        A cheap pre-check: feasibility is monotone in both degrees."""
+        self._prepare(X, y, lower, upper)
+        saved = self.max_iter
+        self.max_iter = int(max_rounds)
+        try:
+            att = self._fit_pair(*(int(d) for d in degrees))
+        finally:
+            self.max_iter = saved
+        return bool(att.infeasible_proof and not att.feasible)
+
+    def _prepare(self, X, y, lower, upper):
         X = np.asarray(X, dtype=np.float64)
         if X.ndim == 1:
             X = X[:, None]
@@ -329,19 +354,6 @@ class IntervalRationalFitter:
             same = domain[:, 1] <= domain[:, 0]
             domain[same, 1] = domain[same, 0] + 1.0
         self._setup(X, lower, upper, yc, domain)
-
-        if self.degrees is not None:
-            m, n = (int(d) for d in self.degrees)
-            att = self._fit_pair(m, n)
-            if att.feasible:
-                att = self._make_certified(att)
-            else:
-                att = self._fit_pair(m, n, converge=True)
-            tried = [(m, n, att.feasible, self._ncoef(m, n))]
-            best = att
-        else:
-            best, tried = self._search()
-        return self._finish(best, tried, t0)
 
     # Internals -----------------------------------------------------------------------------
     def _exponents(self, d: int) -> np.ndarray:
@@ -568,11 +580,6 @@ class IntervalRationalFitter:
                     # One numerator degree more usually suffices for a sibling channel: a
                     # feasible pair early prunes the walk (which still finds the fewest).
                     best = cache[(hm + 1, hn)]
-        if best is None and self.quick_reject and not feas(M, N):
-            # Feasibility is monotone in both degrees: nothing below (M, N) can be feasible.
-            best = self._fit_pair(M, N, converge=True)
-            tried.append((M, N, best.feasible, self._ncoef(M, N)))
-            return best, tried
         m_hi = M  # smallest m known feasible for the previous n (monotone staircase)
         for n in range(0, N + 1):
             # Largest m whose coefficient count beats the best so far.
