@@ -27,6 +27,32 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 
+def warp_throughput(model, n: int = 1_000_000) -> float:
+    """Evaluations per second of the rational material's generated Warp code (one launch, one
+    CPU thread, median of 5, host<->device copies included)."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from fit.angles import spherical_to_direction
+    from warp_rbrdf import testing as T
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import MaterialSpec
+
+    r = Renderer(T.plane_scene(MaterialSpec(name="m", type="rational", data=model), [T.constant_env(1.0)],
+                               resolution=4, spp=1))
+    rng = np.random.default_rng(1)
+    wi = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+    wo = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+    r.eval_material("m", wi[:10], wo[:10])
+    ts = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        r.eval_material("m", wi, wo)
+        ts.append(time.perf_counter() - t0)
+    rate = n / statistics.median(ts)
+    print(f"\nevaluation throughput (Warp CPU, one launch, RGB, {model.n_coefficients} coefficients): "
+          f"{rate / 1e6:.2f} M evaluations/s (median of 5)")
+    return rate
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=os.environ.get("RBRDF_DATA", str(ROOT.parent / "shared" / "data")))
@@ -37,6 +63,8 @@ def main(argv=None) -> int:
     ap.add_argument("--intervals", default="tol", choices=("tol", "tol+spread"), help="core intervals")
     ap.add_argument("--value", default="log", choices=("log", "linear"))
     ap.add_argument("--theta-h", default="sqrt", choices=("sqrt", "identity"))
+    ap.add_argument("--warp", action="store_true",
+                    help="also time the generated Warp code of the last model (CPU device, one thread)")
     ap.add_argument("--transforms", action="store_true",
                     help="compare log/linear value x sqrt/identity theta_h at the first tolerance")
     ap.add_argument("--repeat", type=int, default=1)
@@ -80,6 +108,8 @@ def main(argv=None) -> int:
                 print(f"| {mat} | {tol:g} | {value} | {theta_h} | {row['n_coef']} | {guar} | {band} | "
                       f"{100 * row['max_rel']:.1f} / {100 * row['rms_rel']:.2f} % | {row['time_s']:.1f} |",
                       flush=True)
+    if model is not None and args.warp:
+        warp_throughput(model)
     if model is not None:
         rng = np.random.default_rng(0)
         n = 1_000_000

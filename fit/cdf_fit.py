@@ -204,6 +204,113 @@ def _verify_phi(G: RationalFunction) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
+def _grid_poly(exponents, coef, domain, axes, dvar=None) -> np.ndarray:
+    """Chebyshev polynomial (or its derivative in ``dvar``) on the tensor grid ``axes``,
+    shape ``tuple(len(a) for a in axes)``, by contracting one 1-D table per axis."""
+    from .rational import _cheb_deriv_table, _cheb_table
+
+    exponents = np.asarray(exponents, int)
+    kmax = exponents.max(axis=0)
+    C = np.zeros(tuple(int(k) + 1 for k in kmax))
+    np.add.at(C, tuple(exponents.T), np.asarray(coef, float))
+    out = C
+    for v, a in enumerate(axes):
+        lo, hi = domain[v]
+        t = (2.0 * np.asarray(a, float) - (lo + hi)) / (hi - lo)
+        if v == dvar:
+            T = _cheb_deriv_table(t, int(kmax[v])) * (2.0 / (hi - lo))
+        else:
+            T = _cheb_table(t, int(kmax[v]))
+        # contract the leading coefficient axis with T (points x k); the new axis goes last
+        out = np.tensordot(out, T[:, :int(kmax[v]) + 1], axes=([0], [1]))
+    return out
+
+
+def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: float,
+                   min_slope_frac: float = 1e-3, max_rounds: int = 30, batch: int = 2000,
+                   coef_bound: float = 1e6):
+    """Refit the numerator of ``f = P / Q`` with ``Q`` fixed so that ``f`` INCREASES in
+    variable ``var`` on the grid ``axes`` (one 1-D array per variable), staying as close to the
+    intervals ``[lower, upper]`` at ``X`` as that allows.
+
+    With Q fixed, ``dR/dx_var = (P' Q - P Q') / Q**2`` has a numerator LINEAR in P's
+    coefficients, so "R' >= s" at a grid point is the LP row ``(P' Q - P Q') >= s Q**2``, with
+    ``s = min_slope_frac * span / (b - a)`` (``span``: the range the map covers, ``[a, b]``: the
+    domain of ``var``). The LP maximises the smallest normalized interval margin delta (which
+    may stay negative: the intervals are soft) under the slope rows (hard); rows are generated:
+    start from a coarse sub-grid, add (at most ``batch`` per round) the grid points where the
+    slope falls below ``s`` until none does. Always feasible when ``deg P >= deg Q + 1`` in ``var`` (``P = u Q``
+    is increasing wherever Q > 0). Returns ``(RationalFunction, info)``; Q and hence the Q > 0
+    certificate are unchanged.
+    """
+    from scipy.optimize import linprog
+
+    from .rational import chebyshev_basis, chebyshev_basis_derivative
+
+    X = np.asarray(X, float)
+    lower = np.asarray(lower, float)
+    upper = np.asarray(upper, float)
+    E, dom = f.num_exponents, f.domain
+    w = np.maximum(upper - lower, 1e-12)
+    B = chebyshev_basis(X, E, dom)
+    Qx = f.denominator(X)
+    scale = float(np.max(np.abs(f.num_coef))) or 1.0
+    slope = min_slope_frac * span / (dom[var, 1] - dom[var, 0])
+    G = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(axes))
+
+    def slope_rows(pts):
+        Q = f.denominator(pts)
+        dQ = chebyshev_basis_derivative(pts, f.den_exponents, dom, var) @ f.den_coef
+        A = chebyshev_basis_derivative(pts, E, dom, var) * Q[:, None] - chebyshev_basis(pts, E, dom) * dQ[:, None]
+        return A, slope * Q ** 2
+
+    Qg = _grid_poly(f.den_exponents, f.den_coef, dom, axes).ravel()
+    dQg = _grid_poly(f.den_exponents, f.den_coef, dom, axes, var).ravel()
+    rhs_g = slope * Qg ** 2
+
+    def slopes(p):
+        """Slope-row residuals at every grid point (separable tensor evaluation)."""
+        P = _grid_poly(E, p, dom, axes).ravel()
+        dP = _grid_poly(E, p, dom, axes, var).ravel()
+        return dP * Qg - P * dQg - rhs_g
+
+    idx = np.arange(len(G)).reshape([len(a) for a in axes])
+    for v, a in enumerate(axes):   # a coarse sub-grid (about 9 x 17 x 17 points) to start from
+        step = max(1, (len(a) - 1) // (16 if v == var else 8))
+        idx = np.take(idx, np.unique(np.r_[np.arange(0, len(a), step), len(a) - 1]), axis=v)
+    rows = idx.ravel()
+    K = len(E)
+    # variables: p (K, scaled by `scale`), delta; maximise delta
+    c = np.zeros(K + 1)
+    c[-1] = -1.0
+    one = np.ones((len(X), 1))
+    A_int = np.vstack([np.hstack([-B * scale / w[:, None], one]), np.hstack([B * scale / w[:, None], one])])
+    b_int = np.concatenate([-lower * Qx, upper * Qx]) / np.concatenate([w, w])
+    bounds = [(-coef_bound, coef_bound)] * K + [(None, 1.0)]
+    info = {"rounds": 0, "slope_rows": 0, "min_slope": None, "delta": None}
+    p = None
+    for rnd in range(max_rounds):
+        A_s, r_s = slope_rows(G[rows])
+        A_ub = np.vstack([A_int, np.hstack([-A_s * scale, np.zeros((len(rows), 1))])])
+        b_ub = np.concatenate([b_int, -r_s])
+        res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
+        if res.status != 0:
+            info.update(status=res.message)
+            return None, info
+        p = res.x[:K] * scale
+        sl = slopes(p)
+        bad = np.setdiff1d(np.flatnonzero(sl < 0.0), rows)
+        info.update(rounds=rnd + 1, slope_rows=int(len(rows)), delta=float(res.x[-1]))
+        if len(bad) == 0:
+            break
+        rows = np.union1d(rows, bad[np.argsort(sl[bad])[:batch]])
+    out = RationalFunction(dom, E, p, f.den_exponents, f.den_coef, var_names=f.var_names)
+    d = out.derivative(G[::max(1, len(G) // 400_000)], var)
+    info["min_slope"] = float(d.min())
+    return out, info
+
+
+# --------------------------------------------------------------------------------------------
 @dataclass
 class CDFFit:
     """Rational inverse CDFs of one material, with their verification and the table they fit.
@@ -378,7 +485,7 @@ def fit_theta(table: CDFTable, tol: float = 0.03, n_theta_v: int = 0, n_mu: int 
     X = np.stack(np.meshgrid(tv, mu, indexing="ij"), -1).reshape(-1, 2)
     f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, 1]])
     r = f.fit(X, y=Y.ravel(), lower=lo.ravel(), upper=hi.ravel())
-    return r, {"points": int(len(X)), "tol_rad": tol, "n_mu": n_mu, "n_theta_v": len(tv)}
+    return r, {"points": int(len(X)), "tol_rad": tol, "n_mu": n_mu, "n_theta_v": len(tv)}, (X, lo.ravel(), hi.ravel())
 
 
 def fit_phi(table: CDFTable, tol: float = 0.15, n_theta_v: int = 9, n_theta_l: int = 9, degrees=(6, 4),
@@ -400,7 +507,7 @@ def fit_phi(table: CDFTable, tol: float = 0.15, n_theta_v: int = 9, n_theta_l: i
     X = np.stack(np.meshgrid(tv, tl, u, indexing="ij"), -1).reshape(-1, 3)
     f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, HALF_PI], [0, 1]], degrees=degrees, max_iter=25)
     r = f.fit(X, y=Y.ravel(), lower=lo.ravel(), upper=hi.ravel())
-    return r, {"points": int(len(X)), "tol_rad": tol, "grid": [n_theta_v, n_theta_l, n_u]}
+    return r, {"points": int(len(X)), "tol_rad": tol, "grid": [n_theta_v, n_theta_l, n_u]}, (X, lo.ravel(), hi.ravel())
 
 
 def _summary(r) -> dict:
@@ -409,13 +516,36 @@ def _summary(r) -> dict:
             "max_error_ratio": r.max_error_ratio, "message": r.message}
 
 
+def _refit(f, var, data, span, verify, log, what):
+    """Monotone refit of a folding fit on its verification grid; returns (f, verification, info)."""
+    X, lo, hi = data
+    grid = VERIFY_GRID[what]
+    if what == "theta":
+        axes = [np.linspace(0, HALF_PI, grid[0]), np.linspace(0, 1, grid[1])]
+    else:
+        axes = [np.linspace(0, HALF_PI, grid[0]), np.linspace(0, HALF_PI, grid[1]), np.linspace(0, 1, grid[2])]
+    t0 = time.perf_counter()
+    g, info = monotone_refit(f, var, X, lo, hi, axes, span)
+    info["time_s"] = time.perf_counter() - t0
+    if g is None:
+        log(f"  {what}: monotone refit failed ({info.get('status')})")
+        return f, verify(f), info
+    v = verify(g)
+    log(f"  {what}: monotone refit (Q kept, numerator refitted under slope >= 0 rows on the "
+        f"verification grid): {info['rounds']} rounds, {info['slope_rows']} slope rows, margin "
+        f"{info['delta']:.3g}, {info['time_s']:.1f} s, verified {v['ok']}")
+    return g, v, info
+
+
 def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_params: dict | None = None,
             theta_kw: dict | None = None, phi_kw: dict | None = None, refinements: int = 1,
-            log=None, source: dict | None = None) -> CDFFit:
+            log=None, source: dict | None = None, monotone: bool = True) -> CDFFit:
     """Tabulate (unless ``table`` is given), fit both inverse CDFs, verify, decide fallback.
 
     Each refinement round that fails verification doubles the data density along the CDF
-    variable (tighter monotone intervals) and halves the tolerance. ``log(str)`` reports."""
+    variable (tighter monotone intervals) and halves the tolerance. With ``monotone`` (default)
+    a fit whose Q is certified but that folds is first repaired by :func:`monotone_refit` on the
+    verification grid (numerator refitted, Q kept) and verified again. ``log(str)`` reports."""
     log = log or (lambda s: None)
     params = dict(DEFAULTS, **(table_params or {}))
     if table is None:
@@ -428,19 +558,23 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
     vt = vp = {"ok": False}
     for rnd in range(refinements + 1):
         if not vt.get("ok"):
-            rt, dt = fit_theta(table, **theta_kw)
+            rt, dt, data_t = fit_theta(table, **theta_kw)
             F = rt.function
             vt = _verify_theta(F) if F is not None else {"ok": False, "error": "no fit"}
             info["theta"] = dict(_summary(rt), data=dt)
             log(f"  theta fit (round {rnd}): degrees ({rt.num_degree}, {rt.den_degree}), "
                 f"{rt.n_coefficients} coefficients, {rt.time_s:.1f} s, verified {vt['ok']}")
+            if F is not None and vt.get("q_certified") and not vt.get("ok") and monotone:
+                F, vt, info["theta"]["monotone_refit"] = _refit(F, 1, data_t, HALF_PI, _verify_theta, log, "theta")
         if not vp.get("ok"):
-            rp, dp = fit_phi(table, **phi_kw)
+            rp, dp, data_p = fit_phi(table, **phi_kw)
             G = rp.function
             vp = _verify_phi(G) if G is not None else {"ok": False, "error": "no fit"}
             info["phi"] = dict(_summary(rp), data=dp)
             log(f"  phi fit (round {rnd}): degrees ({rp.num_degree}, {rp.den_degree}), "
                 f"{rp.n_coefficients} coefficients, {rp.time_s:.1f} s, verified {vp['ok']}")
+            if G is not None and vp.get("q_certified") and not vp.get("ok") and monotone:
+                G, vp, info["phi"]["monotone_refit"] = _refit(G, 2, data_p, np.pi, _verify_phi, log, "phi")
         info["rounds"].append({"theta_ok": vt.get("ok"), "phi_ok": vp.get("ok")})
         if vt.get("ok") and vp.get("ok"):
             break

@@ -143,8 +143,11 @@ def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_m
 
 
 def model_summary(model) -> dict:
-    fi = model.function_info or [{} for _ in model.functions]
+    """Coefficient counts and feasibility of a (possibly piecewise) rational model."""
+    pieces = getattr(model, "pieces", None) or [model]
+    fi = [i for p in pieces for i in (p.function_info or [{} for _ in p.functions])]
     feas = [bool(i.get("feasible", i.get("valid", True))) for i in fi]
+    per_channel = [sum(int(p.functions[c].n_coefficients) for p in pieces) for c in range(len(pieces[0].functions))]
     return {"n_coefficients": int(model.n_coefficients), "feasible_all": all(feas),
-            "per_channel": [int(f.n_coefficients) for f in model.functions],
+            "per_channel": per_channel, "n_pieces": len(pieces),
             "info": json.loads(json.dumps(fi, default=str))}
