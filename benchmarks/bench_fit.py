@@ -53,6 +53,30 @@ def warp_throughput(model, n: int = 1_000_000) -> float:
     return rate
 
 
+def plot(rows, path, what: str) -> None:
+    """Coefficients (R+G+B, all pieces) against tolerance, one line per material; o: guaranteed
+    core, x: not guaranteed."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.6), dpi=120)
+    for mat in dict.fromkeys(x["material"] for x in rows):
+        r = sorted((x for x in rows if x["material"] == mat), key=lambda x: x["tol"])
+        line, = ax.plot([x["tol"] * 100 for x in r], [x["n_coef"] for x in r], "-", label=mat)
+        for x in r:
+            ax.plot(x["tol"] * 100, x["n_coef"], "o" if x["core_valid"] else "x", color=line.get_color())
+    ax.set_xlabel("relative tolerance (%)")
+    ax.set_ylabel("coefficients (R+G+B, all pieces)")
+    ax.set_xscale("log")
+    ax.legend(fontsize=6)
+    ax.set_title(f"Rational BRDF fits ({what}; o guaranteed, x not)", fontsize=7)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    print(f"wrote {path}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=os.environ.get("RBRDF_DATA", str(ROOT.parent / "shared" / "data")))
@@ -70,7 +94,13 @@ def main(argv=None) -> int:
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--chart", default=None, help="PNG of coefficients vs tolerance")
     ap.add_argument("--json", default=None, help="write all rows as JSON")
+    ap.add_argument("--plot", nargs="+", default=None, metavar="JSON",
+                    help="only draw --chart from the rows of earlier --json files")
     args = ap.parse_args(argv)
+    if args.plot:
+        rows = [r for f in args.plot for r in json.loads(Path(f).read_text())]
+        plot(rows, args.chart or "fit_coefficients_vs_tol.png", "log value, sqrt theta_h")
+        return 0
 
     from fit.brdf_fit import fit_brdf
     from fit.io import load_measured
@@ -123,28 +153,7 @@ def main(argv=None) -> int:
         print(f"\nevaluation throughput (NumPy, RGB, {model.n_coefficients} coefficients): "
               f"{n / statistics.median(ts) / 1e6:.2f} M evaluations/s (median of 5)")
     if args.chart:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, ax = plt.subplots(figsize=(5, 3.5), dpi=120)
-        for mat in args.materials:
-            r = [x for x in rows if x["material"] == mat]
-            ok = [x for x in r if x["core_valid"]]
-            line, = ax.plot([x["tol"] * 100 for x in r], [x["n_coef"] for x in r], "-", label=mat)
-            ax.plot([x["tol"] * 100 for x in ok], [x["n_coef"] for x in ok], "o", color=line.get_color())
-            bad = [x for x in r if not x["core_valid"]]
-            ax.plot([x["tol"] * 100 for x in bad], [x["n_coef"] for x in bad], "x", color=line.get_color())
-        ax.set_xlabel("relative tolerance (%)")
-        ax.set_ylabel("coefficients (R+G+B)")
-        ax.set_xscale("log")
-        ax.legend(fontsize=7)
-        ax.set_title(f"Rational BRDF fit ({args.intervals} core, {args.value} value, {args.theta_h} theta_h;"
-                     f" x = not guaranteed)", fontsize=7)
-        fig.tight_layout()
-        Path(args.chart).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(args.chart)
-        print(f"wrote {args.chart}")
+        plot(rows, args.chart, f"{args.intervals} core, {args.value} value, {args.theta_h} theta_h")
     if args.json:
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(rows, indent=1))

@@ -28,7 +28,7 @@ def _cmd_brdf(args) -> int:
     try:
         fit = fit_brdf(b, tol=args.tol, intervals=args.intervals, core_theta_d_deg=core,
                        band_intervals=args.band_intervals, theta_h_transform=args.theta_h,
-                       value_transform=args.value, max_degree=args.max_degree,
+                       value_transform=args.value, max_degree=args.max_degree, floor_frac=args.floor_frac,
                        max_den_degree=args.max_den_degree, progress=progress,
                        source_file=Path(args.file).name)
     except ValueError as e:
@@ -85,6 +85,10 @@ def register(subparsers) -> None:
     p.add_argument("--theta-h", dest="theta_h", choices=("sqrt", "identity"), default="sqrt",
                    help="input transform of theta_h (default sqrt)")
     p.add_argument("--value", choices=("log", "linear"), default="log", help="value transform (default log)")
+    p.add_argument("--floor-frac", dest="floor_frac", type=float, default=1.0,
+                   help="absolute floor = FLOOR_FRAC * tol * A_Y / pi (A_Y: white-sky luminance albedo; "
+                        "default 1). Smaller keeps dark off-specular values relative (better colour on "
+                        "dark glossy materials) at the price of feasibility")
     p.add_argument("--max-degree", type=int, default=12, help="largest numerator total degree (default 12)")
     p.add_argument("--max-den-degree", type=int, default=6, help="largest denominator total degree (default 6)")
     p.add_argument("--allow-infeasible", action="store_true",
