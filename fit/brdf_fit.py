@@ -16,6 +16,13 @@ Domain and grazing policy (stored in the coefficient file's ``domain_policy`` an
   so neighbouring clusters jump by more than 5 % (satin: 1.2 -> 5.9 between bins at theta_d
   77.5 deg) and no smooth function meets 5 % there (measured: satin's band alone is infeasible
   up to degrees (12, 6)); the band is therefore fitted to the clusters' own spread.
+* Output clamp: ``rho = min(max(y, 0), value_max)`` with ``value_max`` = twice the largest
+  fitted cluster value (Q > 0 rules out poles, but a best-effort band can grow large where no
+  cluster constrains it, e.g. theta_h + theta_d > 90 deg; measured: exp overflow on
+  cc_iris_purple_gem's band before this clamp).
+* If no core is met with one function per channel, the cores are tried again split at
+  ``theta_h = 5 deg`` into a specular-peak piece and the rest (cc_iris_purple_gem's red
+  highlight drops from 0.95 to exactly 0 within 3.5 deg; no single (12, 6) function follows it).
 * Outside the box the inputs are clamped onto it (``"outside": "clamp"``): at grazing theta_d
   the function returns its value at 78.5 deg instead of growing without bound.
 * Intervals: ``"tol"`` (core default): ``y +- max(tol y, abs_floor)``; ``"tol+spread"`` (band
@@ -69,6 +76,7 @@ class PieceFit:
     errors: list = field(default_factory=list)     # per channel dict (:func:`brdf_errors`)
     partial: tuple | None = None                   # (min fraction, factor) or None
     rejected: bool = False                         # a channel failed the pre-check: not fitted
+    theta_h_range_deg: tuple = (0.0, 90.0)
 
     @property
     def valid(self) -> bool:
@@ -87,6 +95,15 @@ class BRDFFit:
     time_s: float = 0.0
 
     @property
+    def core_pieces(self) -> list:
+        """The pieces of the guaranteed core (one, or two when split in theta_h)."""
+        return [pc for pc in self.pieces if pc.theta_d_range_deg == self.pieces[0].theta_d_range_deg]
+
+    @property
+    def core_theta_d_deg(self) -> float:
+        return self.pieces[0].theta_d_range_deg[1]
+
+    @property
     def results(self) -> list:
         return self.pieces[0].results
 
@@ -96,8 +113,8 @@ class BRDFFit:
 
     @property
     def valid(self) -> bool:
-        """The core piece meets its intervals with Q > 0 certified (the stated guarantee)."""
-        return self.pieces[0].valid
+        """Every core piece meets its intervals with Q > 0 certified (the stated guarantee)."""
+        return all(pc.valid for pc in self.core_pieces)
 
     @property
     def all_valid(self) -> bool:
@@ -185,7 +202,8 @@ CORE_CANDIDATES_DEG = (60.0, 50.0, 40.0)
 
 
 def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="auto",
-             band_intervals: str = "tol+spread", band_partial=(0.5, 2.0), theta_h_transform: str = "sqrt",
+             band_intervals: str = "tol+spread", band_partial=(0.5, 2.0), peak_split_deg: float | None = 5.0,
+             theta_h_transform: str = "sqrt",
              value_transform: str = "log", max_degree: int = 12, max_den_degree: int = 6,
              floor_frac: float = 1.0, spread_k: float = 1.0, name: str | None = None,
              progress=None, source_file: str = "") -> BRDFFit:
@@ -199,7 +217,9 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     channel over the whole box (file version 1). ``band_partial = (fraction, factor)``: if the
     band cannot meet its intervals everywhere, it is fitted again with the clusters that kept
     fewer than ``fraction`` of their above-horizon samples after the grazing cut-off only held
-    within ``factor`` (see :func:`channel_data`; None: never). ``progress(label, event)`` is called after every degree pair tried.
+    within ``factor`` (see :func:`channel_data`; None: never). ``peak_split_deg``: if no core
+    is met with one function per channel, the cores are tried again split at
+    ``theta_h = peak_split_deg`` into a specular-peak piece and the rest (None: never). ``progress(label, event)`` is called after every degree pair tried.
     """
     t0 = time.perf_counter()
     p = project_for_fit(brdf)
@@ -212,18 +232,36 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     floors = [floor_frac * tol * float(r) for r in rho_ref]
     # One value offset for all channels and pieces (log transform): twice the largest floor.
     offset = 2.0 * max(floors) if value_transform == "log" else 0.0
-    kw = dict(tol=tol, theta_h_transform=theta_h_transform, value_transform=value_transform,
+    # Upper clamp: twice the largest fitted cluster value (Q > 0 rules out poles, but where no
+    # cluster constrains the function, e.g. the below-horizon corner theta_h + theta_d > 90 deg
+    # of the grazing band, it could still grow without bound).
+    _, tdg = np.meshgrid(p.theta_h, p.theta_d, indexing="ij")
+    vals = p.value[tdg <= np.deg2rad(THETA_D_MAX_DEG) + 1e-12]
+    value_max = 2.0 * float(np.nanmax(vals))
+    kw = dict(tol=tol, theta_h_transform=theta_h_transform, value_transform=value_transform, value_max=value_max,
               offset=offset, max_degree=max_degree, max_den_degree=max_den_degree,
               floor_frac=floor_frac, spread_k=spread_k, rho_ref=rho_ref, progress=progress)
     if core_theta_d_deg == "auto":
         cores = CORE_CANDIDATES_DEG
     else:
         cores = (min(float(core_theta_d_deg), THETA_D_MAX_DEG),)
-    for core in cores:
-        core_fit = _fit_piece(p, (0.0, core), intervals, stop_on_infeasible=core != cores[-1], **kw)
-        if core_fit.valid:
+    attempts = [(core, None) for core in cores]
+    if peak_split_deg:
+        attempts += [(core, float(peak_split_deg)) for core in cores]
+    for k, (core, split) in enumerate(attempts):
+        last = k == len(attempts) - 1
+        if split is None:
+            core_fits = [_fit_piece(p, (0.0, core), intervals, stop_on_infeasible=not last, **kw)]
+        else:
+            core_fits = []
+            for th in ((0.0, split), (split, 90.0)):
+                core_fits.append(_fit_piece(p, (0.0, core), intervals, stop_on_infeasible=not last,
+                                            theta_h_range_deg=th, **kw))
+                if not core_fits[-1].valid and not last:
+                    break
+        if all(pc.valid for pc in core_fits):
             break
-    pieces = [core_fit]
+    pieces = list(core_fits)
     if core < THETA_D_MAX_DEG:
         band = (core, THETA_D_MAX_DEG)
         band_fit = _fit_piece(p, band, band_intervals, stop_on_infeasible=band_partial is not None, **kw)
@@ -235,19 +273,23 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     return BRDFFit(model, pieces, total)
 
 
-def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,
+def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset, value_max,
                max_degree, max_den_degree, floor_frac, spread_k, rho_ref, progress,
-               stop_on_infeasible=False, partial=None) -> PieceFit:
+               stop_on_infeasible=False, partial=None, theta_h_range_deg=(0.0, 90.0)) -> PieceFit:
     a, b = theta_d_range_deg
-    rf_domain = np.array([Variable("theta_h", "rad", theta_h_transform, (0.0, THETA_H_MAX)).rf_domain,
+    ha, hb = (float(x) for x in theta_h_range_deg)
+    rf_domain = np.array([Variable("theta_h", "rad", theta_h_transform, tuple(np.deg2rad([ha, hb]))).rf_domain,
                           (np.deg2rad(a), np.deg2rad(b))])
-    piece = PieceFit((a, b), intervals, [], [], partial=partial)
-    label = f"theta_d {a:g}-{b:g}"
+    piece = PieceFit((a, b), intervals, [], [], partial=partial, theta_h_range_deg=(ha, hb))
+    label = f"theta_d {a:g}-{b:g}" + (f" theta_h {ha:g}-{hb:g}" if (ha, hb) != (0.0, 90.0) else "")
     data = []
     for c in range(3):
         d = channel_data(p, c, tol, intervals, floor_frac, spread_k, (a, b), rho_ref=float(rho_ref[c]),
                          partial_min_fraction=None if partial is None else partial[0],
                          partial_factor=2.0 if partial is None else partial[1])
+        if (ha, hb) != (0.0, 90.0):
+            sel = (d.X[:, 0] >= np.deg2rad(ha) - 1e-12) & (d.X[:, 0] <= np.deg2rad(hb) + 1e-12)
+            d = ChannelData(d.X[sel], d.y[sel], d.lower[sel], d.upper[sel], d.abs_floor)
         U = np.stack([apply_input_transform(d.X[:, 0], theta_h_transform), d.X[:, 1]], axis=-1)
         data.append((d, U, apply_value_transform(d.lower, value_transform, offset),
                      apply_value_transform(d.upper, value_transform, offset),
@@ -280,45 +322,74 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
     return piece
 
 
+def _piece_model(pc, name, kw, vt, offset) -> RationalModel:
+    variables = [Variable("theta_h", "rad", kw["theta_h_transform"], tuple(np.deg2rad(pc.theta_h_range_deg))),
+                 Variable("theta_d", "rad", "identity", tuple(np.deg2rad(pc.theta_d_range_deg)))]
+    finfo = []
+    for r, err in zip(pc.results, pc.errors):
+        finfo.append({"feasible": bool(r.feasible), "valid": bool(r.valid),
+                      "num_degree": r.num_degree, "den_degree": r.den_degree, **err,
+                      "q_certificate": {"certified": bool(r.certificate and r.certificate.certified),
+                                        "lower_bound": r.certificate.lower_bound if r.certificate else None,
+                                        "method": r.certificate.method if r.certificate else ""},
+                      "fit_time_s": r.time_s})
+    return RationalModel(name=name, variables=variables, functions=[r.function for r in pc.results],
+                         outputs=CHANNELS, kind="brdf", value_transform=vt, value_offset=offset,
+                         value_min=0.0, value_max=kw["value_max"], function_info=finfo)
+
+
+def _piece_info(pc) -> dict:
+    return {"theta_d_range_deg": list(pc.theta_d_range_deg), "theta_h_range_deg": list(pc.theta_h_range_deg),
+            "intervals": pc.intervals,
+            "partial_clusters": (None if pc.partial is None else
+                                 {"min_sample_fraction": pc.partial[0], "factor": pc.partial[1]}),
+            "guaranteed": pc.valid,
+            "max_interval_ratio": max(e["max_interval_ratio"] for e in pc.errors),
+            "max_rel_error": max(e["max_rel_error"] for e in pc.errors)}
+
+
 def _model(p, name, pieces, kw, intervals, band_intervals, total, source_file):
     tol, vt, offset = kw["tol"], kw["value_transform"], kw["offset"]
     floors = [kw["floor_frac"] * tol * float(r) for r in kw["rho_ref"]]
     core = pieces[0].theta_d_range_deg[1]
+    groups: dict = {}
+    for pc in pieces:                       # theta_d ranges in order, theta_h sub-pieces inside
+        groups.setdefault(pc.theta_d_range_deg, []).append(pc)
     models, infos = [], []
-    for pc in pieces:
-        variables = [Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
-                     Variable("theta_d", "rad", "identity", tuple(np.deg2rad(pc.theta_d_range_deg)))]
-        finfo = []
-        for r, err in zip(pc.results, pc.errors):
-            finfo.append({"feasible": bool(r.feasible), "valid": bool(r.valid),
-                          "num_degree": r.num_degree, "den_degree": r.den_degree, **err,
-                          "q_certificate": {"certified": bool(r.certificate and r.certificate.certified),
-                                            "lower_bound": r.certificate.lower_bound if r.certificate else None,
-                                            "method": r.certificate.method if r.certificate else ""},
-                          "fit_time_s": r.time_s})
-        models.append(RationalModel(name=name, variables=variables, functions=[r.function for r in pc.results],
-                                    outputs=CHANNELS, kind="brdf", value_transform=vt, value_offset=offset,
-                                    value_min=0.0, function_info=finfo))
-        infos.append({"theta_d_range_deg": list(pc.theta_d_range_deg), "intervals": pc.intervals,
-                      "partial_clusters": (None if pc.partial is None else
-                                           {"min_sample_fraction": pc.partial[0], "factor": pc.partial[1]}),
-                      "guaranteed": pc.valid,
-                      "max_interval_ratio": max(e["max_interval_ratio"] for e in pc.errors),
-                      "max_rel_error": max(e["max_rel_error"] for e in pc.errors)})
+    for (a, b), grp in groups.items():
+        if len(grp) == 1:
+            models.append(_piece_model(grp[0], name, kw, vt, offset))
+            infos.append(_piece_info(grp[0]))
+            continue
+        edges = [grp[0].theta_h_range_deg[0]] + [pc.theta_h_range_deg[1] for pc in grp]
+        models.append(PiecewiseRationalModel(
+            name=name, variables=[Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
+                                  Variable("theta_d", "rad", "identity", tuple(np.deg2rad([a, b])))],
+            split_variable="theta_h", edges=[float(np.deg2rad(e)) for e in edges],
+            pieces=[_piece_model(pc, name, kw, vt, offset) for pc in grp], kind="brdf",
+            piece_info=[_piece_info(pc) for pc in grp]))
+        infos.append({"theta_d_range_deg": [a, b], "theta_h_split_deg": edges[1:-1], "intervals": grp[0].intervals,
+                      "guaranteed": all(pc.valid for pc in grp),
+                      "max_interval_ratio": max(_piece_info(pc)["max_interval_ratio"] for pc in grp),
+                      "max_rel_error": max(_piece_info(pc)["max_rel_error"] for pc in grp)})
+    core_ok = all(pc.valid for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg)
+    band = [pc for pc in pieces if pc.theta_d_range_deg != pieces[0].theta_d_range_deg]
+    split_txt = (f", split at theta_h = {pieces[0].theta_h_range_deg[1]:g} deg into a peak piece and the rest"
+                 if pieces[0].theta_h_range_deg != (0.0, 90.0) else "")
     policy = {
         "outside": "clamp", "below_horizon": "zero", "theta_d_max_deg": THETA_D_MAX_DEG,
-        "guaranteed_theta_d_max_deg": core if pieces[0].valid else None,
+        "guaranteed_theta_d_max_deg": core if core_ok else None,
         "grazing": (f"samples with max(theta_i, theta_o) > {GRAZING_CUTOFF_DEG} deg dropped before the "
                     f"median projection; theta_d > {THETA_D_MAX_DEG} deg is clamped to "
                     f"{THETA_D_MAX_DEG} deg (value at the cut-off, no 1/cos growth)"),
-        "guarantee": (f"theta_d <= {core:g} deg: every cluster within {intervals!r} intervals "
-                      f"(relative {tol:g}, absolute floor tol * A / pi per channel, A = white-sky albedo)"
+        "guarantee": (f"theta_d <= {core:g} deg{split_txt}: every cluster within {intervals!r} intervals "
+                      f"(relative {tol:g}, absolute floor tol * A_Y / pi, A_Y = white-sky luminance albedo)"
                       + (f"; {core:g} < theta_d <= {THETA_D_MAX_DEG} deg: {band_intervals!r} intervals"
-                         + (f" (clusters with < {pieces[1].partial[0]:g} of their samples left by the "
-                            f"grazing cut-off: within a factor {pieces[1].partial[1]:g})"
-                            if len(pieces) > 1 and pieces[1].partial else "") + ", "
-                         f"{'met' if len(pieces) > 1 and pieces[1].valid else 'best effort (NOT met, see pieces)'}"
-                         if len(pieces) > 1 else "") + "; Q > 0 on every piece's box (Bernstein certificate)"),
+                         + (f" (clusters with < {band[0].partial[0]:g} of their samples left by the "
+                            f"grazing cut-off: within a factor {band[0].partial[1]:g})"
+                            if band[0].partial else "") + ", "
+                         f"{'met' if band[0].valid else 'best effort (NOT met, see pieces)'}"
+                         if band else "") + "; Q > 0 on every piece's box (Bernstein certificate)"),
     }
     fit_info = {"tolerance": tol, "tolerance_kind": "relative", "intervals": intervals,
                 "band_intervals": band_intervals if len(pieces) > 1 else None,
@@ -328,10 +399,16 @@ def _model(p, name, pieces, kw, intervals, band_intervals, total, source_file):
                 "fitter": "fit.fitter.IntervalRationalFitter (LP, HiGHS, constraint generation)",
                 "max_degree": kw["max_degree"], "max_den_degree": kw["max_den_degree"],
                 "core_theta_d_deg": core,
-                "feasible": [bool(r.feasible) for r in pieces[0].results],
-                "valid": [bool(r.valid) for r in pieces[0].results]}
+                "theta_h_split_deg": (pieces[0].theta_h_range_deg[1]
+                                      if pieces[0].theta_h_range_deg != (0.0, 90.0) else None),
+                "feasible": [all(bool(pc.results[c].feasible) if c < len(pc.results) else False
+                                 for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg)
+                             for c in range(3)],
+                "valid": [all(bool(pc.results[c].valid) if c < len(pc.results) else False
+                              for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg)
+                          for c in range(3)]}
     source = {"file": source_file or (p.source.split("/")[-1] if p.source else ""), "sha256": p.source_sha256}
-    if len(pieces) == 1:
+    if len(models) == 1:
         m = models[0]
         m.domain_policy, m.fit_info, m.source = policy, fit_info, source
         return m

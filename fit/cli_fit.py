@@ -39,20 +39,25 @@ def _cmd_brdf(args) -> int:
     save(fit.model, out)
     print(f"{b.name}: tol {args.tol:g}, theta_h {args.theta_h}, value {args.value}, "
           f"floor {fit.model.fit_info['abs_floor'][0]:.3g} 1/sr")
-    print(f"{'theta_d deg':12s}{'intervals':>11s}{'ch':>3s}{'degrees':>9s}{'coefs':>7s}{'max rel':>9s}"
+    print(f"{'theta_d deg':16s}{'intervals':>11s}{'ch':>3s}{'degrees':>9s}{'coefs':>7s}{'max rel':>9s}"
           f"{'rms rel':>9s}{'inside':>8s}{'Q>0':>5s}{'time s':>8s}")
     for pc in fit.pieces:
         rng = f"{pc.theta_d_range_deg[0]:g}-{pc.theta_d_range_deg[1]:g}"
+        if tuple(pc.theta_h_range_deg) != (0.0, 90.0):
+            rng += f" h{pc.theta_h_range_deg[0]:g}-{pc.theta_h_range_deg[1]:g}"
         for ch, r, e in zip("RGB", pc.results, pc.errors):
-            print(f"{rng:12s}{pc.intervals:>11s}{ch:>3s}{f'({r.num_degree},{r.den_degree})':>9s}"
+            print(f"{rng:16s}{pc.intervals:>11s}{ch:>3s}{f'({r.num_degree},{r.den_degree})':>9s}"
                   f"{r.n_coefficients:7d}{100 * e['max_rel_error']:8.2f}%{100 * e['rms_rel_error']:8.2f}%"
                   f"{100 * e['inside_fraction']:7.1f}%"
                   f"{'yes' if r.certificate and r.certificate.certified else 'NO':>5s}{r.time_s:8.2f}")
     core_rng = fit.pieces[0].theta_d_range_deg
-    status = (f"guaranteed on theta_d <= {core_rng[1]:g} deg" if fit.valid
+    status = (f"guaranteed on theta_d <= {core_rng[1]:g} deg"
+              + (f" (split at theta_h = {fit.pieces[0].theta_h_range_deg[1]:g} deg)"
+                 if tuple(fit.pieces[0].theta_h_range_deg) != (0.0, 90.0) else "") if fit.valid
               else "NOT guaranteed (best fit found, flagged infeasible)")
-    if len(fit.pieces) > 1:
-        status += ("; grazing band met" if fit.pieces[1].valid
+    band = [pc for pc in fit.pieces if all(pc is not q for q in fit.core_pieces)]
+    if band:
+        status += ("; grazing band met" if band[0].valid
                    else "; grazing band best effort (NOT within its intervals, flagged)")
     print(f"total {fit.n_coefficients} coefficients, {fit.time_s:.1f} s, {status}; wrote {out}")
     return 0 if fit.valid or args.allow_infeasible else 1

@@ -19,7 +19,8 @@ A UTF-8 JSON object. Keys (all required unless marked optional)::
       "value": {"name": "rho", "unit": "1/sr",
                 "transform": "linear",       # "linear": y = R(u) ; "log": y = exp(R(u)) - offset
                 "offset": 0.0,               # only used by "log"
-                "min": 0.0},                 # output is max(y, min); null = no clamp
+                "min": 0.0,                  # output is max(y, min); null = no clamp
+                "max": 2300.0},              # optional: output is min(y, max); null = no clamp
       "basis": "chebyshev",
       "outputs": ["R", "G", "B"],
       "functions": [                         # one rational function per output, same order
@@ -48,7 +49,9 @@ Evaluating one output (e.g. a BRDF channel at Rusinkiewicz angles theta_h, theta
     4. basis:      T_0 = 1, T_1 = t, T_{k+1} = 2 t T_k - T_{k-1}
                    P = sum_j p_j prod_v T_{EP[j][v]}(t_v);  Q = sum_j q_j prod_v T_{EQ[j][v]}(t_v)
     5. value:      y = P / Q ("linear")   or   y = exp(P / Q) - offset ("log")
-    6. clamp:      rho = max(y, min)       (min = 0 for BRDFs: never negative)
+    6. clamp:      rho = min(max(y, min), max)   (min = 0 for BRDFs: never negative; max, when
+                   given, bounds the function where no data constrain it; with "log" the
+                   exponent is clipped at log(max + offset) first)
 
 For a BRDF the variables are exactly ``theta_h`` then ``theta_d`` (radians, Rusinkiewicz 1998,
 as in conventions.md) and rho is in 1/sr without the cosine; rho = 0 when the light or view
@@ -67,7 +70,9 @@ Same keys, except that ``functions`` is replaced by::
 
 Evaluation: clamp every input onto the top-level ``variables`` domains, pick the piece ``k``
 with ``e_k <= x <= e_k+1`` (the lower piece at a shared edge), then apply steps 1-6 with that
-piece's variables and functions. Readers of version 1 reject version 2 files (they would
+piece's variables and functions. A piece may itself hold ``"split"`` and ``"pieces"`` instead
+of ``"functions"`` (e.g. a theta_d core split at a theta_h edge into a specular-peak piece and
+the rest), evaluated the same way, recursively. Readers of version 1 reject version 2 files (they would
 evaluate only part of the model).
 
 Outside the fitted domain the inputs are clamped onto it (step 1), so the function is continuous
@@ -184,6 +189,7 @@ class RationalModel(_BRDFEvaluation):
     value_transform: str = "linear"
     value_offset: float = 0.0
     value_min: float | None = 0.0
+    value_max: float | None = None       # output clamp from above (bounded in data-free corners)
     value_name: str = "rho"
     value_unit: str = "1/sr"
     domain_policy: dict = field(default_factory=lambda: {"outside": "clamp", "below_horizon": "zero"})
@@ -226,10 +232,17 @@ class RationalModel(_BRDFEvaluation):
 
     def __call__(self, x) -> np.ndarray:
         u = self.rf_inputs(x)
-        out = np.stack([invert_value_transform(f(u), self.value_transform, self.value_offset)
-                        for f in self.functions], axis=-1)
+        vals = []
+        for f in self.functions:
+            r = f(u)
+            if self.value_max is not None and self.value_transform == "log":
+                r = np.minimum(r, np.log(self.value_max + self.value_offset))   # no exp overflow
+            vals.append(invert_value_transform(r, self.value_transform, self.value_offset))
+        out = np.stack(vals, axis=-1)
         if self.value_min is not None:
             out = np.maximum(out, self.value_min)
+        if self.value_max is not None:
+            out = np.minimum(out, self.value_max)
         return out
 
     # Persistence ---------------------------------------------------------------------------
@@ -252,7 +265,7 @@ class RationalModel(_BRDFEvaluation):
                            "domain": list(v.domain)} for v in self.variables],
             "value": {"name": self.value_name, "unit": self.value_unit,
                       "transform": self.value_transform, "offset": self.value_offset,
-                      "min": self.value_min},
+                      "min": self.value_min, "max": self.value_max},
             "basis": "chebyshev",
             "outputs": list(self.outputs),
             "functions": funcs,
@@ -340,6 +353,10 @@ class PiecewiseRationalModel(_BRDFEvaluation):
     def value_min(self):
         return self.pieces[0].value_min
 
+    @property
+    def value_max(self):
+        return self.pieces[0].value_max
+
     def piece_index(self, x_split) -> np.ndarray:
         """Index of the piece that evaluates each value of the split variable (clamped)."""
         inner = np.asarray(self.edges[1:-1])
@@ -364,8 +381,9 @@ class PiecewiseRationalModel(_BRDFEvaluation):
         pieces = []
         for piece, info in zip(self.pieces, self.piece_info):
             d = piece.to_dict()
-            pieces.append({"variables": d["variables"], "functions": d["functions"],
-                           "info": _jsonable(info)})
+            body = ({"functions": d["functions"]} if "functions" in d
+                    else {"split": d["split"], "pieces": d["pieces"]})   # nested piecewise piece
+            pieces.append({"variables": d["variables"], **body, "info": _jsonable(info)})
         return {
             "format": FORMAT, "version": VERSION_PIECEWISE, "name": self.name, "kind": self.kind,
             "variables": [{"name": v.name, "unit": v.unit, "transform": v.transform,
@@ -446,7 +464,8 @@ def from_dict(d: dict, path=None):
             kind=str(d.get("kind", "function")),
             value_transform=str(value.get("transform", "linear")),
             value_offset=float(value.get("offset", 0.0) or 0.0),
-            value_min=value.get("min", None), value_name=str(value.get("name", "y")),
+            value_min=value.get("min", None), value_max=value.get("max", None),
+            value_name=str(value.get("name", "y")),
             value_unit=str(value.get("unit", "")),
             domain_policy=dict(d.get("domain_policy", {"outside": "clamp"})),
             fit_info=dict(d.get("fit", {})), function_info=infos,
@@ -464,8 +483,12 @@ def _piecewise_from_dict(d: dict, path=None) -> PiecewiseRationalModel:
         pieces, infos = [], []
         for k, pd in enumerate(d["pieces"]):
             sub = {key: d[key] for key in ("name", "kind", "value", "basis", "outputs") if key in d}
-            sub.update(format=FORMAT, version=VERSION, variables=pd["variables"], functions=pd["functions"],
+            sub.update(format=FORMAT, variables=pd["variables"],
                        domain_policy=d.get("domain_policy", {"outside": "clamp"}))
+            if "split" in pd:        # a piece split again (e.g. theta_h peak piece + rest)
+                sub.update(version=VERSION_PIECEWISE, split=pd["split"], pieces=pd["pieces"])
+            else:
+                sub.update(version=VERSION, functions=pd["functions"])
             pieces.append(from_dict(sub, path))
             infos.append(dict(pd.get("info", {})))
         variables = [Variable(name=str(v["name"]), unit=str(v.get("unit", "")),

@@ -158,16 +158,37 @@ def test_rgl_material_fits_at_5_percent(material):
 
 
 @pytest.mark.slow
-def test_sharp_clipped_peak_is_reported_not_guaranteed():
+def test_sharp_clipped_peak_needs_the_theta_h_split():
     """cc_iris_purple_gem's red peak falls from 0.95 to exactly 0 within 3.5 deg of theta_h
-    (clipped by the RGB conversion): no core meets 5 % up to degrees (12, 6), and the fit says
-    so instead of claiming the guarantee."""
+    (clipped by the RGB conversion): without the theta_h split no core meets 5 % up to degrees
+    (12, 6) and the fit says so; with the split at 5 deg the 40 deg core is guaranteed."""
     from fit.io import load_measured
 
-    fit = fit_brdf(load_measured(data_file("rgl/cc_iris_purple_gem_rgb.bsdf")), tol=0.05)
-    assert not fit.valid and not fit.results[0].valid
-    assert fit.model.domain_policy["guaranteed_theta_d_max_deg"] is None
-    assert fit.model.fit_info["valid"][0] is False
+    b = load_measured(data_file("rgl/cc_iris_purple_gem_rgb.bsdf"))
+    no_split = fit_brdf(b, tol=0.05, peak_split_deg=None)
+    assert not no_split.valid and no_split.model.domain_policy["guaranteed_theta_d_max_deg"] is None
+    fit = fit_brdf(b, tol=0.05)
+    assert fit.valid and fit.core_theta_d_deg == 40.0
+    assert [pc.theta_h_range_deg for pc in fit.core_pieces] == [(0.0, 5.0), (5.0, 90.0)]
+    p = project_for_fit(b)
+    for c in range(3):
+        d = channel_data(p, c, 0.05, "tol", theta_d_range_deg=(0.0, 40.0))
+        f = fit.model(d.X)[:, c]
+        assert np.all((f >= d.lower) & (f <= d.upper))
+
+
+def test_output_bounded_where_no_cluster_constrains_it(lobe_fit, lobe_file):
+    """Q > 0 rules out poles; the upper clamp (twice the largest cluster) bounds the rest, also
+    in the theta_h + theta_d > 90 deg corner that has no data."""
+    from fit.io import load_measured
+
+    m = lobe_fit.model
+    th, td = np.meshgrid(np.linspace(0, np.pi / 2, 91), np.linspace(0, np.pi / 2, 91), indexing="ij")
+    v = m.evaluate_brdf(th, td)
+    assert np.all(np.isfinite(v)) and np.all(v >= 0) and np.all(v <= m.value_max)
+    p = project_for_fit(load_measured(lobe_file))
+    fitted = p.value[:, p.theta_d <= np.deg2rad(THETA_D_MAX_DEG) + 1e-12]
+    assert m.value_max == pytest.approx(2 * np.nanmax(fitted), rel=1e-12)
 
 
 def test_shipped_coefficient_files_load():

@@ -12,7 +12,7 @@ import fit.coefficients as coefficients  # noqa: E402
 import fit.rational as rational  # noqa: E402
 
 
-def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radians(80.0))):
+def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radians(80.0)), value_max=None):
     rng = np.random.default_rng(seed)
     dom = [(0.0, np.pi / 2), tuple(theta_d_range)]
     variables = [coefficients.Variable("theta_h", "rad", "sqrt", dom[0]),
@@ -28,13 +28,28 @@ def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radian
         q[0] = 1.0
         funcs.append(rational.RationalFunction(rf_dom, num_e, p, den_e, q))
     return coefficients.RationalModel(name="random", variables=variables, functions=funcs,
-                                      value_transform=value_transform, value_offset=0.01 if value_transform == "log" else 0.0)
+                                      value_transform=value_transform, value_max=value_max,
+                                      value_offset=0.01 if value_transform == "log" else 0.0)
 
 
 def piecewise_model(value_transform="log"):
-    """Three theta_d pieces with different coefficients (a visible jump at each edge)."""
+    """Three theta_d pieces with different coefficients (a visible jump at each edge), an upper
+    clamp that is active on part of the domain, and the first piece split again in theta_h."""
     e = np.radians([0.0, 30.0, 60.0, 80.0])
-    pieces = [random_model(value_transform, seed=k, theta_d_range=(e[k], e[k + 1])) for k in range(3)]
+    pieces = [random_model(value_transform, seed=k, theta_d_range=(e[k], e[k + 1]), value_max=8.0)
+              for k in range(3)]
+    h = [0.0, np.radians(5.0), np.pi / 2]
+    sub = []
+    for j in range(2):
+        m = random_model(value_transform, seed=10 + j, theta_d_range=(e[0], e[1]), value_max=8.0)
+        m.variables[0] = coefficients.Variable("theta_h", "rad", "sqrt", (h[j], h[j + 1]))
+        for f in m.functions:
+            f.domain[0] = m.variables[0].rf_domain
+        sub.append(m)
+    pieces[0] = coefficients.PiecewiseRationalModel(
+        name="peak", variables=[coefficients.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                                coefficients.Variable("theta_d", "rad", "identity", (e[0], e[1]))],
+        split_variable="theta_h", edges=h, pieces=sub)
     return coefficients.PiecewiseRationalModel(
         name="pieces", variables=[coefficients.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
                                   coefficients.Variable("theta_d", "rad", "identity", (e[0], e[-1]))],
@@ -95,3 +110,16 @@ def test_default_scene_uses_shipped_coefficients(tmp_path, monkeypatch):
     sc.camera.resolution = (8, 8)
     img = Renderer(sc).render(spp=1)
     assert np.isfinite(img).all()
+
+
+def test_nested_piecewise_file_round_trip(tmp_path):
+    """A theta_d-piecewise model whose first piece is split again in theta_h (version 2, nested
+    pieces) and an upper value clamp survive a JSON round trip bit for bit."""
+    model = piecewise_model()
+    coefficients.save(model, tmp_path / "nested.json")
+    back = coefficients.load(tmp_path / "nested.json")
+    assert isinstance(back.pieces[0], coefficients.PiecewiseRationalModel)
+    assert back.value_max == 8.0 and back.n_coefficients == model.n_coefficients
+    x = np.random.default_rng(2).uniform([0, 0], [1.6, 1.5], size=(4000, 2))
+    got = back(x)
+    assert np.array_equal(got, model(x)) and got.max() == 8.0

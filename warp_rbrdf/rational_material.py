@@ -84,7 +84,7 @@ def generate_function(model, name: str) -> str:
     pieces = getattr(model, "pieces", None)
     if pieces is None:
         return _generate_single(model, name)
-    parts = [_generate_single(p, f"{name}_p{k}") for k, p in enumerate(pieces)]
+    parts = [generate_function(p, f"{name}_p{k}") for k, p in enumerate(pieces)]   # nested: recursive
     src = SUPPORTED_VARIABLES[model.split_variable]
     L = ["@wp.func", f"def {name}(wi: wp.vec3, wo: wp.vec3) -> wp.vec3:",
          f"    # piecewise rational BRDF {model.name!r}: {len(pieces)} pieces along {model.split_variable}",
@@ -134,10 +134,15 @@ def _generate_single(model, name: str) -> str:
         _poly(L, f"P{c}", f.num_exponents, f.num_coef, None)
         _poly(L, f"Q{c}", f.den_exponents, f.den_coef, None)
         L.append(f"    y{c} = P{c} / Q{c}")
+        vmax = getattr(model, "value_max", None)
         if model.value_transform == "log":
+            if vmax is not None:
+                L.append(f"    y{c} = wp.min(y{c}, {_lit(np.log(vmax + model.value_offset))})")
             L.append(f"    y{c} = wp.exp(y{c}) - {_lit(model.value_offset)}")
         if model.value_min is not None:
             L.append(f"    y{c} = wp.max(y{c}, {_lit(model.value_min)})")
+        if vmax is not None:
+            L.append(f"    y{c} = wp.min(y{c}, {_lit(vmax)})")
         outs.append(f"float(y{c})")
     L.append(f"    return wp.vec3({', '.join(outs)})")
     return "\n".join(L) + "\n"
