@@ -17,7 +17,7 @@ def _cmd_brdf(args) -> int:
     from .io import load_measured
 
     b = load_measured(args.file)
-    bar = tqdm(desc=f"fitting {b.name}", unit="LP", leave=False)
+    bar = tqdm(desc=f"fitting {b.name}", unit="LP", leave=False, disable=None)  # None: off when not a terminal
 
     def progress(channel, event):
         bar.set_postfix_str(f"{channel} ({event['m']},{event['n']}) "
