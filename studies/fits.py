@@ -144,7 +144,10 @@ def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_m
 
 def model_summary(model) -> dict:
     """Coefficient counts and feasibility of a (possibly piecewise) rational model."""
-    pieces = getattr(model, "pieces", None) or [model]
+    def leaves(m):   # the single-function models of a (possibly nested) piecewise model
+        return [q for p in m.pieces for q in leaves(p)] if getattr(m, "pieces", None) else [m]
+
+    pieces = leaves(model)
     fi = [i for p in pieces for i in (p.function_info or [{} for _ in p.functions])]
     feas = [bool(i.get("feasible", i.get("valid", True))) for i in fi]
     per_channel = [sum(int(p.functions[c].n_coefficients) for p in pieces) for c in range(len(pieces[0].functions))]

@@ -202,3 +202,20 @@ def test_convergence_moderate(tmp_path, rgl_data):
 
     r = convergence.run("moderate", tmp_path, quiet=True)
     assert r["summary"]
+
+
+def test_model_summary_of_nested_piecewise_model():
+    """Coefficient counts per channel of a theta_d-piecewise model whose first piece is split
+    again in theta_h (as fitted for cc_iris_purple_gem)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from test_warp_rational import piecewise_model
+
+    from studies import fits as F
+
+    m = piecewise_model()
+    s = F.model_summary(m)
+    assert s["n_pieces"] == 4 and s["n_coefficients"] == m.n_coefficients
+    assert sum(s["per_channel"]) == m.n_coefficients
