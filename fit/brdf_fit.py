@@ -83,6 +83,13 @@ class PieceFit:
         return not self.rejected and len(self.results) == 3 and all(r.valid for r in self.results)
 
 
+def split_core(pieces) -> tuple:
+    """``(core pieces, band pieces)``: the core is every piece with the first piece's theta_d
+    range (``fit_brdf`` puts the core first)."""
+    core = [pc for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg]
+    return core, [pc for pc in pieces if pc.theta_d_range_deg != pieces[0].theta_d_range_deg]
+
+
 @dataclass
 class BRDFFit:
     """Result of :func:`fit_brdf`: the model (with its file metadata) and per-piece results.
@@ -97,7 +104,12 @@ class BRDFFit:
     @property
     def core_pieces(self) -> list:
         """The pieces of the guaranteed core (one, or two when split in theta_h)."""
-        return [pc for pc in self.pieces if pc.theta_d_range_deg == self.pieces[0].theta_d_range_deg]
+        return split_core(self.pieces)[0]
+
+    @property
+    def band_pieces(self) -> list:
+        """The grazing band's pieces (empty when one function covers the whole box)."""
+        return split_core(self.pieces)[1]
 
     @property
     def core_theta_d_deg(self) -> float:
@@ -357,9 +369,10 @@ def _model(p, name, pieces, kw, intervals, band_intervals, total, source_file):
         groups.setdefault(pc.theta_d_range_deg, []).append(pc)
     models, infos = [], []
     for (a, b), grp in groups.items():
+        grp_infos = [_piece_info(pc) for pc in grp]
         if len(grp) == 1:
             models.append(_piece_model(grp[0], name, kw, vt, offset))
-            infos.append(_piece_info(grp[0]))
+            infos.append(grp_infos[0])
             continue
         edges = [grp[0].theta_h_range_deg[0]] + [pc.theta_h_range_deg[1] for pc in grp]
         models.append(PiecewiseRationalModel(
@@ -367,13 +380,13 @@ def _model(p, name, pieces, kw, intervals, band_intervals, total, source_file):
                                   Variable("theta_d", "rad", "identity", tuple(np.deg2rad([a, b])))],
             split_variable="theta_h", edges=[float(np.deg2rad(e)) for e in edges],
             pieces=[_piece_model(pc, name, kw, vt, offset) for pc in grp], kind="brdf",
-            piece_info=[_piece_info(pc) for pc in grp]))
+            piece_info=grp_infos))
         infos.append({"theta_d_range_deg": [a, b], "theta_h_split_deg": edges[1:-1], "intervals": grp[0].intervals,
                       "guaranteed": all(pc.valid for pc in grp),
-                      "max_interval_ratio": max(_piece_info(pc)["max_interval_ratio"] for pc in grp),
-                      "max_rel_error": max(_piece_info(pc)["max_rel_error"] for pc in grp)})
-    core_ok = all(pc.valid for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg)
-    band = [pc for pc in pieces if pc.theta_d_range_deg != pieces[0].theta_d_range_deg]
+                      "max_interval_ratio": max(i["max_interval_ratio"] for i in grp_infos),
+                      "max_rel_error": max(i["max_rel_error"] for i in grp_infos)})
+    core_pcs, band = split_core(pieces)
+    core_ok = all(pc.valid for pc in core_pcs)
     split_txt = (f", split at theta_h = {pieces[0].theta_h_range_deg[1]:g} deg into a peak piece and the rest"
                  if pieces[0].theta_h_range_deg != (0.0, 90.0) else "")
     policy = {
@@ -401,12 +414,8 @@ def _model(p, name, pieces, kw, intervals, band_intervals, total, source_file):
                 "core_theta_d_deg": core,
                 "theta_h_split_deg": (pieces[0].theta_h_range_deg[1]
                                       if pieces[0].theta_h_range_deg != (0.0, 90.0) else None),
-                "feasible": [all(bool(pc.results[c].feasible) if c < len(pc.results) else False
-                                 for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg)
-                             for c in range(3)],
-                "valid": [all(bool(pc.results[c].valid) if c < len(pc.results) else False
-                              for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg)
-                          for c in range(3)]}
+                "feasible": [all(bool(pc.results[c].feasible) for pc in core_pcs) for c in range(3)],
+                "valid": [all(bool(pc.results[c].valid) for pc in core_pcs) for c in range(3)]}
     source = {"file": source_file or (p.source.split("/")[-1] if p.source else ""), "sha256": p.source_sha256}
     if len(models) == 1:
         m = models[0]

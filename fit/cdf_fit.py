@@ -58,6 +58,14 @@ HALF_PI = 0.5 * np.pi
 VERIFY_GRID = {"theta": (257, 2049), "phi": (33, 65, 513)}
 
 
+def verify_axes(what: str) -> list:
+    """The 1-D axes of the verification grid of ``"theta"`` (theta_v, mu) or ``"phi"``
+    (theta_v, theta_l, u), sizes :data:`VERIFY_GRID`."""
+    n = VERIFY_GRID[what]
+    ranges = [(0, HALF_PI), (0, 1)] if what == "theta" else [(0, HALF_PI), (0, HALF_PI), (0, 1)]
+    return [np.linspace(a, b, k) for (a, b), k in zip(ranges, n)]
+
+
 def _cheb_points(n: int) -> np.ndarray:
     """n Chebyshev-Lobatto points on [0, 1] (denser at the ends, where inverse CDFs are steep)."""
     return 0.5 * (1.0 - np.cos(np.linspace(0.0, np.pi, n)))
@@ -146,9 +154,8 @@ def _certify_positive(poly: RationalFunction | None) -> bool:
 
 
 def _verify_theta(F: RationalFunction) -> dict:
-    nv, nm = VERIFY_GRID["theta"]
-    tv = np.linspace(0, HALF_PI, nv)
-    mu = np.linspace(0, 1, nm)
+    tv, mu = verify_axes("theta")
+    nv, nm = len(tv), len(mu)
     dmin_all, dmin_in, folds = np.inf, np.inf, 0
     end0 = end1 = None
     for chunk in np.array_split(tv, 8):
@@ -175,10 +182,8 @@ def _verify_theta(F: RationalFunction) -> dict:
 
 
 def _verify_phi(G: RationalFunction) -> dict:
-    nv, nt, nu = VERIFY_GRID["phi"]
-    tv = np.linspace(0, HALF_PI, nv)
-    tl = np.linspace(0, HALF_PI, nt)
-    u = np.linspace(0, 1, nu)
+    tv, tl, u = verify_axes("phi")
+    nv, nt, nu = len(tv), len(tl), len(u)
     dmin_all, dmin_in, folds = np.inf, np.inf, 0
     end0, end1 = -np.inf, np.inf
     for a in tv:
@@ -289,10 +294,12 @@ def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: f
     bounds = [(-coef_bound, coef_bound)] * K + [(None, 1.0)]
     info = {"rounds": 0, "slope_rows": 0, "min_slope": None, "delta": None}
     p = None
+    new = rows
+    A_ub, b_ub = A_int, b_int
     for rnd in range(max_rounds):
-        A_s, r_s = slope_rows(G[rows])
-        A_ub = np.vstack([A_int, np.hstack([-A_s * scale, np.zeros((len(rows), 1))])])
-        b_ub = np.concatenate([b_int, -r_s])
+        A_s, r_s = slope_rows(G[new])          # only the rows added this round
+        A_ub = np.vstack([A_ub, np.hstack([-A_s * scale, np.zeros((len(new), 1))])])
+        b_ub = np.concatenate([b_ub, -r_s])
         res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
         if res.status != 0:
             info.update(status=res.message)
@@ -303,10 +310,10 @@ def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: f
         info.update(rounds=rnd + 1, slope_rows=int(len(rows)), delta=float(res.x[-1]))
         if len(bad) == 0:
             break
-        rows = np.union1d(rows, bad[np.argsort(sl[bad])[:batch]])
+        new = bad[np.argsort(sl[bad])[:batch]]
+        rows = np.union1d(rows, new)
     out = RationalFunction(dom, E, p, f.den_exponents, f.den_coef, var_names=f.var_names)
-    d = out.derivative(G[::max(1, len(G) // 400_000)], var)
-    info["min_slope"] = float(d.min())
+    info["min_slope"] = float(np.min((sl + rhs_g) / Qg ** 2))   # dR/dx on the whole grid
     return out, info
 
 
@@ -519,13 +526,8 @@ def _summary(r) -> dict:
 def _refit(f, var, data, span, verify, log, what):
     """Monotone refit of a folding fit on its verification grid; returns (f, verification, info)."""
     X, lo, hi = data
-    grid = VERIFY_GRID[what]
-    if what == "theta":
-        axes = [np.linspace(0, HALF_PI, grid[0]), np.linspace(0, 1, grid[1])]
-    else:
-        axes = [np.linspace(0, HALF_PI, grid[0]), np.linspace(0, HALF_PI, grid[1]), np.linspace(0, 1, grid[2])]
     t0 = time.perf_counter()
-    g, info = monotone_refit(f, var, X, lo, hi, axes, span)
+    g, info = monotone_refit(f, var, X, lo, hi, verify_axes(what), span)
     info["time_s"] = time.perf_counter() - t0
     if g is None:
         log(f"  {what}: monotone refit failed ({info.get('status')})")

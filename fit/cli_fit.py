@@ -55,7 +55,7 @@ def _cmd_brdf(args) -> int:
               + (f" (split at theta_h = {fit.pieces[0].theta_h_range_deg[1]:g} deg)"
                  if tuple(fit.pieces[0].theta_h_range_deg) != (0.0, 90.0) else "") if fit.valid
               else "NOT guaranteed (best fit found, flagged infeasible)")
-    band = [pc for pc in fit.pieces if all(pc is not q for q in fit.core_pieces)]
+    band = fit.band_pieces
     if band:
         status += ("; grazing band met" if band[0].valid
                    else "; grazing band best effort (NOT within its intervals, flagged)")

@@ -317,12 +317,8 @@ class IntervalRationalFitter:
         has no positive margin). False means "not refuted" (feasible, or not proved in time).
         A cheap pre-check: feasibility is monotone in both degrees."""
         self._prepare(X, y, lower, upper)
-        saved = self.max_iter
-        self.max_iter = int(max_rounds)
-        try:
-            att = self._fit_pair(*(int(d) for d in degrees))
-        finally:
-            self.max_iter = saved
+        m, n = (int(d) for d in degrees)
+        att = self._fit_pair(m, n, max_rounds=max_rounds)
         return bool(att.infeasible_proof and not att.feasible)
 
     def _prepare(self, X, y, lower, upper):
@@ -495,12 +491,13 @@ class IntervalRationalFitter:
         s = np.minimum(P - self._lo * Q, self._hi * Q - P) / self._w
         return s, P, Q
 
-    def _fit_pair(self, m: int, n: int, converge: bool = False) -> _Attempt:
+    def _fit_pair(self, m: int, n: int, converge: bool = False, max_rounds: int | None = None) -> _Attempt:
         """Constraint generation for one degree pair.
 
         Stops as soon as every point is inside its interval with Q > 0 (feasible), or when the
         subset LP proves infeasibility (delta <= delta_min). With ``converge`` (used for the
-        flagged best fit) it continues until the least-violation LP converges.
+        flagged best fit) it continues until the least-violation LP converges. At most
+        ``max_rounds`` rounds (default ``max_iter``).
         """
         cp, cq = self._cols(m), self._cols(n)
         rows = self._subset0.copy()
@@ -512,7 +509,7 @@ class IntervalRationalFitter:
         if _highs is not None and self.incremental:
             sess = _LPSession(self, cp, cq, qrows)
             sess.add_points(rows)
-        for _ in range(self.max_iter):
+        for _ in range(self.max_iter if max_rounds is None else int(max_rounds)):
             sol = sess.solve() if sess is not None else None
             if sol is None:   # no incremental model, or it did not reach optimality: solve afresh
                 sol = self._solve_lp(cp, cq, rows, qrows)

@@ -47,19 +47,24 @@ def test_tabulated_chi2_and_unbiased_rgl(rgl, name):
         probs, te, pe = _expected_cell_probs(table, tv)
         counts, _, _ = np.histogram2d(tl, pl, bins=[te, pe])
         assert _chi2_pvalue(counts, probs, n) > 1e-4, (name, tv)
-        # unbiasedness of f cos / pdf against quadrature over the light (view fixed)
-        wi = spherical_to_direction(tl, pl)
-        wo = spherical_to_direction(tv, 0.0)
-        est = (brdf.evaluate(wi, wo) @ LUMINANCE) * np.cos(tl) / pdf
-        m, se = est.mean(), est.std() / np.sqrt(n)
-        # Quadrature over the light with the view fixed (full azimuth range: the resampled RGL
-        # data are not mirror-symmetric in phi_l, 2.6 % apart on cc_iris_purple_gem at 45 deg).
-        swap = lambda a, b: brdf.evaluate(b, a)  # noqa: E731
-        q1 = directional_albedo(swap, tv) @ LUMINANCE
-        q2 = directional_albedo(swap, tv, 180, 720) @ LUMINANCE
-        # 3 sigma + the quadrature's own uncertainty (difference of two resolutions) + 0.5 %
-        # for the clear coats' near-normal mirror peak (heavy-tailed weights, midpoint rule)
-        assert abs(m - q2) < 3 * se + 2 * abs(q2 - q1) + 0.005 * q2, (name, tv, m, q2, se, q1)
+        _assert_albedo_matches_quadrature(brdf, tv, tl, pl, 1.0 / pdf, name)
+
+
+def _assert_albedo_matches_quadrature(brdf, tv, tl, pl, weight, name):
+    """Unbiasedness of ``f cos * weight`` (weight = 1/pdf or alpha) for light samples
+    ``(tl, pl)`` at view ``tv``, against quadrature over the light (view fixed)."""
+    wi = spherical_to_direction(tl, pl)
+    wo = spherical_to_direction(tv, 0.0)
+    est = (brdf.evaluate(wi, wo) @ LUMINANCE) * np.cos(tl) * weight
+    m, se = est.mean(), est.std() / np.sqrt(len(est))
+    # Quadrature over the light with the view fixed (full azimuth range: the resampled RGL
+    # data are not mirror-symmetric in phi_l, 2.6 % apart on cc_iris_purple_gem at 45 deg).
+    swap = lambda a, b: brdf.evaluate(b, a)  # noqa: E731
+    q1 = directional_albedo(swap, tv) @ LUMINANCE
+    q2 = directional_albedo(swap, tv, 180, 720) @ LUMINANCE
+    # 3 sigma + the quadrature's own uncertainty (difference of two resolutions) + 0.5 %
+    # for the clear coats' near-normal mirror peak (heavy-tailed weights, midpoint rule)
+    assert abs(m - q2) < 3 * se + 2 * abs(q2 - q1) + 0.005 * q2, (name, tv, m, q2, se, q1)
 
 
 def _rational_cell_probs(fit: CDFFit, tv, nb_t=7, nb_p=9, nq=64):
@@ -217,7 +222,7 @@ def test_monotone_refit_repairs_a_fold_and_stays_unbiased(lambert_fit):
     with quadrature and passes the chi-square test."""
     import copy
 
-    from fit.cdf_fit import HALF_PI, VERIFY_GRID, _verify_theta, fit_theta, monotone_refit
+    from fit.cdf_fit import HALF_PI, _verify_theta, fit_theta, monotone_refit, verify_axes
 
     f, fit = lambert_fit
     bad = copy.deepcopy(fit)
@@ -226,8 +231,7 @@ def test_monotone_refit_repairs_a_fold_and_stays_unbiased(lambert_fit):
     th.num_coef = np.concatenate([th.num_coef, [3.0 * np.abs(th.num_coef).max()]])
     assert not _verify_theta(th)["monotone_grid"]
     _, _, (X, lo, hi) = fit_theta(fit.table)
-    nv, nm = VERIFY_GRID["theta"]
-    g, info = monotone_refit(th, 1, X, lo, hi, [np.linspace(0, HALF_PI, nv), np.linspace(0, 1, nm)], HALF_PI)
+    g, info = monotone_refit(th, 1, X, lo, hi, verify_axes("theta"), HALF_PI)
     assert g is not None and info["min_slope"] > 0
     assert np.array_equal(g.den_coef, th.den_coef)             # Q (and its certificate) kept
     bad.theta = g
@@ -261,15 +265,9 @@ def test_rational_sampler_on_rgl_material(rgl, name):
     assert not fit.fallback, fit.reason
     rng = np.random.default_rng(5)
     n = 60_000
-    swap = lambda a, b: brdf.evaluate(b, a)  # noqa: E731
     for tv in THETA_V:
         tl, pl, alpha = fit.sample(tv, rng.random(n), rng.random(n))
         probs, te, pe = _rational_cell_probs(fit, tv)
         counts, _, _ = np.histogram2d(tl, pl, bins=[te, pe])
         assert _chi2_pvalue(counts, probs, n) > 1e-4, (name, tv)
-        est = (brdf.evaluate(spherical_to_direction(tl, pl), spherical_to_direction(tv, 0.0)) @ LUMINANCE
-               ) * np.cos(tl) * alpha
-        m, se = est.mean(), est.std() / np.sqrt(n)
-        q1 = directional_albedo(swap, tv) @ LUMINANCE
-        q2 = directional_albedo(swap, tv, 180, 720) @ LUMINANCE
-        assert abs(m - q2) < 3 * se + 2 * abs(q2 - q1) + 0.005 * q2, (name, tv, m, q2, se)
+        _assert_albedo_matches_quadrature(brdf, tv, tl, pl, alpha, name)
