@@ -211,6 +211,7 @@ def channel_data(p: ProjectedBRDF, c: int, tol: float, intervals: str = "tol+spr
 
 
 CORE_CANDIDATES_DEG = (60.0, 50.0, 40.0)
+PRECHECK_ROUNDS = 6
 
 
 def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="auto",
@@ -313,7 +314,8 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
         for c, (d, U, lo, hi, yt) in enumerate(data):
             pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
                                          domain=rf_domain)
-            ok = not pre.proves_infeasible(U, (max_degree, max_den_degree), y=yt, lower=lo, upper=hi)
+            ok = not pre.proves_infeasible(U, (max_degree, max_den_degree), y=yt, lower=lo, upper=hi,
+                                           max_rounds=PRECHECK_ROUNDS)
             if progress is not None:
                 progress(f"{label} {CHANNELS[c]}", {"m": max_degree, "n": max_den_degree, "feasible": ok,
                                                     "n_coefficients": None})

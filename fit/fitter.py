@@ -27,9 +27,9 @@ simplex restarts from the previous optimal basis (falls back to ``linprog`` from
 bindings are missing or a warm solve does not end optimal).
 
 The degree search walks the (numerator, denominator) plane: feasibility is monotone in both
-degrees, so for each denominator degree n a binary search finds the smallest feasible numerator degree
-m; only pairs with fewer coefficients than the best found so far are tried, and m never
-exceeds the smallest feasible m of a lower denominator degree. An optional ``start_degrees``
+degrees, so for each denominator degree n, from the largest down, a binary search finds the
+smallest feasible numerator degree m; only pairs with fewer coefficients than the best found so
+far are tried, and m never goes below the smallest feasible m of a higher denominator degree. An optional ``start_degrees``
 pair (e.g. the previous colour channel's degrees) is tried first: if feasible it is the initial
 best, which prunes most of the walk without changing its result. The result
 is the feasible fit with the FEWEST coefficients (ties: lower denominator degree).
@@ -577,31 +577,38 @@ class IntervalRationalFitter:
                     # One numerator degree more usually suffices for a sibling channel: a
                     # feasible pair early prunes the walk (which still finds the fewest).
                     best = cache[(hm + 1, hn)]
-        m_hi = M  # smallest m known feasible for the previous n (monotone staircase)
-        for n in range(0, N + 1):
-            # Largest m whose coefficient count beats the best so far.
-            m_cap = m_hi
-            if best is not None:
-                if n >= best.n:
-                    m_cap = min(m_cap, best.m)
-                while m_cap >= 0 and not better(m_cap, n, best):
-                    m_cap -= 1
-                if m_cap < 0:
-                    break  # larger n only adds coefficients
-            if not feas(m_cap, n):
-                continue
-            lo, hi = 0, m_cap          # hi is feasible: binary search for the smallest m
+        # Walk the denominator degree DOWN from N. The smallest feasible numerator degree
+        # m_min(n) does not decrease when n decreases (monotonicity), so after n the search for
+        # n - 1 starts at m_min(n): one or two pairs per lower n, most of them cheap refutations.
+        # (Walking n upwards from 0 starts at m = M, the most expensive feasible LPs; measured
+        # on satin_rosaline's red core: 16 pairs, 10.9 s up; 6 pairs, 3.3 s down.)
+        m_lo = 0
+        for n in range(N, -1, -1):
             if hint is not None and n <= hint[1] and not cache[hint].feasible:
-                lo = min(max(lo, hint[0] + 1), hi)   # (m <= hm, n <= hn) infeasible by monotonicity
-            while lo < hi:
+                m_lo = max(m_lo, hint[0] + 1)        # (m <= hm, n <= hn) infeasible
+            if best is None:
+                lo, hi = m_lo, M + 1                 # hi = M + 1: nothing known feasible yet
+            else:
+                m_cap = M if n < best.n else min(M, best.m)
+                while m_cap >= m_lo and not better(m_cap, n, best):
+                    m_cap -= 1
+                if m_cap < m_lo:
+                    continue                         # no pair at this n beats the best
+                if not feas(m_cap, n):
+                    m_lo = m_cap + 1                 # m_min(n) > m_cap, and m_min(n - 1) too
+                    continue
+                lo, hi = m_lo, m_cap
+            while lo < hi:                           # smallest feasible m in [lo, hi]
                 mid = (lo + hi) // 2
                 if feas(mid, n):
                     hi = mid
                 else:
                     lo = mid + 1
-            m_hi = hi
-            cand = cache[(hi, n)]
-            if best is None or better(hi, n, best):
+            m_lo = lo
+            if lo > M:
+                continue                             # nothing feasible at this n
+            cand = cache[(lo, n)]
+            if best is None or better(lo, n, best):
                 best = cand
         if best is None:
             best = self._fit_pair(M, N, converge=True)
