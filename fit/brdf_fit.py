@@ -75,7 +75,7 @@ class PieceFit:
     results: list                                  # FitResult per channel
     errors: list = field(default_factory=list)     # per channel dict (:func:`brdf_errors`)
     partial: tuple | None = None                   # (min fraction, factor) or None
-    rejected: bool = False                         # a channel failed the pre-check: not fitted
+    rejected: bool = False                         # pre-check or a channel search failed: not fitted
     theta_h_range_deg: tuple = (0.0, 90.0)
 
     @property
@@ -307,32 +307,47 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
         data.append((d, U, apply_value_transform(d.lower, value_transform, offset),
                      apply_value_transform(d.upper, value_transform, offset),
                      apply_value_transform(d.y, value_transform, offset)))
+    order = [0, 1, 2]
     if stop_on_infeasible:
-        # Cheap pre-check of every channel at the largest degrees before any degree search: a
-        # piece that one channel provably cannot meet is abandoned without fitting the others
-        # (a channel that passes the pre-check but fails its search also rejects the piece).
-        for c, (d, U, lo, hi, yt) in enumerate(data):
-            pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
-                                         domain=rf_domain)
-            ok = not pre.proves_infeasible(U, (max_degree, max_den_degree), y=yt, lower=lo, upper=hi,
-                                           max_rounds=PRECHECK_ROUNDS)
-            if progress is not None:
-                progress(f"{label} {CHANNELS[c]}", {"m": max_degree, "n": max_den_degree, "feasible": ok,
-                                                    "n_coefficients": None})
-            if not ok:
-                piece.rejected = True
-                return piece
-    for c, (d, U, lo, hi, yt) in enumerate(data):
+        # Cheap rejection before any degree search. One constraint-generation round at the
+        # largest degrees ranks the channels by margin (hardest first); only the hardest gets
+        # the full pre-check (PRECHECK_ROUNDS rounds, which refute in 2-5 rounds when they do).
+        # The channels are then searched hardest first, and the first one whose search fails
+        # rejects the piece (the others are not fitted).
+        top = (max_degree, max_den_degree)
+        margins = []
+        for d, U, lo, hi, yt in data:
+            pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree, domain=rf_domain)
+            margins.append(pre.subset_margin(U, top, y=yt, lower=lo, upper=hi, rounds=1))
+        order = sorted(range(3), key=lambda c: margins[c])
+        c0 = order[0]
+        d, U, lo, hi, yt = data[c0]
+        pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree, domain=rf_domain)
+        ok = margins[c0] > pre.delta_min and not pre.proves_infeasible(
+            U, top, y=yt, lower=lo, upper=hi, max_rounds=PRECHECK_ROUNDS)
+        if progress is not None:
+            progress(f"{label} {CHANNELS[c0]}", {"m": max_degree, "n": max_den_degree, "feasible": ok,
+                                                 "n_coefficients": None})
+        if not ok:
+            piece.rejected = True
+            return piece
+    results, errors = [None] * 3, [None] * 3
+    prev = None
+    for c in order:
+        d, U, lo, hi, yt = data[c]
         cb = None if progress is None else (lambda e, c=c: progress(f"{label} {CHANNELS[c]}", e))
-        # R, G and B usually need the same degrees: start G and B from the previous channel's
+        # R, G and B usually need the same degrees: start each channel from the previous one's
         # pair (a feasible start only prunes the search; the fewest-coefficient pair is kept).
-        prev = piece.results[-1] if piece.results else None
         start = (prev.num_degree, prev.den_degree) if prev is not None and prev.valid else None
         fitter = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
                                         domain=rf_domain, progress=cb, start_degrees=start)
         r = fitter.fit(U, y=yt, lower=lo, upper=hi)
-        piece.results.append(r)
-        piece.errors.append(brdf_errors(r, U, d, value_transform, offset, tol))
+        results[c], errors[c] = r, brdf_errors(r, U, d, value_transform, offset, tol)
+        prev = r
+        if stop_on_infeasible and not r.valid:
+            piece.rejected = True
+            return piece
+    piece.results, piece.errors = results, errors
     return piece
 
 
