@@ -339,8 +339,10 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
         # R, G and B usually need the same degrees: start each channel from the previous one's
         # pair (a feasible start only prunes the search; the fewest-coefficient pair is kept).
         start = (prev.num_degree, prev.den_degree) if prev is not None and prev.valid else None
+        # A piece that may be rejected needs no converged best-effort fit of a failing channel.
         fitter = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
-                                        domain=rf_domain, progress=cb, start_degrees=start)
+                                        domain=rf_domain, progress=cb, start_degrees=start,
+                                        best_effort=not stop_on_infeasible)
         r = fitter.fit(U, y=yt, lower=lo, upper=hi)
         results[c], errors[c] = r, brdf_errors(r, U, d, value_transform, offset, tol)
         prev = r

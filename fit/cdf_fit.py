@@ -233,7 +233,7 @@ def _grid_poly(exponents, coef, domain, axes, dvar=None) -> np.ndarray:
 
 def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: float,
                    min_slope_frac: float = 1e-3, max_rounds: int = 30, batch: int = 2000,
-                   coef_bound: float = 1e6):
+                   coef_bound: float = 1e6, deadline: float | None = None):
     """Refit the numerator of ``f = P / Q`` with ``Q`` fixed so that ``f`` INCREASES in
     variable ``var`` on the grid ``axes`` (one 1-D array per variable), staying as close to the
     intervals ``[lower, upper]`` at ``X`` as that allows.
@@ -246,10 +246,12 @@ def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: f
     start from a coarse sub-grid, add (at most ``batch`` per round) the grid points where the
     slope falls below ``s`` until none does. Always feasible when ``deg P >= deg Q + 1`` in ``var`` (``P = u Q``
     is increasing wherever Q > 0). Returns ``(RationalFunction, info)``; Q and hence the Q > 0
-    certificate are unchanged.
+    certificate are unchanged. ``deadline`` (a ``time.perf_counter()`` value): past it the
+    refit gives up (returns ``None`` with the reason in ``info["status"]``).
     """
     from scipy.optimize import linprog
 
+    from .fitter import IncrementalLP
     from .rational import chebyshev_basis, chebyshev_basis_derivative
 
     X = np.asarray(X, float)
@@ -296,18 +298,34 @@ def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: f
     p = None
     new = rows
     A_ub, b_ub = A_int, b_int
+    # One live HiGHS model, slope rows appended each round (warm-started dual simplex); linprog
+    # from scratch without the bindings or if a warm solve does not end optimal.
+    lp = IncrementalLP(c, [b_[0] for b_ in bounds], [b_[1] for b_ in bounds]) if IncrementalLP.available else None
+    if lp is not None:
+        lp.add_rows(A_int, b_int)
+    t0 = time.perf_counter()
     for rnd in range(max_rounds):
-        A_s, r_s = slope_rows(G[new])          # only the rows added this round
-        A_ub = np.vstack([A_ub, np.hstack([-A_s * scale, np.zeros((len(new), 1))])])
-        b_ub = np.concatenate([b_ub, -r_s])
-        res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
-        if res.status != 0:
-            info.update(status=res.message)
+        if deadline is not None and time.perf_counter() > deadline:
+            info.update(status=f"time limit reached after {rnd} rounds ({time.perf_counter() - t0:.0f} s)")
             return None, info
-        p = res.x[:K] * scale
+        A_s, r_s = slope_rows(G[new])          # only the rows added this round
+        A_new = np.hstack([-A_s * scale, np.zeros((len(new), 1))])
+        A_ub = np.vstack([A_ub, A_new])
+        b_ub = np.concatenate([b_ub, -r_s])
+        x = None
+        if lp is not None:
+            lp.add_rows(A_new, -r_s)
+            x = lp.solve()
+        if x is None:
+            res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
+            if res.status != 0:
+                info.update(status=res.message)
+                return None, info
+            x = res.x
+        p = x[:K] * scale
         sl = slopes(p)
         bad = np.setdiff1d(np.flatnonzero(sl < 0.0), rows)
-        info.update(rounds=rnd + 1, slope_rows=int(len(rows)), delta=float(res.x[-1]))
+        info.update(rounds=rnd + 1, slope_rows=int(len(rows)), delta=float(x[-1]))
         if len(bad) == 0:
             break
         new = bad[np.argsort(sl[bad])[:batch]]
@@ -478,10 +496,11 @@ def load(path) -> CDFFit:
 
 # --------------------------------------------------------------------------------------------
 DEFAULTS = dict(n_v=32, n_t=64, n_p=64, sub=3, eps=0.02, noise=1e-6)
+TIME_LIMIT_S = 180.0   # default bound on fit_cdf's fitting time (s)
 
 
 def fit_theta(table: CDFTable, tol: float = 0.03, n_theta_v: int = 0, n_mu: int = 33,
-              max_degree: int = 10, over=(-0.01, 0.01)):
+              max_degree: int = 10, over=(-0.01, 0.01), time_limit: float | None = None):
     """Fit F(theta_v, mu) ~ CDF^-1_v(mu). Returns (FitResult, data info)."""
     from .fitter import IntervalRationalFitter
 
@@ -490,13 +509,13 @@ def fit_theta(table: CDFTable, tol: float = 0.03, n_theta_v: int = 0, n_mu: int 
     Y = inverse_cdf_theta(table, tv, mu)
     lo, hi = _monotone_intervals(Y, tol, 0.0, HALF_PI, over)
     X = np.stack(np.meshgrid(tv, mu, indexing="ij"), -1).reshape(-1, 2)
-    f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, 1]])
+    f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, 1]], time_limit=time_limit)
     r = f.fit(X, y=Y.ravel(), lower=lo.ravel(), upper=hi.ravel())
     return r, {"points": int(len(X)), "tol_rad": tol, "n_mu": n_mu, "n_theta_v": len(tv)}, (X, lo.ravel(), hi.ravel())
 
 
 def fit_phi(table: CDFTable, tol: float = 0.15, n_theta_v: int = 9, n_theta_l: int = 9, degrees=(6, 4),
-            n_u: int = 9, max_degree: int = 8, over=(-0.02, 0.02)):
+            n_u: int = 9, max_degree: int = 8, over=(-0.02, 0.02), time_limit: float | None = None):
     """Fit G(theta_v, theta_l, u) ~ |phi_l| = CDF^-1_v(u | theta_l) (half range).
 
     Fixed total degrees (6, 4) by default: the fitter's degree search on the trivariate data
@@ -512,7 +531,8 @@ def fit_phi(table: CDFTable, tol: float = 0.15, n_theta_v: int = 9, n_theta_l: i
     Y = inverse_cdf_phi(table, tv, tl, u)
     lo, hi = _monotone_intervals(Y, tol, 0.0, np.pi, over)
     X = np.stack(np.meshgrid(tv, tl, u, indexing="ij"), -1).reshape(-1, 3)
-    f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, HALF_PI], [0, 1]], degrees=degrees, max_iter=25)
+    f = IntervalRationalFitter(max_degree=max_degree, domain=[[0, HALF_PI], [0, HALF_PI], [0, 1]], degrees=degrees, max_iter=25,
+                               time_limit=time_limit)
     r = f.fit(X, y=Y.ravel(), lower=lo.ravel(), upper=hi.ravel())
     return r, {"points": int(len(X)), "tol_rad": tol, "grid": [n_theta_v, n_theta_l, n_u]}, (X, lo.ravel(), hi.ravel())
 
@@ -523,11 +543,11 @@ def _summary(r) -> dict:
             "max_error_ratio": r.max_error_ratio, "message": r.message}
 
 
-def _refit(f, var, data, span, verify, log, what):
+def _refit(f, var, data, span, verify, log, what, deadline=None):
     """Monotone refit of a folding fit on its verification grid; returns (f, verification, info)."""
     X, lo, hi = data
     t0 = time.perf_counter()
-    g, info = monotone_refit(f, var, X, lo, hi, verify_axes(what), span)
+    g, info = monotone_refit(f, var, X, lo, hi, verify_axes(what), span, deadline=deadline)
     info["time_s"] = time.perf_counter() - t0
     if g is None:
         log(f"  {what}: monotone refit failed ({info.get('status')})")
@@ -541,13 +561,19 @@ def _refit(f, var, data, span, verify, log, what):
 
 def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_params: dict | None = None,
             theta_kw: dict | None = None, phi_kw: dict | None = None, refinements: int = 1,
-            log=None, source: dict | None = None, monotone: bool = True) -> CDFFit:
+            log=None, source: dict | None = None, monotone: bool = True,
+            time_limit_s: float | None = TIME_LIMIT_S) -> CDFFit:
     """Tabulate (unless ``table`` is given), fit both inverse CDFs, verify, decide fallback.
 
     Each refinement round that fails verification doubles the data density along the CDF
     variable (tighter monotone intervals) and halves the tolerance. With ``monotone`` (default)
     a fit whose Q is certified but that folds is first repaired by :func:`monotone_refit` on the
-    verification grid (numerator refitted, Q kept) and verified again. ``log(str)`` reports."""
+    verification grid (numerator refitted, Q kept) and verified again. ``log(str)`` reports.
+
+    ``time_limit_s`` bounds the fitting time (tabulation excluded): fits and refits stop when
+    it is reached, and whatever is not verified by then falls back (the reason says so).
+    A sharp lobe can otherwise take many minutes (measured, near-mirror Blinn-Phong n = 5000:
+    the theta refit alone ran 233 s with its LP re-solved from scratch every round)."""
     log = log or (lambda s: None)
     params = dict(DEFAULTS, **(table_params or {}))
     if table is None:
@@ -556,40 +582,54 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
     phi_kw = dict(phi_kw or {})
     info: dict = {"fitter": "fit.fitter.IntervalRationalFitter", "rounds": []}
     t0 = time.perf_counter()
+    deadline = None if time_limit_s is None else t0 + float(time_limit_s)
+
+    def left():
+        return None if deadline is None else max(deadline - time.perf_counter(), 0.0)
+
+    def late():
+        return deadline is not None and time.perf_counter() > deadline
+
     F = G = None
     vt = vp = {"ok": False}
     for rnd in range(refinements + 1):
-        if not vt.get("ok"):
-            rt, dt, data_t = fit_theta(table, **theta_kw)
+        if not vt.get("ok") and not late():
+            rt, dt, data_t = fit_theta(table, **theta_kw, time_limit=left())
             F = rt.function
             vt = _verify_theta(F) if F is not None else {"ok": False, "error": "no fit"}
             info["theta"] = dict(_summary(rt), data=dt)
             log(f"  theta fit (round {rnd}): degrees ({rt.num_degree}, {rt.den_degree}), "
                 f"{rt.n_coefficients} coefficients, {rt.time_s:.1f} s, verified {vt['ok']}")
-            if F is not None and vt.get("q_certified") and not vt.get("ok") and monotone:
-                F, vt, info["theta"]["monotone_refit"] = _refit(F, 1, data_t, HALF_PI, _verify_theta, log, "theta")
-        if not vp.get("ok"):
-            rp, dp, data_p = fit_phi(table, **phi_kw)
+            if F is not None and vt.get("q_certified") and not vt.get("ok") and monotone and not late():
+                F, vt, info["theta"]["monotone_refit"] = _refit(F, 1, data_t, HALF_PI, _verify_theta, log,
+                                                                "theta", deadline)
+        if not vp.get("ok") and not late():
+            rp, dp, data_p = fit_phi(table, **phi_kw, time_limit=left())
             G = rp.function
             vp = _verify_phi(G) if G is not None else {"ok": False, "error": "no fit"}
             info["phi"] = dict(_summary(rp), data=dp)
             log(f"  phi fit (round {rnd}): degrees ({rp.num_degree}, {rp.den_degree}), "
                 f"{rp.n_coefficients} coefficients, {rp.time_s:.1f} s, verified {vp['ok']}")
-            if G is not None and vp.get("q_certified") and not vp.get("ok") and monotone:
-                G, vp, info["phi"]["monotone_refit"] = _refit(G, 2, data_p, np.pi, _verify_phi, log, "phi")
+            if G is not None and vp.get("q_certified") and not vp.get("ok") and monotone and not late():
+                G, vp, info["phi"]["monotone_refit"] = _refit(G, 2, data_p, np.pi, _verify_phi, log,
+                                                              "phi", deadline)
         info["rounds"].append({"theta_ok": vt.get("ok"), "phi_ok": vp.get("ok")})
-        if vt.get("ok") and vp.get("ok"):
+        if (vt.get("ok") and vp.get("ok")) or late():
             break
         theta_kw["n_mu"] = 2 * theta_kw.get("n_mu", 33) - 1
         theta_kw["tol"] = 0.5 * theta_kw.get("tol", 0.03)
         phi_kw["n_u"] = 2 * phi_kw.get("n_u", 9) - 1
         phi_kw["tol"] = 0.5 * phi_kw.get("tol", 0.15)
+    info["time_limit_s"] = time_limit_s
+    info["time_limit_reached"] = bool(late())
     info["time_s"] = time.perf_counter() - t0
     reasons = []
     for what, v in (("theta", vt), ("phi", vp)):
         if not v.get("ok"):
             bad = [k for k in ("q_certified", "monotone_grid", "covers_grid", "ends_certified") if v.get(k) is False]
             reasons.append(f"{what}: " + (", ".join(f"not {b}" for b in bad) or v.get("error", "failed")))
+    if reasons and info["time_limit_reached"]:
+        reasons.append(f"fitting time limit {time_limit_s:g} s reached")
     fb = bool(reasons)
     return CDFFit(table=table, table_params=params, theta=F, phi=G,
                   verification={"theta": vt, "phi": vp}, fallback=fb,

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .cdf_fit import TIME_LIMIT_S
+
 
 def _load_or_fit(args, log=print):
     from .cdf_fit import fit_cdf, file_source, load
@@ -23,7 +25,8 @@ def _load_or_fit(args, log=print):
                       verification={}, fallback=True, reason="table only (--table-only)",
                       name=b.name, source=file_source(path))
     return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log,
-                   refinements=args.refinements, source=file_source(path))
+                   refinements=args.refinements, source=file_source(path),
+                   time_limit_s=None if args.time_limit <= 0 else args.time_limit)
 
 
 def _add_table_args(p):
@@ -33,6 +36,9 @@ def _add_table_args(p):
     p.add_argument("--eps", type=float, default=0.02, help="cosine mixture weight (default 0.02)")
     p.add_argument("--refinements", type=int, default=1, help="refit rounds when verification fails")
     p.add_argument("--table-only", action="store_true", help="tabulate only, no rational fit")
+    p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, metavar="S",
+                   help=f"bound on the rational fitting time in seconds (default {TIME_LIMIT_S:g}; 0: none); "
+                        "what is not verified by then falls back to the tabulated sampler, with the reason")
 
 
 def _cmd_cdf(args) -> int:

@@ -185,6 +185,44 @@ class _Attempt:
 _HIGHS_OPTIONS: dict = {}   # extra HiGHS options for the incremental model (defaults measured best)
 
 
+class IncrementalLP:
+    """``min cost . x`` s.t. ``A x <= ub`` (rows added over time), ``lo <= x <= hi``, as one live
+    HiGHS model: every :meth:`solve` after :meth:`add_rows` is a warm-started dual simplex from
+    the previous basis. Needs HiGHS's Python bindings (``available``); callers fall back to
+    ``linprog`` from scratch without them, or when :meth:`solve` returns None (not optimal)."""
+
+    available = _HighsModel is not None
+
+    def __init__(self, cost, lo, hi):
+        self.nv = len(cost)
+        h = _HighsModel()
+        h.setOptionValue("output_flag", False)
+        for k_, v_ in _HIGHS_OPTIONS.items():
+            h.setOptionValue(k_, v_)
+        lo = np.array([-np.inf if v is None else v for v in lo], dtype=np.float64)
+        hi = np.array([np.inf if v is None else v for v in hi], dtype=np.float64)
+        h.addVars(self.nv, lo, hi)
+        h.changeColsCost(self.nv, np.arange(self.nv, dtype=np.int32), np.asarray(cost, dtype=np.float64))
+        self.h = h
+
+    def add_rows(self, A, ub):
+        m = A.shape[0]
+        if m == 0:
+            return
+        A = np.ascontiguousarray(A, dtype=np.float64)
+        starts = (np.arange(m, dtype=np.int32) * self.nv).astype(np.int32)
+        idx = np.tile(np.arange(self.nv, dtype=np.int32), m)
+        self.h.addRows(m, np.full(m, -np.inf), np.ascontiguousarray(ub, dtype=np.float64),
+                       m * self.nv, starts, idx, A.reshape(-1))
+
+    def solve(self):
+        """The optimal x, or None if HiGHS did not end optimal."""
+        self.h.run()
+        if self.h.getModelStatus() != _HighsStatus.kOptimal:
+            return None
+        return np.asarray(self.h.getSolution().col_value, dtype=np.float64)
+
+
 class _LPSession:
     """One HiGHS model per degree pair, grown by constraint generation.
 
@@ -197,47 +235,30 @@ class _LPSession:
         self.f, self.cp, self.cq = fitter, cp, cq
         self.npv, self.nqv = len(cp), len(cq)
         self.nv = self.npv + self.nqv + 1
-        h = _HighsModel()
-        h.setOptionValue("output_flag", False)
-        for k_, v_ in _HIGHS_OPTIONS.items():
-            h.setOptionValue(k_, v_)
         lo = np.full(self.nv, -fitter.coef_bound)
         hi = np.full(self.nv, fitter.coef_bound)
         lo[self.npv] = hi[self.npv] = 1.0                   # q_0 = 1
         lo[-1], hi[-1] = -1e3, 1.0
-        h.addVars(self.nv, lo, hi)
         cost = np.zeros(self.nv)
         cost[-1] = -1.0
-        h.changeColsCost(self.nv, np.arange(self.nv, dtype=np.int32), cost)
-        self.h = h
+        self.lp = IncrementalLP(cost, lo, hi)
         self._add_q(fitter._static_q_rows(cq, qrows))
-
-    def _add(self, A, ub):
-        m = A.shape[0]
-        if m == 0:
-            return
-        A = np.ascontiguousarray(A, dtype=np.float64)
-        starts = (np.arange(m, dtype=np.int32) * self.nv).astype(np.int32)
-        idx = np.tile(np.arange(self.nv, dtype=np.int32), m)
-        self.h.addRows(m, np.full(m, -np.inf), np.ascontiguousarray(ub, dtype=np.float64),
-                       m * self.nv, starts, idx, A.reshape(-1))
 
     def _add_q(self, Qr):
         A = np.hstack([np.zeros((len(Qr), self.npv)), -Qr, np.zeros((len(Qr), 1))])
-        self._add(A, np.full(len(Qr), -self.f.q_min))
+        self.lp.add_rows(A, np.full(len(Qr), -self.f.q_min))
 
     def add_points(self, rows):
         A, Qd = self.f._point_rows(self.cp, self.cq, rows)
-        self._add(A, np.zeros(len(rows)))
+        self.lp.add_rows(A, np.zeros(len(rows)))
         if len(Qd):
             self._add_q(Qd)
 
     def solve(self):
         self.f._lp_count += 1
-        self.h.run()
-        if self.h.getModelStatus() != _HighsStatus.kOptimal:
+        z = self.lp.solve()
+        if z is None:
             return None
-        z = np.asarray(self.h.getSolution().col_value, dtype=np.float64)
         return z[:self.npv], z[self.npv:self.npv + self.nqv], float(z[-1])
 
 
@@ -263,6 +284,12 @@ class IntervalRationalFitter:
         fewest-coefficient pair.
     incremental : grow one HiGHS model per degree pair (warm-started re-solves) instead of
         solving every constraint-generation LP from scratch (same LP, same result).
+    best_effort : when no degree pair is feasible, converge the least-violation LP at the
+        largest degrees for the flagged result (False: return the unconverged attempt; callers
+        that only need to know "infeasible" skip that cost).
+    time_limit : seconds; when exceeded, the search stops trying new degree pairs and the
+        running pair stops its rounds. The result is then the best found so far (valid only if
+        it passed every check; the message says the limit was reached).
     """
 
     _batch_mult = 2.0   # violators added per constraint-generation round, per coefficient
@@ -272,7 +299,8 @@ class IntervalRationalFitter:
                  q_min: float = 1e-4, q_grid: int | None = None, degrees=None,
                  coef_bound: float = 1e6, max_iter: int = 60, certify_depth: int = 12,
                  progress=None, delta_min: float = 1e-10, bernstein_split: int = 2,
-                 incremental: bool = True, start_degrees=None):
+                 incremental: bool = True, start_degrees=None, best_effort: bool = True,
+                 time_limit: float | None = None):
         if degree_kind not in ("total", "tensor"):
             raise ValueError("degree_kind must be 'total' or 'tensor'")
         self.tol = float(tol)
@@ -292,6 +320,8 @@ class IntervalRationalFitter:
         self.bernstein_split = int(bernstein_split)
         self.incremental = bool(incremental)
         self.start_degrees = start_degrees
+        self.best_effort = bool(best_effort)
+        self.time_limit = None if time_limit is None else float(time_limit)
 
     # Public API ----------------------------------------------------------------------------
     def fit(self, X, y=None, lower=None, upper=None) -> FitResult:
@@ -335,7 +365,11 @@ class IntervalRationalFitter:
         att = self._fit_pair(m, n, max_rounds=rounds)
         return float("inf") if att.feasible else float(att.delta)
 
+    def _out_of_time(self) -> bool:
+        return self.time_limit is not None and time.perf_counter() - self._t0 > self.time_limit
+
     def _prepare(self, X, y, lower, upper):
+        self._t0 = time.perf_counter()
         X = np.asarray(X, dtype=np.float64)
         if X.ndim == 1:
             X = X[:, None]
@@ -530,6 +564,8 @@ class IntervalRationalFitter:
             sess = _LPSession(self, cp, cq, qrows)
             sess.add_points(rows)
         for _ in range(self.max_iter if max_rounds is None else int(max_rounds)):
+            if best is not None and self._out_of_time():
+                break
             sol = sess.solve() if sess is not None else None
             if sol is None:   # no incremental model, or it did not reach optimality: solve afresh
                 sol = self._solve_lp(cp, cq, rows, qrows)
@@ -568,6 +604,8 @@ class IntervalRationalFitter:
         M, N = self.max_degree, self.max_den_degree
 
         def feas(m, n):
+            if (m, n) not in cache and self._out_of_time():
+                return False                   # not tried: the result says the limit was hit
             if (m, n) not in cache:
                 att = self._fit_pair(m, n)
                 att = self._make_certified(att) if att.feasible else att
@@ -631,8 +669,13 @@ class IntervalRationalFitter:
             if best is None or better(lo, n, best):
                 best = cand
         if best is None:
-            best = self._fit_pair(M, N, converge=True)
-            tried.append((M, N, best.feasible, self._ncoef(M, N)))
+            if self.best_effort and not self._out_of_time():
+                best = self._fit_pair(M, N, converge=True)
+                tried.append((M, N, best.feasible, self._ncoef(M, N)))
+            elif cache:   # the caller only needs to know that nothing is feasible: no converged fit
+                best = cache.get((M, N)) or min(cache.values(), key=lambda a: a.max_violation)
+            else:
+                best = _Attempt(M, N, None, None, -np.inf, False, False, np.inf, 0, 0)
         return best, tried
 
     def _function(self, att: _Attempt) -> RationalFunction:
@@ -666,7 +709,8 @@ class IntervalRationalFitter:
         if att.p is None:
             return FitResult(None, att.m, att.n, False, None, -np.inf, np.inf, np.inf, len(self._X),
                              att.n_constraints, self._lp_count, time.perf_counter() - t0, tried,
-                             "no LP solution")
+                             "no LP solution" + (f"; time limit {self.time_limit:g} s reached"
+                                                 if self._out_of_time() else ""))
         f = self._function(att)
         cert = getattr(att, "certificate", None)
         if cert is None:
@@ -679,6 +723,7 @@ class IntervalRationalFitter:
         feasible = bool(viol <= 0 and np.all(np.isfinite(R)))
         msg = ("feasible" if feasible else "no feasible degree pair up to the maximum degree; "
                "returning the least-violating fit") + (
+            f"; time limit {self.time_limit:g} s reached" if self._out_of_time() else "") + (
             "; Q > 0 certified" if cert.certified else "; Q > 0 NOT certified")
         return FitResult(f, att.m, att.n, feasible, cert, att.delta, float(viol), ratio, len(self._X),
                          att.n_constraints, self._lp_count, time.perf_counter() - t0, tried, msg)

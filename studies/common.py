@@ -143,13 +143,48 @@ def make_scene(geometry: str, light: str, material: MaterialSpec, resolution: in
                  path=f"<study {geometry}/{light}>")
 
 
+_CDFS: dict = {}
+CDF_TIME_LIMIT_S: float | None = None   # bound on each rational CDF fit (None: fit_cdf's default)
+
+
+def cdf_for(spec: MaterialSpec, rational: bool):
+    """The inverse-CDF table (``rational`` False) or table + verified rational fit of an
+    in-memory material, as a ``fit.cdf_fit.CDFFit``, made once per (data, type, scale) in this
+    process and shared by every scene and sampler that uses it (the renderer would otherwise
+    tabulate, and fit, again for each one). ``None`` for materials without in-memory data."""
+    if spec.type == "lambert" or spec.data is None or isinstance(spec.data, (str, Path)):
+        return None
+    from fit.cdf_fit import DEFAULTS, CDFFit, fit_cdf
+    from fit.cdf_table import tabulate
+    from warp_rbrdf.cdf_sampling import material_evaluate
+
+    key = (id(spec.data), spec.type, tuple(np.broadcast_to(np.asarray(spec.scale, float), 3)))
+    hit = _CDFS.get(key, (None, None))[0]
+    if hit is None or (rational and hit.theta is None and "table only" in hit.reason):
+        ev = material_evaluate(spec, spec.data)
+        if rational:
+            kw = {} if CDF_TIME_LIMIT_S is None else {"time_limit_s": CDF_TIME_LIMIT_S}
+            hit = fit_cdf(ev, name=spec.name, table=hit.table if hit is not None else None, **kw)
+        else:
+            hit = CDFFit(table=tabulate(ev, **DEFAULTS), table_params=dict(DEFAULTS), theta=None, phi=None,
+                         verification={}, fallback=True, reason="table only (studies cache)", name=spec.name)
+        _CDFS[key] = (hit, spec.data)    # the data object is kept alive, so its id stays unique
+    return hit
+
+
 def with_sampler(scene: Scene, sampler: str) -> Scene:
+    """A copy of ``scene`` whose materials use ``sampler``; inverse-CDF samplers get the
+    material's cached tables / fits (:func:`cdf_for`)."""
     import copy
+
+    from warp_rbrdf.cdf_sampling import RATIONAL_SAMPLERS, TABLE_SAMPLERS
 
     sc = copy.copy(scene)
     sc.materials = {k: copy.copy(v) for k, v in scene.materials.items()}
     for m in sc.materials.values():
         m.sampler = sampler
+        if sampler in TABLE_SAMPLERS and m.cdf is None:
+            m.cdf = cdf_for(m, sampler in RATIONAL_SAMPLERS)
     sc.integrator = copy.copy(scene.integrator)
     sc.integrator.sampler = sampler if sampler in BASE_SAMPLERS else sc.integrator.sampler
     return sc

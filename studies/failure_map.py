@@ -14,7 +14,10 @@ Cases (each pinned by a test in tests/test_studies.py):
   estimators are linear in the BRDF; fit: with an absolute interval floor the relative guarantee
   is lost);
 * ``fit_mirror``: a rational fit at 5 % of the mirror lobe's projection needs far more
-  coefficients than a diffuse material, or is flagged infeasible.
+  coefficients than a diffuse material, or is flagged infeasible;
+* ``mirror_cdf``: the rational inverse CDFs of the mirror lobe, fitted under the preset's time
+  limit (``cdf_time_limit``): verified, or an explicit fallback to the tabulated sampler whose
+  reason names the limit (the same fit is what the inverse-CDF samplers of the mirror rows use).
 
 Sampler metric (no reference image needed): the relative standard error of the pixel estimate,
 ``sqrt(mean over the mask of (per-pixel sample variance / spp)) / mean radiance``, with
@@ -31,6 +34,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from functools import lru_cache
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -41,11 +45,11 @@ import numpy as np  # noqa: E402
 
 from studies import common as C  # noqa: E402
 
-PRESETS = {
-    "smoke": dict(resolution=16, spp=16, seeds=1, fit_stride=9, fit_max_degree=4),
-    "test": dict(resolution=24, spp=32, seeds=2, fit_stride=9, fit_max_degree=4),
-    "moderate": dict(resolution=48, spp=64, seeds=3, fit_stride=3, fit_max_degree=8),
-    "full": dict(resolution=96, spp=256, seeds=4, fit_stride=2, fit_max_degree=10),
+PRESETS = {   # cdf_time_limit: bound (s) on each material's rational inverse-CDF fit
+    "smoke": dict(resolution=16, spp=16, seeds=1, fit_stride=9, fit_max_degree=4, cdf_time_limit=5.0),
+    "test": dict(resolution=24, spp=32, seeds=2, fit_stride=9, fit_max_degree=4, cdf_time_limit=20.0),
+    "moderate": dict(resolution=48, spp=64, seeds=3, fit_stride=3, fit_max_degree=8, cdf_time_limit=300.0),
+    "full": dict(resolution=96, spp=256, seeds=4, fit_stride=2, fit_max_degree=10, cdf_time_limit=300.0),
 }
 MIRROR_EXPONENT = 5000
 
@@ -75,6 +79,13 @@ def mirror_lobe_file(path, exponent: int = MIRROR_EXPONENT, kd: float = 0.02, ks
 
 
 def load_mirror(out_dir) -> object:
+    """The mirror lobe's table (one object per folder and process: its tables and fits are
+    cached by object in :func:`studies.common.cdf_for`)."""
+    return _load_mirror(str(Path(out_dir).resolve()))
+
+
+@lru_cache(maxsize=4)
+def _load_mirror(out_dir: str):
     from fit.io import load_measured
 
     return load_measured(mirror_lobe_file(Path(out_dir) / f"mirror_n{MIRROR_EXPONENT}.binary"))
@@ -151,9 +162,22 @@ def fit_channel(proj, tol, abs_floor, stride, max_degree, channel=1, theta_d_max
 
 
 # --------------------------------------------------------------------------------------------
+def mirror_cdf(mirror) -> dict:
+    """Fit (tables + rational inverse CDFs, under ``C.CDF_TIME_LIMIT_S``) of the mirror lobe,
+    cached for the samplers; returns its outcome."""
+    t0 = time.perf_counter()
+    fit = C.cdf_for(C.material_spec("measured", mirror, sampler="rational"), rational=True)
+    fi = fit.fit_info
+    return dict(fallback=bool(fit.fallback), reason=fit.reason, seconds=time.perf_counter() - t0,
+                fit_seconds=fi.get("time_s"), time_limit_s=fi.get("time_limit_s"),
+                time_limit_reached=bool(fi.get("time_limit_reached")),
+                theta=fi.get("theta", {}).get("n_coefficients"), phi=fi.get("phi", {}).get("n_coefficients"))
+
+
 def run(preset="full", out="results/failure_map", samplers=None, charts=True, quiet=False,
-        cases=("mirror", "grazing", "sun", "low_albedo", "fit")) -> dict:
+        cases=("mirror", "grazing", "sun", "low_albedo", "fit", "mirror_cdf")) -> dict:
     cfg = dict(PRESETS[preset])
+    C.CDF_TIME_LIMIT_S = cfg["cdf_time_limit"]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     samplers = list(samplers or C.all_samplers())
@@ -162,7 +186,7 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
     noise_rows, other = [], {}
     jobs = []
     if "mirror" in cases:
-        mirror = load_mirror(out)
+        mirror = load_mirror(out)   # one object per process (cached), so its CDFs are shared
         jobs += [("mirror lobe / studio", "sphere", "studio", C.material_spec("measured", mirror)),
                  ("mirror lobe / sun", "sphere", "rooitou", C.material_spec("measured", mirror))]
     if "grazing" in cases:
@@ -174,8 +198,13 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
     if "low_albedo" in cases:
         jobs += [("paper×0.02 sphere / studio", "sphere", "studio",
                   C.material_spec("measured", C.measured("paper"), scale=0.02))]
-    bar = C.progress(total=len(jobs) + (2 if "grazing" in cases else 0) + (4 if "fit" in cases else 0),
-                     desc="failure map", disable=quiet)
+    bar = C.progress(total=len(jobs) + (2 if "grazing" in cases else 0) + (4 if "fit" in cases else 0)
+                     + ("mirror_cdf" in cases), desc="failure map", disable=quiet)
+    if "mirror_cdf" in cases:
+        # First, so the mirror rows' inverse-CDF samplers reuse it (studies.common.cdf_for).
+        bar.set_postfix_str("mirror inverse CDFs")
+        other["mirror_cdf"] = mirror_cdf(load_mirror(out))
+        bar.update(1)
     for label, g, l, spec in jobs:
         bar.set_postfix_str(label)
         d = sampler_noise(g, l, spec, samplers, res, spp, seeds)
@@ -243,6 +272,12 @@ def summary_markdown(rows, other, meta) -> str:
                  f"{g['de_mean']:.2f} (p99 {g['de_p99']:.2f}) at a view 80° from the normal vs "
                  f"{n['de_mean']:.2f} (p99 {n['de_p99']:.2f}) at 10°; same-representation noise "
                  f"{g['noise_de_mean']:.2f} / {n['noise_de_mean']:.2f}.\n")
+    if "mirror_cdf" in other:
+        m = other["mirror_cdf"]
+        L.append(f"\nRational inverse CDFs of the mirror lobe (time limit {m['time_limit_s']:g} s): "
+                 + (f"FALLBACK to the tabulated sampler ({m['reason']})" if m["fallback"]
+                    else f"verified (theta {m['theta']} + phi {m['phi']} coefficients)")
+                 + f", {m['fit_seconds']:.0f} s of fitting.\n")
     fits = [(k, v) for k, v in other.items() if k.startswith("fit_")]
     if fits:
         L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, every "

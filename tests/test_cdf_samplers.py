@@ -136,6 +136,14 @@ def test_broken_fits_trigger_fallback(lambert_fit):
     assert md.sampler[0] == SAMPLER_CODES["tabulated"] and not md.cdf_fits
 
 
+def test_cdf_fit_time_limit_falls_back_explicitly():
+    # no time to fit: the material falls back to the tabulated sampler and says why
+    fit = fit_cdf(lambert((0.8, 0.6, 0.4)), name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32),
+                  refinements=0, time_limit_s=0.0)
+    assert fit.fallback and "time limit" in fit.reason
+    assert fit.table is not None and fit.fit_info["time_limit_reached"]
+
+
 def test_cdf_file_round_trip(lambert_fit, tmp_path):
     from fit.cdf_fit import load
 

@@ -92,3 +92,20 @@ def test_infeasible_returns_flagged_best_fit():
     r = IntervalRationalFitter(tol=1e-4, max_degree=2).fit(x, y)
     assert not r.feasible and not r.valid
     assert r.function is not None and r.max_violation > 0
+
+
+def test_time_limit_and_no_best_effort_are_flagged():
+    x = np.linspace(0, 1, 200)
+    y = np.abs(x - 0.5) + 0.1
+    # nothing feasible: without best effort the search stops at its last refuted pair (no
+    # converged least-violation LP), and is flagged
+    quick = IntervalRationalFitter(tol=1e-4, max_degree=4, best_effort=False).fit(x, y)
+    full = IntervalRationalFitter(tol=1e-4, max_degree=4).fit(x, y)
+    assert not quick.valid and not full.valid and quick.n_lp < full.n_lp
+    # a time limit of zero tries no degree pair: no function, never valid, and it says why
+    r = IntervalRationalFitter(tol=0.05, max_degree=6, time_limit=0.0).fit(x, y)
+    assert r.function is None and not r.valid and "time limit" in r.message
+    # a feasible search within its limit is unaffected
+    d = np.loadtxt(data_file("nist/Kirby2.dat"), skiprows=1)
+    r = IntervalRationalFitter(tol=0.05, abs_floor=0.2, max_degree=6, time_limit=600).fit(d[:, 1], d[:, 0])
+    assert r.valid and "time limit" not in r.message
