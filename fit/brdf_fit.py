@@ -315,16 +315,12 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
         # The channels are then searched hardest first, and the first one whose search fails
         # rejects the piece (the others are not fitted).
         top = (max_degree, max_den_degree)
-        margins = []
-        for d, U, lo, hi, yt in data:
-            pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree, domain=rf_domain)
-            margins.append(pre.subset_margin(U, top, y=yt, lower=lo, upper=hi, rounds=1))
+        pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree, domain=rf_domain)
+        margins = [pre.subset_margin(U, top, y=yt, lower=lo, upper=hi, rounds=1) for d, U, lo, hi, yt in data]
         order = sorted(range(3), key=lambda c: margins[c])
         c0 = order[0]
         d, U, lo, hi, yt = data[c0]
-        pre = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree, domain=rf_domain)
-        ok = margins[c0] > pre.delta_min and not pre.proves_infeasible(
-            U, top, y=yt, lower=lo, upper=hi, max_rounds=PRECHECK_ROUNDS)
+        ok = not pre.proves_infeasible(U, top, y=yt, lower=lo, upper=hi, max_rounds=PRECHECK_ROUNDS)
         if progress is not None:
             progress(f"{label} {CHANNELS[c0]}", {"m": max_degree, "n": max_den_degree, "feasible": ok,
                                                  "n_coefficients": None})

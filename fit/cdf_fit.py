@@ -297,7 +297,7 @@ def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: f
     info = {"rounds": 0, "slope_rows": 0, "min_slope": None, "delta": None}
     p = None
     new = rows
-    A_ub, b_ub = A_int, b_int
+    A_parts, b_parts = [A_int], [b_int]     # stacked only if linprog has to solve from scratch
     # One live HiGHS model, slope rows appended each round (warm-started dual simplex); linprog
     # from scratch without the bindings or if a warm solve does not end optimal.
     lp = IncrementalLP(c, [b_[0] for b_ in bounds], [b_[1] for b_ in bounds]) if IncrementalLP.available else None
@@ -310,14 +310,14 @@ def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: f
             return None, info
         A_s, r_s = slope_rows(G[new])          # only the rows added this round
         A_new = np.hstack([-A_s * scale, np.zeros((len(new), 1))])
-        A_ub = np.vstack([A_ub, A_new])
-        b_ub = np.concatenate([b_ub, -r_s])
+        A_parts.append(A_new)
+        b_parts.append(-r_s)
         x = None
         if lp is not None:
             lp.add_rows(A_new, -r_s)
             x = lp.solve()
         if x is None:
-            res = linprog(c, A_ub=A_ub, b_ub=b_ub, bounds=bounds, method="highs")
+            res = linprog(c, A_ub=np.vstack(A_parts), b_ub=np.concatenate(b_parts), bounds=bounds, method="highs")
             if res.status != 0:
                 info.update(status=res.message)
                 return None, info
@@ -497,6 +497,16 @@ def load(path) -> CDFFit:
 # --------------------------------------------------------------------------------------------
 DEFAULTS = dict(n_v=32, n_t=64, n_p=64, sub=3, eps=0.02, noise=1e-6)
 TIME_LIMIT_S = 180.0   # default bound on fit_cdf's fitting time (s)
+
+
+def table_only(evaluate, table_params: dict | None = None, reason: str = "table only", name: str = "",
+               source: dict | None = None) -> CDFFit:
+    """A :class:`CDFFit` with the tables and no rational fit (``fallback`` True: the tabulated
+    samplers use it, a rational sampler falls back to them)."""
+    params = dict(DEFAULTS, **(table_params or {}))
+    return CDFFit(table=tabulate(evaluate, **params), table_params=params, theta=None, phi=None,
+                  verification={}, fallback=True, reason=reason, name=name,
+                  source=source or {"file": "", "sha256": ""})
 
 
 def fit_theta(table: CDFTable, tol: float = 0.03, n_theta_v: int = 0, n_mu: int = 33,

@@ -17,13 +17,10 @@ def _load_or_fit(args, log=print):
     b = load_measured(path)
     params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
     if getattr(args, "table_only", False):
-        from .cdf_fit import CDFFit, DEFAULTS
-        from .cdf_table import tabulate
+        from .cdf_fit import table_only
 
-        p = dict(DEFAULTS, **params)
-        return CDFFit(table=tabulate(b.evaluate, **p), table_params=p, theta=None, phi=None,
-                      verification={}, fallback=True, reason="table only (--table-only)",
-                      name=b.name, source=file_source(path))
+        return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
+                          source=file_source(path))
     return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log,
                    refinements=args.refinements, source=file_source(path),
                    time_limit_s=None if args.time_limit <= 0 else args.time_limit)

@@ -143,7 +143,8 @@ def make_scene(geometry: str, light: str, material: MaterialSpec, resolution: in
                  path=f"<study {geometry}/{light}>")
 
 
-_CDFS: dict = {}
+_TABLES: dict = {}
+_FITS: dict = {}
 CDF_TIME_LIMIT_S: float | None = None   # bound on each rational CDF fit (None: fit_cdf's default)
 
 
@@ -154,22 +155,19 @@ def cdf_for(spec: MaterialSpec, rational: bool):
     tabulate, and fit, again for each one). ``None`` for materials without in-memory data."""
     if spec.type == "lambert" or spec.data is None or isinstance(spec.data, (str, Path)):
         return None
-    from fit.cdf_fit import DEFAULTS, CDFFit, fit_cdf
-    from fit.cdf_table import tabulate
+    from fit.cdf_fit import fit_cdf, table_only
     from warp_rbrdf.cdf_sampling import material_evaluate
 
     key = (id(spec.data), spec.type, tuple(np.broadcast_to(np.asarray(spec.scale, float), 3)))
-    hit = _CDFS.get(key, (None, None))[0]
-    if hit is None or (rational and hit.theta is None and "table only" in hit.reason):
-        ev = material_evaluate(spec, spec.data)
-        if rational:
-            kw = {} if CDF_TIME_LIMIT_S is None else {"time_limit_s": CDF_TIME_LIMIT_S}
-            hit = fit_cdf(ev, name=spec.name, table=hit.table if hit is not None else None, **kw)
-        else:
-            hit = CDFFit(table=tabulate(ev, **DEFAULTS), table_params=dict(DEFAULTS), theta=None, phi=None,
-                         verification={}, fallback=True, reason="table only (studies cache)", name=spec.name)
-        _CDFS[key] = (hit, spec.data)    # the data object is kept alive, so its id stays unique
-    return hit
+    if key not in _TABLES:   # the data object is kept alive with its entry, so its id stays unique
+        _TABLES[key] = (table_only(material_evaluate(spec, spec.data), reason="table only (studies cache)",
+                                   name=spec.name), spec.data)
+    if not rational:
+        return _TABLES[key][0]
+    if key not in _FITS:
+        kw = {} if CDF_TIME_LIMIT_S is None else {"time_limit_s": CDF_TIME_LIMIT_S}
+        _FITS[key] = fit_cdf(material_evaluate(spec, spec.data), name=spec.name, table=_TABLES[key][0].table, **kw)
+    return _FITS[key]
 
 
 def with_sampler(scene: Scene, sampler: str) -> Scene:

@@ -81,3 +81,14 @@ def test_fit_package_does_not_import_warp():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "False"
+
+
+def test_cdf_table_only_writes_a_flagged_table(lambert_file, tmp_path, capsys):
+    from fit.cdf_fit import load
+
+    out = tmp_path / "l_cdf.json"
+    assert main(["cdf", str(lambert_file), "--table-only", "--n-v", "4", "--n-t", "16", "--n-p", "16",
+                 "--out", str(out)]) == 0
+    fit = load(out)
+    assert fit.fallback and "--table-only" in fit.reason and fit.theta is None
+    assert fit.table is not None and fit.table_params["n_t"] == 16
