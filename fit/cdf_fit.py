@@ -53,7 +53,7 @@ from .errors import BRDFFileError
 from .rational import RationalFunction
 
 FORMAT = "rbrdf-cdf"
-VERSION = 1
+VERSION = 2   # 2: optional "layout"/"rows" (fit.cdf_rows); version-1 files (global layout) still load
 HALF_PI = 0.5 * np.pi
 VERIFY_GRID = {"theta": (257, 2049), "phi": (33, 65, 513)}
 
@@ -353,36 +353,90 @@ class CDFFit:
     name: str = ""
     source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
 
+    rows: list | None = None   # "rows" layout: per table row (F_v, G_v) or None (table row)
+
+    @property
+    def layout(self) -> str:
+        """``"global"`` (F(theta_v, mu), G(theta_v, theta_l, u)) or ``"rows"`` (fit.cdf_rows)."""
+        return "global" if self.rows is None else "rows"
+
     # Sampling (NumPy reference of the Warp sampler) ------------------------------------------
+    def _theta_map(self, tv, mu):
+        """(theta_l, dtheta_l/dmu) of the rational map; NaN on table rows (rows layout)."""
+        if self.rows is None:
+            return normalized_map(self.theta, 1, np.stack([tv, mu], -1), HALF_PI)
+        from .cdf_rows import normalized_row_map
+
+        v = self.table.row(tv)
+        t, d = np.full(mu.shape, np.nan), np.full(mu.shape, np.nan)
+        for r in np.unique(v):
+            if self.rows[r] is not None:
+                k = v == r
+                t[k], d[k] = normalized_row_map(self.rows[r][0], mu[k][:, None], HALF_PI)
+        return t, d
+
+    def _phi_map(self, tv, tl, u):
+        if self.rows is None:
+            return normalized_map(self.phi, 2, np.stack([tv, tl, u], -1), np.pi)
+        from .cdf_rows import normalized_row_map
+
+        v = self.table.row(tv)
+        p, d = np.full(u.shape, np.nan), np.full(u.shape, np.nan)
+        for r in np.unique(v):
+            if self.rows[r] is not None:
+                k = v == r
+                p[k], d[k] = normalized_row_map(self.rows[r][1], np.stack([tl[k], u[k]], -1), np.pi)
+        return p, d
+
+    def _table_rows(self, tv) -> np.ndarray:
+        """True where the sample's row is sampled with the table (rows layout, failed row)."""
+        if self.rows is None:
+            return np.zeros(np.shape(tv), bool)
+        ok = np.array([r is not None for r in self.rows])
+        return ~ok[self.table.row(tv)]
+
     def sample(self, theta_v, mu, tau):
         """``(theta_l, phi_l, alpha)``; alpha = dtheta/dmu * dphi/dtau * sin(theta_l) (= 1/pdf
-        in 1/sr^-1), 0 where a clamp is active."""
-        if self.theta is None or self.phi is None:
+        in 1/sr^-1), 0 where a clamp is active. Rows layout: rows without a verified fit are
+        sampled with the table (alpha = 1 / the table's pdf)."""
+        if self.rows is None and (self.theta is None or self.phi is None):
             raise ValueError("no rational fit (fallback); use .table")
         tv, mu, tau = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(mu, float),
                                           np.asarray(tau, float))
-        X = np.stack([tv, mu], -1)
-        tl, dF = normalized_map(self.theta, 1, X, HALF_PI)
+        tl, dF = self._theta_map(tv, mu)
         s = np.where(tau < 0.5, -1.0, 1.0)
         u = np.abs(2.0 * tau - 1.0)
         ok = (tl >= 0) & (tl <= HALF_PI)
         tl = np.clip(tl, 0.0, HALF_PI)
-        Y = np.stack([tv, tl, u], -1)
-        ph, dG = normalized_map(self.phi, 2, Y, np.pi)
+        ph, dG = self._phi_map(tv, tl, u)
         ok &= (ph >= 0) & (ph <= np.pi)
         pl = s * np.clip(ph, 0.0, np.pi)
         alpha = np.where(ok, dF * 2.0 * dG * np.sin(tl), 0.0)
+        tab = self._table_rows(tv)
+        if tab.any():
+            t2, p2, pdf = self.table.sample(tv[tab], mu[tab], tau[tab])
+            tl, pl, alpha = tl.copy(), pl.copy(), alpha.copy()
+            tl[tab], pl[tab], alpha[tab] = t2, p2, np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
         return tl, pl, alpha
 
     def theta_cdf(self, theta_v, theta_l, iters: int = 40) -> np.ndarray:
-        """P(theta <= theta_l) under the rational sampler (bisection of the monotone F)."""
+        """P(theta <= theta_l) under the rational sampler (bisection of the monotone F; the
+        table's CDF on table rows)."""
         tv, t = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(theta_l, float))
         lo, hi = np.zeros(t.shape), np.ones(t.shape)
         for _ in range(iters):
             m = 0.5 * (lo + hi)
-            below = normalized_map(self.theta, 1, np.stack([tv, m], -1), HALF_PI)[0] <= t
+            below = self._theta_map(tv, m)[0] <= t
             lo, hi = np.where(below, m, lo), np.where(below, hi, m)
-        return np.where(t >= HALF_PI, 1.0, np.where(t <= 0, 0.0, 0.5 * (lo + hi)))
+        out = 0.5 * (lo + hi)
+        tab = self._table_rows(tv)
+        if tab.any():
+            edges = np.linspace(0.0, HALF_PI, self.table.n_t + 1)
+            v = self.table.row(tv)
+            out = out.copy()
+            for k in np.flatnonzero(tab.ravel()):
+                out.flat[k] = np.interp(t.flat[k], edges, self.table.cdf_theta[v.flat[k]])
+        return np.where(t >= HALF_PI, 1.0, np.where(t <= 0, 0.0, out))
 
     def phi_cdf_half(self, theta_v, theta_l, phi_abs, iters: int = 40) -> np.ndarray:
         """P(|phi| <= phi_abs | theta_l) under the rational sampler (bisection in u)."""
@@ -391,9 +445,18 @@ class CDFFit:
         lo, hi = np.zeros(p.shape), np.ones(p.shape)
         for _ in range(iters):
             m = 0.5 * (lo + hi)
-            below = normalized_map(self.phi, 2, np.stack([tv, tl, m], -1), np.pi)[0] <= p
+            below = self._phi_map(tv, tl, m)[0] <= p
             lo, hi = np.where(below, m, lo), np.where(below, hi, m)
-        return np.where(p >= np.pi, 1.0, np.where(p <= 0, 0.0, 0.5 * (lo + hi)))
+        out = 0.5 * (lo + hi)
+        tab = self._table_rows(tv)
+        if tab.any():
+            edges = np.linspace(0.0, np.pi, self.table.n_p + 1)
+            v = self.table.row(tv)
+            j = np.clip(np.floor(tl / (HALF_PI / self.table.n_t)), 0, self.table.n_t - 1).astype(np.intp)
+            out = out.copy()
+            for k in np.flatnonzero(tab.ravel()):
+                out.flat[k] = np.interp(p.flat[k], edges, self.table.cdf_phi[v.flat[k], j.flat[k]])
+        return np.where(p >= np.pi, 1.0, np.where(p <= 0, 0.0, out))
 
     # Persistence ------------------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -418,6 +481,8 @@ class CDFFit:
                 "phi_l": "sign(tau - 1/2) pi (G(theta_v, theta_l, u) - G(.., 0)) / (G(.., 1) - G(.., 0)), u = |2 tau - 1|",
                 "alpha": "dtheta_l/dmu * dphi_l/dtau * sin(theta_l)",
                 "phi_origin": "azimuth of the view direction",
+                "rows": "layout 'rows': row v = floor(theta_v / (pi/2) * n_v) uses F_v(mu), G_v(theta_l, u) "
+                        "in the same formulas; a null row is sampled with the table",
             },
             "table": dict(self.table_params),
             "table_data": {"theta_v": t.theta_v.tolist(), "cdf_theta": t.cdf_theta.tolist(),
@@ -425,6 +490,11 @@ class CDFFit:
                            "eps": t.eps, "albedo": t.albedo.tolist()},
             "theta": model(self.theta, ("theta_v", "mu"), "theta_l", "[0, pi/2]"),
             "phi": model(self.phi, ("theta_v", "theta_l", "u"), "phi_abs", "[0, pi]"),
+            "layout": self.layout,
+            "rows": None if self.rows is None else [
+                None if r is None else {"theta": model(r[0], ("mu",), "theta_l", "[0, pi/2]"),
+                                        "phi": model(r[1], ("theta_l", "u"), "phi_abs", "[0, pi]")}
+                for r in self.rows],
             "verification": _jsonable(self.verification),
             "fallback": bool(self.fallback),
             "reason": self.reason,
@@ -460,7 +530,7 @@ def from_dict(d: dict, path=None) -> CDFFit:
 
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise BRDFFileError(path, f"not an {FORMAT} file")
-    if d.get("version") != VERSION:
+    if d.get("version") not in (1, VERSION):
         raise BRDFFileError(path, f"unsupported {FORMAT} version {d.get('version')!r} (this reader knows {VERSION})")
     try:
         td = d["table_data"]
@@ -470,13 +540,20 @@ def from_dict(d: dict, path=None) -> CDFFit:
                          albedo=np.asarray(td["albedo"], float))
         theta = model_from_dict(d["theta"], path).functions[0] if d.get("theta") else None
         phi = model_from_dict(d["phi"], path).functions[0] if d.get("phi") else None
+        rows = None
+        if d.get("layout", "global") == "rows":
+            rows = [None if r is None else (model_from_dict(r["theta"], path).functions[0],
+                                            model_from_dict(r["phi"], path).functions[0])
+                    for r in d["rows"]]
+            if len(rows) != table.n_v:
+                raise ValueError(f"{len(rows)} row fits for {table.n_v} table rows")
         fb = bool(d["fallback"])
-        if not fb and (theta is None or phi is None):
+        if not fb and rows is None and (theta is None or phi is None):
             raise ValueError("no fallback but rational functions missing")
         return CDFFit(table=table, table_params=dict(d.get("table", {})), theta=theta, phi=phi,
                       verification=dict(d.get("verification", {})), fallback=fb,
                       reason=str(d.get("reason", "")), fit_info=dict(d.get("fit", {})),
-                      name=str(d.get("name", "")), source=dict(d.get("source", {})))
+                      name=str(d.get("name", "")), source=dict(d.get("source", {})), rows=rows)
     except BRDFFileError:
         raise
     except (KeyError, TypeError, ValueError, IndexError) as e:
@@ -572,7 +649,8 @@ def _refit(f, var, data, span, verify, log, what, deadline=None):
 def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_params: dict | None = None,
             theta_kw: dict | None = None, phi_kw: dict | None = None, refinements: int = 1,
             log=None, source: dict | None = None, monotone: bool = True,
-            time_limit_s: float | None = TIME_LIMIT_S) -> CDFFit:
+            time_limit_s: float | None = TIME_LIMIT_S, layout: str = "rows",
+            rows_kw: dict | None = None) -> CDFFit:
     """Tabulate (unless ``table`` is given), fit both inverse CDFs, verify, decide fallback.
 
     Each refinement round that fails verification doubles the data density along the CDF
@@ -582,6 +660,11 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
 
     ``time_limit_s`` bounds the fitting time (tabulation excluded): fits and refits stop when
     it is reached, and whatever is not verified by then falls back (the reason says so).
+
+    ``layout``: ``"rows"`` (default; :mod:`fit.cdf_rows`, one univariate F_v and one bivariate
+    G_v per table row, rows that fail verification sampled with the table; ``rows_kw`` tunes
+    it) or ``"global"`` (the paper's F(theta_v, mu), G(theta_v, theta_l, u); ``theta_kw``,
+    ``phi_kw``, ``refinements``, ``monotone`` apply to it).
     A sharp lobe can otherwise take many minutes (measured, near-mirror Blinn-Phong n = 5000:
     the theta refit alone ran 233 s with its LP re-solved from scratch every round)."""
     log = log or (lambda s: None)
@@ -600,6 +683,10 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
     def late():
         return deadline is not None and time.perf_counter() > deadline
 
+    if layout == "rows":
+        return _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows_kw, t0)
+    if layout != "global":
+        raise ValueError(f"layout must be 'rows' or 'global', not {layout!r}")
     F = G = None
     vt = vp = {"ok": False}
     for rnd in range(refinements + 1):
@@ -647,7 +734,48 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
                   fit_info=info, name=name, source=source or {"file": "", "sha256": ""})
 
 
+def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows_kw, t0) -> CDFFit:
+    from .cdf_rows import fit_rows
+
+    rows, info = fit_rows(table, log=log, deadline=deadline, **(rows_kw or {}))
+    info.update(layout="rows", fitter="fit.fitter.IntervalRationalFitter", time_limit_s=time_limit_s,
+                time_limit_reached=bool(deadline is not None and time.perf_counter() > deadline),
+                time_s=time.perf_counter() - t0)
+    n_ok, n = info["verified_rows"], info["n_rows"]
+    fb = n_ok == 0
+    if fb:
+        reason = "no row verified" + (f" (fitting time limit {time_limit_s:g} s reached)"
+                                      if info["time_limit_reached"] else "")
+    elif n_ok < n:
+        why = sorted({r.get("reason", "?") for r, f in zip(info["rows"], rows) if f is None})
+        reason = (f"verified on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with "
+                  f"the table ({'; '.join(why)})")
+    else:
+        reason = f"verified on all {n} view rows: monotone, covering, no poles"
+    log(f"  {reason}")
+    return CDFFit(table=table, table_params=params, theta=None, phi=None,
+                  verification={"rows": [r.get("verification", {}) for r in info["rows"]]},
+                  fallback=fb, reason=reason, fit_info=info, name=name,
+                  source=source or {"file": "", "sha256": ""}, rows=None if fb else rows)
+
+
 def verify(fit: CDFFit) -> CDFFit:
+    """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback.
+    Rows layout: a row that fails is dropped to the table (``fit.rows[v] = None``)."""
+    if fit.rows is not None:
+        from .cdf_rows import verify_row
+
+        vs = []
+        for v, r in enumerate(fit.rows):
+            vs.append(verify_row(*r) if r is not None else {"ok": False})
+            if r is not None and not vs[-1]["ok"]:
+                fit.rows[v] = None
+        n_ok = sum(r is not None for r in fit.rows)
+        fit.verification = {"rows": vs}
+        fit.fallback = n_ok == 0
+        fit.reason = (f"verified on {n_ok}/{len(fit.rows)} view rows (others sampled with the table)"
+                      if n_ok else "no row verified")
+        return fit
     """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback."""
     vt = _verify_theta(fit.theta) if fit.theta is not None else {"ok": False}
     vp = _verify_phi(fit.phi) if fit.phi is not None else {"ok": False}

@@ -171,7 +171,9 @@ def mirror_cdf(mirror) -> dict:
     return dict(fallback=bool(fit.fallback), reason=fit.reason, seconds=time.perf_counter() - t0,
                 fit_seconds=fi.get("time_s"), time_limit_s=fi.get("time_limit_s"),
                 time_limit_reached=bool(fi.get("time_limit_reached")),
-                theta=fi.get("theta", {}).get("n_coefficients"), phi=fi.get("phi", {}).get("n_coefficients"))
+                theta=fi.get("theta", {}).get("n_coefficients"), phi=fi.get("phi", {}).get("n_coefficients"),
+                layout=fi.get("layout", fit.layout),
+                verified_rows=fi.get("verified_rows"), n_rows=fi.get("n_rows"))
 
 
 def run(preset="full", out="results/failure_map", samplers=None, charts=True, quiet=False,

@@ -231,8 +231,57 @@ def generate_sampler_function(cdf_fit, name: str) -> str:
     return "\n".join(L) + "\n"
 
 
+def _row_function(F, G, name: str) -> str:
+    """``@wp.func name(mu, tau) -> vec3(theta_l, phi_l, alpha)`` of one row of the rows layout
+    (:mod:`fit.cdf_rows`): univariate F_v(mu), bivariate G_v(theta_l, u), same normalisation."""
+    from fit.cdf_fit import restrict_rf
+
+    f0 = float(F(np.zeros((1, 1)))[0])
+    f1 = float(F(np.ones((1, 1)))[0])
+    L = ["@wp.func", f"def {name}(mu: float, tau: float) -> wp.vec3:", "    m = wp.float64(mu)"]
+    _emit_rf(L, "f", F, ["m"], 0)
+    L += [f"    fs = {_lit(HALF_PI_F / (f1 - f0))}",
+          f"    tl = (fR - {_lit(f0)}) * fs",
+          "    dtl = fdR * fs",
+          "    inside = 1",
+          "    if tl < wp.float64(0.0) or tl > wp.float64(1.5707963267948966):\n        inside = 0",
+          "    tl = wp.clamp(tl, wp.float64(0.0), wp.float64(1.5707963267948966))",
+          "    s = wp.float64(1.0)",
+          "    if tau < 0.5:\n        s = wp.float64(-1.0)",
+          "    u = wp.float64(wp.abs(2.0 * tau - 1.0))"]
+    _emit_rf(L, "g", G, ["tl", "u"], 1)
+    _emit_rf(L, "ga", restrict_rf(G, 1, 0), ["tl"], 0, deriv=False)
+    _emit_rf(L, "gb", restrict_rf(G, 1, 1), ["tl"], 0, deriv=False)
+    L += ["    gs = wp.float64(3.141592653589793) / (gbR - gaR)",
+          "    ph = (gR - gaR) * gs",
+          "    if ph < wp.float64(0.0) or ph > wp.float64(3.141592653589793):\n        inside = 0",
+          "    ph = wp.clamp(ph, wp.float64(0.0), wp.float64(3.141592653589793))",
+          "    alpha = wp.float64(0.0)",
+          "    if inside == 1:\n        alpha = dtl * wp.float64(2.0) * gdR * gs * wp.sin(tl)",
+          "    return wp.vec3(float(tl), float(s * ph), float(alpha))"]
+    return "\n".join(L) + "\n"
+
+
+def generate_rows_sampler_function(cdf_fit, name: str) -> str:
+    """Rows layout: one generated function per verified row and a dispatcher
+    ``name(theta_v, mu, tau)`` that picks the row exactly as :func:`tab_row` does; a row
+    without a verified fit returns alpha = -1, which tells the caller to use the table."""
+    n_v = len(cdf_fit.rows)
+    parts, L = [], ["@wp.func", f"def {name}(theta_v: float, mu: float, tau: float) -> wp.vec3:",
+                    f"    # generated per-row rational inverse CDFs of {cdf_fit.name!r}",
+                    f"    v = CS.tab_row(theta_v, {n_v})"]
+    for v, r in enumerate(cdf_fit.rows):
+        if r is None:
+            continue
+        parts.append(_row_function(r[0], r[1], f"{name}_r{v}"))
+        L += [f"    if v == {v}:", f"        return {name}_r{v}(mu, tau)"]
+    L.append("    return wp.vec3(0.0, 0.0, -1.0)")
+    return "\n\n".join(parts + ["\n".join(L) + "\n"])
+
+
 def generate_sampler_functions(fits):
-    return [(f"cdfsamp_{i}", generate_sampler_function(f, f"cdfsamp_{i}")) for i, f in enumerate(fits)]
+    return [(f"cdfsamp_{i}", generate_rows_sampler_function(f, f"cdfsamp_{i}") if f.rows is not None
+             else generate_sampler_function(f, f"cdfsamp_{i}")) for i, f in enumerate(fits)]
 
 
 # --------------------------------------------------------------------------------------------
