@@ -149,10 +149,10 @@ def fit_row(table: CDFTable, v: int, delta_theta: float, delta_phi: float, n_mu:
         if F is None or G is None:
             info["verification"] = {"ok": False}
             info["reason"] = "monotone refit failed"
-        else:
+        elif "monotone_refit" in info["theta"] or "monotone_refit" in info["phi"]:
             info["verification"] = verify_row(F, G)
-        if not info["verification"]["ok"]:
-            bad = [k for k, val in info["verification"].items() if val is False]
+        if not info["verification"]["ok"] and "reason" not in info:
+            bad = [k for k, val in info["verification"].items() if val is False and k != "ok"]
             info["reason"] = "not " + ", not ".join(bad)
     info["time_s"] = time.perf_counter() - t0
     return F, G, info

@@ -196,31 +196,31 @@ def _emit_rf(L, pre, f, xs, dvar, deriv=True):
     L.append(f"    {pre}dR = ({pre}dP - {pre}R * {pre}dQ) / {pre}Q")
 
 
-def generate_sampler_function(cdf_fit, name: str) -> str:
-    """``@wp.func name(theta_v, mu, tau) -> vec3(theta_l, phi_l, alpha)`` for a verified fit:
-    the endpoint-normalized map of :meth:`fit.cdf_fit.CDFFit.sample`, float64, unrolled."""
+def _emit_maps(L, F, G, f_vars, g_vars):
+    """Lines of the endpoint-normalized maps theta_l = F(f_vars..., mu), |phi_l| =
+    G(g_vars..., theta_l, u) (CDF variable last) and alpha, ending in ``return vec3(theta_l,
+    phi_l, alpha)``; a univariate F gets its end values as constants."""
     from fit.cdf_fit import restrict_rf
 
-    F, G = cdf_fit.theta, cdf_fit.phi
-    L = ["@wp.func", f"def {name}(theta_v: float, mu: float, tau: float) -> wp.vec3:",
-         f"    # generated rational inverse CDFs of {cdf_fit.name!r}",
-         "    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))",
-         "    m = wp.float64(mu)"]
-    _emit_rf(L, "f", F, ["tv", "m"], 1)
-    _emit_rf(L, "fa", restrict_rf(F, 1, 0), ["tv"], 0, deriv=False)
-    _emit_rf(L, "fb", restrict_rf(F, 1, 1), ["tv"], 0, deriv=False)
-    L += ["    fs = wp.float64(1.5707963267948966) / (fbR - faR)",
-          "    tl = (fR - faR) * fs",
-          "    dtl = fdR * fs",
+    _emit_rf(L, "f", F, f_vars + ["m"], F.n_vars - 1)
+    if F.n_vars == 1:
+        f0, f1 = (float(F(np.full((1, 1), x))[0]) for x in (0.0, 1.0))
+        L += [f"    fs = {_lit(HALF_PI_F / (f1 - f0))}", f"    tl = (fR - {_lit(f0)}) * fs"]
+    else:
+        _emit_rf(L, "fa", restrict_rf(F, F.n_vars - 1, 0), f_vars, 0, deriv=False)
+        _emit_rf(L, "fb", restrict_rf(F, F.n_vars - 1, 1), f_vars, 0, deriv=False)
+        L += ["    fs = wp.float64(1.5707963267948966) / (fbR - faR)", "    tl = (fR - faR) * fs"]
+    L += ["    dtl = fdR * fs",
           "    inside = 1",
           "    if tl < wp.float64(0.0) or tl > wp.float64(1.5707963267948966):\n        inside = 0",
           "    tl = wp.clamp(tl, wp.float64(0.0), wp.float64(1.5707963267948966))",
           "    s = wp.float64(1.0)",
           "    if tau < 0.5:\n        s = wp.float64(-1.0)",
           "    u = wp.float64(wp.abs(2.0 * tau - 1.0))"]
-    _emit_rf(L, "g", G, ["tv", "tl", "u"], 2)
-    _emit_rf(L, "ga", restrict_rf(G, 2, 0), ["tv", "tl"], 0, deriv=False)
-    _emit_rf(L, "gb", restrict_rf(G, 2, 1), ["tv", "tl"], 0, deriv=False)
+    k = G.n_vars - 1
+    _emit_rf(L, "g", G, g_vars + ["tl", "u"], k)
+    _emit_rf(L, "ga", restrict_rf(G, k, 0), g_vars + ["tl"], 0, deriv=False)
+    _emit_rf(L, "gb", restrict_rf(G, k, 1), g_vars + ["tl"], 0, deriv=False)
     L += ["    gs = wp.float64(3.141592653589793) / (gbR - gaR)",
           "    ph = (gR - gaR) * gs",
           "    if ph < wp.float64(0.0) or ph > wp.float64(3.141592653589793):\n        inside = 0",
@@ -229,37 +229,23 @@ def generate_sampler_function(cdf_fit, name: str) -> str:
           "    if inside == 1:\n        alpha = dtl * wp.float64(2.0) * gdR * gs * wp.sin(tl)",
           "    return wp.vec3(float(tl), float(s * ph), float(alpha))"]
     return "\n".join(L) + "\n"
+
+
+def generate_sampler_function(cdf_fit, name: str) -> str:
+    """``@wp.func name(theta_v, mu, tau) -> vec3(theta_l, phi_l, alpha)`` for a verified fit:
+    the endpoint-normalized map of :meth:`fit.cdf_fit.CDFFit.sample`, float64, unrolled."""
+    L = ["@wp.func", f"def {name}(theta_v: float, mu: float, tau: float) -> wp.vec3:",
+         f"    # generated rational inverse CDFs of {cdf_fit.name!r}",
+         "    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))",
+         "    m = wp.float64(mu)"]
+    return _emit_maps(L, cdf_fit.theta, cdf_fit.phi, ["tv"], ["tv"])
 
 
 def _row_function(F, G, name: str) -> str:
     """``@wp.func name(mu, tau) -> vec3(theta_l, phi_l, alpha)`` of one row of the rows layout
     (:mod:`fit.cdf_rows`): univariate F_v(mu), bivariate G_v(theta_l, u), same normalisation."""
-    from fit.cdf_fit import restrict_rf
-
-    f0 = float(F(np.zeros((1, 1)))[0])
-    f1 = float(F(np.ones((1, 1)))[0])
     L = ["@wp.func", f"def {name}(mu: float, tau: float) -> wp.vec3:", "    m = wp.float64(mu)"]
-    _emit_rf(L, "f", F, ["m"], 0)
-    L += [f"    fs = {_lit(HALF_PI_F / (f1 - f0))}",
-          f"    tl = (fR - {_lit(f0)}) * fs",
-          "    dtl = fdR * fs",
-          "    inside = 1",
-          "    if tl < wp.float64(0.0) or tl > wp.float64(1.5707963267948966):\n        inside = 0",
-          "    tl = wp.clamp(tl, wp.float64(0.0), wp.float64(1.5707963267948966))",
-          "    s = wp.float64(1.0)",
-          "    if tau < 0.5:\n        s = wp.float64(-1.0)",
-          "    u = wp.float64(wp.abs(2.0 * tau - 1.0))"]
-    _emit_rf(L, "g", G, ["tl", "u"], 1)
-    _emit_rf(L, "ga", restrict_rf(G, 1, 0), ["tl"], 0, deriv=False)
-    _emit_rf(L, "gb", restrict_rf(G, 1, 1), ["tl"], 0, deriv=False)
-    L += ["    gs = wp.float64(3.141592653589793) / (gbR - gaR)",
-          "    ph = (gR - gaR) * gs",
-          "    if ph < wp.float64(0.0) or ph > wp.float64(3.141592653589793):\n        inside = 0",
-          "    ph = wp.clamp(ph, wp.float64(0.0), wp.float64(3.141592653589793))",
-          "    alpha = wp.float64(0.0)",
-          "    if inside == 1:\n        alpha = dtl * wp.float64(2.0) * gdR * gs * wp.sin(tl)",
-          "    return wp.vec3(float(tl), float(s * ph), float(alpha))"]
-    return "\n".join(L) + "\n"
+    return _emit_maps(L, F, G, [], [])
 
 
 def generate_rows_sampler_function(cdf_fit, name: str) -> str:
