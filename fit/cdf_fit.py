@@ -144,6 +144,21 @@ def normalized_map(f: RationalFunction, var: int, x, span: float):
     return span * (f(x) - f0) / den, span * f.derivative(x, var) / den
 
 
+def sample_maps(theta_map, phi_map, mu, tau):
+    """``(theta_l, phi_l, alpha)`` from normalized maps ``theta_map(mu) -> (theta_l, dtheta/dmu)``
+    and ``phi_map(theta_l, u) -> (|phi_l|, d|phi_l|/du)``: u = |2 tau - 1|, the sign of phi_l
+    from tau < 1/2, alpha = dtheta/dmu * 2 d|phi|/du * sin(theta_l), 0 where a clamp acts."""
+    tl, dF = theta_map(mu)
+    s = np.where(tau < 0.5, -1.0, 1.0)
+    u = np.abs(2.0 * tau - 1.0)
+    ok = (tl >= 0) & (tl <= HALF_PI)
+    tl = np.clip(tl, 0.0, HALF_PI)
+    ph, dG = phi_map(tl, u)
+    ok &= (ph >= 0) & (ph <= np.pi)
+    pl = s * np.clip(ph, 0.0, np.pi)
+    return tl, pl, np.where(ok, dF * 2.0 * dG * np.sin(tl), 0.0)
+
+
 def _certify_positive(poly: RationalFunction | None) -> bool:
     if poly is None:
         return False
@@ -403,15 +418,8 @@ class CDFFit:
             raise ValueError("no rational fit (fallback); use .table")
         tv, mu, tau = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(mu, float),
                                           np.asarray(tau, float))
-        tl, dF = self._theta_map(tv, mu)
-        s = np.where(tau < 0.5, -1.0, 1.0)
-        u = np.abs(2.0 * tau - 1.0)
-        ok = (tl >= 0) & (tl <= HALF_PI)
-        tl = np.clip(tl, 0.0, HALF_PI)
-        ph, dG = self._phi_map(tv, tl, u)
-        ok &= (ph >= 0) & (ph <= np.pi)
-        pl = s * np.clip(ph, 0.0, np.pi)
-        alpha = np.where(ok, dF * 2.0 * dG * np.sin(tl), 0.0)
+        tl, pl, alpha = sample_maps(lambda m: self._theta_map(tv, m), lambda t, u: self._phi_map(tv, t, u),
+                                    mu, tau)
         tab = self._table_rows(tv)
         if tab.any():
             t2, p2, pdf = self.table.sample(tv[tab], mu[tab], tau[tab])
@@ -684,7 +692,7 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
         return deadline is not None and time.perf_counter() > deadline
 
     if layout == "rows":
-        return _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows_kw, t0)
+        return _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows_kw, t0, evaluate)
     if layout != "global":
         raise ValueError(f"layout must be 'rows' or 'global', not {layout!r}")
     F = G = None
@@ -734,10 +742,10 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
                   fit_info=info, name=name, source=source or {"file": "", "sha256": ""})
 
 
-def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows_kw, t0) -> CDFFit:
+def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows_kw, t0, evaluate) -> CDFFit:
     from .cdf_rows import fit_rows
 
-    rows, info = fit_rows(table, log=log, deadline=deadline, **(rows_kw or {}))
+    rows, info = fit_rows(table, log=log, deadline=deadline, evaluate=evaluate, **(rows_kw or {}))
     info.update(layout="rows", fitter="fit.fitter.IntervalRationalFitter", time_limit_s=time_limit_s,
                 time_limit_reached=bool(deadline is not None and time.perf_counter() > deadline),
                 time_s=time.perf_counter() - t0)
@@ -748,10 +756,10 @@ def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows
                                       if info["time_limit_reached"] else "")
     elif n_ok < n:
         why = sorted({r.get("reason", "?") for r, f in zip(info["rows"], rows) if f is None})
-        reason = (f"verified on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with "
+        reason = (f"rational on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with "
                   f"the table ({'; '.join(why)})")
     else:
-        reason = f"verified on all {n} view rows: monotone, covering, no poles"
+        reason = f"rational on all {n} view rows: verified monotone, covering, no poles"
     log(f"  {reason}")
     return CDFFit(table=table, table_params=params, theta=None, phi=None,
                   verification={"rows": [r.get("verification", {}) for r in info["rows"]]},
@@ -773,7 +781,7 @@ def verify(fit: CDFFit) -> CDFFit:
         n_ok = sum(r is not None for r in fit.rows)
         fit.verification = {"rows": vs}
         fit.fallback = n_ok == 0
-        fit.reason = (f"verified on {n_ok}/{len(fit.rows)} view rows (others sampled with the table)"
+        fit.reason = (f"rational on {n_ok}/{len(fit.rows)} view rows (others sampled with the table)"
                       if n_ok else "no row verified")
         return fit
     """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback."""

@@ -40,7 +40,8 @@ from .rational import RationalFunction
 HALF_PI = 0.5 * np.pi
 ROW_VERIFY = {"theta": 2049, "phi": (65, 513)}
 ROW_DEFAULTS = dict(delta_theta=0.004, delta_phi=0.01, n_mu=65, n_theta_l=17, n_u=17,
-                    max_degree_theta=10, max_degree_phi=8, row_time_limit=20.0)
+                    max_degree_theta=10, max_degree_phi=8, row_time_limit=20.0,
+                    max_variance_ratio=1.2, gate_samples=32768)
 
 
 def _cheb01(n: int) -> np.ndarray:
@@ -158,12 +159,51 @@ def fit_row(table: CDFTable, v: int, delta_theta: float, delta_phi: float, n_mu:
     return F, G, info
 
 
-def fit_rows(table: CDFTable, log=None, deadline: float | None = None, **kw):
+def row_variance_ratio(table: CDFTable, F: RationalFunction, G: RationalFunction, evaluate, v: int,
+                       n: int = 32768, seed: int = 0) -> dict:
+    """Variance per sample of the derivative estimator of the luminance albedo integral
+    rho cos dw with row ``v``'s rational maps, divided by the tabulated sampler's, at the row's
+    view angle ``table.theta_v[v]`` (same n uniform (mu, tau) pairs for both, fixed seed).
+    ``evaluate(wi (N, 3), wo (3,)) -> (N, 3)`` RGB BRDF in 1/sr (the material tabulated)."""
+    from .angles import spherical_to_direction
+    from .cdf_fit import sample_maps
+    from .cdf_table import LUMINANCE
+
+    rng = np.random.default_rng(seed)
+    mu, tau = rng.random(n), rng.random(n)
+    tv = float(table.theta_v[v])
+    wo = spherical_to_direction(tv, 0.0)
+
+    def estimates(tl, pl, w):
+        f = np.asarray(evaluate(spherical_to_direction(tl, pl), wo), float) @ LUMINANCE
+        return f * np.cos(tl) * w
+
+    tl, pl, alpha = sample_maps(lambda m: normalized_row_map(F, m[:, None], HALF_PI),
+                                lambda t, u: normalized_row_map(G, np.stack([t, u], -1), np.pi), mu, tau)
+    e_r = estimates(tl, pl, alpha)
+    tl, pl, pdf = table.sample(np.full(n, tv), mu, tau)
+    e_t = estimates(tl, pl, np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0))
+    var_r, var_t = float(np.var(e_r)), float(np.var(e_t))
+    ratio = var_r / var_t if var_t > 0 else (1.0 if var_r == 0 else np.inf)
+    return {"theta_v_deg": float(np.degrees(tv)), "variance_rational": var_r, "variance_table": var_t,
+            "ratio": float(ratio), "mean_rational": float(np.mean(e_r)), "mean_table": float(np.mean(e_t)),
+            "n": n}
+
+
+def fit_rows(table: CDFTable, log=None, deadline: float | None = None, evaluate=None, **kw):
     """Per-row fits of every table row: ``(rows, info)`` with ``rows[v] = (F_v, G_v)`` or None
     (row sampled with the table; ``info["rows"][v]["reason"]`` says why). Rows not started
-    before ``deadline`` (a ``time.perf_counter()`` value) are None with reason "time limit"."""
+    before ``deadline`` (a ``time.perf_counter()`` value) are None with reason "time limit".
+
+    Variance gate: with ``evaluate`` (the tabulated material), a verified row whose derivative
+    estimator has more than ``max_variance_ratio`` times the tabulated sampler's variance
+    (:func:`row_variance_ratio`, ``gate_samples`` samples at the row's view angle) is ALSO
+    sampled with the table: a verified map is unbiased whatever its shape, but a map that
+    follows the lobe worse than the table costs more samples than it saves. ``None`` or
+    ``inf`` disables the gate."""
     log = log or (lambda s: None)
     p = dict(ROW_DEFAULTS, **kw)
+    gate, n_gate = p.pop("max_variance_ratio"), p.pop("gate_samples")
     rows, infos = [], []
     for v in range(table.n_v):
         if table.row_fallback[v]:
@@ -179,12 +219,19 @@ def fit_rows(table: CDFTable, log=None, deadline: float | None = None, **kw):
             lim = max(0.0, min(lim or np.inf, deadline - time.perf_counter()))
         F, G, info = fit_row(table, v, **dict(p, row_time_limit=lim))
         ok = info["verification"].get("ok", False)
+        if ok and evaluate is not None and gate is not None and np.isfinite(gate):
+            info["variance"] = vr = row_variance_ratio(table, F, G, evaluate, v, n=n_gate)
+            if not vr["ratio"] <= gate:
+                ok = False
+                info["reason"] = f"variance above {gate:g}x the table's"
         rows.append((F, G) if ok else None)
         infos.append(info)
         log(f"  row {v:2d} (theta_v {np.degrees(table.theta_v[v]):5.1f} deg): theta {tuple(info['theta']['degrees'])}"
             f" phi {tuple(info['phi']['degrees'])}, {info['theta']['n_coefficients'] + info['phi']['n_coefficients']}"
             f" coefficients, {info['time_s']:.1f} s, " + ("verified" if ok else f"TABLE ({info.get('reason')})")
+            + (f", variance {info['variance']['ratio']:.2f}x table" if "variance" in info else "")
             + "".join(f", {w} refit margin {info[w]['monotone_refit'].get('delta', float('nan')):.2f}"
                       for w in ("theta", "phi") if "monotone_refit" in info.get(w, {})))
     n_ok = sum(r is not None for r in rows)
+    p.update(max_variance_ratio=gate, gate_samples=n_gate, variance_gate=evaluate is not None)
     return rows, {"params": p, "rows": infos, "verified_rows": n_ok, "n_rows": table.n_v}

@@ -39,11 +39,13 @@ def lambert_fit():
 
 @pytest.fixture(scope="module")
 def rows_fit():
-    """Rows layout (fit.cdf_rows) on satin_rosaline: per-row fits, some rows on the table."""
+    """Rows layout (fit.cdf_rows) on satin_rosaline: per-row fits, some rows on the table
+    (variance gate off, so that every verified map is kept and tested)."""
     from fit.io import load_measured
 
     b = load_measured(data_file("rgl/satin_rosaline_rgb.bsdf"))
-    fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8))
+    fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8),
+                  rows_kw=dict(max_variance_ratio=None))
     assert fit.layout == "rows" and not fit.fallback, fit.reason
     return b, fit
 
@@ -278,9 +280,10 @@ def test_monotone_refit_repairs_a_fold_and_stays_unbiased(lambert_fit):
 def test_rational_sampler_on_rgl_material(rgl, name):
     """The rational inverse CDFs of a measured material (fitted, repaired where they fold,
     verified): chi-square against the sampler's own density and the derivative estimator of
-    the luminance albedo against quadrature (3 sigma + quadrature uncertainty), theta_v 0/45/85."""
+    the luminance albedo against quadrature (3 sigma + quadrature uncertainty), theta_v 0/45/85.
+    The variance gate is off here so that the maps themselves are tested on every row."""
     brdf, table = rgl[name]
-    fit = fit_cdf(brdf.evaluate, name=name, table=table)
+    fit = fit_cdf(brdf.evaluate, name=name, table=table, rows_kw=dict(max_variance_ratio=None))
     assert not fit.fallback, fit.reason
     rng = np.random.default_rng(5)
     n = 60_000
@@ -341,3 +344,46 @@ def test_rows_layout_warp_equals_numpy(rows_fit):
     tl, pl, alpha = fit.sample(tv, xi[:, 0], xi[:, 1])
     np.testing.assert_allclose(wi, spherical_to_direction(tl, pv + pl), atol=5e-4)
     np.testing.assert_allclose(w, alpha, rtol=3e-3, atol=1e-5)
+
+
+def test_rows_variance_gate_sends_costly_rows_to_the_table(rows_fit):
+    """The variance gate measures what the sampler does: its ratio equals the ratio of the
+    variances of the NumPy reference samplers (rational row vs table) on the same (mu, tau);
+    rows above the limit are sampled with the table and say so; the gate off keeps them."""
+    from fit.angles import spherical_to_direction as sph
+    from fit.cdf_rows import row_variance_ratio
+    from fit.cdf_table import LUMINANCE
+
+    b, ungated = rows_fit
+    n = 8192
+    ratios = {}
+    for v, r in enumerate(ungated.rows):
+        if r is None:
+            continue
+        g = row_variance_ratio(ungated.table, *r, b.evaluate, v, n=n, seed=3)
+        rng = np.random.default_rng(3)
+        mu, tau = rng.random(n), rng.random(n)
+        tv = ungated.table.theta_v[v]
+        wo = sph(tv, 0.0)
+        tl, pl, a = ungated.sample(np.full(n, tv), mu, tau)
+        e_r = (b.evaluate(sph(tl, pl), wo) @ LUMINANCE) * np.cos(tl) * a
+        tl, pl, pdf = ungated.table.sample(np.full(n, tv), mu, tau)
+        e_t = (b.evaluate(sph(tl, pl), wo) @ LUMINANCE) * np.cos(tl) / pdf
+        assert g["ratio"] == pytest.approx(np.var(e_r) / np.var(e_t), rel=1e-9)
+        # both estimators are unbiased for the same integral: means agree within 4 sigma
+        sd = np.sqrt((np.var(e_r) + np.var(e_t)) / n)
+        assert abs(g["mean_rational"] - g["mean_table"]) < 4 * sd + 1e-12
+        ratios[v] = g["ratio"]
+    # a limit between the smallest and largest measured ratio splits the rows
+    lim = float(np.median(list(ratios.values())))
+    gated = fit_cdf(b.evaluate, name="satin", table=ungated.table,
+                    rows_kw=dict(max_variance_ratio=lim, gate_samples=8192))
+    infos = gated.fit_info["rows"]
+    for v, r in enumerate(gated.rows):
+        if "variance" in infos[v]:
+            ratio = infos[v]["variance"]["ratio"]
+            assert (r is None) == (not ratio <= lim)
+            if r is None:
+                assert infos[v]["reason"] == f"variance above {lim:g}x the table's"
+    assert any(r is None and "variance" in i for r, i in zip(gated.rows, infos))
+    assert "variance above" in gated.reason

@@ -111,9 +111,26 @@ def view_angles(wo: wp.vec3) -> wp.vec2:
 
 
 @wp.func
-def local_dir(theta_l: float, phi: float) -> wp.vec3:
+def view_frame(wo: wp.vec3) -> wp.vec3:
+    """(theta_v, cos phi_v, sin phi_v) of the local view direction (phi_v = 0 at the pole):
+    the view's azimuth as a rotation, so that sampled directions need no atan2."""
+    rxy = wp.sqrt(wo[0] * wo[0] + wo[1] * wo[1])
+    c = 1.0
+    s = 0.0
+    if rxy > 1.0e-12:
+        c = wo[0] / rxy
+        s = wo[1] / rxy
+    return wp.vec3(wp.atan2(rxy, wo[2]), c, s)
+
+
+@wp.func
+def local_dir(theta_l: float, phi_l: float, vf: wp.vec3) -> wp.vec3:
+    """Direction at polar angle theta_l and azimuth phi_l measured from the view's azimuth
+    (``vf`` from :func:`view_frame`)."""
     st = wp.sin(theta_l)
-    return wp.vec3(st * wp.cos(phi), st * wp.sin(phi), wp.cos(theta_l))
+    cp = wp.cos(phi_l)
+    sp = wp.sin(phi_l)
+    return wp.vec3(st * (cp * vf[1] - sp * vf[2]), st * (sp * vf[1] + cp * vf[2]), wp.cos(theta_l))
 
 
 @wp.func
@@ -134,9 +151,29 @@ def _lit(x: float) -> str:
     return f"wp.float64({float(x)!r})"
 
 
-def _emit_rf(L, pre, f, xs, dvar, deriv=True):
-    """Lines computing ``{pre}_P/Q/dP/dQ`` of RationalFunction ``f`` at float64 expressions
-    ``xs`` (one per variable), derivative with respect to variable ``dvar``."""
+def _tree_sum(terms) -> str:
+    """A balanced sum of expression strings: independent partial sums instead of one serial
+    chain (the compiler may not reassociate floating-point adds, and a 45-term chain is a
+    45-add latency chain)."""
+    if not terms:
+        return "wp.float64(0.0)"
+    while len(terms) > 1:
+        terms = [f"({terms[i]} + {terms[i + 1]})" if i + 1 < len(terms) else terms[i]
+                 for i in range(0, len(terms), 2)]
+    return terms[0]
+
+
+def _emit_rf(L, pre, f, xs, dvar, ends=False):
+    """Lines computing the polynomials ``{pre}P``, ``{pre}Q`` of RationalFunction ``f`` at
+    float64 expressions ``xs`` (one per variable) and their derivatives ``{pre}dP``,
+    ``{pre}dQ`` in variable ``dvar``; with ``ends`` also ``{pre}Plo, {pre}Qlo`` /
+    ``{pre}Phi, {pre}Qhi``, the polynomials with ``dvar`` at the lower / upper end of its
+    domain (the endpoint normalisation's f(x|0), f(x|1)).
+
+    Each polynomial is grouped by the power of ``dvar``: ``P = sum_j a_j T_j(t_dvar)`` with
+    ``a_j = sum_i c_ij prod T_i(other variables)``; the derivative is ``sum_j a_j dT_j`` and
+    the ends are ``sum_j a_j (-1)^j`` and ``sum_j a_j`` -- one pass over the coefficients for
+    all four values, balanced sums for instruction-level parallelism."""
     n = f.n_vars
     kmax = [0] * n
     for ex in (f.num_exponents, f.den_exponents):
@@ -150,83 +187,78 @@ def _emit_rf(L, pre, f, xs, dvar, deriv=True):
             L.append(f"    {pre}T{v}_1 = {pre}t{v}")
         for k in range(2, kmax[v] + 1):
             L.append(f"    {pre}T{v}_{k} = wp.float64(2.0) * {pre}t{v} * {pre}T{v}_{k - 1} - {pre}T{v}_{k - 2}")
-    if not deriv:
-        for nm, ex, co in ((f"{pre}P", f.num_exponents, f.num_coef), (f"{pre}Q", f.den_exponents, f.den_coef)):
-            terms = [" * ".join([_lit(c)] + [f"{pre}T{v}_{int(e[v])}" for v in range(n) if e[v] > 0])
-                     for e, c in zip(ex, co) if c != 0.0]
-            L.append(f"    {nm} = wp.float64(0.0)")
-            for i in range(0, len(terms), 8):
-                L.append(f"    {nm} = {nm} + " + " + ".join(terms[i:i + 8]))
-        L.append(f"    {pre}R = {pre}P / {pre}Q")
-        return
-    # derivative table of the dvar: dT_k/dx = k U_{k-1}(t) * 2/(b-a)
+    # derivative table of dvar: dT_k/dx = k U_{k-1}(t) * 2/(b-a)
     a, b = f.domain[dvar]
     sc = 2.0 / (b - a)
-    L.append(f"    {pre}U_0 = wp.float64(1.0)")
     if kmax[dvar] >= 2:
         L.append(f"    {pre}U_1 = wp.float64(2.0) * {pre}t{dvar}")
-    for k in range(2, kmax[dvar]):
+    if kmax[dvar] >= 3:
+        L.append(f"    {pre}U_2 = wp.float64(2.0) * {pre}t{dvar} * {pre}U_1 - wp.float64(1.0)")
+    for k in range(3, kmax[dvar]):
         L.append(f"    {pre}U_{k} = wp.float64(2.0) * {pre}t{dvar} * {pre}U_{k - 1} - {pre}U_{k - 2}")
-    L.append(f"    {pre}D_0 = wp.float64(0.0)")
-    for k in range(1, kmax[dvar] + 1):
-        L.append(f"    {pre}D_{k} = {_lit(k * sc)} * {pre}U_{k - 1}")
 
-    def poly(name, ex, co, deriv):
-        terms = []
+    def dT(k):
+        return _lit(sc) if k == 1 else f"{_lit(k * sc)} * {pre}U_{k - 1}"
+
+    for nm, ex, co in (("P", f.num_exponents, f.num_coef), ("Q", f.den_exponents, f.den_coef)):
+        groups: dict = {}
         for e, c in zip(ex, co):
-            if c == 0.0 or (deriv and e[dvar] == 0):
+            if c == 0.0:
                 continue
-            fac = [_lit(c)]
-            for v in range(n):
-                k = int(e[v])
-                if v == dvar and deriv:
-                    fac.append(f"{pre}D_{k}")
-                elif k > 0:
-                    fac.append(f"{pre}T{v}_{k}")
-            terms.append(" * ".join(fac))
-        L.append(f"    {name} = wp.float64(0.0)")
-        for i in range(0, len(terms), 8):
-            L.append(f"    {name} = {name} + " + " + ".join(terms[i:i + 8]))
+            fac = [_lit(c)] + [f"{pre}T{v}_{int(e[v])}" for v in range(n) if v != dvar and e[v] > 0]
+            groups.setdefault(int(e[dvar]), []).append(" * ".join(fac))
+        for j, terms in sorted(groups.items()):
+            L.append(f"    {pre}{nm}a{j} = {_tree_sum(terms)}")
+        L.append(f"    {pre}{nm} = " + _tree_sum([f"{pre}{nm}a{j}" + (f" * {pre}T{dvar}_{j}" if j else "")
+                                                   for j in sorted(groups)]))
+        L.append(f"    {pre}d{nm} = " + _tree_sum([f"{pre}{nm}a{j} * {dT(j)}" for j in sorted(groups) if j]))
+        if ends:
+            L.append(f"    {pre}{nm}lo = " + _tree_sum([("-" if j % 2 else "") + f"{pre}{nm}a{j}"
+                                                        for j in sorted(groups)]))
+            L.append(f"    {pre}{nm}hi = " + _tree_sum([f"{pre}{nm}a{j}" for j in sorted(groups)]))
 
-    poly(f"{pre}P", f.num_exponents, f.num_coef, False)
-    poly(f"{pre}Q", f.den_exponents, f.den_coef, False)
-    poly(f"{pre}dP", f.num_exponents, f.num_coef, True)
-    poly(f"{pre}dQ", f.den_exponents, f.den_coef, True)
-    L.append(f"    {pre}R = {pre}P / {pre}Q")
-    L.append(f"    {pre}dR = ({pre}dP - {pre}R * {pre}dQ) / {pre}Q")
+
+def _emit_normalized(L, pre, span, ends=None):
+    """Lines of ``{pre}v = span (R - R_lo) / (R_hi - R_lo)`` and its derivative ``{pre}dv``
+    from the polynomials of :func:`_emit_rf` (R = P/Q), with ONE division: with
+    D = P_hi Q_lo - P_lo Q_hi and N = P Q_lo - P_lo Q, value = span N Q_hi / (Q D) and
+    derivative = span (P' Q - P Q') Q_hi Q_lo / (Q^2 D). ``ends = (R_lo, R_hi)`` as numbers
+    when they are constants (univariate F)."""
+    sp = _lit(span)
+    if ends is not None:
+        r0, r1 = ends
+        L += [f"    {pre}inv = wp.float64(1.0) / ({pre}Q * {pre}Q)",
+              f"    {pre}v = {_lit(span / (r1 - r0))} * ({pre}P - {_lit(r0)} * {pre}Q) * {pre}Q * {pre}inv",
+              f"    {pre}dv = {_lit(span / (r1 - r0))} * ({pre}dP * {pre}Q - {pre}P * {pre}dQ) * {pre}inv"]
+        return
+    L += [f"    {pre}inv = wp.float64(1.0) / ({pre}Q * {pre}Q * ({pre}Phi * {pre}Qlo - {pre}Plo * {pre}Qhi))",
+          f"    {pre}v = {sp} * ({pre}P * {pre}Qlo - {pre}Plo * {pre}Q) * {pre}Qhi * {pre}Q * {pre}inv",
+          f"    {pre}dv = {sp} * ({pre}dP * {pre}Q - {pre}P * {pre}dQ) * {pre}Qhi * {pre}Qlo * {pre}inv"]
 
 
 def _emit_maps(L, F, G, f_vars, g_vars):
     """Lines of the endpoint-normalized maps theta_l = F(f_vars..., mu), |phi_l| =
     G(g_vars..., theta_l, u) (CDF variable last) and alpha, ending in ``return vec3(theta_l,
     phi_l, alpha)``; a univariate F gets its end values as constants."""
-    from fit.cdf_fit import restrict_rf
-
-    _emit_rf(L, "f", F, f_vars + ["m"], F.n_vars - 1)
+    _emit_rf(L, "f", F, f_vars + ["m"], F.n_vars - 1, ends=F.n_vars > 1)
+    ends = None
     if F.n_vars == 1:
-        f0, f1 = (float(F(np.full((1, 1), x))[0]) for x in (0.0, 1.0))
-        L += [f"    fs = {_lit(HALF_PI_F / (f1 - f0))}", f"    tl = (fR - {_lit(f0)}) * fs"]
-    else:
-        _emit_rf(L, "fa", restrict_rf(F, F.n_vars - 1, 0), f_vars, 0, deriv=False)
-        _emit_rf(L, "fb", restrict_rf(F, F.n_vars - 1, 1), f_vars, 0, deriv=False)
-        L += ["    fs = wp.float64(1.5707963267948966) / (fbR - faR)", "    tl = (fR - faR) * fs"]
-    L += ["    dtl = fdR * fs",
+        ends = tuple(float(F(np.full((1, 1), x))[0]) for x in (0.0, 1.0))
+    _emit_normalized(L, "f", HALF_PI_F, ends)
+    L += ["    tl = fv",
           "    inside = 1",
           "    if tl < wp.float64(0.0) or tl > wp.float64(1.5707963267948966):\n        inside = 0",
           "    tl = wp.clamp(tl, wp.float64(0.0), wp.float64(1.5707963267948966))",
           "    s = wp.float64(1.0)",
           "    if tau < 0.5:\n        s = wp.float64(-1.0)",
           "    u = wp.float64(wp.abs(2.0 * tau - 1.0))"]
-    k = G.n_vars - 1
-    _emit_rf(L, "g", G, g_vars + ["tl", "u"], k)
-    _emit_rf(L, "ga", restrict_rf(G, k, 0), g_vars + ["tl"], 0, deriv=False)
-    _emit_rf(L, "gb", restrict_rf(G, k, 1), g_vars + ["tl"], 0, deriv=False)
-    L += ["    gs = wp.float64(3.141592653589793) / (gbR - gaR)",
-          "    ph = (gR - gaR) * gs",
+    _emit_rf(L, "g", G, g_vars + ["tl", "u"], G.n_vars - 1, ends=True)
+    _emit_normalized(L, "g", np.pi)
+    L += ["    ph = gv",
           "    if ph < wp.float64(0.0) or ph > wp.float64(3.141592653589793):\n        inside = 0",
           "    ph = wp.clamp(ph, wp.float64(0.0), wp.float64(3.141592653589793))",
           "    alpha = wp.float64(0.0)",
-          "    if inside == 1:\n        alpha = dtl * wp.float64(2.0) * gdR * gs * wp.sin(tl)",
+          "    if inside == 1:\n        alpha = fdv * wp.float64(2.0) * gdv * wp.sin(tl)",
           "    return wp.vec3(float(tl), float(s * ph), float(alpha))"]
     return "\n".join(L) + "\n"
 

@@ -78,13 +78,13 @@ def bsdf_sample(mats: M.Materials, m: int, sampler: int, wo: wp.vec3, xi: wp.vec
         return wp.vec4(w[0], w[1], w[2], 1.0 / S.pdf_uniform_hemisphere(w))
     if sampler >= M.SAMPLER_TABULATED:
         b = m * M.N_CDF_INFO
-        va = CS.view_angles(wo)
+        va = CS.view_frame(wo)
         r = mats.cdf_info[b + 5]
         if r >= 0 and (sampler == M.SAMPLER_RATIONAL or sampler == M.SAMPLER_RATIONAL_DERIV
                        or sampler == M.SAMPLER_MIS_RATIONAL):
             q = rational_cdf_sample(r, va[0], xi[0], xi[1])
             if q[2] >= 0.0:                  # alpha < 0: a table row of the rows layout
-                wl = CS.local_dir(q[0], va[1] + q[1])
+                wl = CS.local_dir(q[0], q[1], va)
                 wgt = q[2]                   # derivative estimator: alpha
                 if sampler == M.SAMPLER_RATIONAL and q[2] > 0.0:
                     pdf = 1.0 / q[2]         # standard estimator: pdf of the map (eq. 3)
@@ -93,7 +93,7 @@ def bsdf_sample(mats: M.Materials, m: int, sampler: int, wo: wp.vec3, xi: wp.vec
         q = CS.tab_sample(mats.cdf_t, mats.cdf_p, mats.cdf_info[b], mats.cdf_info[b + 1],
                           mats.cdf_info[b + 2], mats.cdf_info[b + 3], mats.cdf_info[b + 4],
                           va[0], xi[0], xi[1])
-        wl = CS.local_dir(q[0], va[1] + q[1])
+        wl = CS.local_dir(q[0], q[1], va)
         wgt = 0.0
         if q[2] > 0.0:
             wgt = 1.0 / q[2]
