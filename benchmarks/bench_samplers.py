@@ -2,13 +2,19 @@
 
 1. Samples per second of each sampler alone in Warp (a kernel that only samples: tabulated
    binary search vs generated rational inverse CDFs vs cosine), on the Warp CPU device unless
-   --device says otherwise.
+   --device says otherwise, for view directions in two orders: "coherent" (sorted by theta_v,
+   as consecutive samples of a render tile see nearby view angles) and "random" (every
+   sample another view row: worst case for the per-row generated code and the branch
+   predictor). Per launch the best of 3.
 2. Variance per sample of the estimator of the luminance directional albedo
    integral rho cos dw at theta_v = 0, 45, 85 deg (NumPy), for cosine, tabulated, and the
    rational sampler where its fit is verified (else "fallback"), and the efficiency
    1 / (variance * time per sample) with the Warp sampling times.
 
 Usage: python benchmarks/bench_samplers.py [--n 1000000] [--materials a,b] [--cdf-dir DIR]
+       [--max-variance-ratio R | none]
+(``--max-variance-ratio none`` fits without the variance gate of fit.cdf_rows, so every
+verified row is rational: the speed of the rational rows themselves.)
 (``--cdf-dir``: rbrdf-cdf files named MATERIAL.json from `rbrdf-fit cdf`; without them the
 rational fits are computed, ~1-2 min per material.)
 """
@@ -25,11 +31,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 
-def warp_rate(renderer, name, sampler, n, reps=3):
+def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
     rng = np.random.default_rng(0)
     from fit.angles import spherical_to_direction
 
-    wo = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+    tv = np.arccos(rng.random(n))
+    wo = spherical_to_direction(np.sort(tv) if order == "coherent" else tv, rng.random(n) * 2 * np.pi)
     xi = rng.random((n, 2))
     renderer.sample_material(name, wo[:1000], xi[:1000], sampler)  # warm up
     wp = renderer.wp
@@ -85,6 +92,8 @@ def main(argv=None):
                                            "cc_ibiza_sunset_rgb,cc_iris_purple_gem_rgb,colodur_napoli_4f_rgb")
     ap.add_argument("--cdf-dir", default=None)
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--max-variance-ratio", default=None,
+                    help="variance gate of the rows layout (default: fit.cdf_rows default; 'none': off)")
     args = ap.parse_args(argv)
     import warp as wp
 
@@ -102,14 +111,16 @@ def main(argv=None):
         if name == "lambert":
             ev = lambert((0.8, 0.6, 0.4))
             fit = fit_cdf(ev, name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32),
-                          phi_kw=dict(degrees=(2, 1)), refinements=0)
+                          phi_kw=dict(degrees=(2, 1)), refinements=0, layout="global")
             spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler="rational" if not fit.fallback else "tabulated")
         else:
             b = load_measured(DATA / "rgl" / f"{name}.bsdf")
             ev = b.evaluate
             cdf = Path(args.cdf_dir) / f"{name}.json" if args.cdf_dir else None
             t0 = time.perf_counter()
-            fit = load(cdf) if cdf and cdf.exists() else fit_cdf(ev, name=name)
+            gate = args.max_variance_ratio
+            rows_kw = {} if gate is None else {"max_variance_ratio": None if gate == "none" else float(gate)}
+            fit = load(cdf) if cdf and cdf.exists() else fit_cdf(ev, name=name, rows_kw=rows_kw)
             print(f"{name}: fit {time.perf_counter() - t0:.1f} s, fallback {fit.fallback} ({fit.reason})")
             spec = MaterialSpec(name="m", type="measured", data=b,
                                 sampler="rational" if not fit.fallback else "tabulated")
@@ -117,11 +128,18 @@ def main(argv=None):
         spec.cdf = fit
         r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=2, spp=1), device=args.device)
         r.compile()
-        rates = {s: warp_rate(r, "m", s, args.n) for s in ("cosine", "tabulated")}
-        if not fit.fallback:
-            rates["rational"] = warp_rate(r, "m", "rational-derivative", args.n)
-        print(f"{name}: Warp samples/s " + ", ".join(f"{k} {v / 1e6:.2f} M" for k, v in rates.items())
-              + (f"; rational/tabulated {rates['rational'] / rates['tabulated']:.2f}x" if "rational" in rates else ""))
+        if fit.rows is not None:
+            g = [i["variance"]["ratio"] for i in fit.fit_info["rows"] if "variance" in i]
+            print(f"{name}: rational on {sum(x is not None for x in fit.rows)}/{len(fit.rows)} view rows"
+                  + (f"; variance gate, rational / tabulated per verified row: median {np.median(g):.2f}, "
+                     f"range {min(g):.2f}-{max(g):.2f} ({len(g)} rows)" if g else ""))
+        for order in ("random", "coherent"):   # the coherent rates (last) go into the efficiencies
+            rates = {s: warp_rate(r, "m", s, args.n, order=order) for s in ("cosine", "tabulated")}
+            if not fit.fallback:
+                rates["rational"] = warp_rate(r, "m", "rational-derivative", args.n, order=order)
+            print(f"{name}: Warp samples/s ({order} view angles) "
+                  + ", ".join(f"{k} {v / 1e6:.2f} M" for k, v in rates.items())
+                  + (f"; rational/tabulated {rates['rational'] / rates['tabulated']:.2f}x" if "rational" in rates else ""))
         for tv, out in variances(ev, fit).items():
             base = out["cosine"][1] / rates["cosine"]
             parts = []

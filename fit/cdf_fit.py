@@ -403,6 +403,16 @@ class CDFFit:
                 p[k], d[k] = normalized_row_map(self.rows[r][1], np.stack([tl[k], u[k]], -1), np.pi)
         return p, d
 
+    def inverse_theta(self, theta_v, mu) -> np.ndarray:
+        """theta_l = the rational CDF^-1_v(mu) (rad); NaN on table rows of the rows layout."""
+        tv, mu = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(mu, float))
+        return self._theta_map(tv, mu)[0]
+
+    def inverse_phi(self, theta_v, theta_l, u) -> np.ndarray:
+        """|phi_l| = the rational CDF^-1_v(u | theta_l) (rad, u = |2 tau - 1|); NaN on table rows."""
+        tv, tl, u = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_v, theta_l, u)))
+        return self._phi_map(tv, tl, u)[0]
+
     def _table_rows(self, tv) -> np.ndarray:
         """True where the sample's row is sampled with the table (rows layout, failed row)."""
         if self.rows is None:
@@ -751,11 +761,11 @@ def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows
                 time_s=time.perf_counter() - t0)
     n_ok, n = info["verified_rows"], info["n_rows"]
     fb = n_ok == 0
+    why = sorted({r.get("reason", "?") for r, f in zip(info["rows"], rows) if f is None})
     if fb:
-        reason = "no row verified" + (f" (fitting time limit {time_limit_s:g} s reached)"
-                                      if info["time_limit_reached"] else "")
+        reason = f"no row rational ({'; '.join(why)})" + (f" (fitting time limit {time_limit_s:g} s reached)"
+                                                          if info["time_limit_reached"] else "")
     elif n_ok < n:
-        why = sorted({r.get("reason", "?") for r, f in zip(info["rows"], rows) if f is None})
         reason = (f"rational on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with "
                   f"the table ({'; '.join(why)})")
     else:

@@ -1,7 +1,8 @@
 """Plots of the sampling densities and inverse CDFs (``rbrdf-fit plot-cdf``), as in the
 supplementary figures 6-9: PDF_v(theta_l) and CDF^-1_v(mu) for theta_v = 0, 45, 85 deg, and slices
 of PDF_v(phi_l | theta_l) and CDF^-1_v(tau | theta_l) for several theta_v (tabulated: solid;
-rational fit, when verified: dashed)."""
+rational fit, when verified: dashed; in the rows layout only view rows with a rational fit
+show a dashed curve, the others are sampled with the table)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,7 +21,7 @@ def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     t = fit.table
-    rational = fit.theta is not None and fit.phi is not None and not fit.fallback
+    rational = not fit.fallback
     files = []
     fig, ax = plt.subplots(1, 2, figsize=(10, 4))
     mu = np.linspace(0, 1, 401)
@@ -30,7 +31,9 @@ def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:
         ax[0].stairs(p, np.degrees(e), color=c, label=f"theta_v = {tv_deg} deg")
         ax[1].plot(mu, np.degrees(inverse_cdf_theta(t, [tv], mu)[0]), c, label=f"table, {tv_deg} deg")
         if rational:
-            ax[1].plot(mu, np.degrees(fit.sample(tv, mu, 0.75)[0]), c + "--", label=f"rational, {tv_deg} deg")
+            th = fit.inverse_theta(tv, mu)
+            if np.isfinite(th).any():
+                ax[1].plot(mu, np.degrees(th), "k--", lw=0.9, label=f"rational, {tv_deg} deg")
     ax[0].set(xlabel="theta_l (deg)", ylabel="PDF_v(theta_l) (1/rad)", title=f"{fit.name}: PDF_v(theta_l)")
     ax[1].set(xlabel="mu", ylabel="theta_l (deg)", title="CDF^-1_v(mu)")
     ax[0].legend(); ax[1].legend(fontsize=7)
@@ -38,7 +41,7 @@ def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:
     fig.tight_layout(); fig.savefig(f1, dpi=100); plt.close(fig)
     files.append(f1)
 
-    tvs = (0, 30, 60, 85)
+    tvs = (0, 20, 45, 85)
     fig, ax = plt.subplots(2, len(tvs), figsize=(4 * len(tvs), 7))
     tau = np.linspace(0, 1, 401)
     for k, tv_deg in enumerate(tvs):
@@ -51,12 +54,10 @@ def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:
             ph = np.sign(tau - 0.5) * inverse_cdf_phi(t, [tv], [tl], u)[0, 0]
             ax[1, k].plot(tau, np.degrees(ph), c, label=f"table, theta_l = {tl_deg}")
             if rational:
-                tlv = np.full_like(tau, tl)
-                Y = np.stack([np.full_like(tau, tv), tlv, u], -1)
-                from .cdf_fit import normalized_map
-
-                g = normalized_map(fit.phi, 2, Y, np.pi)[0]
-                ax[1, k].plot(tau, np.degrees(np.sign(tau - 0.5) * g), c + "--")
+                g = fit.inverse_phi(tv, tl, u)
+                if np.isfinite(g).any():
+                    ax[1, k].plot(tau, np.degrees(np.sign(tau - 0.5) * g), "k--", lw=0.9,
+                                  label=f"rational, theta_l = {tl_deg}")
         ax[0, k].set(title=f"PDF_v(phi_l | theta_l), theta_v = {tv_deg} deg", xlabel="phi_l (deg)")
         ax[1, k].set(title=f"CDF^-1_v(tau | theta_l), theta_v = {tv_deg} deg", xlabel="tau", ylabel="phi_l (deg)")
         ax[0, k].legend(fontsize=7); ax[1, k].legend(fontsize=7)

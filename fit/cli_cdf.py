@@ -63,9 +63,11 @@ def _cmd_plot(args) -> int:
 def register(sub) -> None:
     p = sub.add_parser("cdf", help="tabulate the sampling CDFs and fit rational inverse CDFs",
                        description="Tabulate CDF^-1 of rho cos (luminance) per theta_v row, fit the "
-                                   "bivariate/trivariate rational inverse CDFs, verify them "
-                                   "(Q > 0 certificate, monotone on a dense grid, exact endpoints) "
-                                   "and write a versioned rbrdf-cdf JSON (fallback flag included).")
+                                   "rational inverse CDFs per view row (univariate theta map, bivariate "
+                                   "phi map), verify them (Q > 0 certificate, monotone on a dense grid, "
+                                   "exact endpoints), send rows that fail or whose derivative estimator "
+                                   "exceeds 1.2x the table's variance to the table, and write a "
+                                   "versioned rbrdf-cdf JSON (fallback flag and per-row reasons included).")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
     p.add_argument("--out", required=True, help="output .json")
     _add_table_args(p)
