@@ -26,7 +26,11 @@ the normalised map > 0 on a dense grid: 2049 mu values for F, 65 x 513 (theta_l,
 A row whose fit fails (infeasible intervals with a fold left, no certificate, or the time
 limit) is recorded as ``None`` with its reason and SAMPLED WITH THE TABLE for that row -- the
 density is then the table's, exact, so nothing is biased; the CLI and renderer print how many
-rows fell back.
+rows fell back. The same happens to a verified row whose derivative estimator has more than
+``max_variance_ratio`` (default 1.2) times the tabulated sampler's variance at the row's view
+angle (the variance gate, :func:`row_variance_ratio`; measured at fit time with the material's
+own BRDF): a verified map is unbiased, but one that follows the lobe worse than the table costs
+more samples than it saves.
 """
 from __future__ import annotations
 
