@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cdf_table import CDFTable, inverse_cdf_phi, inverse_cdf_theta, tabulate
+from .cdf_table import CDFTable, inverse_cdf_phi, inverse_cdf_theta, inverse_pdf, tabulate
 from .errors import BRDFFileError
 from .rational import RationalFunction
 
@@ -434,7 +434,7 @@ class CDFFit:
         if tab.any():
             t2, p2, pdf = self.table.sample(tv[tab], mu[tab], tau[tab])
             tl, pl, alpha = tl.copy(), pl.copy(), alpha.copy()
-            tl[tab], pl[tab], alpha[tab] = t2, p2, np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
+            tl[tab], pl[tab], alpha[tab] = t2, p2, inverse_pdf(pdf)
         return tl, pl, alpha
 
     def theta_cdf(self, theta_v, theta_l, iters: int = 40) -> np.ndarray:
@@ -451,9 +451,9 @@ class CDFFit:
         if tab.any():
             edges = np.linspace(0.0, HALF_PI, self.table.n_t + 1)
             v = self.table.row(tv)
-            out = out.copy()
-            for k in np.flatnonzero(tab.ravel()):
-                out.flat[k] = np.interp(t.flat[k], edges, self.table.cdf_theta[v.flat[k]])
+            for r in np.unique(v[tab]):
+                k = tab & (v == r)
+                out[k] = np.interp(t[k], edges, self.table.cdf_theta[r])
         return np.where(t >= HALF_PI, 1.0, np.where(t <= 0, 0.0, out))
 
     def phi_cdf_half(self, theta_v, theta_l, phi_abs, iters: int = 40) -> np.ndarray:
@@ -471,9 +471,9 @@ class CDFFit:
             edges = np.linspace(0.0, np.pi, self.table.n_p + 1)
             v = self.table.row(tv)
             j = np.clip(np.floor(tl / (HALF_PI / self.table.n_t)), 0, self.table.n_t - 1).astype(np.intp)
-            out = out.copy()
-            for k in np.flatnonzero(tab.ravel()):
-                out.flat[k] = np.interp(p.flat[k], edges, self.table.cdf_phi[v.flat[k], j.flat[k]])
+            for r, c in {(int(a), int(b)) for a, b in zip(v[tab], j[tab])}:
+                k = tab & (v == r) & (j == c)
+                out[k] = np.interp(p[k], edges, self.table.cdf_phi[r, c])
         return np.where(p >= np.pi, 1.0, np.where(p <= 0, 0.0, out))
 
     # Persistence ------------------------------------------------------------------------------
@@ -792,7 +792,7 @@ def verify(fit: CDFFit) -> CDFFit:
         fit.verification = {"rows": vs}
         fit.fallback = n_ok == 0
         fit.reason = (f"rational on {n_ok}/{len(fit.rows)} view rows (others sampled with the table)"
-                      if n_ok else "no row verified")
+                      if n_ok else "no row rational")
         return fit
     """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback."""
     vt = _verify_theta(fit.theta) if fit.theta is not None else {"ok": False}

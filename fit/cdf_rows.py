@@ -171,7 +171,7 @@ def row_variance_ratio(table: CDFTable, F: RationalFunction, G: RationalFunction
     ``evaluate(wi (N, 3), wo (3,)) -> (N, 3)`` RGB BRDF in 1/sr (the material tabulated)."""
     from .angles import spherical_to_direction
     from .cdf_fit import sample_maps
-    from .cdf_table import LUMINANCE
+    from .cdf_table import LUMINANCE, inverse_pdf
 
     rng = np.random.default_rng(seed)
     mu, tau = rng.random(n), rng.random(n)
@@ -186,7 +186,7 @@ def row_variance_ratio(table: CDFTable, F: RationalFunction, G: RationalFunction
                                 lambda t, u: normalized_row_map(G, np.stack([t, u], -1), np.pi), mu, tau)
     e_r = estimates(tl, pl, alpha)
     tl, pl, pdf = table.sample(np.full(n, tv), mu, tau)
-    e_t = estimates(tl, pl, np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0))
+    e_t = estimates(tl, pl, inverse_pdf(pdf))
     var_r, var_t = float(np.var(e_r)), float(np.var(e_t))
     ratio = var_r / var_t if var_t > 0 else (1.0 if var_r == 0 else np.inf)
     return {"theta_v_deg": float(np.degrees(tv)), "variance_rational": var_r, "variance_table": var_t,

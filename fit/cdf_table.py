@@ -106,6 +106,12 @@ class CDFTable:
         return np.where((tl >= 0) & (tl < 0.5 * np.pi), p, 0.0)
 
 
+def inverse_pdf(pdf) -> np.ndarray:
+    """1 / pdf where pdf > 0, else 0 (the estimator weight of a sample that cannot occur)."""
+    pdf = np.asarray(pdf, float)
+    return np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
+
+
 def _cosine_cell_masses(n_t: int, n_p: int):
     """Exact masses of the cosine-weighted hemisphere density on the (theta, phi in [0, pi]) cells."""
     edges = np.linspace(0, 0.5 * np.pi, n_t + 1)
