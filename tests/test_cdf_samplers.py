@@ -387,3 +387,28 @@ def test_rows_variance_gate_sends_costly_rows_to_the_table(rows_fit):
                 assert infos[v]["reason"] == f"variance above {lim:g}x the table's"
     assert any(r is None and "variance" in i for r, i in zip(gated.rows, infos))
     assert "variance above" in gated.reason
+
+
+def test_rows_inverse_maps_and_plot_cdf(rows_fit, tmp_path):
+    """inverse_theta / inverse_phi are the maps fit.sample uses on rational rows and NaN on
+    table rows; plot-cdf draws the rows layout (two PNGs)."""
+    from fit.cdf_plots import plot_cdf
+
+    _, fit = rows_fit
+    n_v = len(fit.rows)
+    rng = np.random.default_rng(2)
+    mu, tau = rng.random(400), rng.random(400)
+    for v, r in enumerate(fit.rows):
+        tv = (v + 0.5) * (np.pi / 2) / n_v
+        th = fit.inverse_theta(tv, mu)
+        ph = fit.inverse_phi(tv, th, np.abs(2 * tau - 1))
+        if r is None:
+            assert np.isnan(th).all() and np.isnan(ph).all()
+            continue
+        tl, pl, _ = fit.sample(tv, mu, tau)
+        np.testing.assert_allclose(th, tl, atol=1e-12)
+        np.testing.assert_allclose(ph, np.abs(pl), atol=1e-12)
+    assert any(r is None for r in fit.rows) and any(r is not None for r in fit.rows)
+    files = plot_cdf(fit, tmp_path, prefix="satin")
+    assert [f.name for f in files] == ["satin_theta.png", "satin_phi.png"]
+    assert all(f.stat().st_size > 10_000 for f in files)
