@@ -51,16 +51,16 @@ the table; the reasons are recorded.
 """
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass
-
-import numpy as np
-from numpy.polynomial import chebyshev as C
-from numpy.polynomial import polynomial as P
-
 import os
 import sys
+import time
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
+import warp as wp
+from numpy.polynomial import chebyshev as C
+from numpy.polynomial import polynomial as P
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -111,23 +111,10 @@ def to_power(f) -> tuple:
     out = []
     for ex, co in ((f.num_exponents, f.num_coef), (f.den_exponents, f.den_coef)):
         ch = np.zeros(int(ex.max()) + 1 if len(ex) else 1)
-        for e, c in zip(ex[:, 0], co):
-            ch[int(e)] += c
-        out.append(_cheb_to_power01(ch))
+        np.add.at(ch, ex[:, 0], co)
+        out.append(C.Chebyshev(ch, domain=[0.0, 1.0]).convert(kind=np.polynomial.Polynomial,
+                                                            domain=[-1.0, 1.0]).coef)
     return out[0], out[1]
-
-
-def _cheb_to_power01(ch) -> np.ndarray:
-    """sum_k ch_k T_k(2x - 1) as ascending power coefficients in x."""
-    pw = C.cheb2poly(ch)                # in t
-    out = np.zeros(len(pw))
-    lin = np.array([-1.0, 2.0])          # t = 2x - 1
-    term = np.array([1.0])
-    for k, a in enumerate(pw):
-        if k:
-            term = P.polymul(term, lin)
-        out[:len(term)] += a * term
-    return out
 
 
 def normalize(p, q, span: float) -> tuple:
@@ -143,8 +130,8 @@ def normalize(p, q, span: float) -> tuple:
 
 
 def certify_map(p, q) -> dict:
-    """Q > 0 and (P'Q - PQ') > 0 on [0, 1], by :func:`positive_on_unit`."""
-    q_ok = positive_on_unit(q) if q[0] > 0 else positive_on_unit(-np.asarray(q))
+    """Q > 0 and (P'Q - PQ') > 0 on [0, 1], by :func:`positive_on_unit` (q as :func:`normalize` returns it)."""
+    q_ok = positive_on_unit(q)
     num = P.polysub(P.polymul(P.polyder(p), q), P.polymul(p, P.polyder(q)))
     return {"q_certified": bool(q_ok), "monotone_certified": bool(q_ok and positive_on_unit(num))}
 
@@ -189,38 +176,11 @@ class CellMaps:
         """(|phi_l|, d|phi_l|/du) of row(s) ``v``, cell(s) ``j`` at ``u``."""
         return eval_maps(self.phi_p[v, j], self.phi_q[v, j], u)
 
-    def n_coefficients(self) -> int:
-        """Nonzero coefficients of the verified maps."""
-        return int(sum(np.count_nonzero(a[m]) for a, m in ((self.theta_p, self.theta_ok), (self.theta_q, self.theta_ok),
-                                                          (self.phi_p, self.phi_ok), (self.phi_q, self.phi_ok))))
-
-    def to_dict(self) -> dict:
-        return {"basis": "power in x on [0, 1], ascending; normalised: P(0)/Q(0) = 0, P(1)/Q(1) = span",
-                "theta_p": self.theta_p.tolist(), "theta_q": self.theta_q.tolist(),
-                "theta_ok": self.theta_ok.tolist(), "phi_p": self.phi_p.tolist(),
-                "phi_q": self.phi_q.tolist(), "phi_ok": self.phi_ok.tolist()}
-
-    @classmethod
-    def from_dict(cls, d: dict, n_v: int, n_t: int) -> "CellMaps":
-        m = cls(**{k: np.asarray(d[k], bool if k.endswith("_ok") else float)
-                   for k in ("theta_p", "theta_q", "theta_ok", "phi_p", "phi_q", "phi_ok")})
-        if m.theta_p.shape[0] != n_v or m.phi_p.shape[:2] != (n_v, n_t) or m.theta_p.shape != m.theta_q.shape \
-                or m.phi_p.shape != m.phi_q.shape or m.theta_ok.shape != (n_v,) or m.phi_ok.shape != (n_v, n_t):
-            raise ValueError("cell map arrays do not match the table's shape")
-        return m
-
 
 def table_phi(table: CDFTable, v, j, u):
     """(|phi_l|, d|phi_l|/du) of the table's inverse conditional CDF of row v, cell j."""
-    cdf = table.cdf_phi[v, j]                      # (..., n_p + 1)
-    k = np.clip((cdf <= u[..., None]).sum(-1) - 1, 0, table.n_p - 1)
-    q0 = np.take_along_axis(cdf, k[..., None], -1)[..., 0]
-    q1 = np.take_along_axis(cdf, (k + 1)[..., None], -1)[..., 0]
-    m = q1 - q0
-    dp = np.pi / table.n_p
-    safe = np.where(m > 0, m, 1.0)
-    frac = np.where(m > 0, np.clip((u - q0) / safe, 0, 1), 0.5)
-    return (k + frac) * dp, np.where(m > 0, dp / safe, 0.0)
+    ph, m = table.phi_cell(v, j, u)
+    return ph, np.where(m > 0, (np.pi / table.n_p) / np.where(m > 0, m, 1.0), 0.0)
 
 
 def sample_cells(table: CDFTable, cells: CellMaps, theta_v, mu, tau):
@@ -322,25 +282,10 @@ def table_relative_variance(table: CDFTable, evaluate, v: int, n: int, seed: int
 
 
 def variance_ratio(table: CDFTable, cells: CellMaps, evaluate, v: int, n: int, seed: int = 0) -> dict:
-    """Derivative-estimator variance of row v's maps / the table's (same (mu, tau), luminance
-    albedo integral at the row's view angle)."""
-    from fit.angles import spherical_to_direction
+    """:func:`fit.cdf_rows.variance_ratio` of the cells sampler at row v."""
+    from fit.cdf_rows import variance_ratio as ratio
 
-    rng = np.random.default_rng(seed)
-    mu, tau = rng.random(n), rng.random(n)
-    tv = np.full(n, float(table.theta_v[v]))
-    wo = spherical_to_direction(float(tv[0]), 0.0)
-
-    def est(tl, pl, w):
-        return (np.asarray(evaluate(spherical_to_direction(tl, pl), wo), float) @ LUMINANCE) * np.cos(tl) * w
-
-    e_r = est(*sample_cells(table, cells, tv, mu, tau))
-    tl, pl, pdf = table.sample(tv, mu, tau)
-    e_t = est(tl, pl, inverse_pdf(pdf))
-    var_r, var_t = float(np.var(e_r)), float(np.var(e_t))
-    return {"theta_v_deg": float(np.degrees(tv[0])), "variance_rational": var_r, "variance_table": var_t,
-            "ratio": float(var_r / var_t) if var_t > 0 else (1.0 if var_r == 0 else float("inf")),
-            "mean_rational": float(np.mean(e_r)), "mean_table": float(np.mean(e_t)), "n": n}
+    return ratio(table, lambda tv, mu, tau: sample_cells(table, cells, tv, mu, tau), evaluate, v, n, seed)
 
 
 def fit_cells(table: CDFTable, evaluate, log=None, deadline: float | None = None, only_rows=None,
@@ -391,7 +336,6 @@ def fit_cells(table: CDFTable, evaluate, log=None, deadline: float | None = None
             log(f"  row {v:2d}: TABLE ({info['reason']})")
             continue
         th_p[v, :len(tp)], th_q[v, :len(tq)] = tp, tq
-        th_q[v, len(tq):] = 0.0
         fails: dict = {}
         degs = []
         m_t = np.diff(table.cdf_theta[v])
@@ -403,7 +347,6 @@ def fit_cells(table: CDFTable, evaluate, log=None, deadline: float | None = None
                 fails[gi["reason"]] = fails.get(gi["reason"], 0) + 1
                 continue
             ph_p[v, j, :len(gp)], ph_q[v, j, :len(gq)] = gp, gq
-            ph_q[v, j, len(gq):] = 0.0
             ph_ok[v, j] = True
             degs.append(gi["degrees"])
         th_ok[v] = True
@@ -434,50 +377,39 @@ def fit_cells(table: CDFTable, evaluate, log=None, deadline: float | None = None
 # --------------------------------------------------------------------------------------------
 # Warp mock-up of the sampler (speed only): fixed degrees, coefficients read from arrays
 # --------------------------------------------------------------------------------------------
-import warp as _wp  # noqa: E402
-
 # degrees of the mock-up's unrolled loops (maps are zero-padded to them): the fit's maximum
 # degrees, from $CELLS_WARP_DEGREES ("theta,phi", default 10,8) since they are compile-time constants
-_DEG = [int(d) for d in os.environ.get("CELLS_WARP_DEGREES", "10,8").split(",")]
-DT, DP = _wp.constant(_DEG[0]), _wp.constant(_DEG[1])
-NT, NPH = _wp.constant(_DEG[0] + 1), _wp.constant(_DEG[1] + 1)
+DT, DP = (int(d) for d in os.environ.get("CELLS_WARP_DEGREES", "10,8").split(","))
+
+
+def _ratio_func(D: int):
+    """``@wp.func ratio(c, b, x) -> (P/Q, (P/Q)')`` with P = sum_k c[b + k] x^k and
+    Q = sum_k c[b + D + 1 + k] x^k, k <= D: Horner with a constant trip count (the captured
+    degree D, so the loop unrolls), P and Q chains interleaved."""
+    N = D + 1
+
+    @wp.func
+    def ratio(c: wp.array(dtype=wp.float64), b: int, x: wp.float64) -> wp.vec2d:
+        p = c[b + N - 1]
+        q = c[b + 2 * N - 1]
+        dp = wp.float64(0.0)
+        dq = wp.float64(0.0)
+        for k in range(D):
+            dp = dp * x + p
+            dq = dq * x + q
+            p = p * x + c[b + D - 1 - k]
+            q = q * x + c[b + N + D - 1 - k]
+        iq = wp.float64(1.0) / q
+        return wp.vec2d(p * iq, (dp * q - p * dq) * iq * iq)
+
+    return ratio
 
 
 def _warp_kernels():
-    import warp as wp
-
     from warp_rbrdf import cdf_sampling as CS
 
-
-    @wp.func
-    def ratio_t(c: wp.array(dtype=wp.float64), b: int, x: wp.float64) -> wp.vec2d:
-        """(P/Q, (P/Q)') with P = sum_k c[b + k] x^k, Q = sum_k c[b + NT + k] x^k, k < NT:
-        Horner with a constant trip count (unrolled), P and Q chains interleaved."""
-        p = c[b + NT - 1]
-        q = c[b + 2 * NT - 1]
-        dp = wp.float64(0.0)
-        dq = wp.float64(0.0)
-        for k in range(DT):
-            dp = dp * x + p
-            dq = dq * x + q
-            p = p * x + c[b + DT - 1 - k]
-            q = q * x + c[b + NT + DT - 1 - k]
-        iq = wp.float64(1.0) / q
-        return wp.vec2d(p * iq, (dp * q - p * dq) * iq * iq)
-
-    @wp.func
-    def ratio_p(c: wp.array(dtype=wp.float64), b: int, x: wp.float64) -> wp.vec2d:
-        p = c[b + NPH - 1]
-        q = c[b + 2 * NPH - 1]
-        dp = wp.float64(0.0)
-        dq = wp.float64(0.0)
-        for k in range(DP):
-            dp = dp * x + p
-            dq = dq * x + q
-            p = p * x + c[b + DP - 1 - k]
-            q = q * x + c[b + NPH + DP - 1 - k]
-        iq = wp.float64(1.0) / q
-        return wp.vec2d(p * iq, (dp * q - p * dq) * iq * iq)
+    ratio_t, ratio_p = _ratio_func(DT), _ratio_func(DP)
+    NT, NPH = DT + 1, DP + 1
 
     @wp.kernel
     def cells_kernel(tc: wp.array(dtype=wp.float64), pc: wp.array(dtype=wp.float64),
@@ -496,8 +428,8 @@ def _warp_kernels():
             out[i] = wp.vec4(wl[0], wl[1], wl[2], 1.0 / q[2])
             return
         F = ratio_t(tc, v * 2 * NT, wp.float64(mu))
-        tl = wp.clamp(float(F[0]), 0.0, HALF_PI_F)
-        j = wp.clamp(int(tl * (float(n_t) / HALF_PI_F)), 0, n_t - 1)
+        tl = wp.clamp(float(F[0]), 0.0, CS.HALF_PI_F)
+        j = wp.clamp(int(tl * (float(n_t) / CS.HALF_PI_F)), 0, n_t - 1)
         s = 1.0
         if tau < 0.5:
             s = -1.0
@@ -528,10 +460,8 @@ def _warp_kernels():
         wl = CS.local_dir(q[0], q[1], va)
         out[i] = wp.vec4(wl[0], wl[1], wl[2], 1.0 / q[2])
 
-    return wp, cells_kernel, table_kernel
+    return cells_kernel, table_kernel
 
-
-HALF_PI_F = 1.5707963267948966
 
 
 def warp_speed(table: CDFTable, cells: CellMaps, n: int = 1_000_000, reps: int = 5, order: str = "coherent") -> dict:
@@ -542,15 +472,15 @@ def warp_speed(table: CDFTable, cells: CellMaps, n: int = 1_000_000, reps: int =
 
     if cells.space != "theta":
         raise ValueError("the Warp mock-up evaluates theta-space maps only")
-    wp, ck, tk = _warp_kernels()
+    ck, tk = _warp_kernels()
     rng = np.random.default_rng(0)
     tv = np.arccos(rng.random(n))
     wo = spherical_to_direction(np.sort(tv) if order == "coherent" else tv, rng.random(n) * 2 * np.pi)
     xi = rng.random((n, 2))
     n_v, n_t = table.n_v, table.n_t
-    tc = np.zeros((n_v, 2, int(NT)))
+    tc = np.zeros((n_v, 2, DT + 1))
     tc[:, 0, :cells.theta_p.shape[1]], tc[:, 1, :cells.theta_q.shape[1]] = cells.theta_p, cells.theta_q
-    pc = np.zeros((n_v, n_t, 2, int(NPH)))
+    pc = np.zeros((n_v, n_t, 2, DP + 1))
     pc[..., 0, :cells.phi_p.shape[2]], pc[..., 1, :cells.phi_q.shape[2]] = cells.phi_p, cells.phi_q
     dev = "cpu"
     arr = lambda a, t: wp.array(a, dtype=t, device=dev)  # noqa: E731
@@ -564,11 +494,12 @@ def warp_speed(table: CDFTable, cells: CellMaps, n: int = 1_000_000, reps: int =
                        ct, cp, *dims, dwo, dxi]),
         "tabulated": (tk, [ct, cp, *dims, dwo, dxi]),
     }
+    for kern, inputs in launches.values():   # compile / load, warm up
+        wp.launch(kern, dim=n, inputs=inputs, outputs=[out], device=dev)
+    wp.synchronize()
     best = {}
     for _ in range(reps):
         for k, (kern, inputs) in launches.items():
-            wp.launch(kern, dim=n, inputs=inputs, outputs=[out], device=dev)
-            wp.synchronize()
             t = time.perf_counter()
             wp.launch(kern, dim=n, inputs=inputs, outputs=[out], device=dev)
             wp.synchronize()
@@ -627,10 +558,8 @@ def main(argv=None):
           + (f"; variance ratio of the rows that verified: median {np.median(ratios):.2f}, range "
              f"{min(ratios):.2f}-{max(ratios):.2f} ({len(ratios)} rows)" if ratios else ""))
     if a.warp:
-        import warp as wp
-
-        if cells.degrees[0] > int(DT) or cells.degrees[1] > int(DP):
-            raise SystemExit(f"degrees {cells.degrees} exceed the mock-up's {int(DT)},{int(DP)}: set CELLS_WARP_DEGREES")
+        if cells.degrees[0] > DT or cells.degrees[1] > DP:
+            raise SystemExit(f"degrees {cells.degrees} exceed the mock-up's {DT},{DP}: set CELLS_WARP_DEGREES")
 
         wp.config.quiet = True
         for order in ("coherent", "random"):

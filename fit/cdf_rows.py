@@ -163,14 +163,13 @@ def fit_row(table: CDFTable, v: int, delta_theta: float, delta_phi: float, n_mu:
     return F, G, info
 
 
-def row_variance_ratio(table: CDFTable, F: RationalFunction, G: RationalFunction, evaluate, v: int,
-                       n: int = 32768, seed: int = 0) -> dict:
+def variance_ratio(table: CDFTable, sample, evaluate, v: int, n: int = 32768, seed: int = 0) -> dict:
     """Variance per sample of the derivative estimator of the luminance albedo integral
-    rho cos dw with row ``v``'s rational maps, divided by the tabulated sampler's, at the row's
-    view angle ``table.theta_v[v]`` (same n uniform (mu, tau) pairs for both, fixed seed).
-    ``evaluate(wi (N, 3), wo (3,)) -> (N, 3)`` RGB BRDF in 1/sr (the material tabulated)."""
+    rho cos dw with ``sample(theta_v, mu, tau) -> (theta_l, phi_l, alpha)``, divided by the
+    tabulated sampler's, at row ``v``'s view angle ``table.theta_v[v]`` (same n uniform
+    (mu, tau) pairs for both, fixed seed). ``evaluate(wi (N, 3), wo (3,)) -> (N, 3)`` RGB BRDF
+    in 1/sr (the material tabulated)."""
     from .angles import spherical_to_direction
-    from .cdf_fit import sample_maps
     from .cdf_table import LUMINANCE, inverse_pdf
 
     rng = np.random.default_rng(seed)
@@ -182,9 +181,7 @@ def row_variance_ratio(table: CDFTable, F: RationalFunction, G: RationalFunction
         f = np.asarray(evaluate(spherical_to_direction(tl, pl), wo), float) @ LUMINANCE
         return f * np.cos(tl) * w
 
-    tl, pl, alpha = sample_maps(lambda m: normalized_row_map(F, m[:, None], HALF_PI),
-                                lambda t, u: normalized_row_map(G, np.stack([t, u], -1), np.pi), mu, tau)
-    e_r = estimates(tl, pl, alpha)
+    e_r = estimates(*sample(np.full(n, tv), mu, tau))
     tl, pl, pdf = table.sample(np.full(n, tv), mu, tau)
     e_t = estimates(tl, pl, inverse_pdf(pdf))
     var_r, var_t = float(np.var(e_r)), float(np.var(e_t))
@@ -192,6 +189,16 @@ def row_variance_ratio(table: CDFTable, F: RationalFunction, G: RationalFunction
     return {"theta_v_deg": float(np.degrees(tv)), "variance_rational": var_r, "variance_table": var_t,
             "ratio": float(ratio), "mean_rational": float(np.mean(e_r)), "mean_table": float(np.mean(e_t)),
             "n": n}
+
+
+def row_variance_ratio(table: CDFTable, F: RationalFunction, G: RationalFunction, evaluate, v: int,
+                       n: int = 32768, seed: int = 0) -> dict:
+    """:func:`variance_ratio` of row ``v``'s rational maps F_v, G_v."""
+    from .cdf_fit import sample_maps
+
+    return variance_ratio(table, lambda tv, mu, tau: sample_maps(
+        lambda m: normalized_row_map(F, m[:, None], HALF_PI),
+        lambda t, u: normalized_row_map(G, np.stack([t, u], -1), np.pi), mu, tau), evaluate, v, n, seed)
 
 
 def fit_rows(table: CDFTable, log=None, deadline: float | None = None, evaluate=None, **kw):

@@ -77,17 +77,21 @@ class CDFTable:
         theta_l = (j + np.clip(frac, 0, 1)) * dt
         # symmetric conditional in phi
         s = np.where(tau < 0.5, -1.0, 1.0)
-        u = np.abs(2.0 * tau - 1.0)
+        phi_abs, m_p = self.phi_cell(v, j, np.abs(2.0 * tau - 1.0))
+        pdf = (m_t / dt) * (0.5 * m_p / (np.pi / self.n_p)) / np.maximum(np.sin(theta_l), 1e-300)
+        return theta_l, s * phi_abs, pdf
+
+    def phi_cell(self, v, j, u):
+        """``(|phi_l|, m_p)``: the inverse of the half-range conditional CDF of row ``v``,
+        theta_l cell ``j`` at ``u`` in [0, 1] (linear inside a phi cell), and the mass ``m_p``
+        of the phi cell it falls in (d|phi_l|/du = (pi / n_p) / m_p where m_p > 0)."""
         cdf_p = self.cdf_phi[v, j]  # (..., n_p + 1)
         k = np.clip((cdf_p <= u[..., None]).sum(-1) - 1, 0, self.n_p - 1)
         q0 = np.take_along_axis(cdf_p, k[..., None], -1)[..., 0]
         q1 = np.take_along_axis(cdf_p, (k + 1)[..., None], -1)[..., 0]
         m_p = q1 - q0
-        dp = np.pi / self.n_p
         fp = np.where(m_p > 0, (u - q0) / np.where(m_p > 0, m_p, 1), 0.5)
-        phi_l = s * (k + np.clip(fp, 0, 1)) * dp
-        pdf = (m_t / dt) * (0.5 * m_p / dp) / np.maximum(np.sin(theta_l), 1e-300)
-        return theta_l, phi_l, pdf
+        return (k + np.clip(fp, 0, 1)) * (np.pi / self.n_p), m_p
 
     def pdf(self, theta_v, theta_l, phi_l) -> np.ndarray:
         """Density in 1/sr of :meth:`sample` at light direction ``(theta_l, phi_l)``; 0 below
