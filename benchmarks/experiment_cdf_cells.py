@@ -112,9 +112,20 @@ def to_power(f) -> tuple:
     for ex, co in ((f.num_exponents, f.num_coef), (f.den_exponents, f.den_coef)):
         ch = np.zeros(int(ex.max()) + 1 if len(ex) else 1)
         np.add.at(ch, ex[:, 0], co)
-        out.append(C.Chebyshev(ch, domain=[0.0, 1.0]).convert(kind=np.polynomial.Polynomial,
-                                                            domain=[-1.0, 1.0]).coef)
+        out.append(_cheb_to_power01(ch))
     return out[0], out[1]
+
+
+def _cheb_to_power01(ch) -> np.ndarray:
+    """sum_k ch_k T_k(2x - 1) as ascending power coefficients in x (expanded term by term:
+    numpy's ``Chebyshev.convert`` rounds differently, and certificates at the margin flip)."""
+    out = np.zeros(len(ch))
+    term = np.array([1.0])
+    for k, a in enumerate(C.cheb2poly(ch)):
+        if k:
+            term = P.polymul(term, [-1.0, 2.0])   # (2x - 1)^k
+        out[:len(term)] += a * term
+    return out
 
 
 def normalize(p, q, span: float) -> tuple:
