@@ -12,11 +12,12 @@
    1 / (variance * time per sample) with the Warp sampling times.
 
 Usage: python benchmarks/bench_samplers.py [--n 1000000] [--materials a,b] [--cdf-dir DIR]
-       [--max-variance-ratio R | none]
-(``--max-variance-ratio none`` fits without the variance gate of fit.cdf_rows, so every
-verified row is rational: the speed of the rational rows themselves.)
-(``--cdf-dir``: rbrdf-cdf files named MATERIAL.json from `rbrdf-fit cdf`; without them the
-rational fits are computed, 16-18 s per material with the rows layout.)
+       [--layout pieces|rows|global] [--max-variance-ratio R | none]
+(``--layout``: how the rational inverse CDFs are built here, default the fitter's default
+"pieces" (fit.cdf_pieces, about 1 s per material); "rows" takes 16-18 s per material.)
+(``--max-variance-ratio none`` builds without the variance gate, so every verified row is
+rational: the speed of the rational rows themselves.)
+(``--cdf-dir``: rbrdf-cdf files named MATERIAL.json from `rbrdf-fit cdf`.)
 """
 from __future__ import annotations
 
@@ -93,7 +94,9 @@ def main(argv=None):
     ap.add_argument("--cdf-dir", default=None)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--max-variance-ratio", default=None,
-                    help="variance gate of the rows layout (default: fit.cdf_rows default; 'none': off)")
+                    help="variance gate of the pieces / rows layout (default: the layout's default; 'none': off)")
+    ap.add_argument("--layout", default="pieces", choices=("pieces", "rows", "global"),
+                    help="layout of the rational inverse CDFs fitted here (default %(default)s; fit.cdf_fit)")
     args = ap.parse_args(argv)
     import warp as wp
 
@@ -110,8 +113,8 @@ def main(argv=None):
     for name in args.materials.split(","):
         if name == "lambert":
             ev = lambert((0.8, 0.6, 0.4))
-            fit = fit_cdf(ev, name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32),
-                          phi_kw=dict(degrees=(2, 1)), refinements=0, layout="global")
+            fit = fit_cdf(ev, name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32), layout=args.layout,
+                          phi_kw=dict(degrees=(2, 1)), refinements=0)
             spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler="rational" if not fit.fallback else "tabulated")
         else:
             b = load_measured(DATA / "rgl" / f"{name}.bsdf")
@@ -119,8 +122,9 @@ def main(argv=None):
             cdf = Path(args.cdf_dir) / f"{name}.json" if args.cdf_dir else None
             t0 = time.perf_counter()
             gate = args.max_variance_ratio
-            rows_kw = {} if gate is None else {"max_variance_ratio": None if gate == "none" else float(gate)}
-            fit = load(cdf) if cdf and cdf.exists() else fit_cdf(ev, name=name, rows_kw=rows_kw)
+            kw = {} if gate is None else {"max_variance_ratio": None if gate == "none" else float(gate)}
+            fit = load(cdf) if cdf and cdf.exists() else fit_cdf(ev, name=name, layout=args.layout,
+                                                                 rows_kw=kw, pieces_kw=kw)
             print(f"{name}: fit {time.perf_counter() - t0:.1f} s, fallback {fit.fallback} ({fit.reason})")
             spec = MaterialSpec(name="m", type="measured", data=b,
                                 sampler="rational" if not fit.fallback else "tabulated")
@@ -128,9 +132,10 @@ def main(argv=None):
         spec.cdf = fit
         r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=2, spp=1), device=args.device)
         r.compile()
-        if fit.rows is not None:
+        if fit.rows is not None or fit.pieces is not None:
             g = [i["variance"]["ratio"] for i in fit.fit_info["rows"] if "variance" in i]
-            print(f"{name}: rational on {sum(x is not None for x in fit.rows)}/{len(fit.rows)} view rows"
+            n_ok = int(fit.pieces.row_ok.sum()) if fit.pieces is not None else sum(x is not None for x in fit.rows)
+            print(f"{name} ({fit.layout} layout): rational on {n_ok}/{fit.table.n_v} view rows"
                   + (f"; variance gate, rational / tabulated per verified row: median {np.median(g):.2f}, "
                      f"range {min(g):.2f}-{max(g):.2f} ({len(g)} rows)" if g else ""))
         for order in ("random", "coherent"):   # the coherent rates (last) go into the efficiencies

@@ -369,15 +369,24 @@ class CDFFit:
     source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
 
     rows: list | None = None   # "rows" layout: per table row (F_v, G_v) or None (table row)
+    pieces: object = None      # "pieces" layout: fit.cdf_pieces.PieceMaps
 
     @property
     def layout(self) -> str:
-        """``"global"`` (F(theta_v, mu), G(theta_v, theta_l, u)) or ``"rows"`` (fit.cdf_rows)."""
+        """``"global"`` (F(theta_v, mu), G(theta_v, theta_l, u)), ``"rows"`` (fit.cdf_rows) or
+        ``"pieces"`` (fit.cdf_pieces)."""
+        if self.pieces is not None:
+            return "pieces"
         return "global" if self.rows is None else "rows"
 
     # Sampling (NumPy reference of the Warp sampler) ------------------------------------------
     def _theta_map(self, tv, mu):
-        """(theta_l, dtheta_l/dmu) of the rational map; NaN on table rows (rows layout)."""
+        """(theta_l, dtheta_l/dmu) of the rational map; NaN on table rows (rows, pieces layouts)."""
+        if self.pieces is not None:
+            v = self.table.row(tv)
+            t, d = self.pieces.theta_map(v, mu)
+            tab = ~self.pieces.row_ok[v]
+            return np.where(tab, np.nan, t), np.where(tab, np.nan, d)
         if self.rows is None:
             return normalized_map(self.theta, 1, np.stack([tv, mu], -1), HALF_PI)
         from .cdf_rows import normalized_row_map
@@ -391,6 +400,11 @@ class CDFFit:
         return t, d
 
     def _phi_map(self, tv, tl, u):
+        if self.pieces is not None:
+            v = self.table.row(tv)
+            p, d = self.pieces.phi_map(v, self.pieces.theta_piece(v, np.nan_to_num(tl)), u)
+            tab = ~self.pieces.row_ok[v]
+            return np.where(tab, np.nan, p), np.where(tab, np.nan, d)
         if self.rows is None:
             return normalized_map(self.phi, 2, np.stack([tv, tl, u], -1), np.pi)
         from .cdf_rows import normalized_row_map
@@ -414,7 +428,9 @@ class CDFFit:
         return self._phi_map(tv, tl, u)[0]
 
     def _table_rows(self, tv) -> np.ndarray:
-        """True where the sample's row is sampled with the table (rows layout, failed row)."""
+        """True where the sample's row is sampled with the table (rows / pieces layout, failed row)."""
+        if self.pieces is not None:
+            return ~self.pieces.row_ok[self.table.row(tv)]
         if self.rows is None:
             return np.zeros(np.shape(tv), bool)
         ok = np.array([r is not None for r in self.rows])
@@ -424,7 +440,7 @@ class CDFFit:
         """``(theta_l, phi_l, alpha)``; alpha = dtheta/dmu * dphi/dtau * sin(theta_l) (= 1/pdf
         in 1/sr^-1), 0 where a clamp is active. Rows layout: rows without a verified fit are
         sampled with the table (alpha = 1 / the table's pdf)."""
-        if self.rows is None and (self.theta is None or self.phi is None):
+        if self.rows is None and self.pieces is None and (self.theta is None or self.phi is None):
             raise ValueError("no rational fit (fallback); use .table")
         tv, mu, tau = np.broadcast_arrays(np.asarray(theta_v, float), np.asarray(mu, float),
                                           np.asarray(tau, float))
@@ -501,6 +517,9 @@ class CDFFit:
                 "phi_origin": "azimuth of the view direction",
                 "rows": "layout 'rows': row v = floor(theta_v / (pi/2) * n_v) uses F_v(mu), G_v(theta_l, u) "
                         "in the same formulas; a null row is sampled with the table",
+                "pieces": "layout 'pieces': rational-quadratic pieces uniform in mu / u, rebuilt from "
+                          "table_data by fit.cdf_pieces.build_pieces(n_mu, n_u); rows with row_ok false "
+                          "are sampled with the table",
             },
             "table": dict(self.table_params),
             "table_data": {"theta_v": t.theta_v.tolist(), "cdf_theta": t.cdf_theta.tolist(),
@@ -509,6 +528,9 @@ class CDFFit:
             "theta": model(self.theta, ("theta_v", "mu"), "theta_l", "[0, pi/2]"),
             "phi": model(self.phi, ("theta_v", "theta_l", "u"), "phi_abs", "[0, pi]"),
             "layout": self.layout,
+            "pieces": None if self.pieces is None else {
+                "n_mu": self.pieces.n_mu, "n_u": self.pieces.n_u,
+                "row_ok": [bool(x) for x in self.pieces.row_ok]},
             "rows": None if self.rows is None else [
                 None if r is None else {"theta": model(r[0], ("mu",), "theta_l", "[0, pi/2]"),
                                         "phi": model(r[1], ("theta_l", "u"), "phi_abs", "[0, pi]")}
@@ -565,13 +587,25 @@ def from_dict(d: dict, path=None) -> CDFFit:
                     for r in d["rows"]]
             if len(rows) != table.n_v:
                 raise ValueError(f"{len(rows)} row fits for {table.n_v} table rows")
+        pieces = None
+        if d.get("layout", "global") == "pieces":
+            from .cdf_pieces import build_pieces, verify_pieces
+
+            pd = d["pieces"]
+            if len(pd["row_ok"]) != table.n_v:
+                raise ValueError(f"{len(pd['row_ok'])} row flags for {table.n_v} table rows")
+            pieces = build_pieces(table, int(pd["n_mu"]), int(pd["n_u"]), row_ok=pd["row_ok"])
+            bad = ~np.asarray(verify_pieces(pieces)["rows"]) & pieces.row_ok
+            if bad.any():
+                raise ValueError(f"pieces of rows {np.flatnonzero(bad).tolist()} fail verification")
         fb = bool(d["fallback"])
-        if not fb and rows is None and (theta is None or phi is None):
+        if not fb and rows is None and pieces is None and (theta is None or phi is None):
             raise ValueError("no fallback but rational functions missing")
         return CDFFit(table=table, table_params=dict(d.get("table", {})), theta=theta, phi=phi,
                       verification=dict(d.get("verification", {})), fallback=fb,
                       reason=str(d.get("reason", "")), fit_info=dict(d.get("fit", {})),
-                      name=str(d.get("name", "")), source=dict(d.get("source", {})), rows=rows)
+                      name=str(d.get("name", "")), source=dict(d.get("source", {})), rows=rows,
+                      pieces=pieces)
     except BRDFFileError:
         raise
     except (KeyError, TypeError, ValueError, IndexError) as e:
@@ -667,8 +701,8 @@ def _refit(f, var, data, span, verify, log, what, deadline=None):
 def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_params: dict | None = None,
             theta_kw: dict | None = None, phi_kw: dict | None = None, refinements: int = 1,
             log=None, source: dict | None = None, monotone: bool = True,
-            time_limit_s: float | None = TIME_LIMIT_S, layout: str = "rows",
-            rows_kw: dict | None = None) -> CDFFit:
+            time_limit_s: float | None = TIME_LIMIT_S, layout: str = "pieces",
+            rows_kw: dict | None = None, pieces_kw: dict | None = None) -> CDFFit:
     """Tabulate (unless ``table`` is given), fit both inverse CDFs, verify, decide fallback.
 
     Each refinement round that fails verification doubles the data density along the CDF
@@ -676,11 +710,15 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
     a fit whose Q is certified but that folds is first repaired by :func:`monotone_refit` on the
     verification grid (numerator refitted, Q kept) and verified again. ``log(str)`` reports.
 
-    ``time_limit_s`` bounds the fitting time (tabulation excluded): fits and refits stop when
-    it is reached, and whatever is not verified by then falls back (the reason says so).
+    ``time_limit_s`` bounds the fitting time of the fitted layouts ("rows", "global";
+    tabulation excluded): fits and refits stop when it is reached, and whatever is not verified
+    by then falls back (the reason says so). The "pieces" layout fits nothing (about 1 s).
 
-    ``layout``: ``"rows"`` (default; :mod:`fit.cdf_rows`, one univariate F_v and one bivariate
-    G_v per table row, rows that fail verification sampled with the table; ``rows_kw`` tunes
+    ``layout``: ``"pieces"`` (default; :mod:`fit.cdf_pieces`, monotone rational-quadratic
+    pieces uniform in mu and u per table row, built from the table in about a second, rows
+    above the variance gate sampled with the table; ``pieces_kw`` tunes it), ``"rows"``
+    (:mod:`fit.cdf_rows`, one univariate F_v and one bivariate G_v per table row fitted with
+    the interval fitter, rows that fail verification sampled with the table; ``rows_kw`` tunes
     it) or ``"global"`` (the paper's F(theta_v, mu), G(theta_v, theta_l, u); ``theta_kw``,
     ``phi_kw``, ``refinements``, ``monotone`` apply to it).
     A sharp lobe can otherwise take many minutes (measured, near-mirror Blinn-Phong n = 5000:
@@ -703,8 +741,10 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
 
     if layout == "rows":
         return _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows_kw, t0, evaluate)
+    if layout == "pieces":
+        return _fit_cdf_pieces(table, params, name, source, log, pieces_kw, evaluate)
     if layout != "global":
-        raise ValueError(f"layout must be 'rows' or 'global', not {layout!r}")
+        raise ValueError(f"layout must be 'pieces', 'rows' or 'global', not {layout!r}")
     F = G = None
     vt = vp = {"ok": False}
     for rnd in range(refinements + 1):
@@ -777,9 +817,42 @@ def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows
                   source=source or {"file": "", "sha256": ""}, rows=None if fb else rows)
 
 
+def _fit_cdf_pieces(table, params, name, source, log, pieces_kw, evaluate) -> CDFFit:
+    from .cdf_pieces import fit_pieces
+
+    pm, info = fit_pieces(table, evaluate, log=log, **(pieces_kw or {}))
+    info.update(layout="pieces", construction="fit.cdf_pieces (monotone rational-quadratic pieces)")
+    n_ok, n = info["verified_rows"], info["n_rows"]
+    why = sorted({r.get("reason", "?") for r in info["rows"] if not r["ok"]})
+    if n_ok == 0:
+        reason = f"no row rational ({'; '.join(why)})"
+    elif n_ok < n:
+        reason = (f"rational on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with "
+                  f"the table ({'; '.join(why)})")
+    else:
+        reason = f"rational on all {n} view rows: monotone, covering, no poles (by construction, checked)"
+    log(f"  {reason}")
+    return CDFFit(table=table, table_params=params, theta=None, phi=None,
+                  verification={"pieces": info["verification"]}, fallback=n_ok == 0, reason=reason,
+                  fit_info=info, name=name, source=source or {"file": "", "sha256": ""},
+                  pieces=None if n_ok == 0 else pm)
+
+
 def verify(fit: CDFFit) -> CDFFit:
     """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback.
-    Rows layout: a row that fails is dropped to the table (``fit.rows[v] = None``)."""
+    Rows layout: a row that fails is dropped to the table (``fit.rows[v] = None``); pieces
+    layout: its row flag is cleared."""
+    if fit.pieces is not None:
+        from .cdf_pieces import verify_pieces
+
+        ver = verify_pieces(fit.pieces)
+        fit.pieces.row_ok &= np.asarray(ver["rows"], bool)
+        n_ok = int(fit.pieces.row_ok.sum())
+        fit.verification = {"pieces": {k: ver[k] for k in ("ok", "failures")}}
+        fit.fallback = n_ok == 0
+        fit.reason = (f"rational on {n_ok}/{fit.table.n_v} view rows (others sampled with the table)"
+                      if n_ok else "no row rational")
+        return fit
     if fit.rows is not None:
         from .cdf_rows import verify_row
 

@@ -21,7 +21,7 @@ def _load_or_fit(args, log=print):
 
         return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
                           source=file_source(path))
-    return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log,
+    return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log, layout=args.layout,
                    refinements=args.refinements, source=file_source(path),
                    time_limit_s=None if args.time_limit <= 0 else args.time_limit)
 
@@ -31,7 +31,12 @@ def _add_table_args(p):
     p.add_argument("--n-t", type=int, default=64, help="theta_l cells (default 64)")
     p.add_argument("--n-p", type=int, default=64, help="|phi_l| cells (default 64)")
     p.add_argument("--eps", type=float, default=0.02, help="cosine mixture weight (default 0.02)")
-    p.add_argument("--refinements", type=int, default=1, help="refit rounds when verification fails")
+    p.add_argument("--layout", choices=("pieces", "rows", "global"), default="pieces",
+                   help="pieces (default): monotone rational-quadratic pieces uniform in mu and u, "
+                        "constant-time lookup, the fastest sampler; rows: one fitted rational map pair "
+                        "per view row; global: the paper's bivariate/trivariate rational functions")
+    p.add_argument("--refinements", type=int, default=1, help="refit rounds when verification fails "
+                                                               "(global layout)")
     p.add_argument("--table-only", action="store_true", help="tabulate only, no rational fit")
     p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, metavar="S",
                    help=f"bound on the rational fitting time in seconds (default {TIME_LIMIT_S:g}; 0: none); "
@@ -62,12 +67,14 @@ def _cmd_plot(args) -> int:
 
 def register(sub) -> None:
     p = sub.add_parser("cdf", help="tabulate the sampling CDFs and fit rational inverse CDFs",
-                       description="Tabulate CDF^-1 of rho cos (luminance) per theta_v row, fit the "
-                                   "rational inverse CDFs per view row (univariate theta map, bivariate "
-                                   "phi map), verify them (Q > 0 certificate, monotone on a dense grid, "
-                                   "exact endpoints), send rows that fail or whose derivative estimator "
-                                   "exceeds 1.2x the table's variance to the table, and write a "
-                                   "versioned rbrdf-cdf JSON (fallback flag and per-row reasons included).")
+                       description="Tabulate CDF^-1 of rho cos (luminance) per theta_v row, build the "
+                                   "rational inverse CDFs (default layout 'pieces': per view row, monotone "
+                                   "rational-quadratic pieces of equal mass, found in constant time; "
+                                   "'rows' / 'global': fitted with the interval rational fitter), verify "
+                                   "them (monotone, covering, no poles), send rows that fail or whose "
+                                   "derivative estimator exceeds 1.2x the table's variance to the table, "
+                                   "and write a versioned rbrdf-cdf JSON (fallback flag and per-row "
+                                   "reasons included).")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
     p.add_argument("--out", required=True, help="output .json")
     _add_table_args(p)

@@ -15,9 +15,10 @@ Cases (each pinned by a test in tests/test_studies.py):
   is lost);
 * ``fit_mirror``: a rational fit at 5 % of the mirror lobe's projection needs far more
   coefficients than a diffuse material, or is flagged infeasible;
-* ``mirror_cdf``: the rational inverse CDFs of the mirror lobe, fitted under the preset's time
-  limit (``cdf_time_limit``): verified, or an explicit fallback to the tabulated sampler whose
-  reason names the limit (the same fit is what the inverse-CDF samplers of the mirror rows use).
+* ``mirror_cdf``: the rational inverse CDFs of the mirror lobe (the fitter's default layout,
+  "pieces"): per view row rational or sent to the table with the reason (variance gate), or an
+  explicit fallback to the tabulated sampler (the same fit is what the inverse-CDF samplers of
+  the mirror rows use).
 
 Sampler metric (no reference image needed): the relative standard error of the pixel estimate,
 ``sqrt(mean over the mask of (per-pixel sample variance / spp)) / mean radiance``, with
@@ -276,10 +277,10 @@ def summary_markdown(rows, other, meta) -> str:
                  f"{g['noise_de_mean']:.2f} / {n['noise_de_mean']:.2f}.\n")
     if "mirror_cdf" in other:
         m = other["mirror_cdf"]
-        L.append(f"\nRational inverse CDFs of the mirror lobe (time limit {m['time_limit_s']:g} s): "
-                 + (f"FALLBACK to the tabulated sampler ({m['reason']})" if m["fallback"]
-                    else f"verified (theta {m['theta']} + phi {m['phi']} coefficients)")
-                 + f", {m['fit_seconds']:.0f} s of fitting.\n")
+        lim = "" if m.get("time_limit_s") is None else f", time limit {m['time_limit_s']:g} s"
+        L.append(f"\nRational inverse CDFs of the mirror lobe ({m['layout']} layout{lim}): "
+                 + (f"FALLBACK to the tabulated sampler ({m['reason']})" if m["fallback"] else m["reason"])
+                 + f", {m['fit_seconds']:.1f} s.\n")
     fits = [(k, v) for k, v in other.items() if k.startswith("fit_")]
     if fits:
         L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, every "

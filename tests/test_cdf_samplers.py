@@ -44,7 +44,7 @@ def rows_fit():
     from fit.io import load_measured
 
     b = load_measured(data_file("rgl/satin_rosaline_rgb.bsdf"))
-    fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8),
+    fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8), layout="rows",
                   rows_kw=dict(max_variance_ratio=None))
     assert fit.layout == "rows" and not fit.fallback, fit.reason
     return b, fit
@@ -152,7 +152,7 @@ def test_broken_fits_trigger_fallback(lambert_fit):
 def test_cdf_fit_time_limit_falls_back_explicitly():
     # no time to fit: the material falls back to the tabulated sampler and says why
     fit = fit_cdf(lambert((0.8, 0.6, 0.4)), name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32),
-                  refinements=0, time_limit_s=0.0)
+                  refinements=0, time_limit_s=0.0, layout="rows")
     assert fit.fallback and "time limit" in fit.reason
     assert fit.table is not None and fit.fit_info["time_limit_reached"]
 
@@ -283,7 +283,7 @@ def test_rational_sampler_on_rgl_material(rgl, name):
     the luminance albedo against quadrature (3 sigma + quadrature uncertainty), theta_v 0/45/85.
     The variance gate is off here so that the maps themselves are tested on every row."""
     brdf, table = rgl[name]
-    fit = fit_cdf(brdf.evaluate, name=name, table=table, rows_kw=dict(max_variance_ratio=None))
+    fit = fit_cdf(brdf.evaluate, name=name, table=table, layout="rows", rows_kw=dict(max_variance_ratio=None))
     assert not fit.fallback, fit.reason
     rng = np.random.default_rng(5)
     n = 60_000
@@ -376,7 +376,7 @@ def test_rows_variance_gate_sends_costly_rows_to_the_table(rows_fit):
         ratios[v] = g["ratio"]
     # a limit between the smallest and largest measured ratio splits the rows
     lim = float(np.median(list(ratios.values())))
-    gated = fit_cdf(b.evaluate, name="satin", table=ungated.table,
+    gated = fit_cdf(b.evaluate, name="satin", table=ungated.table, layout="rows",
                     rows_kw=dict(max_variance_ratio=lim, gate_samples=8192))
     infos = gated.fit_info["rows"]
     for v, r in enumerate(gated.rows):

@@ -222,15 +222,17 @@ def test_model_summary_of_nested_piecewise_model():
 
 
 def test_failure_mirror_cdf_is_bounded_and_explicit(failure_map):
-    """The near-mirror lobe's rational inverse CDFs (rows layout) under the test preset's time
-    limit: the fit stops at the limit (the global layout ran 169 s unbounded), and every row
-    without a verified fit is sampled with the table, with a reason that names the limit and
-    counts the rows (measured: 5/32 rows verified in 20 s; never silently)."""
+    """The near-mirror lobe's rational inverse CDFs (pieces layout, the default): built in
+    seconds, not bounded by a time limit (the rows layout verified 5/32 rows in 20 s, the global
+    one ran 169 s unbounded); every row is rational or sent to the table with its reason, and
+    the summary says which (never silently)."""
+    import sys
     m = failure_map["other"]["mirror_cdf"]
-    assert m["time_limit_s"] == 20.0 and m["layout"] == "rows"
-    assert m["time_limit_reached"] and "time limit" in m["reason"]
-    assert m["verified_rows"] < m["n_rows"] == 32
-    assert m["fallback"] or f"{m['verified_rows']}/{m['n_rows']} view rows" in m["reason"]
+    print(m, file=sys.stderr)
+    assert m["layout"] == "pieces" and m["n_rows"] == 32 and m["fit_seconds"] < 20
+    assert m["fallback"] or (f"{m['verified_rows']}/{m['n_rows']} view rows" in m["reason"]
+                             or f"all {m['n_rows']} view rows" in m["reason"])
+    assert m["reason"] in failure_map["markdown"]
 
 
 def test_studies_share_one_cdf_table_per_material(rgl_data):

@@ -145,6 +145,74 @@ def rel_phi_abs(wi: wp.vec3, phi_v: float) -> float:
 
 
 # --------------------------------------------------------------------------------------------
+# Pieces layout (fit.cdf_pieces): rational-quadratic pieces uniform in mu / u
+# --------------------------------------------------------------------------------------------
+@wp.func
+def rq_piece(pw: wp.array(dtype=float), b: int, x: float) -> wp.vec2:
+    """(value, d/dx) of the rational-quadratic piece (y_k, h, a0, a1) at pw[b:b+4], x in [0, 1]."""
+    y0 = pw[b]
+    h = pw[b + 1]
+    a0 = pw[b + 2]
+    a1 = pw[b + 3]
+    t = x * (1.0 - x)
+    den = 1.0 + (a0 + a1 - 2.0) * t
+    iden = 1.0 / den
+    x2 = x * x
+    w = 1.0 - x
+    return wp.vec2(y0 + h * (x2 + a0 * t) * iden, h * (a1 * x2 + 2.0 * t + a0 * w * w) * iden * iden)
+
+
+@wp.func
+def pieces_sample(pw: wp.array(dtype=float), off: int, n_v: int, n_mu: int, n_u: int,
+                  va: wp.vec3, mu: float, tau: float) -> wp.vec4:
+    """(wi, alpha): the direction of (theta_l, phi_l) of fit.cdf_pieces.sample_pieces in the
+    view frame ``va`` (:func:`view_frame`) and alpha, on a rational row (the generated caller
+    sends table rows to the table). Piece of mu: floor(mu n_mu), no search; sin and cos of
+    theta_l computed once (end pieces: from y = sin^2 theta_l, no sin/cos at all)."""
+    v = tab_row(va[0], n_v)
+    xs = mu * float(n_mu)
+    k = wp.clamp(int(xs), 0, n_mu - 1)
+    F = rq_piece(pw, off + (v * n_mu + k) * 4, wp.clamp(xs - float(k), 0.0, 1.0))
+    tl = float(0.0)
+    st = float(0.0)
+    ct = float(0.0)
+    at = float(0.0)                  # dtheta_l/dmu * sin(theta_l)
+    if k == 0 or k == n_mu - 1:      # end pieces in y = sin^2 theta_l
+        y = wp.clamp(F[0], 0.0, 1.0)
+        st = wp.sqrt(y)
+        ct = wp.sqrt(1.0 - y)
+        tl = wp.asin(st)
+        at = F[1] * float(n_mu) / (2.0 * wp.max(ct, 1.0e-20))
+    else:
+        tl = wp.clamp(F[0], 0.0, HALF_PI_F)
+        st = wp.sin(tl)
+        ct = wp.cos(tl)
+        at = F[1] * float(n_mu) * st
+    s = 1.0
+    if tau < 0.5:
+        s = -1.0
+    u = wp.abs(2.0 * tau - 1.0)
+    us = u * float(n_u)
+    kp = wp.clamp(int(us), 0, n_u - 1)
+    G = rq_piece(pw, off + n_v * n_mu * 4 + ((v * n_mu + k) * n_u + kp) * 4, wp.clamp(us - float(kp), 0.0, 1.0))
+    ph = wp.clamp(G[0], 0.0, wp.pi)
+    cp = wp.cos(ph)
+    sp = s * wp.sin(ph)
+    return wp.vec4(st * (cp * va[1] - sp * va[2]), st * (sp * va[1] + cp * va[2]), ct,
+                   at * 2.0 * G[1] * float(n_u))
+
+
+@wp.func
+def maps_to_direction(q: wp.vec3, va: wp.vec3) -> wp.vec4:
+    """(wi, alpha) from (theta_l, phi_l, alpha) of a generated rows / global sampler; alpha < 0
+    (a table row) passes through."""
+    if q[2] < 0.0:
+        return wp.vec4(0.0, 0.0, 0.0, -1.0)
+    wl = local_dir(q[0], q[1], va)
+    return wp.vec4(wl[0], wl[1], wl[2], q[2])
+
+
+# --------------------------------------------------------------------------------------------
 # Generated rational samplers
 # --------------------------------------------------------------------------------------------
 def _lit(x: float) -> str:
@@ -266,7 +334,7 @@ def _emit_maps(L, F, G, f_vars, g_vars):
 def generate_sampler_function(cdf_fit, name: str) -> str:
     """``@wp.func name(theta_v, mu, tau) -> vec3(theta_l, phi_l, alpha)`` for a verified fit:
     the endpoint-normalized map of :meth:`fit.cdf_fit.CDFFit.sample`, float64, unrolled."""
-    L = ["@wp.func", f"def {name}(theta_v: float, mu: float, tau: float) -> wp.vec3:",
+    L = ["@wp.func", f"def {name}(pw: wp.array(dtype=float), theta_v: float, mu: float, tau: float) -> wp.vec3:",
          f"    # generated rational inverse CDFs of {cdf_fit.name!r}",
          "    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))",
          "    m = wp.float64(mu)"]
@@ -285,7 +353,7 @@ def generate_rows_sampler_function(cdf_fit, name: str) -> str:
     ``name(theta_v, mu, tau)`` that picks the row exactly as :func:`tab_row` does; a row
     without a verified fit returns alpha = -1, which tells the caller to use the table."""
     n_v = len(cdf_fit.rows)
-    parts, L = [], ["@wp.func", f"def {name}(theta_v: float, mu: float, tau: float) -> wp.vec3:",
+    parts, L = [], ["@wp.func", f"def {name}(pw: wp.array(dtype=float), theta_v: float, mu: float, tau: float) -> wp.vec3:",
                     f"    # generated per-row rational inverse CDFs of {cdf_fit.name!r}",
                     f"    v = CS.tab_row(theta_v, {n_v})"]
     for v, r in enumerate(cdf_fit.rows):
@@ -297,9 +365,54 @@ def generate_rows_sampler_function(cdf_fit, name: str) -> str:
     return "\n\n".join(parts + ["\n".join(L) + "\n"])
 
 
-def generate_sampler_functions(fits):
-    return [(f"cdfsamp_{i}", generate_rows_sampler_function(f, f"cdfsamp_{i}") if f.rows is not None
-             else generate_sampler_function(f, f"cdfsamp_{i}")) for i, f in enumerate(fits)]
+def generate_pieces_sampler_function(cdf_fit, name: str, offset: int) -> str:
+    """Pieces layout (:mod:`fit.cdf_pieces`): a call of :func:`pieces_sample` on the fit's
+    coefficients at ``offset`` in the packed array (:func:`pack_pieces`); no generated maps."""
+    t, pm = cdf_fit.table, cdf_fit.pieces
+    L = ["@wp.func", f"def {name}(pw: wp.array(dtype=float), va: wp.vec3, mu: float, tau: float) -> wp.vec4:",
+         f"    # pieces-layout inverse CDFs of {cdf_fit.name!r}"]
+    table_rows = np.flatnonzero(~pm.row_ok)
+    if len(table_rows):   # rows sampled with the table: alpha = -1 tells the caller
+        L += [f"    v = CS.tab_row(va[0], {t.n_v})",
+              "    if " + " or ".join(f"v == {int(v)}" for v in table_rows) + ":",
+              "        return wp.vec4(0.0, 0.0, 0.0, -1.0)"]
+    L.append(f"    return CS.pieces_sample(pw, {offset}, {t.n_v}, {pm.n_mu}, {pm.n_u}, va, mu, tau)")
+    return "\n".join(L) + "\n"
+
+
+def generate_sampler_functions(fits, pw_offsets=None):
+    """``[(name, code)]``: per fit a generated ``@wp.func name(pw, va, mu, tau) -> vec4(wi,
+    alpha)`` (``va`` from :func:`view_frame`; alpha < 0: sample the table)."""
+    out = []
+    for i, f in enumerate(fits):
+        name = f"cdfsamp_{i}"
+        if f.pieces is not None:
+            out.append((name, generate_pieces_sampler_function(f, name, pw_offsets[i])))
+            continue
+        maps = (generate_rows_sampler_function(f, f"{name}_maps") if f.rows is not None
+                else generate_sampler_function(f, f"{name}_maps"))
+        out.append((name, maps + "\n\n" + "\n".join([
+            "@wp.func", f"def {name}(pw: wp.array(dtype=float), va: wp.vec3, mu: float, tau: float) -> wp.vec4:",
+            f"    return CS.maps_to_direction({name}_maps(pw, va[0], mu, tau), va)"]) + "\n"))
+    return out
+
+
+def pack_pieces(fits):
+    """``(float32 array, offsets)``: the pieces-layout fits' coefficients concatenated, per fit
+    ``[theta (n_v, n_mu, 4), phi (n_v, n_mu, n_u, 4), row flags (n_v,) 1/0]``; offset -1 for
+    fits of other layouts (the row flags are for readers of the array; the generated code
+    has them as literals)."""
+    parts, offsets, off = [], [], 0
+    for f in fits:
+        if f.pieces is None:
+            offsets.append(-1)
+            continue
+        pm = f.pieces
+        a = np.concatenate([pm.theta.ravel(), pm.phi.ravel(), pm.row_ok.astype(float)])
+        parts.append(a)
+        offsets.append(off)
+        off += a.size
+    return (np.concatenate(parts).astype(np.float32) if parts else np.zeros(1, np.float32)), offsets
 
 
 # --------------------------------------------------------------------------------------------

@@ -64,9 +64,10 @@ def is_mis(sampler: int) -> int:
 
 
 @wp.func
-def rational_cdf_sample(r: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
+def rational_cdf_sample(pw: wp.array(dtype=float), r: int, va: wp.vec3, mu: float, tau: float) -> wp.vec4:
+    """(wi, alpha) of rational sampler ``r`` (view frame ``va``); alpha < 0: a table row."""
 {cdf_branches}
-    return wp.vec3(0.0, 0.0, 0.0)
+    return wp.vec4(0.0, 0.0, 0.0, -1.0)
 
 
 @wp.func
@@ -82,14 +83,11 @@ def bsdf_sample(mats: M.Materials, m: int, sampler: int, wo: wp.vec3, xi: wp.vec
         r = mats.cdf_info[b + 5]
         if r >= 0 and (sampler == M.SAMPLER_RATIONAL or sampler == M.SAMPLER_RATIONAL_DERIV
                        or sampler == M.SAMPLER_MIS_RATIONAL):
-            q = rational_cdf_sample(r, va[0], xi[0], xi[1])
-            if q[2] >= 0.0:                  # alpha < 0: a table row of the rows layout
-                wl = CS.local_dir(q[0], q[1], va)
-                wgt = q[2]                   # derivative estimator: alpha
-                if sampler == M.SAMPLER_RATIONAL and q[2] > 0.0:
-                    pdf = 1.0 / q[2]         # standard estimator: pdf of the map (eq. 3)
-                    wgt = 1.0 / pdf
-                return wp.vec4(wl[0], wl[1], wl[2], wgt)
+            qr = rational_cdf_sample(mats.cdf_pw, r, va, xi[0], xi[1])
+            if qr[3] >= 0.0:                  # alpha < 0: a table row (rows / pieces layout)
+                # derivative estimator: weight alpha; standard estimator: 1 / pdf of the map
+                # (eq. 3) with pdf = 1 / alpha -- the same number, 0 where alpha = 0
+                return qr
         q = CS.tab_sample(mats.cdf_t, mats.cdf_p, mats.cdf_info[b], mats.cdf_info[b + 1],
                           mats.cdf_info[b + 2], mats.cdf_info[b + 3], mats.cdf_info[b + 4],
                           va[0], xi[0], xi[1])
@@ -322,7 +320,7 @@ def generate_source(kinds_used, rational_funcs=(), cdf_funcs=()) -> str:
     if not branches:
         branches = "    pass\n"
     cdf_code = "\n\n".join(code for _, code in cdf_funcs)
-    cdf_branches = "".join(f"    if r == {i}:\n        return {name}(theta_v, mu, tau)\n"
+    cdf_branches = "".join(f"    if r == {i}:\n        return {name}(pw, va, mu, tau)\n"
                            for i, (name, _) in enumerate(cdf_funcs)) or "    pass\n"
     return _TEMPLATE.format(rational_code=rational_code, eval_branches=branches, cdf_code=cdf_code,
                             cdf_branches=cdf_branches)

@@ -61,6 +61,7 @@ class Materials:
     cdf_t: wp.array(dtype=float)       # concatenated theta CDFs of tabulated samplers
     cdf_p: wp.array(dtype=float)       # concatenated phi CDFs
     cdf_info: wp.array(dtype=int)      # N_CDF_INFO ints per material
+    cdf_pw: wp.array(dtype=float)      # concatenated pieces-layout inverse CDFs (cdf_sampling.pack_pieces)
 
 
 @dataclass
@@ -79,6 +80,8 @@ class MaterialData:
     cdf_p: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
     cdf_info: np.ndarray = field(default_factory=lambda: np.zeros(N_CDF_INFO, np.int32))
     cdf_fits: list = field(default_factory=list)    # verified CDFFit per rational sampler index
+    cdf_pw: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    cdf_pw_offsets: list = field(default_factory=list)  # per rational sampler index (-1: not pieces)
     cdf_tables: list = field(default_factory=list)  # CDFTable per material (None: no table)
     samplers_used: set = field(default_factory=set)
 
@@ -94,6 +97,7 @@ def make_materials_struct(md: MaterialData, device) -> Materials:
     s.cdf_t = wp.array(np.ascontiguousarray(md.cdf_t, np.float32), dtype=float, device=device)
     s.cdf_p = wp.array(np.ascontiguousarray(md.cdf_p, np.float32), dtype=float, device=device)
     s.cdf_info = wp.array(np.ascontiguousarray(md.cdf_info, np.int32).reshape(-1), dtype=int, device=device)
+    s.cdf_pw = wp.array(np.ascontiguousarray(md.cdf_pw, np.float32), dtype=float, device=device)
     return s
 
 
@@ -258,6 +262,7 @@ def _build_samplers(md: MaterialData, scene, names, loaded):
         md.cdf_p = np.concatenate(cp).astype(np.float32)
     md.cdf_info = info
     md.cdf_fits = fits
+    md.cdf_pw, md.cdf_pw_offsets = CS.pack_pieces(fits)
     md.cdf_tables = tables
 
 

@@ -111,7 +111,8 @@ class Renderer:
         rfuncs = rational_material.generate_functions(self.material_data.rational)
         from . import cdf_sampling
 
-        cfuncs = cdf_sampling.generate_sampler_functions(self.material_data.cdf_fits)
+        cfuncs = cdf_sampling.generate_sampler_functions(self.material_data.cdf_fits,
+                                                         self.material_data.cdf_pw_offsets)
         src = integrator.generate_source(self.material_data.kinds_used, rfuncs, cfuncs)
         self.module = integrator.load_generated_module(src)
         self.wp.load_module(self.module, device=self.device)
