@@ -284,6 +284,7 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
     pm = build_pieces(table, n_mu, n_u)
     ver = verify_pieces(pm)
     rows = []
+    ungated = PieceMaps(pm.theta, pm.phi, pm.theta_knots, np.ones(table.n_v, bool))
     for v in range(table.n_v):
         r = {"ok": bool(ver["rows"][v])}
         if not r["ok"]:
@@ -291,8 +292,7 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
         elif table.row_fallback[v]:
             r.update(ok=False, reason="table row without BRDF mass (cosine fallback row)")
         elif max_variance_ratio is not None and evaluate is not None:
-            one = PieceMaps(pm.theta, pm.phi, pm.theta_knots, np.ones(table.n_v, bool))
-            r["variance"] = variance_ratio(table, lambda tv, m, t: sample_pieces(table, one, tv, m, t),
+            r["variance"] = variance_ratio(table, lambda tv, m, t: sample_pieces(table, ungated, tv, m, t),
                                            evaluate, v, gate_samples)
             if not r["variance"]["ratio"] <= max_variance_ratio:
                 r.update(ok=False, reason=f"variance > {max_variance_ratio:g} x the table's")

@@ -226,9 +226,7 @@ def test_failure_mirror_cdf_is_bounded_and_explicit(failure_map):
     seconds, not bounded by a time limit (the rows layout verified 5/32 rows in 20 s, the global
     one ran 169 s unbounded); every row is rational or sent to the table with its reason, and
     the summary says which (never silently)."""
-    import sys
     m = failure_map["other"]["mirror_cdf"]
-    print(m, file=sys.stderr)
     assert m["layout"] == "pieces" and m["n_rows"] == 32 and m["fit_seconds"] < 20
     assert m["fallback"] or (f"{m['verified_rows']}/{m['n_rows']} view rows" in m["reason"]
                              or f"all {m['n_rows']} view rows" in m["reason"])

@@ -399,16 +399,15 @@ def generate_sampler_functions(fits, pw_offsets=None):
 
 def pack_pieces(fits):
     """``(float32 array, offsets)``: the pieces-layout fits' coefficients concatenated, per fit
-    ``[theta (n_v, n_mu, 4), phi (n_v, n_mu, n_u, 4), row flags (n_v,) 1/0]``; offset -1 for
-    fits of other layouts (the row flags are for readers of the array; the generated code
-    has them as literals)."""
+    ``[theta (n_v, n_mu, 4), phi (n_v, n_mu, n_u, 4)]``; offset -1 for fits of other layouts
+    (the table rows are literals of the generated code)."""
     parts, offsets, off = [], [], 0
     for f in fits:
         if f.pieces is None:
             offsets.append(-1)
             continue
         pm = f.pieces
-        a = np.concatenate([pm.theta.ravel(), pm.phi.ravel(), pm.row_ok.astype(float)])
+        a = np.concatenate([pm.theta.ravel(), pm.phi.ravel()])
         parts.append(a)
         offsets.append(off)
         off += a.size
