@@ -64,7 +64,7 @@ from numpy.polynomial import polynomial as P
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fit.cdf_table import LUMINANCE, CDFTable, inverse_pdf  # noqa: E402
+from fit.cdf_table import LUMINANCE, CDFTable, inverse_pdf, table_where  # noqa: E402
 
 HALF_PI = 0.5 * np.pi
 CAP = float("inf")   # interval half-width <= CAP * the point's cell mass (0.2: a map keeps >= 20 % of every cell's mass)
@@ -222,13 +222,7 @@ def sample_cells(table: CDFTable, cells: CellMaps, theta_v, mu, tau):
     inside &= (ph >= 0) & (ph <= np.pi)
     ph = np.clip(ph, 0.0, np.pi)
     alpha = np.where(inside, jac * dG, 0.0)
-    pl = s * ph
-    tab = ~cells.theta_ok[v]
-    if tab.any():
-        t2, p2, pdf = table.sample(tv[tab], mu[tab], tau[tab])
-        tl, pl, alpha = tl.copy(), pl.copy(), alpha.copy()
-        tl[tab], pl[tab], alpha[tab] = t2, p2, inverse_pdf(pdf)
-    return tl, pl, alpha
+    return table_where(table, ~cells.theta_ok[v], tv, mu, tau, tl, s * ph, alpha)
 
 
 # --------------------------------------------------------------------------------------------

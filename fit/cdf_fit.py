@@ -48,7 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cdf_table import CDFTable, inverse_cdf_phi, inverse_cdf_theta, inverse_pdf, tabulate
+from .cdf_table import CDFTable, inverse_cdf_phi, inverse_cdf_theta, table_where, tabulate
 from .errors import BRDFFileError
 from .rational import RationalFunction
 
@@ -446,12 +446,7 @@ class CDFFit:
                                           np.asarray(tau, float))
         tl, pl, alpha = sample_maps(lambda m: self._theta_map(tv, m), lambda t, u: self._phi_map(tv, t, u),
                                     mu, tau)
-        tab = self._table_rows(tv)
-        if tab.any():
-            t2, p2, pdf = self.table.sample(tv[tab], mu[tab], tau[tab])
-            tl, pl, alpha = tl.copy(), pl.copy(), alpha.copy()
-            tl[tab], pl[tab], alpha[tab] = t2, p2, inverse_pdf(pdf)
-        return tl, pl, alpha
+        return table_where(self.table, self._table_rows(tv), tv, mu, tau, tl, pl, alpha)
 
     def theta_cdf(self, theta_v, theta_l, iters: int = 40) -> np.ndarray:
         """P(theta <= theta_l) under the rational sampler (bisection of the monotone F; the
@@ -799,17 +794,12 @@ def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows
     info.update(layout="rows", fitter="fit.fitter.IntervalRationalFitter", time_limit_s=time_limit_s,
                 time_limit_reached=bool(deadline is not None and time.perf_counter() > deadline),
                 time_s=time.perf_counter() - t0)
-    n_ok, n = info["verified_rows"], info["n_rows"]
+    n_ok = info["verified_rows"]
     fb = n_ok == 0
-    why = sorted({r.get("reason", "?") for r, f in zip(info["rows"], rows) if f is None})
-    if fb:
-        reason = f"no row rational ({'; '.join(why)})" + (f" (fitting time limit {time_limit_s:g} s reached)"
-                                                          if info["time_limit_reached"] else "")
-    elif n_ok < n:
-        reason = (f"rational on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with "
-                  f"the table ({'; '.join(why)})")
-    else:
-        reason = f"rational on all {n} view rows: verified monotone, covering, no poles"
+    why = {r.get("reason", "?") for r, f in zip(info["rows"], rows) if f is None}
+    reason = _rows_reason(n_ok, info["n_rows"], why, "verified monotone, covering, no poles")
+    if fb and info["time_limit_reached"]:
+        reason += f" (fitting time limit {time_limit_s:g} s reached)"
     log(f"  {reason}")
     return CDFFit(table=table, table_params=params, theta=None, phi=None,
                   verification={"rows": [r.get("verification", {}) for r in info["rows"]]},
@@ -817,20 +807,25 @@ def _fit_cdf_rows(table, params, name, source, log, deadline, time_limit_s, rows
                   source=source or {"file": "", "sha256": ""}, rows=None if fb else rows)
 
 
+def _rows_reason(n_ok: int, n: int, why, all_ok: str) -> str:
+    """The fit's reason for the per-row layouts: how many of the ``n`` view rows are rational
+    and why the others are sampled with the table (``why``: their reasons)."""
+    why = "; ".join(sorted(why))
+    if n_ok == 0:
+        return f"no row rational ({why})"
+    if n_ok < n:
+        return f"rational on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with the table ({why})"
+    return f"rational on all {n} view rows: {all_ok}"
+
+
 def _fit_cdf_pieces(table, params, name, source, log, pieces_kw, evaluate) -> CDFFit:
     from .cdf_pieces import fit_pieces
 
     pm, info = fit_pieces(table, evaluate, log=log, **(pieces_kw or {}))
     info.update(layout="pieces", construction="fit.cdf_pieces (monotone rational-quadratic pieces)")
-    n_ok, n = info["verified_rows"], info["n_rows"]
-    why = sorted({r.get("reason", "?") for r in info["rows"] if not r["ok"]})
-    if n_ok == 0:
-        reason = f"no row rational ({'; '.join(why)})"
-    elif n_ok < n:
-        reason = (f"rational on {n_ok}/{n} view rows; the other {n - n_ok} rows are sampled with "
-                  f"the table ({'; '.join(why)})")
-    else:
-        reason = f"rational on all {n} view rows: monotone, covering, no poles (by construction, checked)"
+    n_ok = info["verified_rows"]
+    why = {r.get("reason", "?") for r in info["rows"] if not r["ok"]}
+    reason = _rows_reason(n_ok, info["n_rows"], why, "monotone, covering, no poles (by construction, checked)")
     log(f"  {reason}")
     return CDFFit(table=table, table_params=params, theta=None, phi=None,
                   verification={"pieces": info["verification"]}, fallback=n_ok == 0, reason=reason,

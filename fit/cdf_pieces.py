@@ -251,7 +251,7 @@ def sample_pieces(table: CDFTable, pm: PieceMaps, theta_v, mu, tau):
     """``(theta_l, phi_l, alpha)`` of the pieces sampler (NumPy reference of the Warp one;
     rows with ``row_ok`` False use the table: alpha = 1 / its pdf)."""
     from .cdf_fit import sample_maps
-    from .cdf_table import inverse_pdf
+    from .cdf_table import table_where
 
     tv, mu, tau = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_v, mu, tau)))
     v = table.row(tv)
@@ -261,12 +261,7 @@ def sample_pieces(table: CDFTable, pm: PieceMaps, theta_v, mu, tau):
         return pm.phi_map(v, k, u)
 
     tl, pl, alpha = sample_maps(lambda m: pm.theta_map(v, m), phi_map, mu, tau)
-    tab = ~pm.row_ok[v]
-    if tab.any():
-        t2, p2, pdf = table.sample(tv[tab], mu[tab], tau[tab])
-        tl, pl, alpha = tl.copy(), pl.copy(), alpha.copy()
-        tl[tab], pl[tab], alpha[tab] = t2, p2, inverse_pdf(pdf)
-    return tl, pl, alpha
+    return table_where(table, ~pm.row_ok[v], tv, mu, tau, tl, pl, alpha)
 
 
 def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu"],

@@ -116,6 +116,18 @@ def inverse_pdf(pdf) -> np.ndarray:
     return np.where(pdf > 0, 1.0 / np.where(pdf > 0, pdf, 1.0), 0.0)
 
 
+def table_where(table: CDFTable, tab, tv, mu, tau, tl, pl, alpha):
+    """``(theta_l, phi_l, alpha)`` with the table's samples (alpha = 1 / its pdf) where the
+    boolean ``tab`` is set: the rows a rational sampler hands to the table (all arrays of one
+    shape; the inputs are not modified)."""
+    if not np.any(tab):
+        return tl, pl, alpha
+    t2, p2, pdf = table.sample(tv[tab], mu[tab], tau[tab])
+    tl, pl, alpha = tl.copy(), pl.copy(), alpha.copy()
+    tl[tab], pl[tab], alpha[tab] = t2, p2, inverse_pdf(pdf)
+    return tl, pl, alpha
+
+
 def _cosine_cell_masses(n_t: int, n_p: int):
     """Exact masses of the cosine-weighted hemisphere density on the (theta, phi in [0, pi]) cells."""
     edges = np.linspace(0, 0.5 * np.pi, n_t + 1)

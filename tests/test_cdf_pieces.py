@@ -13,7 +13,8 @@ from fit.angles import spherical_to_direction
 from fit.cdf_fit import fit_cdf, load, verify
 from fit.cdf_pieces import _piece, build_pieces, rq_eval, sample_pieces, verify_pieces
 from fit.cdf_table import LUMINANCE, tabulate
-from test_cdf_samplers import THETA_V, _assert_albedo_matches_quadrature, _chi2_pvalue, _rational_cell_probs
+from test_cdf_samplers import (THETA_V, _assert_albedo_matches_quadrature, _chi2_pvalue, _rational_cell_probs,
+                                warp_rational_samples)
 
 from analytic import lambert
 
@@ -172,17 +173,8 @@ def test_pieces_warp_equals_numpy_and_renders_agree(satin):
     b, fit = satin
     fit = copy.deepcopy(fit)
     fit.pieces.row_ok[2] = False              # one table row: the Warp code must branch to it
-    spec = MaterialSpec(name="m", type="measured", data=b, sampler="rational-derivative")
-    spec.cdf = fit
-    r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=2, spp=1))
-    r.compile()
-    rng = np.random.default_rng(4)
-    n = 4000
-    tv = rng.random(n) * np.radians(89)
-    pv = rng.random(n) * 2 * np.pi
-    xi = rng.random((n, 2)) * 0.998 + 0.001
+    r, tv, pv, xi, wi, w = warp_rational_samples(b, fit)
     wo = spherical_to_direction(tv, pv)
-    wi, w = r.sample_material("m", wo, xi, "rational-derivative")
     tl, pl, alpha = fit.sample(tv, xi[:, 0], xi[:, 1])
     assert (fit.table.row(tv) == 2).sum() > 100
     np.testing.assert_allclose(wi, spherical_to_direction(tl, pv + pl), atol=5e-4)

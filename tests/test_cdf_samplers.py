@@ -324,23 +324,30 @@ def test_rows_layout_round_trip_and_broken_row_goes_to_table(rows_fit, tmp_path)
     np.testing.assert_allclose(np.c_[tl, pl, a], np.c_[t2, p2, 1 / pdf])
 
 
-def test_rows_layout_warp_equals_numpy(rows_fit):
-    """Generated per-row Warp code == NumPy (rational rows and table rows alike)."""
+def warp_rational_samples(brdf, fit, n: int = 4000):
+    """Renderer (plane, measured ``brdf`` with rational inverse CDFs ``fit``) and 4000 Warp
+    samples of its rational-derivative strategy: ``(renderer, theta_v, phi_v, xi, wi, alpha)``
+    for view angles below 89 deg and xi away from 0 and 1."""
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 
-    b, fit = rows_fit
-    spec = MaterialSpec(name="m", type="measured", data=b, sampler="rational-derivative")
+    spec = MaterialSpec(name="m", type="measured", data=brdf, sampler="rational-derivative")
     spec.cdf = fit
     r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=2, spp=1))
     r.compile()
     rng = np.random.default_rng(4)
-    n = 4000
     tv = rng.random(n) * np.radians(89)
     pv = rng.random(n) * 2 * np.pi
     xi = rng.random((n, 2)) * 0.998 + 0.001
     wi, w = r.sample_material("m", spherical_to_direction(tv, pv), xi, "rational-derivative")
+    return r, tv, pv, xi, wi, w
+
+
+def test_rows_layout_warp_equals_numpy(rows_fit):
+    """Generated per-row Warp code == NumPy (rational rows and table rows alike)."""
+    b, fit = rows_fit
+    _, tv, pv, xi, wi, w = warp_rational_samples(b, fit)
     tl, pl, alpha = fit.sample(tv, xi[:, 0], xi[:, 1])
     np.testing.assert_allclose(wi, spherical_to_direction(tl, pv + pl), atol=5e-4)
     np.testing.assert_allclose(w, alpha, rtol=3e-3, atol=1e-5)
