@@ -22,10 +22,15 @@ The maps (all angles in radians, CDF variables in [0, 1]):
   theta_l cell, coherent / random view order, 64 x 32 pieces), and the variance is no worse
   (vch_golden_yellow at theta_v = 85 deg: 1.06x the table's, 1.41x per table cell).
 
-Piece counts (defaults 64 theta x 64 phi pieces): on cc_iris_purple_gem, 64 x 32 pieces leave 8
-of 32 rows above the variance gate, 128 x 32 leave 7, 64 x 64 none; on vch_golden_yellow 64 x 64
-samples at 1.71x / 1.53x the table's rate, 64 x 32 at 1.73x / 1.59x (the larger phi array misses
-the cache more often when every sample has another view row).
+Piece counts: 64 theta pieces; phi pieces per map: the fewest of 16, 32, 64 that keep every row
+within the variance gate (else the count with the most rational rows). Measured (variance gate
+1.2, rational rows per count 16 / 32 / 64): paper_white and satin_rosaline 32/32 rows at 16;
+vch_golden_yellow 22 / 32; cc_ibiza_sunset 14 / 31 / 32; cc_iris_purple_gem 12 / 24 / 32;
+colodur_napoli_4f 29 at every count (three rows of a noisy measurement stay on the table).
+Fewer phi pieces also sample faster when every sample has another view row (the phi maps are
+then read at random; vch: 1.62x / 1.65x the table's rate with 32 pieces, 1.56x / 1.57x with
+64, two runs each of ``benchmarks/bench_samplers.py --materials vch_golden_yellow_rgb --n-u N``). The Warp sampler stores the phi maps as knots (value, slope;
+:func:`warp_rbrdf.cdf_sampling.pieces_phi_knots`): 2 floats per piece instead of 4.
 
 Each piece is the monotone rational-quadratic interpolant of Gregory & Delbourgo (IMA J. Numer.
 Anal. 2, 1982; the "rational-quadratic spline" of neural spline flows) between two knots:
@@ -72,7 +77,7 @@ from scipy.interpolate import PchipInterpolator
 from .cdf_table import CDFTable
 
 HALF_PI = 0.5 * np.pi
-PIECES_DEFAULTS = dict(n_mu=64, n_u=64, max_variance_ratio=1.2, gate_samples=32768)
+PIECES_DEFAULTS = dict(n_mu=64, n_u=(16, 32, 64), max_variance_ratio=1.2, gate_samples=32768)
 
 
 @dataclass
@@ -265,17 +270,42 @@ def sample_pieces(table: CDFTable, pm: PieceMaps, theta_v, mu, tau):
 
 
 def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu"],
-               n_u: int = PIECES_DEFAULTS["n_u"],
+               n_u=PIECES_DEFAULTS["n_u"],
                max_variance_ratio: float | None = PIECES_DEFAULTS["max_variance_ratio"],
                gate_samples: int = PIECES_DEFAULTS["gate_samples"], log=None):
     """Build, verify and gate the pieces of ``table``. ``evaluate(wi, wo) -> (N, 3)`` (the
     material tabulated) is needed for the variance gate (``max_variance_ratio`` None: no
-    gate). Returns ``(PieceMaps, info)``; ``info["rows"]`` has per row ``ok``, ``reason`` and
-    the gate's ``variance`` dict."""
-    from .cdf_rows import variance_ratio
-
+    gate). ``n_u``: phi pieces per map, or increasing candidates (default 16, 32, 64): the
+    fewest that keep every row within the gate, else the count with the most rational rows
+    (the smallest on ties). Returns ``(PieceMaps, info)``; ``info["rows"]`` has per row
+    ``ok``, ``reason`` and the gate's ``variance`` dict, ``info["n_u_tried"]`` the rational
+    rows per candidate tried."""
     log = log or (lambda s: None)
     t0 = time.perf_counter()
+    best, tried = None, {}
+    for nu in sorted(np.atleast_1d(n_u).astype(int).tolist()):
+        pm, info = _fit_pieces_once(table, evaluate, n_mu, nu, max_variance_ratio, gate_samples)
+        tried[nu] = info["verified_rows"]
+        if best is None or info["verified_rows"] > best[1]["verified_rows"]:
+            best = (pm, info)
+        if not any(r.get("reason", "").startswith("variance") for r in info["rows"]):
+            break
+    pm, info = best
+    info.update(n_u_tried=tried, time_s=time.perf_counter() - t0)
+    ratios = [r["variance"]["ratio"] for r in info["rows"] if "variance" in r]
+    log(f"  pieces ({n_mu} theta x {info['n_u']} phi pieces per map; phi pieces tried: rational rows "
+        + ", ".join(f"{k}: {v}" for k, v in tried.items()) + f"): {info['verified_rows']}/{table.n_v} "
+        "rows rational" + (f"; variance ratio to the table per row: median {np.median(ratios):.2f}, range "
+                           f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "")
+        + f" ({info['time_s']:.1f} s)")
+    pm.info = info
+    return pm, info
+
+
+def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_samples):
+    """:func:`fit_pieces` for one phi piece count."""
+    from .cdf_rows import variance_ratio
+
     pm = build_pieces(table, n_mu, n_u)
     ver = verify_pieces(pm)
     rows = []
@@ -293,14 +323,7 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
                 r.update(ok=False, reason=f"variance > {max_variance_ratio:g} x the table's")
         rows.append(r)
         pm.row_ok[v] = r["ok"]
-    n_ok = int(pm.row_ok.sum())
-    ratios = [r["variance"]["ratio"] for r in rows if "variance" in r]
     info = {"n_mu": n_mu, "n_u": n_u, "max_variance_ratio": max_variance_ratio,
-            "gate_samples": gate_samples, "verified_rows": n_ok, "n_rows": table.n_v, "rows": rows,
-            "verification": {k: ver[k] for k in ("ok", "failures")},
-            "time_s": time.perf_counter() - t0}
-    log(f"  pieces ({n_mu} theta x {n_u} phi pieces per map): {n_ok}/{table.n_v} rows rational"
-        + (f"; variance ratio to the table per row: median {np.median(ratios):.2f}, range "
-           f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "") + f" ({info['time_s']:.1f} s)")
-    pm.info = info
+            "gate_samples": gate_samples, "verified_rows": int(pm.row_ok.sum()), "n_rows": table.n_v,
+            "rows": rows, "verification": {k: ver[k] for k in ("ok", "failures")}}
     return pm, info

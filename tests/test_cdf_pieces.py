@@ -127,11 +127,58 @@ def test_pieces_variance_gate(satin):
     assert ratios[v] == pytest.approx(np.var(e_r) / np.var(e_t), rel=1e-9)
     lim = float(np.median(ratios))
     gated = fit_cdf(b.evaluate, name="satin", table=fit.table, layout="pieces",
-                    pieces_kw=dict(max_variance_ratio=lim))
+                    pieces_kw=dict(max_variance_ratio=lim, n_u=fit.pieces.n_u))
     ok = gated.pieces.row_ok
     assert ok.tolist() == (ratios <= lim).tolist() and 0 < ok.sum() < len(ok)
     assert all(i["reason"] == f"variance > {lim:g} x the table's" for i, o in zip(gated.fit_info["rows"], ok) if not o)
     assert "sampled with the table" in gated.reason
+
+
+def test_pieces_phi_count_is_the_fewest_that_keeps_rows_within_the_gate(satin):
+    """n_u candidates: the first count whose rows all pass the gate ends the search; else the
+    count with the most rational rows, the smallest on ties (checked against each count built
+    alone). Satin passes the default gate with the fewest pieces."""
+    from fit.cdf_pieces import _fit_pieces_once, fit_pieces
+
+    b, fit = satin
+    assert fit.pieces.n_u == 16 and fit.fit_info["n_u_tried"] == {16: fit.table.n_v}
+    ratios = np.array([i["variance"]["ratio"] for i in fit.fit_info["rows"]])
+    lim = float(np.sort(ratios)[-3])          # strict enough that 16 pieces leave rows behind
+    alone = {nu: _fit_pieces_once(fit.table, b.evaluate, 64, nu, lim, 32768)[1]["verified_rows"]
+             for nu in (16, 32, 64)}
+    pm, info = fit_pieces(fit.table, b.evaluate, n_u=(64, 16, 32), max_variance_ratio=lim)
+    assert alone[16] < fit.table.n_v
+    expect, tried = None, {}
+    for nu in (16, 32, 64):
+        tried[nu] = alone[nu]
+        if expect is None or alone[nu] > alone[expect]:
+            expect = nu
+        if alone[nu] == fit.table.n_v:
+            break
+    assert info["n_u_tried"] == tried and pm.n_u == expect == info["n_u"]
+    assert int(pm.row_ok.sum()) == alone[expect]
+
+
+def test_warp_phi_knots_share_values_and_slopes(satin):
+    """The Warp array stores the phi maps as knots (value, slope): they reproduce every piece's
+    ends; a verified row whose pieces do not share a knot cannot be packed (ValueError), a
+    table row can."""
+    from warp_rbrdf.cdf_sampling import pieces_phi_knots
+
+    _, fit = satin
+    pm = fit.pieces
+    kn = pieces_phi_knots(pm)
+    assert kn.shape == pm.phi.shape[:-2] + (pm.n_u + 1, 2)
+    np.testing.assert_allclose(kn[..., :-1, 0], pm.phi[..., 0])
+    np.testing.assert_allclose(kn[..., 1:, 0], pm.phi[..., 0] + pm.phi[..., 1], atol=1e-12)
+    np.testing.assert_allclose(kn[..., :-1, 1], pm.phi[..., 2] * pm.phi[..., 1])
+    np.testing.assert_allclose(kn[..., 1:, 1], pm.phi[..., 3] * pm.phi[..., 1], rtol=1e-9, atol=1e-15)
+    bad = copy.deepcopy(pm)
+    bad.phi[3, 5, 2, 3] *= 1.5                # slope at the end of a piece != next piece's start
+    with pytest.raises(ValueError, match=r"rows \[3\]"):
+        pieces_phi_knots(bad)
+    bad.row_ok[3] = False
+    pieces_phi_knots(bad)
 
 
 def test_pieces_file_round_trip(satin, tmp_path):

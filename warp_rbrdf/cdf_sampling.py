@@ -163,12 +163,34 @@ def rq_piece(pw: wp.array(dtype=float), b: int, x: float) -> wp.vec2:
 
 
 @wp.func
+def rq_knots(pw: wp.array(dtype=float), b: int, x: float) -> wp.vec2:
+    """(value, d/dx) of the same rational-quadratic piece stored by its two knots
+    ``(y0, s0, y1, s1)`` at pw[b:b+4] (values and slopes dy/dx, x in [0, 1]): consecutive pieces
+    share a knot, so the map is continuous by construction and a piece costs 2 floats.
+    ``h = y1 - y0``: ``y = y0 + h (h x^2 + s0 x(1-x)) / (h + (s0 + s1 - 2h) x(1-x))``."""
+    y0 = pw[b]
+    s0 = pw[b + 1]
+    y1 = pw[b + 2]
+    s1 = pw[b + 3]
+    h = y1 - y0
+    t = x * (1.0 - x)
+    den = h + (s0 + s1 - 2.0 * h) * t
+    if den <= 0.0:                  # h = 0 and flat slopes: a constant piece
+        return wp.vec2(y0, 0.0)
+    iden = 1.0 / den
+    x2 = x * x
+    w = 1.0 - x
+    return wp.vec2(y0 + h * (h * x2 + s0 * t) * iden, h * h * (s1 * x2 + 2.0 * h * t + s0 * w * w) * iden * iden)
+
+
+@wp.func
 def pieces_sample(pw: wp.array(dtype=float), off: int, n_v: int, n_mu: int, n_u: int,
                   va: wp.vec3, mu: float, tau: float) -> wp.vec4:
     """(wi, alpha): the direction of (theta_l, phi_l) of fit.cdf_pieces.sample_pieces in the
     view frame ``va`` (:func:`view_frame`) and alpha, on a rational row (the generated caller
     sends table rows to the table). Piece of mu: floor(mu n_mu), no search; sin and cos of
-    theta_l computed once (end pieces: from y = sin^2 theta_l, no sin/cos at all)."""
+    theta_l computed once (end pieces: from y = sin^2 theta_l, no sin/cos at all). Theta pieces:
+    4 floats each (:func:`rq_piece`); phi maps: knots (:func:`rq_knots`, see :func:`pack_pieces`)."""
     v = tab_row(va[0], n_v)
     xs = mu * float(n_mu)
     k = wp.clamp(int(xs), 0, n_mu - 1)
@@ -194,7 +216,8 @@ def pieces_sample(pw: wp.array(dtype=float), off: int, n_v: int, n_mu: int, n_u:
     u = wp.abs(2.0 * tau - 1.0)
     us = u * float(n_u)
     kp = wp.clamp(int(us), 0, n_u - 1)
-    G = rq_piece(pw, off + n_v * n_mu * 4 + ((v * n_mu + k) * n_u + kp) * 4, wp.clamp(us - float(kp), 0.0, 1.0))
+    G = rq_knots(pw, off + n_v * n_mu * 4 + ((v * n_mu + k) * (n_u + 1) + kp) * 2,
+                 wp.clamp(us - float(kp), 0.0, 1.0))
     ph = wp.clamp(G[0], 0.0, wp.pi)
     cp = wp.cos(ph)
     sp = s * wp.sin(ph)
@@ -397,17 +420,40 @@ def generate_sampler_functions(fits, pw_offsets=None):
     return out
 
 
+def pieces_phi_knots(pm) -> np.ndarray:
+    """(n_v, n_mu, n_u + 1, 2): the phi pieces ``(y_k, h, a0, a1)`` of ``pm`` as knots (value,
+    slope dy/dx in piece-local x): the form :func:`rq_knots` reads (half the bytes of the
+    pieces, which matters when view rows change from sample to sample: the phi maps of a
+    material are then read at random, 64 x 64 pieces = 2 MB as pieces, 1.06 MB as knots).
+    Raises ValueError where a verified row's pieces do not share their knots (their values or
+    slopes differ between the end of a piece and the start of the next)."""
+    c = pm.phi
+    y = np.concatenate([c[..., 0], (c[..., -1, 0] + c[..., -1, 1])[..., None]], axis=-1)
+    s_start = c[..., 2] * c[..., 1]                  # a0 h: slope at x = 0 of each piece
+    s_end = c[..., 3] * c[..., 1]                    # a1 h: slope at x = 1
+    s = np.concatenate([s_start, s_end[..., -1:]], axis=-1)
+    ok = np.asarray(pm.row_ok, bool)
+    tol = 1e-9 * (1.0 + np.abs(y[..., 1:-1]))
+    bad = (np.abs(c[..., :-1, 0] + c[..., :-1, 1] - y[..., 1:-1]) > tol) \
+        | (np.abs(s_end[..., :-1] - s[..., 1:-1]) > 1e-9 * (1.0 + np.abs(s[..., 1:-1])))
+    rows = np.flatnonzero(bad.any(axis=(-1, -2)) & ok)
+    if rows.size:
+        raise ValueError(f"phi pieces of rows {rows.tolist()} do not share their knots")
+    return np.stack([y, s], axis=-1)
+
+
 def pack_pieces(fits):
     """``(float32 array, offsets)``: the pieces-layout fits' coefficients concatenated, per fit
-    ``[theta (n_v, n_mu, 4), phi (n_v, n_mu, n_u, 4)]``; offset -1 for fits of other layouts
-    (the table rows are literals of the generated code)."""
+    ``[theta pieces (n_v, n_mu, 4), phi knots (n_v, n_mu, n_u + 1, 2)]`` (:func:`rq_piece`,
+    :func:`rq_knots`); offset -1 for fits of other layouts (the table rows are literals of the
+    generated code)."""
     parts, offsets, off = [], [], 0
     for f in fits:
         if f.pieces is None:
             offsets.append(-1)
             continue
         pm = f.pieces
-        a = np.concatenate([pm.theta.ravel(), pm.phi.ravel()])
+        a = np.concatenate([pm.theta.ravel(), pieces_phi_knots(pm).ravel()])
         parts.append(a)
         offsets.append(off)
         off += a.size
