@@ -1,5 +1,7 @@
 """Shared helpers of the studies: data paths, in-memory scenes, sampler discovery, timed renders,
-image metrics (RMSE on an object mask, CIE ΔE2000 with colour-science) and small writers.
+image metrics (RMSE on an object mask, CIE ΔE2000 with colour-science), small writers and
+:func:`publish_docs` (each study's ``--docs``: charts to ``docs/images/``, the full report to
+``docs/study_<name>.md`` and the README block between the study's markers).
 
 Every study builds its scenes in memory (no TOML files), with the object alone in front of a
 hidden environment (``hide_environment = true``) so that errors are measured on the object's
@@ -10,6 +12,8 @@ from __future__ import annotations
 import csv
 import json
 import os
+import shlex
+import shutil
 import sys
 import time
 from functools import lru_cache
@@ -343,3 +347,116 @@ def progress(iterable=None, **kw):
     kw.setdefault("leave", False)
     kw.setdefault("file", sys.stderr)
     return tqdm(iterable, **kw)
+
+
+# --------------------------------------------------------------------------------------------
+# Publishing (``--docs``): docs/images/study_*.png, docs/study_<name>.md, the README block
+DOCS_HELP = ("also write docs/images/study_*.png, docs/study_<name>.md and the README block between "
+             "the study's markers")
+
+
+def add_docs_arguments(parser):
+    """``--docs`` (and ``--docs-root``, where docs/ and README.md are) for a study's CLI."""
+    parser.add_argument("--docs", action="store_true", help=DOCS_HELP)
+    parser.add_argument("--docs-root", default=str(ROOT),
+                        help="folder holding README.md and docs/ (default: the repository root)")
+
+
+def command_line(script, argv=None) -> str:
+    """The command that ran a study, as ``python studies/x.py ARGS`` (``argv``: the arguments,
+    default ``sys.argv[1:]``; the script path relative to the repository when it is inside)."""
+    script = Path(script).resolve()
+    try:
+        rel = script.relative_to(ROOT).as_posix()
+    except ValueError:
+        rel = str(script)
+    args = sys.argv[1:] if argv is None else list(argv)
+    return shlex.join(["python", rel, *map(str, args)])
+
+
+def readme_markers(name: str) -> tuple[str, str]:
+    return f"<!-- BEGIN study:{name} -->", f"<!-- END study:{name} -->"
+
+
+def replace_block(text: str, name: str, block: str) -> str:
+    """``text`` with what lies between the study's two markers replaced by ``block`` (the markers
+    and everything outside them unchanged). A marker that is missing, repeated or out of order is a
+    ``ValueError`` naming it."""
+    begin, end = readme_markers(name)
+    for m in (begin, end):
+        n = text.count(m)
+        if n != 1:
+            raise ValueError(f"README marker {m!r} " + ("not found" if n == 0 else f"found {n} times")
+                             + f": add the pair {begin!r} ... {end!r} where the study's block goes")
+    i = text.index(begin) + len(begin)
+    j = text.index(end)
+    if j < i:
+        raise ValueError(f"README marker {end!r} comes before {begin!r}")
+    return text[:i] + "\n" + block.strip("\n") + "\n" + text[j:]
+
+
+def _run_line(meta: dict) -> tuple[str, str]:
+    """(long, short) description of the run: wall seconds and machine."""
+    wall = meta.get("wall_seconds")
+    m = meta.get("machine") or machine_info()
+    w = f"{wall:.0f} s" if isinstance(wall, (int, float)) else "–"
+    return (f"Wall time: {w} (the study's run, charts excluded). Machine: {m.get('cpus')} CPUs, "
+            f"{m.get('platform')}, Python {m.get('python')}; finished {m.get('time')}.",
+            f"{w} on {m.get('cpus')} CPUs, {str(m.get('time', ''))[:10]}")
+
+
+def publish_docs(name: str, title: str, out, summary_md: str, meta: dict, charts: dict,
+                 readme_table: str, command: str | None = None, docs_root=None,
+                 readme_charts=None) -> dict:
+    """Publish one study's run (its ``--docs``).
+
+    ``name``: the study's key (README markers ``<!-- BEGIN study:<name> -->`` /
+    ``<!-- END study:<name> -->``, report ``docs/study_<name>.md``); ``out``: the folder the run
+    wrote its charts to; ``charts``: {file in ``out``: name under ``docs/images/``}, in display
+    order; ``readme_charts``: the subset (of those names) shown in the README (default: all);
+    ``summary_md``: the study's full markdown summary; ``meta``: its meta (``wall_seconds``,
+    ``machine``); ``readme_table``: the compact markdown of key numbers for the README block;
+    ``command``: the command line (default: rebuilt from ``sys.argv``); ``docs_root``: folder
+    holding ``README.md`` and ``docs/`` (default: the repository root).
+
+    Everything is checked (charts present, README markers present once each) before anything is
+    written, so a failure leaves the docs as they were. Returns the paths written and the block."""
+    root = Path(docs_root) if docs_root is not None else ROOT
+    if meta.get("preset") == "smoke" and root.resolve() == ROOT.resolve():
+        raise ValueError(f"study {name}: a --smoke run would overwrite the repository's docs and README "
+                         "block; give --docs-root another folder")
+    out = Path(out)
+    command = command or command_line(sys.argv[0])
+    readme = root / "README.md"
+    missing = [str(out / s) for s in charts if not (out / s).is_file()]
+    if missing:
+        raise FileNotFoundError(f"study {name}: chart(s) not written by this run: {', '.join(missing)}")
+    if not readme.is_file():
+        raise FileNotFoundError(f"no README.md in {root}")
+    with open(readme, encoding="utf-8", newline="") as f:
+        text = f.read()
+    long_run, short_run = _run_line(meta)
+    shown = [d for d in charts.values() if readme_charts is None or d in readme_charts]
+    block = "\n".join([f"**{title}** · `{command}` ({short_run})", "",
+                       *[f"![{Path(d).stem}](docs/images/{d})" for d in shown], "",
+                       readme_table.strip("\n"), "",
+                       f"Generated by `--docs`; the full report with every table: "
+                       f"[docs/study_{name}.md](docs/study_{name}.md)."])
+    new_text = replace_block(text, name, block)
+    images = root / "docs" / "images"
+    images.mkdir(parents=True, exist_ok=True)
+    written = []
+    for src, dst in charts.items():
+        shutil.copyfile(out / src, images / dst)
+        written.append(images / dst)
+    doc = root / "docs" / f"study_{name}.md"
+    doc.write_text("\n".join([f"# {title}", "",
+                              "Generated by the study's `--docs` (edits here are overwritten: re-run the "
+                              "command).", "",
+                              f"Command: `{command}`", "", long_run, "",
+                              *[f"![{Path(d).stem}](images/{d})\n" for d in charts.values()],
+                              summary_md.strip("\n"), ""]), encoding="utf-8")
+    if new_text != text:
+        with open(readme, "w", encoding="utf-8", newline="") as f:
+            f.write(new_text)
+    return dict(images=written, doc=doc, readme=readme, block=block)

@@ -22,6 +22,12 @@ covered pixels: mean, 99th percentile; also by the view angle theta_o (where the
 
     python studies/comparison.py --out results/comparison              # full size
     python studies/comparison.py --out results/comparison --smoke
+    python studies/comparison.py --preset moderate --out results/comparison --docs   # the README's
+
+``--docs`` also copies the charts to ``docs/images/study_comparison_{colinear,envmap}.png``,
+writes ``docs/study_comparison.md`` and the README block between
+``<!-- BEGIN study:comparison -->`` and ``<!-- END study:comparison -->``
+(:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
@@ -48,6 +54,10 @@ PRESETS = {
 THETA_BINS = (0.0, 30.0, 60.0, 75.0, 90.0)
 SEED, NOISE_SEED = 5, 900_001
 PAIRS = (("measured", "projected"), ("measured", "rational"), ("projected", "rational"))
+#: ``--docs``: the study's key, title and charts ({file in --out: name under docs/images/}).
+DOCS = dict(name="comparison", title="The method's comparison (3-D table, 2-D projection, rational fit)",
+            charts={"comparison_colinear.png": "study_comparison_colinear.png",
+                    "comparison_envmap.png": "study_comparison_envmap.png"})
 
 
 def view_angles(scene) -> np.ndarray:
@@ -177,6 +187,31 @@ def summary_markdown(rows, meta) -> str:
     return "\n".join(L)
 
 
+def readme_table(res) -> str:
+    """The README's compact table of a run (``run``'s result): per material and light, mean / p99
+    ΔE2000 of 3-D ↔ 2-D and 3-D ↔ rational, the noise floor, and 3-D ↔ 2-D by view angle."""
+    rows, meta = res["rows"], res["meta"]
+    cfg = meta["config"]
+    bins = list(zip(THETA_BINS[:-1], THETA_BINS[1:]))
+
+    def pair(r, tag):
+        m, q = r.get(f"de_{tag}_mean"), r.get(f"de_{tag}_p99")
+        return "–" if m is None else f"{C._fmt(m)} / {C._fmt(q)}"
+
+    body = [[r["material"], r["light"], pair(r, "meas_proj"), pair(r, "meas_rati"), r["noise_de_mean"],
+             "/".join(C._fmt(r[f"de_meas_proj_theta{int(a)}_{int(b)}"]) for a, b in bins)] for r in rows]
+    hdr = ["material", "light", "3-D ↔ 2-D", "3-D ↔ rational", "noise floor",
+           "3-D ↔ 2-D by θo " + "/".join(f"{int(a)}–{int(b)}°" for a, b in bins)]
+    fits = meta.get("fits", {})
+    coef = "; ".join(f"{m} {f['n_coefficients']}" if f.get("n_coefficients") else f"{m} none"
+                     for m, f in fits.items())
+    return (C.md_table(body, hdr)
+            + f"\n(mean / 99th percentile ΔE2000 on the object's fully covered pixels; sphere "
+              f"{cfg['resolution']} px; colinear light {cfg['colinear_spp']} spp; `{cfg['env']}` map with "
+              f"{cfg['env_spp']} importance-sampled lights per pixel; rational: fits at tolerance "
+              f"{meta['tol']:g}" + (f", coefficients: {coef}" if coef else "") + ".)\n")
+
+
 def plot(images, materials, lname, path):
     import matplotlib
 
@@ -236,11 +271,17 @@ def main(argv=None):
     p.add_argument("--direct-fallback", action="store_true",
                    help="if the project's fitter is unavailable, fit with studies.fits.direct_fit (labelled)")
     p.add_argument("--fit-timeout", type=float, default=900.0)
+    C.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.materials, a.resolution, a.env, a.env_spp,
               a.colinear_spp, a.tol, not a.no_fit, a.direct_fallback, a.fit_timeout)
     print(res["markdown"])
     print(f"wrote {a.out}/comparison.csv, .json, .md, comparison_*.png ({res['meta']['wall_seconds']:.0f} s)")
+    if a.docs:
+        pub = C.publish_docs(out=a.out, summary_md=res["markdown"], meta=res["meta"], readme_table=readme_table(res),
+                             command=C.command_line(__file__, argv), docs_root=a.docs_root, **DOCS)
+        print(f"published {pub['doc']}, {len(pub['images'])} charts and the README block")
+    return res
 
 
 if __name__ == "__main__":

@@ -14,9 +14,19 @@ Samplers are discovered from ``warp_rbrdf.scene.SAMPLERS``: the four of the firs
 (uniform, cosine, light, mis) and any inverse-CDF sampler added since; a sampler that a material
 type does not support is recorded as skipped.
 
-    python studies/convergence.py --out results/convergence            # full size
+Presets: ``full`` (default; with ``--docs`` it makes the README's block): 64×64 px, spp = 1, 2, 4, ..., 1024, 3 seeds,
+reference 8192 spp, sphere and bunny under rooitou (tiny sun), studio and a colinear light, ibiza
+and paper (12 scenes; about 30 minutes on 2 cores); ``moderate``: 48 px, spp ≤ 512, 2 seeds,
+reference 4096 spp, the same scenes; ``smoke``: 12 px, spp ≤ 8, one seed, sphere under rooitou
+and colinear, ibiza (CI).
+
+    python studies/convergence.py --out results/convergence --docs     # full size; README + docs
     python studies/convergence.py --out results/convergence --smoke    # tiny
     python studies/convergence.py --preset moderate --out results/convergence_moderate
+
+``--docs`` also copies the charts to ``docs/images/study_convergence_*.png``, writes
+``docs/study_convergence.md`` and the README block between ``<!-- BEGIN study:convergence -->``
+and ``<!-- END study:convergence -->`` (:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
@@ -40,11 +50,23 @@ PRESETS = {
     "moderate": dict(resolution=48, max_spp=512, seeds=2, ref_spp=4096,
                      geometries=["sphere", "bunny"], lights=["rooitou", "studio", "colinear"],
                      materials=["ibiza", "paper"]),
-    "full": dict(resolution=128, max_spp=1024, seeds=3, ref_spp=16384,
+    # about 30 minutes on 2 cores (every sampler, 12 scenes)
+    "full": dict(resolution=64, max_spp=1024, seeds=3, ref_spp=8192,
                  geometries=["sphere", "bunny"], lights=["rooitou", "studio", "colinear"],
                  materials=["ibiza", "paper"]),
 }
 REF_SEED = 1_000_003
+#: ``--docs``: the study's key, title and charts ({file in --out: name under docs/images/}).
+DOCS = dict(name="convergence", title="Convergence",
+            charts={"convergence_rmse_time.png": "study_convergence_rmse_time.png",
+                    "convergence_rmse_spp.png": "study_convergence_rmse_spp.png",
+                    "convergence_efficiency.png": "study_convergence_efficiency.png"},
+            readme_charts=("study_convergence_rmse_time.png", "study_convergence_efficiency.png"))
+#: Columns of the README's compact table: relative RMSE of these samplers, efficiency vs MIS of
+#: the last ones.
+README_SAMPLERS = ("cosine", "light", "mis", "tabulated", "rational-derivative", "mis-tabulated", "mis-rational")
+README_EFFICIENCY = ("light", "mis-tabulated", "mis-rational")
+_SHORT = {"rational-derivative": "rational-deriv.", "mis-tabulated": "mis-tab.", "mis-rational": "mis-rat."}
 
 
 def spp_list(max_spp: int) -> list[int]:
@@ -186,6 +208,29 @@ def summary_markdown(summary, refs, meta) -> str:
     return "\n".join(lines)
 
 
+def readme_table(res) -> str:
+    """The README's compact table of a run (``run``'s result): per scene, relative RMSE at the top
+    spp of :data:`README_SAMPLERS` and efficiency vs MIS of :data:`README_EFFICIENCY`."""
+    summary, refs, meta = res["summary"], res["references"], res["meta"]
+    cfg = meta["config"]
+    top = max((s["spp"] for s in summary), default=cfg["max_spp"])
+    header = ["scene", "material", *(s.replace("derivative", "deriv.") for s in README_SAMPLERS),
+              "eff./MIS: " + " / ".join(_SHORT.get(s, s) for s in README_EFFICIENCY)]
+    body = []
+    for ref in refs:
+        key = (ref["geometry"], ref["light"], ref["material"])
+        d = {s["sampler"]: s for s in summary if (s["geometry"], s["light"], s["material"]) == key}
+        body.append([f"{ref['geometry']} / {ref['light']}", ref["material"]]
+                    + [d[s]["rel_rmse"] if s in d else float("nan") for s in README_SAMPLERS]
+                    + [" / ".join(C._fmt(d[s]["eff_vs_mis"] if s in d else float("nan"))
+                                  for s in README_EFFICIENCY)])
+    return (C.md_table(body, header)
+            + f"\n(relative RMSE at {top} spp, median of {cfg['seeds']} seeds, on the object's fully covered "
+              f"pixels at {cfg['resolution']}×{cfg['resolution']} px; reference: {meta['reference']}; "
+              f"efficiency 1/(rel. MSE × render seconds) relative to MIS, > 1: better than MIS; "
+              f"–: sampler not run.)\n")
+
+
 def plot(rows, refs, summary, out: Path):
     import matplotlib
 
@@ -259,12 +304,18 @@ def main(argv=None):
     p.add_argument("--lights", nargs="*")
     p.add_argument("--materials", nargs="*")
     p.add_argument("--threads", type=int)
+    C.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.samplers, a.resolution, a.max_spp, a.seeds,
               a.ref_spp, a.geometries, a.lights, a.materials, a.threads)
     print(res["markdown"])
     print(f"wrote {a.out}/convergence.csv, convergence.json, convergence.md, convergence_*.png "
           f"({res['meta']['wall_seconds']:.0f} s)")
+    if a.docs:
+        pub = C.publish_docs(out=a.out, summary_md=res["markdown"], meta=res["meta"], readme_table=readme_table(res),
+                             command=C.command_line(__file__, argv), docs_root=a.docs_root, **DOCS)
+        print(f"published {pub['doc']}, {len(pub['images'])} charts and the README block")
+    return res
 
 
 if __name__ == "__main__":

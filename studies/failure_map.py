@@ -29,6 +29,11 @@ the failing samplers.
 
     python studies/failure_map.py --out results/failure_map            # full size
     python studies/failure_map.py --out results/failure_map --smoke
+    python studies/failure_map.py --preset moderate --out results/failure_map --docs   # the README's
+
+``--docs`` also copies the chart to ``docs/images/study_failure_map.png``, writes
+``docs/study_failure_map.md`` and the README block between ``<!-- BEGIN study:failure_map -->``
+and ``<!-- END study:failure_map -->`` (:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
@@ -53,6 +58,8 @@ PRESETS = {   # cdf_time_limit: bound (s) on each material's rational inverse-CD
     "full": dict(resolution=96, spp=256, seeds=4, fit_stride=2, fit_max_degree=10, cdf_time_limit=300.0),
 }
 MIRROR_EXPONENT = 5000
+#: ``--docs``: the study's key, title and chart ({file in --out: name under docs/images/}).
+DOCS = dict(name="failure_map", title="Failure map", charts={"failure_map.png": "study_failure_map.png"})
 
 
 # --------------------------------------------------------------------------------------------
@@ -253,13 +260,13 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
     return dict(samplers=noise_rows, other=other, meta=meta, markdown=md)
 
 
-def summary_markdown(rows, other, meta) -> str:
+def _sampler_findings(rows, other, meta) -> list[str]:
+    """The sampler table and the projection / mirror-CDF lines (the summary's first part, and the
+    README block)."""
     cfg = meta["config"]
     s = meta["samplers"]
-    L = [f"Relative standard error of the pixel estimate at {cfg['spp']} spp ({cfg['resolution']}×"
-         f"{cfg['resolution']} px, independent samples, median of {cfg['seeds']} seeds; lower is "
-         f"better, > 1 means the noise exceeds the signal). Mirror lobe: normalized Blinn-Phong "
-         f"n = {meta['mirror_exponent']} written as a MERL file.\n"]
+    L = []
+
     def cell(r, x):
         v = r.get(f"{x}_rel_err", float("nan"))
         n = r.get(f"{x}_nonfinite", 0)
@@ -281,6 +288,27 @@ def summary_markdown(rows, other, meta) -> str:
         L.append(f"\nRational inverse CDFs of the mirror lobe ({m['layout']} layout{lim}): "
                  + (f"FALLBACK to the tabulated sampler ({m['reason']})" if m["fallback"] else m["reason"])
                  + f", {m['fit_seconds']:.1f} s.\n")
+    return L
+
+
+def readme_table(res) -> str:
+    """The README's compact block of a run (``run``'s result): the relative standard error per case
+    and sampler, and the projection and mirror inverse-CDF findings (the fits: docs only)."""
+    meta = res["meta"]
+    cfg = meta["config"]
+    return (f"Relative standard error of the pixel estimate at {cfg['spp']} spp ({cfg['resolution']} px, "
+            f"independent samples, median of {cfg['seeds']} seeds; > 1: the noise exceeds the signal; mirror "
+            f"lobe: Blinn-Phong n = {meta['mirror_exponent']} as a MERL file):\n\n"
+            + "\n\n".join(x.strip("\n") for x in _sampler_findings(res["samplers"], res["other"], meta)) + "\n")
+
+
+def summary_markdown(rows, other, meta) -> str:
+    cfg = meta["config"]
+    L = [f"Relative standard error of the pixel estimate at {cfg['spp']} spp ({cfg['resolution']}×"
+         f"{cfg['resolution']} px, independent samples, median of {cfg['seeds']} seeds; lower is "
+         f"better, > 1 means the noise exceeds the signal). Mirror lobe: normalized Blinn-Phong "
+         f"n = {meta['mirror_exponent']} written as a MERL file.\n"]
+    L += _sampler_findings(rows, other, meta)
     fits = [(k, v) for k, v in other.items() if k.startswith("fit_")]
     if fits:
         L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, every "
@@ -325,10 +353,16 @@ def main(argv=None):
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--smoke", action="store_true")
     p.add_argument("--samplers", nargs="*")
+    C.add_docs_arguments(p)
     a = p.parse_args(argv)
     r = run("smoke" if a.smoke else a.preset, a.out, a.samplers)
     print(r["markdown"])
     print(f"wrote {a.out}/failure_map.csv, .json, .md, failure_map.png ({r['meta']['wall_seconds']:.0f} s)")
+    if a.docs:
+        pub = C.publish_docs(out=a.out, summary_md=r["markdown"], meta=r["meta"], readme_table=readme_table(r),
+                             command=C.command_line(__file__, argv), docs_root=a.docs_root, **DOCS)
+        print(f"published {pub['doc']}, {len(pub['images'])} chart and the README block")
+    return r
 
 
 if __name__ == "__main__":

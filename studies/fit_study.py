@@ -16,6 +16,12 @@ stand-in built on :class:`fit.fitter.IntervalRationalFitter`). Then:
 
     python studies/fit_study.py --out results/fit_study                    # full size
     python studies/fit_study.py --out results/fit_study --smoke
+    python studies/fit_study.py --preset moderate --materials paper satin ibiza gold napoli iris \\
+        --out results/fit_study --docs                                      # the README's
+
+``--docs`` also copies the chart to ``docs/images/study_fit.png``, writes ``docs/study_fit.md``
+and the README block between ``<!-- BEGIN study:fit -->`` and ``<!-- END study:fit -->``
+(:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
@@ -42,6 +48,9 @@ PRESETS = {
                  n_eval=1 << 21, stride=1, max_degree=10),
 }
 SEED = 5
+#: ``--docs``: the study's key, title and chart ({file in --out: name under docs/images/}).
+DOCS = dict(name="fit", title="Fit study: coefficients vs tolerance vs ΔE2000 vs evaluation cost",
+            charts={"fit_study.png": "study_fit.png"})
 
 
 def random_pairs(n: int, seed: int = 0):
@@ -178,6 +187,34 @@ def summary_markdown(rows, base_rows, meta) -> str:
     return "\n".join(L)
 
 
+def readme_table(res) -> str:
+    """The README's compact table of a run (``run``'s result): per material, at each tolerance,
+    coefficients, mean ΔE2000 vs the 3-D table and ns per evaluation; the tables' cost and the
+    2-D table's ΔE and the noise for scale."""
+    rows, base_rows, meta = res["rows"], res["tables"], res["meta"]
+    cfg = meta["config"]
+    tols = list(cfg["tols"])
+    tl = " / ".join(f"{100 * t:g}" for t in tols) + " %"
+
+    def per_tol(m, f):
+        d = {r["tol"]: r for r in rows if r["material"] == m}
+        return " / ".join(f(d[t]) if t in d and "n_coefficients" in d[t] else "–" for t in tols)
+
+    body = [[b["material"], per_tol(b["material"], lambda r: str(r["n_coefficients"])),
+             per_tol(b["material"], lambda r: f"{r['de_vs_measured_mean']:.2f}"),
+             per_tol(b["material"], lambda r: C._fmt(float(r["eval_ns"]))),
+             per_tol(b["material"], lambda r: "yes" if r["feasible"] else "no"),
+             f"{b['projected_eval_ns']:.0f} / {b['measured_eval_ns']:.0f}",
+             f"{b['de_proj_vs_meas_mean']:.2f} / {b['noise_de_mean']:.2f}"] for b in base_rows]
+    hdr = ["material", f"coefficients at {tl}", "mean ΔE vs 3-D", "ns / eval", "all in tol.",
+           "ns / eval 2-D / 3-D table", "ΔE 2-D vs 3-D / noise"]
+    return (C.md_table(body, hdr)
+            + f"\n(sphere under `{meta['env']}`, {cfg['resolution']} px, sampler `light` at {cfg['spp']} spp, same "
+              f"seed for every representation; mean ΔE2000 of the rational render against the 3-D table's on the "
+              f"object's fully covered pixels; ns per RGB evaluation in the Warp kernel, one thread; "
+              f"coefficients: R + G + B; –: no fit. Fitter: {meta['fitter'][1]}.)\n")
+
+
 def plot(rows, base_rows, path):
     import matplotlib
 
@@ -231,11 +268,17 @@ def main(argv=None):
     p.add_argument("--direct-fallback", action="store_true",
                    help="if the project's fitter is unavailable, use studies.fits.direct_fit (labelled)")
     p.add_argument("--fit-timeout", type=float, default=1800.0)
+    C.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.materials, a.tols, a.env, a.resolution, a.spp,
               not a.no_fit, a.direct_fallback, a.fit_timeout)
     print(res["markdown"])
     print(f"wrote {a.out}/fit_study.csv, .json, .md, fit_study.png ({res['meta']['wall_seconds']:.0f} s)")
+    if a.docs:
+        pub = C.publish_docs(out=a.out, summary_md=res["markdown"], meta=res["meta"], readme_table=readme_table(res),
+                             command=C.command_line(__file__, argv), docs_root=a.docs_root, **DOCS)
+        print(f"published {pub['doc']}, {len(pub['images'])} chart and the README block")
+    return res
 
 
 if __name__ == "__main__":

@@ -9,6 +9,8 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
+import shutil
 
 import numpy as np
 import pytest
@@ -30,8 +32,6 @@ def rgl_data():
 # --------------------------------------------------------------------------------------------
 # Metrics
 def test_delta_e2000_matches_colour_and_is_zero_for_equal_images():
-    import colour
-
     from studies import common as C
 
     rng = np.random.default_rng(0)
@@ -84,9 +84,24 @@ def test_convergence_smoke(tmp_path, rgl_data):
            if x["light"] == "colinear" and x["spp"] == "8" and x["sampler"] in C.BASE_SAMPLERS}
     assert max(col.values()) == pytest.approx(min(col.values()), rel=1e-6)
     assert "| scene |" in r["markdown"]
+    # --docs: the charts it publishes are the ones the run wrote; the README table has one row per
+    # scene, the MIS column is the summary's value and samplers not run read "–"
+    assert all((tmp_path / f).stat().st_size > 0 for f in convergence.DOCS["charts"])
+    t = convergence.readme_table(r).splitlines()
+    assert t[0].startswith("| scene | material | cosine | light | mis | tabulated | rational-deriv. |")
+    body = [x for x in t[2:] if x.startswith("| ")]
+    assert len(body) == len(r["references"]) == 2
+    mis = [s for s in r["summary"] if s["sampler"] == "mis" and s["light"] == "rooitou"][0]
+    row = [x for x in body if x.startswith("| sphere / rooitou | ibiza |")][0].split(" | ")
+    assert row[4] == C._fmt(mis["rel_rmse"])
+    assert row[6] == "–"          # rational-derivative was not run
+    assert row[7] == C._fmt([s for s in r["summary"] if s["sampler"] == "mis-tabulated"
+                             and s["light"] == "rooitou"][0]["rel_rmse"])
+    assert "at 8 spp" in t[-1]
 
 
 def test_comparison_smoke(tmp_path, rgl_data):
+    from studies import common as C
     from studies import comparison
 
     r = comparison.run("smoke", tmp_path, allow_fit=False, quiet=True)
@@ -97,6 +112,13 @@ def test_comparison_smoke(tmp_path, rgl_data):
     assert (tmp_path / "comparison_envmap.png").stat().st_size > 0
     data = json.loads((tmp_path / "comparison.json").read_text())
     assert data["meta"]["config"]["materials"] == ["paper"]
+    assert all((tmp_path / f).stat().st_size > 0 for f in comparison.DOCS["charts"])
+    t = comparison.readme_table(r).splitlines()
+    row = r["rows"][0]
+    rat = (f"{C._fmt(row['de_meas_rati_mean'])} / {C._fmt(row['de_meas_rati_p99'])}"
+           if "de_meas_rati_mean" in row else "–")     # a cached or shipped fit, if any
+    assert t[2].startswith(f"| paper | {row['light']} | {C._fmt(row['de_meas_proj_mean'])} / "
+                           f"{C._fmt(row['de_meas_proj_p99'])} | {rat} | {C._fmt(row['noise_de_mean'])} |")
 
 
 def test_fit_study_smoke(tmp_path, rgl_data):
@@ -113,6 +135,10 @@ def test_fit_study_smoke(tmp_path, rgl_data):
     t = r["tables"][0]
     assert t["measured_eval_ns"] > 0 and t["projected_eval_ns"] > 0
     assert (tmp_path / "fit_study.md").read_text().count("|") > 10
+    assert all((tmp_path / f).stat().st_size > 0 for f in fit_study.DOCS["charts"])
+    t = fit_study.readme_table(r).splitlines()
+    assert t[0].startswith("| material | coefficients at 20 % | mean ΔE vs 3-D | ns / eval |")
+    assert t[2].startswith(f"| paper | {row['n_coefficients']} | {row['de_vs_measured_mean']:.2f} | ")
 
 
 # --------------------------------------------------------------------------------------------
@@ -243,3 +269,171 @@ def test_studies_share_one_cdf_table_per_material(rgl_data):
     ma, mb = next(iter(a.materials.values())), next(iter(b.materials.values()))
     assert ma.cdf is not None and ma.cdf is mb.cdf and ma.cdf.table is not None
     assert next(iter(scene.materials.values())).cdf is None      # the base scene is untouched
+
+
+
+# --------------------------------------------------------------------------------------------
+# Publishing (--docs): docs/images, docs/study_<name>.md and the README block between markers
+STUDY_DOCS = {"convergence": "convergence", "comparison": "comparison", "fit": "fit_study",
+              "failure_map": "failure_map"}   # README marker name -> module
+
+
+def _docs_root(tmp_path):
+    """A folder holding a copy of the repository's README.md (with the studies' markers), each
+    study's block marked with a sentinel line so that its replacement can be checked."""
+    from studies import common as C
+
+    root = tmp_path / "root"
+    root.mkdir()
+    shutil.copyfile(C.ROOT / "README.md", root / "README.md")
+    text = (root / "README.md").read_text(encoding="utf-8")
+    for name in STUDY_DOCS:
+        end = C.readme_markers(name)[1]
+        text = text.replace(end, f"OLD-BLOCK-{name}\n{end}")
+    (root / "README.md").write_text(text, encoding="utf-8")
+    return root
+
+
+def _split(text, name):
+    """(text up to and including the BEGIN marker, the block, text from the END marker on)."""
+    from studies import common as C
+
+    begin, end = C.readme_markers(name)
+    i, j = text.index(begin) + len(begin), text.index(end)
+    return text[:i], text[i:j], text[j:]
+
+
+def test_readme_has_one_marker_pair_per_study():
+    import importlib
+
+    from studies import common as C
+
+    text = (C.ROOT / "README.md").read_text(encoding="utf-8")
+    for name, module in STUDY_DOCS.items():
+        begin, end = C.readme_markers(name)
+        assert text.count(begin) == 1 and text.count(end) == 1 and text.index(begin) < text.index(end)
+        docs = importlib.import_module(f"studies.{module}").DOCS
+        assert docs["name"] == name
+        assert all(d.startswith("study_") and d.endswith(".png") for d in docs["charts"].values())
+        for d in docs.get("readme_charts") or docs["charts"].values():   # the README links them
+            assert d in docs["charts"].values() and f"docs/images/{d}" in _split(text, name)[1]
+    assert "--docs" in text
+
+
+def test_publish_docs_replaces_only_the_block_and_is_idempotent(tmp_path):
+    from studies import common as C
+
+    root = _docs_root(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.png").write_bytes(b"\x89PNG first chart")
+    (out / "b.png").write_bytes(b"\x89PNG second chart")
+    before = (root / "README.md").read_text(encoding="utf-8")
+    meta = {"wall_seconds": 12.3, "machine": {"cpus": 2, "platform": "TestOS-1", "python": "3.x",
+                                              "time": "2000-01-02 03:04:05"}}
+    kw = dict(name="fit", title="Fit study", out=out, meta=meta,
+              summary_md="Full summary.\n\n| a | b |\n| --- | --- |\n| 1 | 2 |\n",
+              charts={"a.png": "study_fit.png", "b.png": "study_fit_extra.png"},
+              readme_table="| k | v |\n| --- | --- |\n| paper | 42 |\n",
+              command="python studies/fit_study.py --smoke --docs", docs_root=root,
+              readme_charts=("study_fit.png",))
+    pub = C.publish_docs(**kw)
+    after = (root / "README.md").read_text(encoding="utf-8")
+    b0, _, e0 = _split(before, "fit")
+    b1, block, e1 = _split(after, "fit")
+    assert (b1, e1) == (b0, e0)                         # everything outside the block unchanged
+    assert block == "\n" + pub["block"] + "\n"
+    lines = pub["block"].splitlines()
+    assert lines[0] == "**Fit study** · `python studies/fit_study.py --smoke --docs` (12 s on 2 CPUs, 2000-01-02)"
+    assert "![study_fit](docs/images/study_fit.png)" in lines
+    assert "study_fit_extra" not in pub["block"]         # not among readme_charts
+    assert "| paper | 42 |" in lines and "[docs/study_fit.md](docs/study_fit.md)" in lines[-1]
+    assert "OLD-BLOCK-fit" in before and "OLD-BLOCK-fit" not in after   # the old block is gone
+    assert "OLD-BLOCK-comparison" in after
+    assert (root / "docs/images/study_fit.png").read_bytes() == b"\x89PNG first chart"
+    assert (root / "docs/images/study_fit_extra.png").read_bytes() == b"\x89PNG second chart"
+    doc = (root / "docs/study_fit.md").read_text(encoding="utf-8")
+    assert doc.startswith("# Fit study\n")
+    assert "Command: `python studies/fit_study.py --smoke --docs`" in doc
+    assert "Wall time: 12 s" in doc and "2 CPUs, TestOS-1, Python 3.x" in doc
+    assert "![study_fit](images/study_fit.png)" in doc and "![study_fit_extra](images/study_fit_extra.png)" in doc
+    assert doc.rstrip().endswith("| 1 | 2 |")
+    # again: the same bytes (idempotent)
+    C.publish_docs(**kw)
+    assert (root / "README.md").read_text(encoding="utf-8") == after
+    assert (root / "docs/study_fit.md").read_text(encoding="utf-8") == doc
+    # another study's block is replaced independently of the first
+    C.publish_docs(**dict(kw, name="failure_map", charts={"a.png": "study_failure_map.png"}, readme_charts=None))
+    final = (root / "README.md").read_text(encoding="utf-8")
+    assert _split(final, "fit")[1] == block and final.count("| paper | 42 |") == 2
+
+
+def test_publish_docs_without_markers_raises_and_writes_nothing(tmp_path):
+    from studies import common as C
+
+    root = _docs_root(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "a.png").write_bytes(b"png")
+    text = (root / "README.md").read_text(encoding="utf-8")
+    kw = dict(name="fit", title="t", out=out, summary_md="s", meta={}, charts={"a.png": "study_fit.png"},
+              readme_table="| x |", command="python x.py", docs_root=root)
+    for marker in C.readme_markers("fit"):
+        (root / "README.md").write_text(text.replace(marker, ""), encoding="utf-8")
+        with pytest.raises(ValueError, match=re.escape(marker)):
+            C.publish_docs(**kw)
+    with pytest.raises(ValueError, match=re.escape("<!-- BEGIN study:nosuch -->")):
+        C.replace_block(text, "nosuch", "x")
+    assert not (root / "docs").exists()                   # checked before anything is written
+    (root / "README.md").write_text(text, encoding="utf-8")
+    with pytest.raises(FileNotFoundError, match="missing.png"):
+        C.publish_docs(**dict(kw, charts={"missing.png": "study_fit.png"}))
+    assert not (root / "docs").exists()
+    readme = (C.ROOT / "README.md").read_bytes()
+    with pytest.raises(ValueError, match="--smoke run would overwrite"):  # the repository's own docs
+        C.publish_docs(**dict(kw, meta={"preset": "smoke"}, docs_root=None))
+    assert (C.ROOT / "README.md").read_bytes() == readme
+
+
+def test_command_line_and_docs_option(capsys):
+    import importlib
+
+    from studies import common as C
+
+    assert C.command_line(C.ROOT / "studies" / "convergence.py", ["--out", "a b", "--docs"]) \
+        == "python studies/convergence.py --out 'a b' --docs"
+    for module in STUDY_DOCS.values():
+        with pytest.raises(SystemExit):
+            importlib.import_module(f"studies.{module}").main(["--help"])
+        assert "--docs " in capsys.readouterr().out
+
+
+def test_failure_map_smoke_publishes_docs(tmp_path, rgl_data):
+    """A real smoke run through the CLI with --docs into a copy of the README."""
+    from studies import common as C
+    from studies import failure_map as fm
+
+    root = _docs_root(tmp_path)
+    before = (root / "README.md").read_text(encoding="utf-8")
+    out = tmp_path / "out"
+    argv = ["--smoke", "--out", str(out), "--samplers", "uniform", "cosine", "light", "mis",
+            "--docs", "--docs-root", str(root)]
+    r = fm.main(argv)
+    cmd = C.command_line(fm.__file__, argv)
+    assert cmd.startswith("python studies/failure_map.py --smoke --out ")
+    assert (root / "docs/images/study_failure_map.png").read_bytes() == (out / "failure_map.png").read_bytes()
+    doc = (root / "docs/study_failure_map.md").read_text(encoding="utf-8")
+    assert f"Command: `{cmd}`" in doc
+    assert (out / "failure_map.md").read_text(encoding="utf-8").strip() in doc
+    after = (root / "README.md").read_text(encoding="utf-8")
+    b0, _, e0 = _split(before, "failure_map")
+    b1, block, e1 = _split(after, "failure_map")
+    assert (b1, e1) == (b0, e0)
+    assert f"**Failure map** · `{cmd}` (" in block
+    assert "![study_failure_map](docs/images/study_failure_map.png)" in block
+    assert "| case | uniform | cosine | light | mis |" in block
+    sun = r["samplers"][[x["case"] for x in r["samplers"]].index("paper sphere / sun")]
+    assert f"| paper sphere / sun | {C._fmt(sun['uniform_rel_err'])} | {C._fmt(sun['cosine_rel_err'])} |" in block
+    assert "Rational inverse CDFs of the mirror lobe" in block and "| mirror_floor" not in block  # fits: docs only
+    assert "| mirror_floor" in doc
+    assert "OLD-BLOCK-failure_map" in before and "OLD-BLOCK-failure_map" not in after
