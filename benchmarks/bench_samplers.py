@@ -14,7 +14,7 @@
 Usage: python benchmarks/bench_samplers.py [--n 1000000] [--materials a,b] [--cdf-dir DIR]
        [--layout pieces|rows|global] [--max-variance-ratio R | none] [--n-u 16,32,64]
 (``--layout``: how the rational inverse CDFs are built here, default the fitter's default
-"pieces" (fit.cdf_pieces, about 1 s per material); "rows" takes 16-18 s per material.)
+"pieces" (fit.cdf_pieces, 2-20 s per material, mostly the variance gate); "rows" takes 16-18 s per material.)
 (``--max-variance-ratio none`` builds without the variance gate, so every verified row is
 rational: the speed of the rational rows themselves.)
 (``--cdf-dir``: rbrdf-cdf files named MATERIAL.json from `rbrdf-fit cdf`.)

@@ -707,10 +707,11 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
 
     ``time_limit_s`` bounds the fitting time of the fitted layouts ("rows", "global";
     tabulation excluded): fits and refits stop when it is reached, and whatever is not verified
-    by then falls back (the reason says so). The "pieces" layout fits nothing (about 1 s).
+    by then falls back (the reason says so). The "pieces" layout fits nothing and has no time
+    limit (1-25 s per material, mostly its variance gate).
 
     ``layout``: ``"pieces"`` (default; :mod:`fit.cdf_pieces`, monotone rational-quadratic
-    pieces uniform in mu and u per table row, built from the table in about a second, rows
+    pieces uniform in mu and u per table row, built from the table (no fitting), rows
     above the variance gate sampled with the table; ``pieces_kw`` tunes it), ``"rows"``
     (:mod:`fit.cdf_rows`, one univariate F_v and one bivariate G_v per table row fitted with
     the interval fitter, rows that fail verification sampled with the table; ``rows_kw`` tunes

@@ -23,13 +23,13 @@ The maps (all angles in radians, CDF variables in [0, 1]):
   (vch_golden_yellow at theta_v = 85 deg: 1.06x the table's, 1.41x per table cell).
 
 Piece counts: 64 theta pieces; phi pieces per map: the fewest of 16, 32, 64 that keep every row
-within the variance gate (else the count with the most rational rows). Measured (variance gate
-1.2, rational rows per count 16 / 32 / 64): paper_white and satin_rosaline 32/32 rows at 16;
-vch_golden_yellow 22 / 32; cc_ibiza_sunset 14 / 31 / 32; cc_iris_purple_gem 12 / 24 / 32;
-colodur_napoli_4f 29 at every count (three rows of a noisy measurement stay on the table).
-Fewer phi pieces also sample faster when every sample has another view row (the phi maps are
-then read at random; vch: 1.62x / 1.65x the table's rate with 32 pieces, 1.56x / 1.57x with
-64, two runs each of ``benchmarks/bench_samplers.py --materials vch_golden_yellow_rgb --n-u N``). The Warp sampler stores the phi maps as knots (value, slope;
+within the variance gate (else the count with the most rational rows). Measured (gate 1.2 with
+its second measurement, rational rows per count 16 / 32 / 64): paper_white, satin_rosaline and
+colodur_napoli_4f 32/32 rows at 16; vch_golden_yellow 24 / 32; cc_ibiza_sunset 13 / 32;
+cc_iris_purple_gem 11 / 23 / 32. Fewer phi pieces also sample faster when every sample has
+another view row (the phi maps are then read at random; vch: 1.62x / 1.65x the table's rate with
+32 pieces, 1.56x / 1.57x with 64, two runs each of ``benchmarks/bench_samplers.py --materials
+vch_golden_yellow_rgb --n-u N``). The Warp sampler stores the phi maps as knots (value, slope;
 :func:`warp_rbrdf.cdf_sampling.pieces_phi_knots`): 2 floats per piece instead of 4.
 
 Each piece is the monotone rational-quadratic interpolant of Gregory & Delbourgo (IMA J. Numer.
@@ -276,13 +276,13 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
                gate_recheck: int | None = PIECES_DEFAULTS["gate_recheck"], log=None):
     """Build, verify and gate the pieces of ``table``. ``evaluate(wi, wo) -> (N, 3)`` (the
     material tabulated) is needed for the variance gate (``max_variance_ratio`` None: no
-    gate). A row whose ratio on ``gate_samples`` pairs lies within a factor 1.25 below the limit
-    to twice the limit (0.96-2.4 for the default 1.2) is measured again on ``gate_recheck``
-    times as many, and that measurement decides (the first is kept as ``variance_first``): a few
-    rare large weights decide a variance estimate, both ways (colodur_napoli_4f: three rows at
-    1.25-1.73x on 32768 pairs were 0.39-0.58x on 262144; cc_ibiza_sunset with 32 phi pieces: a
-    row at 1.19x on 32768 pairs measured 1.23x at theta_v = 85 deg on 2e5). ``n_u``: phi pieces per map, or increasing candidates (default 16, 32, 64): the
-    fewest that keep every row within the gate, else the count with the most rational rows
+    gate). A row whose ratio on ``gate_samples`` pairs lies between limit / 1.25 and twice the
+    limit (0.96-2.4 for the default 1.2) is measured again on ``gate_recheck`` times as many,
+    and that measurement decides (the first is kept as ``variance_first``): a few rare large
+    weights decide a variance estimate, both ways (colodur_napoli_4f: three rows at 1.25-1.73x
+    on 32768 pairs were 0.39-0.58x on 262144; cc_ibiza_sunset, 32 phi pieces, theta_v = 85 deg:
+    1.23x on 2e5 pairs, 1.19x on 3e6). ``n_u``: phi pieces per map, or increasing candidates
+    (default 16, 32, 64): the fewest that keep every row within the gate, else the count with the most rational rows
     (the smallest on ties). Returns ``(PieceMaps, info)``; ``info["rows"]`` has per row
     ``ok``, ``reason`` and the gate's ``variance`` dict, ``info["n_u_tried"]`` the rational
     rows per candidate tried."""
@@ -335,6 +335,7 @@ def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_sample
         rows.append(r)
         pm.row_ok[v] = r["ok"]
     info = {"n_mu": n_mu, "n_u": n_u, "max_variance_ratio": max_variance_ratio,
-            "gate_samples": gate_samples, "gate_recheck": gate_recheck, "verified_rows": int(pm.row_ok.sum()), "n_rows": table.n_v,
-            "rows": rows, "verification": {k: ver[k] for k in ("ok", "failures")}}
+            "gate_samples": gate_samples, "gate_recheck": gate_recheck,
+            "verified_rows": int(pm.row_ok.sum()), "n_rows": table.n_v, "rows": rows,
+            "verification": {k: ver[k] for k in ("ok", "failures")}}
     return pm, info

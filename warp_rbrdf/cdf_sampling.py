@@ -4,9 +4,11 @@ Samplers (``sampler = ...`` per material in scene files):
 
 * ``"tabulated"``: the table of :mod:`fit.cdf_table` inverted by binary search (baseline);
   estimator f cos / pdf with the table's pdf.
-* ``"rational"``: the verified rational inverse CDFs of :mod:`fit.cdf_fit` (endpoint-
-  normalized, see there), generated as unrolled float64 code (constant time); estimator f cos / pdf with pdf = 1 / alpha (eq. 3 of
-  the supplementary text: for a monotone covering map this IS the sampled density).
+* ``"rational"``: the verified rational inverse CDFs of :mod:`fit.cdf_fit`: by default the
+  pieces layout (:func:`pieces_sample`: one rational-quadratic piece per map, found without a
+  search, coefficients in ``Materials.cdf_pw``), else generated unrolled float64 code per fit
+  (rows / global layouts); constant time either way; estimator f cos / pdf with pdf = 1 / alpha
+  (eq. 3 of the supplementary text: for a monotone covering map this IS the sampled density).
 * ``"rational-derivative"``: same directions; the derivative estimator f cos * alpha
   (eq. 4), alpha = dtheta/dmu * dphi/dtau * sin(theta_l), without any pdf. It equals the
   standard estimator sample by sample up to rounding (both are exact for the map the RFs define).
