@@ -362,6 +362,19 @@ def add_docs_arguments(parser):
                         help="folder holding README.md and docs/ (default: the repository root)")
 
 
+def publish_run(args, res: dict, readme_table, script, argv, docs: dict):
+    """A study's ``--docs`` step after its run: :func:`publish_docs` of the run ``res`` (its
+    ``markdown`` and ``meta``) with ``readme_table(res)``, the command rebuilt from ``script`` and
+    ``argv``, and the study's ``docs`` dict (name, title, charts); nothing without ``--docs``."""
+    if not args.docs:
+        return None
+    pub = publish_docs(out=args.out, summary_md=res["markdown"], meta=res["meta"], readme_table=readme_table(res),
+                       command=command_line(script, argv), docs_root=args.docs_root, **docs)
+    n = len(pub["images"])
+    print(f"published {pub['doc']}, {n} chart{'s' if n != 1 else ''} and the README block")
+    return pub
+
+
 def command_line(script, argv=None) -> str:
     """The command that ran a study, as ``python studies/x.py ARGS`` (``argv``: the arguments,
     default ``sys.argv[1:]``; the script path relative to the repository when it is inside)."""

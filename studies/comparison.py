@@ -277,10 +277,7 @@ def main(argv=None):
               a.colinear_spp, a.tol, not a.no_fit, a.direct_fallback, a.fit_timeout)
     print(res["markdown"])
     print(f"wrote {a.out}/comparison.csv, .json, .md, comparison_*.png ({res['meta']['wall_seconds']:.0f} s)")
-    if a.docs:
-        pub = C.publish_docs(out=a.out, summary_md=res["markdown"], meta=res["meta"], readme_table=readme_table(res),
-                             command=C.command_line(__file__, argv), docs_root=a.docs_root, **DOCS)
-        print(f"published {pub['doc']}, {len(pub['images'])} charts and the README block")
+    C.publish_run(a, res, readme_table, __file__, argv, DOCS)
     return res
 
 

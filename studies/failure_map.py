@@ -358,10 +358,7 @@ def main(argv=None):
     r = run("smoke" if a.smoke else a.preset, a.out, a.samplers)
     print(r["markdown"])
     print(f"wrote {a.out}/failure_map.csv, .json, .md, failure_map.png ({r['meta']['wall_seconds']:.0f} s)")
-    if a.docs:
-        pub = C.publish_docs(out=a.out, summary_md=r["markdown"], meta=r["meta"], readme_table=readme_table(r),
-                             command=C.command_line(__file__, argv), docs_root=a.docs_root, **DOCS)
-        print(f"published {pub['doc']}, {len(pub['images'])} chart and the README block")
+    C.publish_run(a, r, readme_table, __file__, argv, DOCS)
     return r
 
 
