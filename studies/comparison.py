@@ -4,8 +4,9 @@ Each material is rendered with the measured 3-D table ("measured"), the projecte
 ("projected", median of each (theta_h, theta_d) cluster) and the rational fit ("rational", when a
 fit is available, see :mod:`studies.fits`), on a sphere under
 
-(a) ``colinear``: one directional light travelling along the view (every visible point at
-    theta_d = 0), ``colinear_spp`` camera samples per pixel (anti-aliasing only);
+(a) ``colinear``: one directional light travelling along the camera axis (theta_d ≤ 6.2° at
+    every visible point of the sphere: half the angle between the axis and a pixel's ray, which
+    is at most 12.5° here), ``colinear_spp`` camera samples per pixel (anti-aliasing only);
 (b) ``envmap``: the environment map with ``env_spp`` importance-sampled light directions per
     pixel (sampler "light": each camera sample draws one direction from the map's luminance
     distribution and traces one shadow ray; 1024 spp = 1024 lights per pixel).
@@ -60,16 +61,17 @@ DOCS = dict(name="comparison", title="The method's comparison (3-D table, 2-D pr
                     "comparison_envmap.png": "study_comparison_envmap.png"})
 
 
-def view_angles(scene) -> np.ndarray:
-    """Per-pixel view angle theta_o in degrees (white Lambert under a colinear directional light
-    of irradiance pi renders cos theta_o exactly; 16 spp, averaged over the pixel)."""
+def view_angles(scene, renderer=None) -> np.ndarray:
+    """Per-pixel view angle theta_o in degrees: the angle between the shading normal and each
+    pixel's own ray back to the camera, from the mean cosine over 4x4 sub-pixel rays
+    (:func:`studies.coverage.view_angle`). Not the angle to the light: the colinear light
+    travels along the camera axis, so on the study's sphere (radius 0.8 seen from 3.7 away:
+    half-angle 12.5°) the light's incidence angle reaches only ~77.5° at the silhouette where
+    theta_o reaches 90°."""
+    from studies.coverage import view_angle
     from warp_rbrdf import Renderer
-    from warp_rbrdf.scene import LightSpec
 
-    sc = C.with_material(scene, C.material_spec("lambert", 1.0, "light"))
-    sc.lights = [LightSpec(type="directional", irradiance=(np.pi,) * 3, colinear_with_view=True)]
-    img = Renderer(sc).render(spp=16, seed=3)
-    return np.degrees(np.arccos(np.clip(img[..., 1], 0.0, 1.0)))
+    return view_angle(renderer if renderer is not None else Renderer(scene), 4)
 
 
 def laplacian_energy(img, mask) -> float:

@@ -311,8 +311,8 @@ def summary_markdown(rows, other, meta) -> str:
     L += _sampler_findings(rows, other, meta)
     fits = [(k, v) for k, v in other.items() if k.startswith("fit_")]
     if fits:
-        L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, every "
-                 f"{fits[0][1]['stride']}th cluster, degrees ≤ {fits[0][1]['max_degree']} "
+        L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, one "
+                 f"cluster in {fits[0][1]['stride']} along each axis, degrees ≤ {fits[0][1]['max_degree']} "
                  f"(fit.fitter.IntervalRationalFitter):\n")
         L.append(C.md_table([[k[4:], v["tol"], f"{v['abs_floor']:.3g}", v["n_coefficients"],
                               "yes" if v["feasible"] else "NO", v["max_rel_err"], v["max_value"]]

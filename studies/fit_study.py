@@ -162,7 +162,8 @@ def summary_markdown(rows, base_rows, meta) -> str:
     L = [f"Sphere under `{meta['env']}`, {cfg['resolution']}×{cfg['resolution']} px, sampler `light` at "
          f"{cfg['spp']} spp, same seed for all representations; ΔE2000 on fully covered object pixels. "
          f"Evaluation cost: ns per BRDF evaluation in the renderer's Warp kernel ({cfg['n_eval']} random "
-         f"direction pairs, one thread, median of 5). Fitter: {meta['fitter'][1]}.\n"]
+         f"direction pairs, one thread, median of 5). Fitter: {meta['fitter'][1]}; fit s: the fitter's own "
+         f"seconds as its coefficient file records them (cached fits report the run that made them).\n"]
     hdr = ["material", "tol", "fit", "coefficients (R/G/B)", "all in tol.", "fit s", "ΔE vs 3-D mean/p99",
            "ΔE vs 2-D mean/p99", "ns / eval", "render s"]
     body = []

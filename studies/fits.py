@@ -87,7 +87,10 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
                 dt = time.perf_counter() - t0
                 if r.returncode == 0 and out.exists():
                     m = load(out)
-                    return m, dict(info, source="cli", file=str(out), fit_seconds=dt)
+                    # fit_seconds: the fitter's own time as the file records it (the same
+                    # number a cached run reports); wall_seconds adds process start-up.
+                    return m, dict(info, source="cli", file=str(out),
+                                   fit_seconds=m.fit_info.get("time_s", dt), wall_seconds=dt)
                 errors.append(f"rbrdf-fit brdf exit {r.returncode}: {(r.stderr or r.stdout).strip()[-300:]}")
             except subprocess.TimeoutExpired:
                 errors.append(f"rbrdf-fit brdf timed out after {timeout:.0f} s")

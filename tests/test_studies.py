@@ -121,6 +121,43 @@ def test_comparison_smoke(tmp_path, rgl_data):
                            f"{C._fmt(row['de_meas_proj_p99'])} | {rat} | {C._fmt(row['noise_de_mean'])} |")
 
 
+def test_view_angle_is_measured_to_each_pixels_ray_not_the_camera_axis():
+    """The comparison's theta_o bins: the angle between the shading normal and each pixel's own
+    ray, checked against the analytic sphere (ray-sphere intersection with the same rays), and
+    reaching ~90° at the silhouette, where the angle to the camera axis (what a colinear
+    directional light measures) stops at 90° - 12.5°."""
+    from studies import common as C
+    from studies.comparison import view_angles
+    from warp_rbrdf import Renderer
+    from warp_rbrdf.camera import camera_frame, camera_rays_numpy
+    from studies.coverage import view_angle
+
+    sc = C.make_scene("sphere", "colinear", C.material_spec("lambert", 1.0, "light"), resolution=48)
+    r = Renderer(sc)
+    got = view_angle(r, 1)                       # one ray through each pixel centre
+    H, W = got.shape
+    py, px = np.mgrid[0:H, 0:W] + 0.5
+    d = camera_rays_numpy(sc.camera, px, py)
+    o = camera_frame(sc.camera)[0]
+    b = d @ o
+    disc = b * b - (o @ o - 0.8 ** 2)
+    hit = disc > 0
+    t = -b - np.sqrt(np.where(hit, disc, 0.0))
+    p = o + t[..., None] * d
+    cos = np.sum(p / 0.8 * -d, axis=-1)
+    want = np.degrees(np.arccos(np.clip(cos, 0, 1)))
+    inner = hit & (want < 80)                    # away from the tessellated silhouette
+    assert np.isnan(got[~hit & (disc < -0.05)]).all()
+    assert np.abs(got[inner] - want[inner]).max() < 1.0
+    assert np.nanmax(got) > 82.0                 # the camera axis would give at most 77.5°
+    axis = np.degrees(np.arccos(np.clip(p[hit] @ -camera_frame(sc.camera)[3], -1, 1)))
+    assert axis.max() < 78.0
+    # the study's entry point averages 4x4 sub-pixel rays of the same geometry
+    avg = view_angles(sc, r)
+    both = inner & np.isfinite(avg)
+    assert np.abs(avg[both] - want[both]).max() < 3.0
+
+
 def test_fit_study_smoke(tmp_path, rgl_data):
     """Fit (the project's fitter if present, otherwise the labelled direct stand-in) at a tiny
     size, render it, ΔE and evaluation cost."""
