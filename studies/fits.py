@@ -17,6 +17,7 @@ works.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
@@ -51,7 +52,17 @@ def _tag(tol: float) -> str:
 
 def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, allow_direct: bool = False,
                    timeout: float = 900.0, fit_dir: Path | None = None, extra_args=(),
-                   direct_stride: int = 3, direct_max_degree: int = 8):
+                   direct_stride: int = 3, direct_max_degree: int = 8, allow_infeasible: bool = False):
+    """``(model, info)``: the rational fit of ``material`` at relative tolerance ``tol``, from the
+    first of: a cached ``rbrdf-fit brdf`` file in ``fit_dir``, a cached direct fit (with
+    ``allow_direct``), a shipped file of that tolerance, a new ``rbrdf-fit brdf`` run (with
+    ``allow_fit``), a new direct fit (with ``allow_direct``). ``(None, info)`` with
+    ``info["error"]`` when none is available.
+
+    ``allow_infeasible``: also accept a fit whose guaranteed core misses the tolerance (the
+    fitter's flagged best effort; ``--allow-infeasible``). Without it such a fit, cached or new,
+    is refused with the fitter's own summary as the reason, so a study never renders a fit it
+    believes guaranteed when it is not."""
     from fit.coefficients import load
 
     fit_dir = Path(fit_dir or FIT_DIR)
@@ -63,6 +74,9 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
         p = fit_dir / name
         if p.exists() and (src == "cli" or allow_direct):
             m = load(p)
+            if src == "cli" and not allow_infeasible and not model_summary(m)["core_guaranteed"]:
+                return None, dict(info, source=None, file=str(p),
+                                  error=f"cached fit {p.name} is flagged: its core misses the tolerance")
             return m, dict(info, source=f"{src} (cached)", file=str(p), fit_seconds=m.fit_info.get("time_s"))
     from warp_rbrdf.paths import PACKAGE_DATA
 
@@ -80,7 +94,8 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
             out = fit_dir / f"{stem}_tol{_tag(tol)}_cli.json"
             cmd = [sys.executable, "-c", "import sys; from fit.cli import main; sys.exit(main())", "brdf",
                    str(C.data_path(C.MATERIALS[material]) if material in C.MATERIALS else material),
-                   "--tol", str(tol), "--out", str(out), *extra_args]
+                   "--tol", str(tol), "--out", str(out), *extra_args,
+                   *(("--allow-infeasible",) if allow_infeasible else ())]
             t0 = time.perf_counter()
             try:
                 r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=C.ROOT)
@@ -91,7 +106,7 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
                     # number a cached run reports); wall_seconds adds process start-up.
                     return m, dict(info, source="cli", file=str(out),
                                    fit_seconds=m.fit_info.get("time_s", dt), wall_seconds=dt)
-                errors.append(f"rbrdf-fit brdf exit {r.returncode}: {(r.stderr or r.stdout).strip()[-300:]}")
+                errors.append(f"rbrdf-fit brdf exit {r.returncode}: {_fit_failure(r.stdout, r.stderr)}")
             except subprocess.TimeoutExpired:
                 errors.append(f"rbrdf-fit brdf timed out after {timeout:.0f} s")
         else:
@@ -145,6 +160,15 @@ def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_m
                                             "theta_d_max_deg": theta_d_max_deg})
 
 
+def _fit_failure(stdout: str, stderr: str) -> str:
+    """Why ``rbrdf-fit brdf`` failed, in one line: its ``total ...`` summary line when it printed
+    one (e.g. "total 735 coefficients, 21.4 s, NOT guaranteed ..."), else the end of stderr."""
+    total = [ln.strip() for ln in (stdout or "").splitlines() if ln.startswith("total ")]
+    if total:
+        return re.sub(r"; wrote \S+$", "", total[-1])
+    return (stderr or stdout or "").strip()[-300:]
+
+
 def model_summary(model) -> dict:
     """Coefficient counts and feasibility of a (possibly piecewise) rational model."""
     def leaves(m):   # the single-function models of a (possibly nested) piecewise model
@@ -154,6 +178,8 @@ def model_summary(model) -> dict:
     fi = [i for p in pieces for i in (p.function_info or [{} for _ in p.functions])]
     feas = [bool(i.get("feasible", i.get("valid", True))) for i in fi]
     per_channel = [sum(int(p.functions[c].n_coefficients) for p in pieces) for c in range(len(pieces[0].functions))]
+    core = (getattr(model, "fit_info", None) or {}).get("valid")   # rbrdf-fit brdf: per channel
     return {"n_coefficients": int(model.n_coefficients), "feasible_all": all(feas),
+            "core_guaranteed": all(feas) if core is None else bool(all(core)),
             "per_channel": per_channel, "n_pieces": len(pieces),
             "info": json.loads(json.dumps(fi, default=str))}

@@ -178,6 +178,48 @@ def test_fit_study_smoke(tmp_path, rgl_data):
     assert t[2].startswith(f"| paper | {row['n_coefficients']} | {row['de_vs_measured_mean']:.2f} | ")
 
 
+def test_fit_study_reports_what_each_fit_guarantees():
+    """The fit study's "in tol." column tells a fully met fit (yes) from a guaranteed core with a
+    flagged grazing band (core) and from a flagged best effort (no), and a failed fitter run is
+    reported by its summary line, not by the tail of its table."""
+    from studies import fit_study
+    from studies import fits as F
+
+    assert fit_study.guarantee(dict(feasible=True, core_guaranteed=True)) == "yes"
+    assert fit_study.guarantee(dict(feasible=False, core_guaranteed=True)) == "core"
+    assert fit_study.guarantee(dict(feasible=False, core_guaranteed=False)) == "no"
+    out = ("paper_white_rgb: tol 0.02\n0-40 h5-90  tol  B  (12,6)  119  2.08%\n"
+           "total 735 coefficients, 21.4 s, NOT guaranteed (best fit found, flagged infeasible); "
+           "grazing band met; wrote /tmp/x.json\n")
+    assert F._fit_failure(out, "") == ("total 735 coefficients, 21.4 s, NOT guaranteed (best fit found, "
+                                       "flagged infeasible); grazing band met")
+    assert F._fit_failure("", "error: no such file") == "error: no such file"
+
+
+def test_model_summary_core_guarantee_follows_the_fitters_record(tmp_path):
+    """``core_guaranteed`` comes from the coefficient file's per-channel ``valid`` (the core), so a
+    fit whose band alone failed is "core", and one whose core failed is not."""
+    import copy
+
+    from fit.coefficients import load
+    from studies import fits as F
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    m = load(sorted(PACKAGE_DATA.glob("paper_white*.json"))[0])
+    s = F.model_summary(m)
+    assert s["feasible_all"] and s["core_guaranteed"]
+    bad = copy.deepcopy(m)
+    bad.fit_info["valid"] = [True, False, True]
+    assert not F.model_summary(bad)["core_guaranteed"]
+    # a flagged file in the cache is refused unless the caller accepts best efforts
+    tol = float(m.fit_info["tolerance"])
+    bad.save(tmp_path / f"paper_white_rgb_tol{F._tag(tol)}_cli.json")
+    none, info = F.rational_model("paper", tol, allow_fit=False, fit_dir=tmp_path)
+    assert none is None and "flagged" in info["error"]
+    got, info = F.rational_model("paper", tol, allow_fit=False, fit_dir=tmp_path, allow_infeasible=True)
+    assert info["source"] == "cli (cached)" and not F.model_summary(got)["core_guaranteed"]
+
+
 # --------------------------------------------------------------------------------------------
 # Failure map (pinned findings)
 @pytest.fixture(scope="module")
