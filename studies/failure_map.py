@@ -146,7 +146,11 @@ def projection_error(geometry, light, material_key, resolution, spp, data=None) 
 
 def fit_channel(proj, tol, abs_floor, stride, max_degree, channel=1, theta_d_max_deg=80.0, scale=1.0):
     """IntervalRationalFitter on one channel of a projection (sqrt theta_h, theta_d); returns
-    coefficients, feasibility, max relative error at the data points, seconds."""
+    coefficients, feasibility, seconds and the relative errors at the data points: over every
+    point with a value > 0 (``max_rel_err``, ``p99_rel_err``), and over the points where the
+    interval is relative, value >= abs_floor / tol (``max_rel_err_relative``; the share of such
+    points is ``relative_share``). Below that value the floor sets the interval, so a fit inside
+    its intervals may be off by many times the value there."""
     from fit.fitter import IntervalRationalFitter
 
     th = proj.theta_h[::stride]
@@ -163,8 +167,11 @@ def fit_channel(proj, tol, abs_floor, stride, max_degree, channel=1, theta_d_max
     pred = res.function(X[ok]) if res.function is not None else np.full(ok.sum(), np.nan)
     pos = y[ok] > 0
     rel = np.abs(pred[pos] - y[ok][pos]) / y[ok][pos]
+    relative = y[ok][pos] >= abs_floor / tol
     return dict(n_coefficients=int(res.n_coefficients), feasible=bool(res.feasible), valid=bool(res.valid),
                 degrees=[int(res.num_degree), int(res.den_degree)], max_rel_err=float(rel.max()),
+                max_rel_err_relative=float(rel[relative].max()) if relative.any() else float("nan"),
+                relative_share=float(relative.mean()),
                 p99_rel_err=float(np.percentile(rel, 99)), seconds=dt, points=int(ok.sum()),
                 max_value=float(y[ok].max()))
 
@@ -315,10 +322,14 @@ def summary_markdown(rows, other, meta) -> str:
                  f"cluster in {fits[0][1]['stride']} along each axis, degrees ≤ {fits[0][1]['max_degree']} "
                  f"(fit.fitter.IntervalRationalFitter):\n")
         L.append(C.md_table([[k[4:], v["tol"], f"{v['abs_floor']:.3g}", v["n_coefficients"],
-                              "yes" if v["feasible"] else "NO", v["max_rel_err"], v["max_value"]]
+                              "yes" if v["feasible"] else "NO", f"{100 * v['relative_share']:.0f} %",
+                              v["max_rel_err_relative"], v["max_rel_err"], v["max_value"]]
                              for k, v in fits],
-                            ["case", "tol", "abs. floor (1/sr)", "coefficients", "feasible", "max rel. error",
+                            ["case", "tol", "abs. floor (1/sr)", "coefficients", "feasible",
+                             "points with a relative interval", "max rel. error there", "max rel. error, all points",
                              "max ρ (1/sr)"]))
+        L.append("\n(relative interval: value ≥ floor / tol, where the interval is ±tol × value; below it "
+                 "the floor sets the interval and the relative error is not bounded.)\n")
     return "\n".join(L)
 
 

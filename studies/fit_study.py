@@ -195,7 +195,7 @@ def summary_markdown(rows, base_rows, meta) -> str:
             if r["material"] != b["material"]:
                 continue
             if "n_coefficients" not in r:
-                body.append([r["material"], r["tol"], "none", r.get("error", "")[:60], "", "", "", "", "", ""])
+                body.append([r["material"], r["tol"], "none", r.get("error", "")[:120], "", "", "", "", "", ""])
                 continue
             body.append([r["material"], r["tol"], r["source"], f"{r['n_coefficients']} ({r['coefficients_rgb']})",
                          guarantee(r), r["fit_seconds"] or float("nan"),

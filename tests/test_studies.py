@@ -291,6 +291,13 @@ def test_failure_fits(failure_map):
     assert o["fit_mirror_floor_0.1%_of_peak"]["max_rel_err"] > 1.0
     assert o["fit_paper_x0.02"]["max_rel_err"] > 3 * 0.05
     assert o["fit_paper"]["max_rel_err"] < 0.1
+    # where the interval is relative (value >= floor / tol) a feasible fit keeps the tolerance;
+    # scaling by 0.02 pushes most of paper below that value: the relative guarantee is lost there
+    for k, v in o.items():
+        if k.startswith("fit_") and v["feasible"] and v["relative_share"] > 0:
+            assert v["max_rel_err_relative"] <= 0.05 * 1.01, k
+    assert o["fit_paper"]["relative_share"] > 0.9
+    assert o["fit_paper_x0.02"]["relative_share"] < 0.5 * o["fit_paper"]["relative_share"]
 
 
 def test_failure_map_outputs(failure_map):
