@@ -21,9 +21,9 @@ method="CIE 2000")``) at one exposure per scene and material: the 99th percentil
 render's luminance on the object is mapped to Y = 1 (L* = 100). Statistics on the object's fully
 covered pixels: mean, 99th percentile; also by the view angle theta_o (where the error is).
 
-    python studies/comparison.py --out results/comparison              # full size
+    python studies/comparison.py --out results/comparison_full --docs  # full size; README + docs
     python studies/comparison.py --out results/comparison --smoke
-    python studies/comparison.py --preset moderate --out results/comparison --docs   # the README's
+    python studies/comparison.py --preset moderate --out results/comparison     # 96 px, ~1 min
 
 ``--docs`` also copies the charts to ``docs/images/study_comparison_{colinear,envmap}.png``,
 writes ``docs/study_comparison.md`` and the README block between

@@ -27,9 +27,9 @@ seeds. It is what an RMSE against the converged image would be without bias; hea
 estimators (rare fireflies) are *under*-estimated at low spp, so the numbers are lower bounds for
 the failing samplers.
 
-    python studies/failure_map.py --out results/failure_map            # full size
+    python studies/failure_map.py --out results/failure_map_full --docs   # full size; README + docs
     python studies/failure_map.py --out results/failure_map --smoke
-    python studies/failure_map.py --preset moderate --out results/failure_map --docs   # the README's
+    python studies/failure_map.py --preset moderate --out results/failure_map   # 48 px, ~1.5 min
 
 ``--docs`` also copies the chart to ``docs/images/study_failure_map.png``, writes
 ``docs/study_failure_map.md`` and the README block between ``<!-- BEGIN study:failure_map -->``

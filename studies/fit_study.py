@@ -14,10 +14,10 @@ stand-in built on :class:`fit.fitter.IntervalRationalFitter`). Then:
   on ``n_eval`` random direction pairs, median of 5, one CPU thread) for the 3-D table, the
   2-D table and each fit; and the render seconds of the sphere.
 
-    python studies/fit_study.py --out results/fit_study                    # full size
+    python studies/fit_study.py --out results/fit_study_full --docs      # full size; README + docs
     python studies/fit_study.py --out results/fit_study --smoke
     python studies/fit_study.py --preset moderate --materials paper satin ibiza gold napoli iris \\
-        --out results/fit_study --docs                                      # the README's
+        --out results/fit_study                                             # 64 px, 20/10/5 %
 
 ``--docs`` also copies the chart to ``docs/images/study_fit.png``, writes ``docs/study_fit.md``
 and the README block between ``<!-- BEGIN study:fit -->`` and ``<!-- END study:fit -->``
