@@ -834,6 +834,13 @@ def _fit_cdf_pieces(table, params, name, source, log, pieces_kw, evaluate) -> CD
                   pieces=None if n_ok == 0 else pm)
 
 
+def _reverified(fit: CDFFit, n_ok: int, n: int) -> CDFFit:
+    """``fit`` with the fallback flag and reason of a per-row layout after :func:`verify`."""
+    fit.fallback = n_ok == 0
+    fit.reason = f"rational on {n_ok}/{n} view rows (others sampled with the table)" if n_ok else "no row rational"
+    return fit
+
+
 def verify(fit: CDFFit) -> CDFFit:
     """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback.
     Rows layout: a row that fails is dropped to the table (``fit.rows[v] = None``); pieces
@@ -845,10 +852,7 @@ def verify(fit: CDFFit) -> CDFFit:
         fit.pieces.row_ok &= np.asarray(ver["rows"], bool)
         n_ok = int(fit.pieces.row_ok.sum())
         fit.verification = {"pieces": {k: ver[k] for k in ("ok", "failures")}}
-        fit.fallback = n_ok == 0
-        fit.reason = (f"rational on {n_ok}/{fit.table.n_v} view rows (others sampled with the table)"
-                      if n_ok else "no row rational")
-        return fit
+        return _reverified(fit, n_ok, fit.table.n_v)
     if fit.rows is not None:
         from .cdf_rows import verify_row
 
@@ -859,11 +863,7 @@ def verify(fit: CDFFit) -> CDFFit:
                 fit.rows[v] = None
         n_ok = sum(r is not None for r in fit.rows)
         fit.verification = {"rows": vs}
-        fit.fallback = n_ok == 0
-        fit.reason = (f"rational on {n_ok}/{len(fit.rows)} view rows (others sampled with the table)"
-                      if n_ok else "no row rational")
-        return fit
-    """Re-run the verification of ``fit`` (e.g. after editing coefficients); updates fallback."""
+        return _reverified(fit, n_ok, len(fit.rows))
     vt = _verify_theta(fit.theta) if fit.theta is not None else {"ok": False}
     vp = _verify_phi(fit.phi) if fit.phi is not None else {"ok": False}
     fit.verification = {"theta": vt, "phi": vp}

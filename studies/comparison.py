@@ -116,7 +116,7 @@ def run(preset="full", out="results/comparison", materials=None, resolution=None
                 if rep == "measured":
                     mask = C.object_mask(base, r)
                     noise, _ = C.timed_render(r, spp, NOISE_SEED)
-            theta = view_angles(base)
+            theta = view_angles(base, r)     # every representation: same geometry and camera
             expo = C.exposure_for(imgs["measured"], mask)
             images[(mname, lname)] = dict(imgs=imgs, exposure=expo, mask=mask, de={})
             row = dict(material=mname, light=lname, env=light, spp=spp, exposure=expo,

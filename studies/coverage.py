@@ -1,5 +1,6 @@
-"""Object coverage per pixel (fraction of n x n sub-pixel camera rays that hit a shape): the
-mask of the studies' error metrics. Uses the renderer's BVH and camera convention."""
+"""Per-pixel geometry of the studies' camera rays, from n x n sub-pixel rays through the
+renderer's BVH and camera convention: object coverage (the fraction of rays that hit a shape:
+the mask of the studies' error metrics) and the view angle theta_o (the comparison's bins)."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,32 +10,12 @@ from warp_rbrdf import camera as C
 
 
 @wp.kernel
-def _coverage(mesh: wp.uint64, cam: C.Camera, n: int, out: wp.array(dtype=float)):
-    tid = wp.tid()
-    px = tid % cam.width
-    py = tid // cam.width
-    hits = int(0)
-    for i in range(n):
-        for j in range(n):
-            d = C.camera_ray(cam, float(px) + (float(i) + 0.5) / float(n), float(py) + (float(j) + 0.5) / float(n))
-            q = wp.mesh_query_ray(mesh, cam.origin, d, 1.0e30)
-            if q.result:
-                hits = hits + 1
-    out[tid] = float(hits) / float(n * n)
-
-
-def coverage(renderer, n: int = 4) -> np.ndarray:
-    """(H, W) fraction of sub-pixel rays hitting a shape, for a built ``warp_rbrdf.Renderer``."""
-    W, H = renderer.scene.camera.resolution
-    out = wp.zeros(W * H, dtype=float, device=renderer.device)
-    wp.launch(_coverage, dim=W * H, inputs=[renderer.mesh.id, renderer.camera, n], outputs=[out],
-              device=renderer.device)
-    return out.numpy().reshape(H, W)
-
-
-@wp.kernel
-def _view_cosine(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.array(dtype=wp.vec3),
-                 tri_smooth: wp.array(dtype=int), cam: C.Camera, n: int, out: wp.array(dtype=float)):
+def _pixel_hits(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.array(dtype=wp.vec3),
+                tri_smooth: wp.array(dtype=int), cam: C.Camera, n: int,
+                cover: wp.array(dtype=float), cos_view: wp.array(dtype=float)):
+    """Per pixel: the fraction of the n x n sub-pixel rays that hit (``cover``) and the mean
+    cosine between the shading normal and the ray back to the camera over those (``cos_view``;
+    -1 where none hits)."""
     tid = wp.tid()
     px = tid % cam.width
     py = tid // cam.width
@@ -63,20 +44,32 @@ def _view_cosine(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.arra
                     ns = ng
                 acc = acc + wp.dot(ns, -d)
                 hits = hits + 1
+    cover[tid] = float(hits) / float(n * n)
     if hits > 0:
-        out[tid] = acc / float(hits)
+        cos_view[tid] = acc / float(hits)
     else:
-        out[tid] = -1.0
+        cos_view[tid] = -1.0
+
+
+def _pixel_hits_numpy(renderer, n: int):
+    """``(cover, cos_view)`` of :func:`_pixel_hits` as (H, W) arrays."""
+    W, H = renderer.scene.camera.resolution
+    cover = wp.zeros(W * H, dtype=float, device=renderer.device)
+    cos_view = wp.zeros(W * H, dtype=float, device=renderer.device)
+    wp.launch(_pixel_hits, dim=W * H,
+              inputs=[renderer.mesh.id, renderer.indices, renderer.normals, renderer.tri_smooth,
+                      renderer.camera, n], outputs=[cover, cos_view], device=renderer.device)
+    return cover.numpy().reshape(H, W), cos_view.numpy().reshape(H, W).astype(float)
+
+
+def coverage(renderer, n: int = 4) -> np.ndarray:
+    """(H, W) fraction of sub-pixel rays hitting a shape, for a built ``warp_rbrdf.Renderer``."""
+    return _pixel_hits_numpy(renderer, n)[0]
 
 
 def view_angle(renderer, n: int = 4) -> np.ndarray:
     """(H, W) view angle theta_o in degrees: the angle between the shading normal and the
     direction back to the camera (each pixel's own ray, not the camera axis), from the mean
     cosine over the n x n sub-pixel rays that hit; NaN where no ray hits."""
-    W, H = renderer.scene.camera.resolution
-    out = wp.zeros(W * H, dtype=float, device=renderer.device)
-    wp.launch(_view_cosine, dim=W * H,
-              inputs=[renderer.mesh.id, renderer.indices, renderer.normals, renderer.tri_smooth,
-                      renderer.camera, n], outputs=[out], device=renderer.device)
-    c = out.numpy().reshape(H, W).astype(float)
+    c = _pixel_hits_numpy(renderer, n)[1]
     return np.where(c < 0.0, np.nan, np.degrees(np.arccos(np.clip(c, 0.0, 1.0))))
