@@ -41,8 +41,9 @@ def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
     xi = rng.random((n, 2))
     renderer.sample_material(name, wo[:1000], xi[:1000], sampler)  # warm up
     wp = renderer.wp
-    m = renderer.material_data.names.index(name)
-    from warp_rbrdf.materials import SAMPLER_CODES
+    m = renderer.material_index(name)
+    t = renderer.technique_code(name, sampler)
+    kernel = renderer.kernels_for(t).sample_bsdf
 
     dwo = wp.array(wo.astype(np.float32), dtype=wp.vec3, device=renderer.device)
     dxi = wp.array(xi.astype(np.float32), dtype=wp.vec2, device=renderer.device)
@@ -51,8 +52,7 @@ def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
     for _ in range(reps):
         wp.synchronize()
         t = time.perf_counter()
-        wp.launch(renderer.module.sample_bsdf_kernel, dim=n,
-                  inputs=[renderer.materials, m, SAMPLER_CODES[sampler], dwo, dxi], outputs=[out],
+        wp.launch(kernel, dim=n, inputs=[renderer.materials, m, t, dwo, dxi], outputs=[out],
                   device=renderer.device)
         wp.synchronize()
         best = min(best, time.perf_counter() - t)

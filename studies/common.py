@@ -30,8 +30,8 @@ from warp_rbrdf.paths import data_root  # noqa: E402
 from warp_rbrdf.scene import (CameraSpec, IntegratorSpec, LightSpec, MaterialSpec,  # noqa: E402
                               Scene, ShapeSpec)
 
-#: Samplers of the first renderer (issue 5); anything else in ``warp_rbrdf.scene.SAMPLERS`` is an
-#: inverse-CDF sampler added later and is included automatically.
+#: The samplers that need no inverse-CDF data, in the studies' display order (the others of
+#: ``warp_rbrdf.registry.STRATEGIES`` follow them).
 BASE_SAMPLERS = ("uniform", "cosine", "light", "mis")
 
 MATERIALS = {
@@ -63,10 +63,9 @@ def has_data(*rels) -> bool:
 
 
 def all_samplers() -> tuple:
-    """Sampler names the renderer accepts now (base ones first)."""
-    from warp_rbrdf import scene as S
+    """Every sampler of the renderer's registry (base ones first)."""
+    from warp_rbrdf.registry import STRATEGY_NAMES as names
 
-    names = tuple(getattr(S, "SAMPLERS", BASE_SAMPLERS))
     return tuple(s for s in BASE_SAMPLERS if s in names) + tuple(s for s in names if s not in BASE_SAMPLERS)
 
 
@@ -160,17 +159,17 @@ def cdf_for(spec: MaterialSpec, rational: bool):
     if spec.type == "lambert" or spec.data is None or isinstance(spec.data, (str, Path)):
         return None
     from fit.cdf_fit import fit_cdf, table_only
-    from warp_rbrdf.cdf_sampling import material_evaluate
+    from warp_rbrdf import registry
 
     key = (id(spec.data), spec.type, tuple(np.broadcast_to(np.asarray(spec.scale, float), 3)))
+    evaluate = registry.material(spec.type).impl().load(spec).evaluate   # scale applied
     if key not in _TABLES:   # the data object is kept alive with its entry, so its id stays unique
-        _TABLES[key] = (table_only(material_evaluate(spec, spec.data), reason="table only (studies cache)",
-                                   name=spec.name), spec.data)
+        _TABLES[key] = (table_only(evaluate, reason="table only (studies cache)", name=spec.name), spec.data)
     if not rational:
         return _TABLES[key][0]
     if key not in _FITS:
         kw = {} if CDF_TIME_LIMIT_S is None else {"time_limit_s": CDF_TIME_LIMIT_S}
-        _FITS[key] = fit_cdf(material_evaluate(spec, spec.data), name=spec.name, table=_TABLES[key][0].table, **kw)
+        _FITS[key] = fit_cdf(evaluate, name=spec.name, table=_TABLES[key][0].table, **kw)
     return _FITS[key]
 
 
@@ -179,14 +178,14 @@ def with_sampler(scene: Scene, sampler: str) -> Scene:
     material's cached tables / fits (:func:`cdf_for`)."""
     import copy
 
-    from warp_rbrdf.cdf_sampling import RATIONAL_SAMPLERS, TABLE_SAMPLERS
+    from warp_rbrdf.registry import RATIONAL_STRATEGIES, TABLE_STRATEGIES
 
     sc = copy.copy(scene)
     sc.materials = {k: copy.copy(v) for k, v in scene.materials.items()}
     for m in sc.materials.values():
         m.sampler = sampler
-        if sampler in TABLE_SAMPLERS and m.cdf is None:
-            m.cdf = cdf_for(m, sampler in RATIONAL_SAMPLERS)
+        if sampler in TABLE_STRATEGIES and m.cdf is None:
+            m.cdf = cdf_for(m, sampler in RATIONAL_STRATEGIES)
     sc.integrator = copy.copy(scene.integrator)
     sc.integrator.sampler = sampler if sampler in BASE_SAMPLERS else sc.integrator.sampler
     return sc

@@ -67,14 +67,14 @@ def random_pairs(n: int, seed: int = 0):
 
 def eval_ns(renderer, wi, wo, reps: int = 5) -> float:
     """Nanoseconds per evaluation of the scene's (first) material in the renderer's Warp code:
-    one launch of its ``eval_bsdf_kernel`` over preallocated arrays (median of ``reps``)."""
+    one launch of its ``eval_bsdf`` kernel over preallocated arrays (median of ``reps``)."""
     wp = renderer.wp
     renderer.compile()
     dev = renderer.device
     a = wp.array(np.ascontiguousarray(wi, np.float32), dtype=wp.vec3, device=dev)
     b = wp.array(np.ascontiguousarray(wo, np.float32), dtype=wp.vec3, device=dev)
     o = wp.zeros(len(wi), dtype=wp.vec3, device=dev)
-    k = renderer.module.eval_bsdf_kernel
+    k = renderer.kernels.eval_bsdf
     ts = []
     for i in range(reps + 1):
         t0 = time.perf_counter()

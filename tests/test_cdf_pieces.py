@@ -182,7 +182,7 @@ def test_warp_phi_knots_share_values_and_slopes(satin):
     """The Warp array stores the phi maps as knots (value, slope): they reproduce every piece's
     ends; a verified row whose pieces do not share a knot cannot be packed (ValueError), a
     table row can."""
-    from warp_rbrdf.cdf_sampling import pieces_phi_knots
+    from warp_rbrdf.techniques.cdf_data import pieces_phi_knots
 
     _, fit = satin
     pm = fit.pieces

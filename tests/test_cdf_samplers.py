@@ -141,12 +141,14 @@ def test_broken_fits_trigger_fallback(lambert_fit):
     assert bad2.fallback and not bad2.verification["phi"]["q_certified"]
     # the renderer falls back explicitly (printed) to the tabulated sampler
     from warp_rbrdf import testing as T
-    from warp_rbrdf.materials import SAMPLER_CODES, build_material_data
+    from warp_rbrdf import registry
+    from warp_rbrdf.materials.build import build_material_data
 
     spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler="rational")
     spec.cdf = bad
     md = build_material_data(T.plane_scene(spec, [T.constant_env(1.0)]))
-    assert md.sampler[0] == SAMPLER_CODES["tabulated"] and not md.cdf_fits
+    assert md.strategies[0] == "tabulated" and md.cdf[0] is bad.table
+    assert md.technique[0] == registry.technique("tabulated").code and not md.global_fits
 
 
 def test_cdf_fit_time_limit_falls_back_explicitly():

@@ -50,11 +50,11 @@ def test_delta_e2000_matches_colour_and_is_zero_for_equal_images():
 
 def test_sampler_discovery_includes_base_samplers():
     from studies import common as C
-    from warp_rbrdf import scene
+    from warp_rbrdf import registry
 
     s = C.all_samplers()
     assert s[:4] == ("uniform", "cosine", "light", "mis")
-    assert set(s) == set(scene.SAMPLERS)
+    assert set(s) == set(registry.STRATEGY_NAMES) and set(s[:4]) == set(registry.BASE_STRATEGIES)
 
 
 # --------------------------------------------------------------------------------------------

@@ -10,7 +10,7 @@ def test_power_heuristic_never_nan():
     import warp as wp
 
     from warp_rbrdf import runtime  # noqa: F401  (Warp init, cache folder)
-    from warp_rbrdf.sampling import power_heuristic
+    from warp_rbrdf.integrator import power_heuristic
 
     @wp.kernel
     def k(pa: wp.array(dtype=float), pb: wp.array(dtype=float), out: wp.array(dtype=float)):

@@ -1,8 +1,8 @@
 """The embedded default scene: a sphere on a plane under a procedural sky.
 
 It needs no file outside the package, so ``rbrdf render`` works on a fresh clone. The sphere
-uses a rational BRDF shipped in ``warp_rbrdf/data/*.json`` when one exists (and the rational
-material is available); otherwise a Lambert fallback.
+uses a rational BRDF shipped in ``warp_rbrdf/data/*.json`` when one exists; otherwise a Lambert
+fallback.
 """
 from __future__ import annotations
 
@@ -61,10 +61,8 @@ def shipped_coefficient_files():
 
 
 def default_material_toml() -> str:
-    from .rational_material import rational_available
-
     files = shipped_coefficient_files()
-    if files and rational_available():
+    if files:
         return f'type = "rational"\nfile = "pkg:{files[0].name}"'
     return LAMBERT_FALLBACK
 

@@ -14,7 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import camera, geometry, integrator, lights, registry, sample_patterns
 from .errors import RenderError, SceneError
+from .materials.build import build_material_data
+from .materials.data import make_materials_struct
+from .runtime import get_device, init_warp
 from .scene import Scene
 
 
@@ -43,8 +47,6 @@ class Renderer:
     """A scene built for one Warp device. ``render()`` can be called many times."""
 
     def __init__(self, scene: Scene, device: str = "cpu"):
-        from .runtime import get_device, init_warp
-
         wp = init_warp()
         self.wp = wp
         self.scene = scene
@@ -56,14 +58,12 @@ class Renderer:
 
     # ------------------------------------------------------------------------------------------
     def _build(self):
-        from . import camera, geometry, lights, materials
-
         wp, dev, sc = self.wp, self.device, self.scene
         used = []
         for sh in sc.shapes:
             if sh.material not in used:
                 used.append(sh.material)
-        self.material_data = materials.build_material_data(sc, used)
+        self.material_data = build_material_data(sc, used)
         index = {n: i for i, n in enumerate(used)}
         geom = geometry.build_geometry(sc, index)
         self.geometry = geom
@@ -99,23 +99,29 @@ class Renderer:
             irr.append(l.irradiance)
         self.directional = lights.make_directional_struct(np.array(dirs, np.float32).reshape(-1, 3),
                                                           np.array(irr, np.float32).reshape(-1, 3), dev)
-        self.materials = materials.make_materials_struct(self.material_data, dev)
+        self.materials = make_materials_struct(self.material_data, dev)
+
+    def _make_kernels(self, all_techniques: bool = False):
+        """The integrator's kernels for the scene's material kinds and techniques (``all_techniques``:
+        every registered technique, for sampling a material with another technique than its own)."""
+        md = self.material_data
+        kinds = [(c, registry.material_by_code(c).impl().kernel_eval(md.loaded_of_kind(c)))
+                 for c in md.kinds_used()]
+        codes = [t.code for t in registry.TECHNIQUES] if all_techniques else md.techniques_used()
+        techniques = []
+        for c in codes:
+            t = registry.technique_by_code(c)
+            sample, pdf = t.impl().kernel_functions(md.global_fits if t.needs_fit else ())
+            techniques.append((c, sample, pdf, t.pdf_exact))
+        return integrator.make_kernels(kinds, techniques)
 
     def compile(self):
-        """Generate and compile (or load from the kernel cache) the scene's kernels."""
+        """Generate and compile (or load from the kernel cache) the scene's render kernel."""
         if self.compile_seconds is not None:
             return self.compile_seconds
-        from . import integrator, rational_material
-
         t0 = time.perf_counter()
-        rfuncs = rational_material.generate_functions(self.material_data.rational)
-        from . import cdf_sampling
-
-        cfuncs = cdf_sampling.generate_sampler_functions(self.material_data.cdf_fits,
-                                                         self.material_data.cdf_pw_offsets)
-        src = integrator.generate_source(self.material_data.kinds_used, rfuncs, cfuncs)
-        self.module = integrator.load_generated_module(src)
-        self.wp.load_module(self.module, device=self.device)
+        self.kernels = self._make_kernels()
+        self.wp.load_module(self.kernels.render_tile.module, device=self.device)
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
 
@@ -127,8 +133,6 @@ class Renderer:
         With ``return_variance=True`` also returns the per-pixel sample variance (H, W, 3)
         (divide by spp for the variance of the pixel mean). ``self.stats`` holds the timings.
         """
-        from . import integrator, sampling
-
         wp = self.wp
         self.compile()
         it = self.scene.integrator
@@ -145,10 +149,10 @@ class Renderer:
         sq = wp.zeros(W * H, dtype=wp.vec3, device=dev)
         tile = it.tile_size if dev.is_cpu else max(W, H)
         tl = integrator.tiles(W, H, tile)
-        k = self.module.render_tile
+        k = self.kernels.render_tile
         fixed = [self.mesh.id, self.indices, self.normals, self.tri_mat, self.tri_smooth,
                  self.camera, self.env, self.directional, self.materials,
-                 spp, seed, sampling.PATTERN_CODES[it.pattern], it.max_depth,
+                 spp, seed, sample_patterns.PATTERN_CODES[it.pattern], it.max_depth,
                  1 if it.hide_environment else 0, self.ray_epsilon]
 
         def one(t):
@@ -179,40 +183,76 @@ class Renderer:
             return img, var.astype(np.float32)
         return img
 
+    def material_index(self, name: str) -> int:
+        """Index ``m`` of material ``name`` in the kernels' arrays."""
+        if name not in self.material_data.names:
+            raise RenderError(f"material {name!r} is not used by any shape of the scene")
+        return self.material_data.names.index(name)
+
+    def technique_code(self, name: str, sampler: str | None = None) -> int:
+        """Technique code of ``sampler`` (a strategy name; default: the material's own strategy
+        after any fallback); clear error when it needs an inverse-CDF table the material lacks
+        (the rational technique samples the table where the material has no verified maps)."""
+        m = self.material_index(name)
+        strat = registry.strategy(sampler or self.material_data.strategies[m])
+        tech = registry.technique(strat.technique)
+        cdf = self.material_data.cdf[m]
+        if tech.needs_table and cdf is None:
+            raise RenderError(f"material {name!r}: sampler {strat.name!r} needs data the material's "
+                              f"sampler {self.material_data.strategies[m]!r} did not build")
+        return tech.code
+
+    def kernels_for(self, t: int):
+        """Compiled kernels (:class:`warp_rbrdf.integrator.Kernels`) that can sample technique
+        ``t``: the scene's, or, for a technique the scene does not use, kernels with every
+        technique (for :meth:`sample_material`, :meth:`pdf_material` and the benchmarks)."""
+        self.compile()
+        if t in self.material_data.techniques_used():
+            return self.kernels
+        if getattr(self, "_all_kernels", None) is None:
+            self._all_kernels = self._make_kernels(all_techniques=True)
+        return self._all_kernels
+
+    def _array(self, a, n, dtype):
+        return self.wp.array(np.ascontiguousarray(a, np.float32).reshape(-1, n), dtype=dtype, device=self.device)
+
     def eval_material(self, name: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Evaluate material ``name`` with the Warp code at local direction pairs (N, 3)."""
         wp = self.wp
         self.compile()
-        if name not in self.material_data.names:
-            raise RenderError(f"material {name!r} is not used by any shape of the scene")
-        m = self.material_data.names.index(name)
-        wi = np.ascontiguousarray(wi, np.float32).reshape(-1, 3)
-        wo = np.ascontiguousarray(wo, np.float32).reshape(-1, 3)
+        m = self.material_index(name)
+        wi, wo = self._array(wi, 3, wp.vec3), self._array(wo, 3, wp.vec3)
         out = wp.zeros(len(wi), dtype=wp.vec3, device=self.device)
-        wp.launch(self.module.eval_bsdf_kernel, dim=len(wi),
-                  inputs=[self.materials, m, wp.array(wi, dtype=wp.vec3, device=self.device),
-                          wp.array(wo, dtype=wp.vec3, device=self.device)],
-                  outputs=[out], device=self.device)
+        wp.launch(self.kernels.eval_bsdf, dim=len(wi), inputs=[self.materials, m, wi, wo], outputs=[out],
+                  device=self.device)
         return out.numpy()
 
     def sample_material(self, name: str, wo: np.ndarray, xi: np.ndarray, sampler: str | None = None):
-        """The Warp BSDF strategy of material ``name`` (its scene sampler, after any fallback,
-        unless ``sampler`` is given) at local views ``wo`` (N, 3) and uniforms ``xi`` (N, 2):
-        returns ``(wi (N, 3), weight (N,))`` with weight = 1/pdf or alpha (0: no sample)."""
+        """The Warp BSDF sample of material ``name`` with the technique of ``sampler`` (default:
+        its scene sampler, after any fallback) at local views ``wo`` (N, 3) and uniforms ``xi``
+        (N, 2): returns ``(wi (N, 3), weight (N,))`` with weight = 1/pdf or alpha (0: no sample)."""
         wp = self.wp
-        self.compile()
-        m = self.material_data.names.index(name)
-        from .materials import SAMPLER_CODES
-
-        code = int(self.material_data.sampler[m]) if sampler is None else SAMPLER_CODES[sampler]
-        wo = np.ascontiguousarray(wo, np.float32).reshape(-1, 3)
-        xi = np.ascontiguousarray(xi, np.float32).reshape(-1, 2)
+        m, t = self.material_index(name), self.technique_code(name, sampler)
+        k = self.kernels_for(t)
+        wo, xi = self._array(wo, 3, wp.vec3), self._array(xi, 2, wp.vec2)
         out = wp.zeros(len(wo), dtype=wp.vec4, device=self.device)
-        wp.launch(self.module.sample_bsdf_kernel, dim=len(wo),
-                  inputs=[self.materials, m, code, wp.array(wo, dtype=wp.vec3, device=self.device),
-                          wp.array(xi, dtype=wp.vec2, device=self.device)], outputs=[out], device=self.device)
+        wp.launch(k.sample_bsdf, dim=len(wo), inputs=[self.materials, m, t, wo, xi], outputs=[out],
+                  device=self.device)
         o = out.numpy()
         return o[:, :3], o[:, 3]
+
+    def pdf_material(self, name: str, wi: np.ndarray, wo: np.ndarray, sampler: str | None = None):
+        """The density (1/sr) the MIS weights use for the BSDF sample of material ``name`` with
+        the technique of ``sampler`` at local direction pairs (N, 3): exact for techniques with
+        ``pdf_exact``, the table's for the rational maps."""
+        wp = self.wp
+        m, t = self.material_index(name), self.technique_code(name, sampler)
+        k = self.kernels_for(t)
+        wi, wo = self._array(wi, 3, wp.vec3), self._array(wo, 3, wp.vec3)
+        out = wp.zeros(len(wi), dtype=float, device=self.device)
+        wp.launch(k.pdf_bsdf, dim=len(wi), inputs=[self.materials, m, t, wi, wo], outputs=[out],
+                  device=self.device)
+        return out.numpy()
 
 
 def render(scene, spp: int | None = None, seed: int | None = None, device: str = "cpu",

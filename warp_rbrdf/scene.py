@@ -14,13 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from . import transforms
+from . import registry, transforms
 from .errors import SceneError
 from .paths import resolve_path
 
-MATERIAL_TYPES = ("lambert", "measured", "projected", "rational")
-SAMPLERS = ("mis", "light", "cosine", "uniform", "tabulated", "rational", "rational-derivative",
-            "mis-tabulated", "mis-rational")
+MATERIAL_TYPES = registry.MATERIAL_NAMES
+SAMPLERS = registry.STRATEGY_NAMES
 PATTERNS = ("stratified", "independent")
 SHAPE_TYPES = ("mesh", "sphere", "plane")
 LIGHT_TYPES = ("directional", "envmap", "constant", "sky")

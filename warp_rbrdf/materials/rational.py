@@ -1,5 +1,5 @@
-"""Rational BRDF material: the fitter's ``rbrdf-rational`` v1 coefficient files
-(:mod:`fit.coefficients`) compiled to generated, fully unrolled Warp code.
+"""``rational``: the fitter's ``rbrdf-rational`` coefficient files (:mod:`fit.coefficients`,
+versions 1 and 2) compiled to generated, fully unrolled Warp code; ``scale`` multiplies them.
 
 For each rational material the generator writes one ``@wp.func`` ``(wi, wo) -> vec3`` that
 follows the file's evaluation recipe exactly (see :mod:`fit.coefficients`): Rusinkiewicz angles
@@ -7,41 +7,42 @@ follows the file's evaluation recipe exactly (see :mod:`fit.coefficients`): Rusi
 Chebyshev recurrences up to the largest exponent used -> P/Q per channel as sums grouped by the
 first variable's exponent -> value transform (linear / log) -> ``max(y, min)``; 0 below the
 horizon. The polynomial part runs in float64 (Chebyshev sums can cancel); the angles come from
-the float32 shading frame. Coefficients are literals, so each (material, degree) pair gets its own
-code and the kernel module is cached by Warp under the hash of the generated source.
+the float32 shading frame. Coefficients are literals (:mod:`warp_rbrdf.codegen`), so each fit
+gets its own code, cached by Warp under the hash of the generated source;
+:func:`kernel_eval` dispatches on ``Materials.offset`` (the material's index among the scene's
+rational materials).
 """
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 
-from .errors import SceneError
+from ..codegen import lit as _lit
+from ..codegen import load_generated
+from ..errors import SceneError
+from .data import LoadedMaterial, Materials
+from .measured import scaled
 
 SUPPORTED_VARIABLES = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
 
 
-def rational_available() -> bool:
-    try:
-        import fit.coefficients  # noqa: F401
-    except ImportError:
-        return False
-    return True
-
-
-def load_rational(spec, file="<scene>", key="materials"):
+def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     """The :class:`fit.coefficients.RationalModel` of a material spec (``spec.data`` or file)."""
     if spec.data is not None:
         model = spec.data
     else:
+        from fit.coefficients import load as load_coefficients  # MERGE: fit.rational.coefficient_file
+
         try:
-            from fit.coefficients import load
-        except ImportError as e:
-            raise SceneError(file, f"{key}.file", f"rational materials need fit.coefficients ({e})") from None
-        try:
-            model = load(spec.file)
+            model = load_coefficients(spec.file)
         except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line
-            raise SceneError(file, f"{key}.file", f"cannot read coefficient file ({e})") from None
-    check_model(model, file, key)
-    return model
+            raise SceneError(scene_file, f"{key}.file", f"cannot read coefficient file ({e})") from None
+    check_model(model, scene_file, key)
+    return LoadedMaterial(spec, model, scaled(model.evaluate, spec.scale))
+
+
+def scale(spec):
+    return spec.scale
 
 
 def check_model(model, file="<scene>", key="materials"):
@@ -56,11 +57,7 @@ def check_model(model, file="<scene>", key="materials"):
         raise SceneError(file, f"{key}.file", f"expected 3 outputs (R, G, B), got {len(model.outputs)}")
 
 
-def _lit(x: float) -> str:
-    return f"wp.float64({float(x)!r})"
-
-
-def _poly(lines, name, exps, coefs, tvars):
+def _poly(lines, name, exps, coefs):
     """Emit ``name = sum_j c_j prod_v T_{e_jv}(t_v)`` grouped by the first variable's exponent."""
     groups: dict = {}
     for e, c in zip(exps, coefs):
@@ -89,7 +86,7 @@ def generate_function(model, name: str) -> str:
     L = ["@wp.func", f"def {name}(wi: wp.vec3, wo: wp.vec3) -> wp.vec3:",
          f"    # piecewise rational BRDF {model.name!r}: {len(pieces)} pieces along {model.split_variable}",
          "    if wi[2] <= 0.0 or wo[2] <= 0.0:", "        return wp.vec3(0.0)",
-         "    a = M.half_diff(wi, wo)", f"    x = wp.float64(a[{src}])"]
+         "    a = F.half_diff(wi, wo)", f"    x = wp.float64(a[{src}])"]
     for k in range(len(pieces) - 1):
         L.append(f"    if x <= {_lit(model.edges[k + 1])}:")
         L.append(f"        return {name}_p{k}(wi, wo)")
@@ -107,7 +104,7 @@ def _generate_single(model, name: str) -> str:
     L = ["@wp.func", f"def {name}(wi: wp.vec3, wo: wp.vec3) -> wp.vec3:",
          f"    # generated from rational BRDF {model.name!r}: {model.n_coefficients} coefficients",
          "    if wi[2] <= 0.0 or wo[2] <= 0.0:", "        return wp.vec3(0.0)",
-         "    a = M.half_diff(wi, wo)"]
+         "    a = F.half_diff(wi, wo)"]
     clamp = model.domain_policy.get("outside", "clamp") == "clamp"
     for v, var in enumerate(model.variables):
         src = SUPPORTED_VARIABLES[var.name]
@@ -131,8 +128,8 @@ def _generate_single(model, name: str) -> str:
             L.append(f"    T{v}_{k} = wp.float64(2.0) * t{v} * T{v}_{k - 1} - T{v}_{k - 2}")
     outs = []
     for c, f in enumerate(model.functions):
-        _poly(L, f"P{c}", f.num_exponents, f.num_coef, None)
-        _poly(L, f"Q{c}", f.den_exponents, f.den_coef, None)
+        _poly(L, f"P{c}", f.num_exponents, f.num_coef)
+        _poly(L, f"Q{c}", f.den_exponents, f.den_coef)
         L.append(f"    y{c} = P{c} / Q{c}")
         vmax = getattr(model, "value_max", None)
         if model.value_transform == "log":
@@ -148,6 +145,51 @@ def _generate_single(model, name: str) -> str:
     return "\n".join(L) + "\n"
 
 
-def generate_functions(models):
-    """``[(name, source)]`` for the scene's rational materials, in material-offset order."""
-    return [(f"rational_{i}", generate_function(m, f"rational_{i}")) for i, m in enumerate(models)]
+GENERATED_HEADER = """# Generated by warp_rbrdf.materials.rational -- do not edit.
+import warp as wp
+
+from warp_rbrdf.materials import frame as F
+"""
+
+
+def generated_functions(models) -> list:
+    """The generated ``@wp.func (wi, wo) -> vec3`` of each model, in order (one module)."""
+    if not models:
+        return []
+    src = GENERATED_HEADER + "\n\n" + "\n\n".join(generate_function(m, f"rational_{i}")
+                                                   for i, m in enumerate(models))
+    mod = load_generated(src, "rbrdf_rational")
+    return [getattr(mod, f"rational_{i}") for i in range(len(models))]
+
+
+@wp.func
+def _no_rational(mats: Materials, m: int, r: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
+    return wp.vec3(0.0)
+
+
+def _chain(funcs, first: int = 0):
+    """``link(mats, m, r, wi, wo)``: generated function ``r`` (one closure per function, see
+    :mod:`warp_rbrdf.integrator` for why not a static loop) times ``Materials.scale[m]``."""
+    if first >= len(funcs):
+        return _no_rational
+    func, rest = funcs[first], _chain(funcs, first + 1)
+
+    @wp.func
+    def link(mats: Materials, m: int, r: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
+        if r == wp.static(first):
+            return wp.cw_mul(wp.static(func)(wi, wo), mats.scale[m])
+        return wp.static(rest)(mats, m, r, wi, wo)
+
+    return link
+
+
+def kernel_eval(loaded_list):
+    """``rational_eval(mats, m, wi, wo)``: the generated function of material ``m`` (index
+    ``Materials.offset[m]`` among the scene's rational materials) times ``Materials.scale[m]``."""
+    chain = _chain(generated_functions([lm.data for lm in loaded_list]))
+
+    @wp.func
+    def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
+        return wp.static(chain)(mats, m, mats.offset[m], wi, wo)
+
+    return rational_eval

@@ -1,4 +1,4 @@
-"""Sample generators and hemisphere sampling (Warp functions).
+"""Sample generators (Warp functions): the random numbers every estimator draws.
 
 Sample generators are *stateless*: a sample value is a pure function of
 ``(pixel seed, sample index, dimension)``, so an image is deterministic per (seed, pixel, sample)
@@ -20,7 +20,6 @@ PATTERN_STRATIFIED = 0
 PATTERN_INDEPENDENT = 1
 PATTERN_CODES = {"stratified": PATTERN_STRATIFIED, "independent": PATTERN_INDEPENDENT}
 
-INV_2_32 = 2.3283064365386963e-10  # 2^-32
 ONE_MINUS_EPS = 0.99999994
 
 # 32-bit hash constants above 2^31 (as uint32 constants so the C++ sees no int32 overflow)
@@ -144,63 +143,3 @@ def sample_2d(pattern: int, pseed: wp.uint32, s: int, spp: int, dim: int) -> wp.
         return cmj_2d(s, spp, p)
     h = hash_u32(p ^ hash_u32(wp.uint32(s) + wp.uint32(0x68E31DA4)))
     return wp.vec2(u32_to_unit(h), u32_to_unit(hash_u32(h ^ _KB5297A4D)))
-
-
-# --- Hemisphere sampling (local frame, z = normal) --------------------------------------------
-@wp.func
-def sample_cosine_hemisphere(u: wp.vec2) -> wp.vec3:
-    r = wp.sqrt(u[0])
-    phi = 2.0 * wp.pi * u[1]
-    return wp.vec3(r * wp.cos(phi), r * wp.sin(phi), wp.sqrt(wp.max(0.0, 1.0 - u[0])))
-
-
-@wp.func
-def pdf_cosine_hemisphere(w: wp.vec3) -> float:
-    return wp.max(w[2], 0.0) / wp.pi
-
-
-@wp.func
-def sample_uniform_hemisphere(u: wp.vec2) -> wp.vec3:
-    z = u[0]
-    r = wp.sqrt(wp.max(0.0, 1.0 - z * z))
-    phi = 2.0 * wp.pi * u[1]
-    return wp.vec3(r * wp.cos(phi), r * wp.sin(phi), z)
-
-
-@wp.func
-def pdf_uniform_hemisphere(w: wp.vec3) -> float:
-    if w[2] > 0.0:
-        return 1.0 / (2.0 * wp.pi)
-    return 0.0
-
-
-@wp.func
-def power_heuristic(pa: float, pb: float) -> float:
-    """pa^2 / (pa^2 + pb^2), computed from the ratio so that huge pdfs (a tabulated density
-    near theta_l = 0 grows like 1/sin theta) never overflow float32 into inf/inf = NaN."""
-    if pa <= 0.0:
-        return 0.0
-    if pb <= 0.0:
-        return 1.0
-    if pa >= pb:
-        r = pb / pa
-        return 1.0 / (1.0 + r * r)
-    r = pa / pb
-    return r * r / (1.0 + r * r)
-
-
-@wp.func
-def onb_tangent(n: wp.vec3) -> wp.vec3:
-    """Tangent of the branchless orthonormal basis of Duff et al. (2017)."""
-    sign = wp.where(n[2] >= 0.0, 1.0, -1.0)
-    a = -1.0 / (sign + n[2])
-    b = n[0] * n[1] * a
-    return wp.vec3(1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0])
-
-
-@wp.func
-def onb_bitangent(n: wp.vec3) -> wp.vec3:
-    sign = wp.where(n[2] >= 0.0, 1.0, -1.0)
-    a = -1.0 / (sign + n[2])
-    b = n[0] * n[1] * a
-    return wp.vec3(b, sign + n[1] * n[1] * a, -n[1])

@@ -1,0 +1,50 @@
+"""Build a scene's :class:`~warp_rbrdf.materials.data.MaterialData`: load each material with its
+kind module (:data:`warp_rbrdf.registry.MATERIALS`), prepare the inverse-CDF data its strategy's
+technique needs (:mod:`warp_rbrdf.techniques.cdf_data`) and pack everything into flat arrays.
+Only the materials referenced by shapes are loaded; only the tables they use are built."""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import registry
+from ..techniques import cdf_data
+from .data import MaterialData, Pool
+
+
+def build_material_data(scene, used_names=None, log=print) -> MaterialData:
+    """Load and pack the materials ``used_names`` (default: all of the scene's) in that order."""
+    names = list(scene.materials) if used_names is None else list(used_names)
+    n = max(len(names), 1)
+    kind = np.zeros(n, np.int32)
+    technique = np.zeros(n, np.int32)
+    combine = np.zeros(n, np.int32)
+    scale = np.ones((n, 3), np.float32)
+    offset = np.zeros(n, np.int32)
+    tables = Pool(width=3)
+    loaded, strategies, cdfs = [], [], []
+    index_of_kind: dict = {}
+    for i, name in enumerate(names):
+        spec = scene.materials[name]
+        key = f"materials.{name}"
+        kd = registry.material(spec.type)
+        impl = kd.impl()
+        lm = impl.load(spec, scene.path, key)
+        kind[i] = kd.code
+        scale[i] = impl.scale(spec)
+        if lm.table is not None:
+            offset[i] = tables.add(lm.table)
+        else:   # kinds without a table index their own functions
+            offset[i] = index_of_kind.get(kd.code, 0)
+            index_of_kind[kd.code] = offset[i] + 1
+        strat, cdf = cdf_data.prepare(spec, lm, scene.path, key, log)
+        technique[i] = registry.technique(strat.technique).code
+        combine[i] = registry.combine_code(strat)
+        loaded.append(lm)
+        strategies.append(strat.name)
+        cdfs.append(cdf)
+    md = MaterialData(names=names, kind=kind, technique=technique, combine=combine, scale=scale,
+                      offset=offset, tables=tables.array(), loaded=loaded, strategies=strategies,
+                      cdf=cdfs)
+    for k, v in cdf_data.pack(cdfs).items():
+        setattr(md, k, v)
+    return md

@@ -1,0 +1,17 @@
+"""BSDF sampling techniques, one module each, listed in :data:`warp_rbrdf.registry.TECHNIQUES`.
+
+Every technique module has the Warp functions
+
+* ``sample(mats: Materials, m: int, wo: vec3, xi: vec2) -> vec4``: a light direction ``wi``
+  (local frame, z = normal) and its estimator weight (1/pdf, or alpha for the rational maps;
+  <= 0: no sample),
+* ``pdf(mats, m, wi, wo) -> float``: the density in 1/sr that MIS uses (exact unless the
+  registry says ``pdf_exact = False``),
+
+``kernel_functions(cdfs) -> (sample, pdf)`` (the functions for a scene's materials: most
+techniques return the two above; the rational one adds generated code for global-layout fits),
+and the NumPy references ``numpy_sample(cdf, wo, xi) -> (wi, weight)`` and
+``numpy_pdf(cdf, wi, wo)``, where ``cdf`` is the material's inverse-CDF data (None, a
+:class:`fit.cdf_table.CDFTable` or a :class:`fit.cdf_fit.CDFFit`). :mod:`.cdf_data` prepares and
+packs that data.
+"""

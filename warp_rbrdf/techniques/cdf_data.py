@@ -1,0 +1,116 @@
+"""NumPy side of the inverse-CDF techniques: which tables and fits a scene's materials need,
+where they come from, and how they are packed into :class:`warp_rbrdf.materials.data.Materials`.
+
+A material whose strategy's technique needs a table (``tabulated``, ``rational``) gets one:
+from its ``cdf = "file.json"`` (an ``rbrdf-cdf`` file of ``rbrdf-fit cdf``), or tabulated from
+the material itself at load. A technique that needs verified rational inverse CDFs gets them
+from the same file, or fitted at load (printed: it takes seconds). A fit that failed its
+verification (``CDFFit.fallback``) switches the material to its strategy's ``fallback``
+(printed, never silent).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .. import registry
+from ..errors import SceneError
+from ..materials.data import (CDF_LAYOUT, CDF_MAPS, CDF_N_MU, CDF_N_P, CDF_N_T, CDF_N_U, CDF_N_V,
+                              CDF_OFF_P, CDF_OFF_ROWS, CDF_OFF_T, LAYOUT_GLOBAL, LAYOUT_NONE,
+                              LAYOUT_PIECES, N_CDF_INFO, Pool)
+
+
+def _read_cdf(spec, scene_file, key):
+    cdf = getattr(spec, "cdf", None)
+    if cdf is None or not isinstance(cdf, (str, bytes, Path)):
+        return cdf
+    from fit.cdf_fit import load  # MERGE: fit.sampling.cdf_file
+
+    try:
+        return load(cdf)
+    except Exception as e:  # noqa: BLE001 - BRDFFileError and I/O errors, one line
+        raise SceneError(scene_file, f"{key}.cdf", f"cannot read CDF file ({e})") from None
+
+
+def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
+    """``(strategy actually used, inverse-CDF data)`` of one material: data None (hemisphere
+    techniques), a :class:`fit.cdf_table.CDFTable` (tabulated) or a verified
+    :class:`fit.cdf_fit.CDFFit` (rational)."""
+    strat = registry.strategy(spec.sampler)
+    tech = registry.technique(strat.technique)
+    if not tech.needs_table:
+        return strat, None
+    fitobj = _read_cdf(spec, scene_file, key)
+    if tech.needs_fit:
+        if fitobj is None:
+            from fit.cdf_fit import fit_cdf  # MERGE: fit.sampling.cdf_file
+
+            log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
+                f"from `rbrdf-fit cdf` to skip this)")
+            fitobj = fit_cdf(loaded.evaluate, name=spec.name)
+        if fitobj.fallback:
+            fb = registry.strategy(strat.fallback)
+            log(f"material {spec.name!r}: rational sampler FALLBACK to {fb.name!r} ({fitobj.reason})")
+            return fb, fitobj.table
+        return strat, fitobj
+    if fitobj is not None:
+        return strat, fitobj.table
+    from fit.cdf_table import tabulate  # MERGE: fit.sampling.table
+
+    return strat, tabulate(loaded.evaluate)
+
+
+def pieces_phi_knots(pm) -> np.ndarray:  # MERGE: moves to fit.sampling.pieces
+    """(n_v, n_mu, n_u + 1, 2): the phi pieces ``(y_k, h, a0, a1)`` of ``pm`` as knots (value,
+    slope dy/dx in piece-local x): the form :func:`.rational.rq_knots` reads (half the bytes of
+    the pieces, which matters when view rows change from sample to sample: the phi maps of a
+    material are then read at random, 64 x 64 pieces = 2 MB as pieces, 1.06 MB as knots).
+    Raises ValueError where a verified row's pieces do not share their knots (their values or
+    slopes differ between the end of a piece and the start of the next)."""
+    c = pm.phi
+    y = np.concatenate([c[..., 0], (c[..., -1, 0] + c[..., -1, 1])[..., None]], axis=-1)
+    s_start = c[..., 2] * c[..., 1]                  # a0 h: slope at x = 0 of each piece
+    s_end = c[..., 3] * c[..., 1]                    # a1 h: slope at x = 1
+    s = np.concatenate([s_start, s_end[..., -1:]], axis=-1)
+    ok = np.asarray(pm.row_ok, bool)
+    tol = 1e-9 * (1.0 + np.abs(y[..., 1:-1]))
+    bad = (np.abs(c[..., :-1, 0] + c[..., :-1, 1] - y[..., 1:-1]) > tol) \
+        | (np.abs(s_end[..., :-1] - s[..., 1:-1]) > 1e-9 * (1.0 + np.abs(s[..., 1:-1])))
+    rows = np.flatnonzero(bad.any(axis=(-1, -2)) & ok)
+    if rows.size:
+        raise ValueError(f"phi pieces of rows {rows.tolist()} do not share their knots")
+    return np.stack([y, s], axis=-1)
+
+
+def pack(cdfs) -> dict:
+    """Pack the materials' inverse-CDF data (one entry per material: None, a CDFTable or a
+    CDFFit) into the flat arrays of :class:`Materials`: ``cdf_t``, ``cdf_p``, ``cdf_pw``
+    (pieces: theta pieces (n_v, n_mu, 4) then phi knots (n_v, n_mu, n_u + 1, 2), see
+    :func:`.rational.pieces_sample`), ``cdf_row_ok``, ``cdf_info`` (n, N_CDF_INFO) and
+    ``global_fits`` (the global-layout fits, in the order of their ``CDF_MAPS`` index)."""
+    info = np.zeros((max(len(cdfs), 1), N_CDF_INFO), np.int32)
+    ct, cp, pw, rows = Pool(), Pool(), Pool(), Pool(dtype=np.int32)
+    global_fits = []
+    for m, cdf in enumerate(cdfs):
+        if cdf is None:
+            continue
+        table = getattr(cdf, "table", cdf)
+        info[m, CDF_OFF_T] = ct.add(table.cdf_theta)
+        info[m, CDF_OFF_P] = cp.add(table.cdf_phi)
+        info[m, [CDF_N_V, CDF_N_T, CDF_N_P]] = table.n_v, table.n_t, table.n_p
+        info[m, CDF_LAYOUT] = LAYOUT_NONE
+        if cdf is table:
+            continue
+        if cdf.pieces is not None:  # MERGE: cdf.maps
+            pm = cdf.pieces
+            info[m, CDF_LAYOUT] = LAYOUT_PIECES
+            info[m, CDF_MAPS] = pw.add(np.concatenate([pm.theta.ravel(), pieces_phi_knots(pm).ravel()]))
+            info[m, [CDF_N_MU, CDF_N_U]] = pm.n_mu, pm.n_u
+            info[m, CDF_OFF_ROWS] = rows.add(np.asarray(pm.row_ok, np.int32))
+        else:
+            info[m, CDF_LAYOUT] = LAYOUT_GLOBAL
+            info[m, CDF_MAPS] = len(global_fits)
+            global_fits.append(cdf)
+    return dict(cdf_t=ct.array(), cdf_p=cp.array(), cdf_pw=pw.array(), cdf_row_ok=rows.array(),
+                cdf_info=info, global_fits=global_fits)

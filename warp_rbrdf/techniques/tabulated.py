@@ -1,0 +1,202 @@
+"""``tabulated`` technique: the material's tabulated inverse CDFs of rho cos (luminance) per
+view row (:class:`fit.cdf_table.CDFTable`), inverted by binary search, exactly as
+:meth:`CDFTable.sample` (its NumPy reference). Weight 1/pdf with the table's exact density.
+
+Frame: ``theta_v, phi_v`` of ``wo`` in the local frame; the sampled light's azimuth ``phi_l`` is
+measured from ``phi_v``; angles in radians, densities in 1/sr. The material's tables live in
+``Materials.cdf_t`` / ``cdf_p`` at the offsets of its ``cdf_info`` (:mod:`..materials.data`).
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from ..materials.data import (CDF_N_P, CDF_N_T, CDF_N_V, CDF_OFF_P, CDF_OFF_T, N_CDF_INFO,
+                              Materials)
+
+
+@wp.func
+def _count_le(cdf: wp.array(dtype=float), start: int, n: int, x: float) -> int:
+    """Number of entries <= x among cdf[start .. start + n] (n + 1 increasing entries)."""
+    lo = int(0)
+    hi = n + 1
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if cdf[start + mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@wp.func
+def tab_row(theta_v: float, n_v: int) -> int:
+    return wp.clamp(int(wp.floor(theta_v / wp.HALF_PI * float(n_v))), 0, n_v - 1)
+
+
+@wp.func
+def tab_sample(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
+               n_v: int, n_t: int, n_p: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
+    """(theta_l, phi_l, pdf) exactly as fit.cdf_table.CDFTable.sample (binary search)."""
+    v = tab_row(theta_v, n_v)
+    st = off_t + v * (n_t + 1)
+    j = wp.clamp(_count_le(cdf_t, st, n_t, mu) - 1, 0, n_t - 1)
+    c0 = cdf_t[st + j]
+    m_t = cdf_t[st + j + 1] - c0
+    dt = wp.HALF_PI / float(n_t)
+    frac = 0.5
+    if m_t > 0.0:
+        frac = wp.clamp((mu - c0) / m_t, 0.0, 1.0)
+    theta_l = (float(j) + frac) * dt
+    s = 1.0
+    if tau < 0.5:
+        s = -1.0
+    u = wp.abs(2.0 * tau - 1.0)
+    sp = off_p + (v * n_t + j) * (n_p + 1)
+    k = wp.clamp(_count_le(cdf_p, sp, n_p, u) - 1, 0, n_p - 1)
+    q0 = cdf_p[sp + k]
+    m_p = cdf_p[sp + k + 1] - q0
+    dp = wp.pi / float(n_p)
+    fp = 0.5
+    if m_p > 0.0:
+        fp = wp.clamp((u - q0) / m_p, 0.0, 1.0)
+    phi_l = s * (float(k) + fp) * dp
+    pdf = (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
+    return wp.vec3(theta_l, phi_l, pdf)
+
+
+@wp.func
+def tab_pdf(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
+            n_v: int, n_t: int, n_p: int, theta_v: float, theta_l: float, phi_abs: float) -> float:
+    """Density (1/sr) of tab_sample at (theta_l, |phi_l|); 0 at or below the horizon."""
+    if theta_l < 0.0 or theta_l >= wp.HALF_PI:
+        return 0.0
+    v = tab_row(theta_v, n_v)
+    dt = wp.HALF_PI / float(n_t)
+    dp = wp.pi / float(n_p)
+    j = wp.clamp(int(wp.floor(theta_l / dt)), 0, n_t - 1)
+    k = wp.clamp(int(wp.floor(phi_abs / dp)), 0, n_p - 1)
+    st = off_t + v * (n_t + 1)
+    sp = off_p + (v * n_t + j) * (n_p + 1)
+    m_t = cdf_t[st + j + 1] - cdf_t[st + j]
+    m_p = cdf_p[sp + k + 1] - cdf_p[sp + k]
+    return (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
+
+
+@wp.func
+def view_angles(wo: wp.vec3) -> wp.vec2:
+    """(theta_v, phi_v) of the local view direction."""
+    rxy = wp.sqrt(wo[0] * wo[0] + wo[1] * wo[1])
+    phi = 0.0
+    if rxy > 1.0e-12:
+        phi = wp.atan2(wo[1], wo[0])
+    return wp.vec2(wp.atan2(rxy, wo[2]), phi)
+
+
+@wp.func
+def view_frame(wo: wp.vec3) -> wp.vec3:
+    """(theta_v, cos phi_v, sin phi_v) of the local view direction (phi_v = 0 at the pole):
+    the view's azimuth as a rotation, so that sampled directions need no atan2."""
+    rxy = wp.sqrt(wo[0] * wo[0] + wo[1] * wo[1])
+    c = 1.0
+    s = 0.0
+    if rxy > 1.0e-12:
+        c = wo[0] / rxy
+        s = wo[1] / rxy
+    return wp.vec3(wp.atan2(rxy, wo[2]), c, s)
+
+
+@wp.func
+def local_dir(theta_l: float, phi_l: float, vf: wp.vec3) -> wp.vec3:
+    """Direction at polar angle theta_l and azimuth phi_l measured from the view's azimuth
+    (``vf`` from :func:`view_frame`)."""
+    st = wp.sin(theta_l)
+    cp = wp.cos(phi_l)
+    sp = wp.sin(phi_l)
+    return wp.vec3(st * (cp * vf[1] - sp * vf[2]), st * (sp * vf[1] + cp * vf[2]), wp.cos(theta_l))
+
+
+@wp.func
+def rel_phi_abs(wi: wp.vec3, phi_v: float) -> float:
+    """|phi_l - phi_v| folded into [0, pi]."""
+    p = wp.atan2(wi[1], wi[0]) - phi_v
+    if p > wp.pi:
+        p = p - 2.0 * wp.pi
+    if p < -wp.pi:
+        p = p + 2.0 * wp.pi
+    return wp.abs(p)
+
+
+
+
+@wp.func
+def table_sample(mats: Materials, m: int, va: wp.vec3, xi: wp.vec2) -> wp.vec4:
+    """(wi, 1/pdf) of the material's table in the view frame ``va`` (:func:`view_frame`)."""
+    b = m * N_CDF_INFO
+    q = tab_sample(mats.cdf_t, mats.cdf_p, mats.cdf_info[b + CDF_OFF_T], mats.cdf_info[b + CDF_OFF_P],
+                   mats.cdf_info[b + CDF_N_V], mats.cdf_info[b + CDF_N_T], mats.cdf_info[b + CDF_N_P],
+                   va[0], xi[0], xi[1])
+    wl = local_dir(q[0], q[1], va)
+    wgt = 0.0
+    if q[2] > 0.0:
+        wgt = 1.0 / q[2]
+    return wp.vec4(wl[0], wl[1], wl[2], wgt)
+
+
+@wp.func
+def sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
+    """(wi, weight = 1/pdf) in the local frame; weight 0: no sample."""
+    return table_sample(mats, m, view_frame(wo), xi)
+
+
+@wp.func
+def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
+    """Density (1/sr) of :func:`sample` at ``wi``; 0 at or below the horizon."""
+    if wi[2] <= 0.0:
+        return 0.0
+    b = m * N_CDF_INFO
+    va = view_angles(wo)
+    tl = wp.atan2(wp.sqrt(wi[0] * wi[0] + wi[1] * wi[1]), wi[2])
+    return tab_pdf(mats.cdf_t, mats.cdf_p, mats.cdf_info[b + CDF_OFF_T], mats.cdf_info[b + CDF_OFF_P],
+                   mats.cdf_info[b + CDF_N_V], mats.cdf_info[b + CDF_N_T], mats.cdf_info[b + CDF_N_P],
+                   va[0], tl, rel_phi_abs(wi, va[1]))
+
+
+def kernel_functions(cdfs):
+    """(sample, pdf) for the scene's materials using this technique."""
+    return sample, pdf
+
+
+# --------------------------------------------------------------------------------------------
+# NumPy references
+# --------------------------------------------------------------------------------------------
+def view_angles_numpy(wo):
+    """(theta_v, phi_v) of local view directions ``wo`` (..., 3); phi_v = 0 at the pole."""
+    wo = np.asarray(wo, float)
+    rxy = np.hypot(wo[..., 0], wo[..., 1])
+    return np.arctan2(rxy, wo[..., 2]), np.where(rxy > 1e-12, np.arctan2(wo[..., 1], wo[..., 0]), 0.0)
+
+
+def local_dir_numpy(theta_l, phi_l, phi_v):
+    """Directions at (theta_l, phi_l + phi_v), shape (..., 3)."""
+    st = np.sin(theta_l)
+    return np.stack([st * np.cos(phi_l + phi_v), st * np.sin(phi_l + phi_v), np.cos(theta_l)], -1)
+
+
+def numpy_sample(cdf, wo, xi):
+    """NumPy reference of :func:`sample`: ``(wi (N, 3), weight (N,))``; ``cdf``: the material's
+    CDFTable (or a CDFFit, whose ``table`` is used)."""
+    table = getattr(cdf, "table", cdf)
+    tv, pv = view_angles_numpy(wo)
+    tl, pl, p = table.sample(tv, xi[:, 0], xi[:, 1])
+    return local_dir_numpy(tl, pl, pv), np.where(p > 0, 1.0 / np.where(p > 0, p, 1.0), 0.0)
+
+
+def numpy_pdf(cdf, wi, wo):
+    """NumPy reference of :func:`pdf` (1/sr)."""
+    table = getattr(cdf, "table", cdf)
+    tv, pv = view_angles_numpy(wo)
+    wi = np.asarray(wi, float)
+    tl = np.arctan2(np.hypot(wi[:, 0], wi[:, 1]), wi[:, 2])
+    pl = np.arctan2(wi[:, 1], wi[:, 0]) - pv
+    return np.where(wi[:, 2] > 0, table.pdf(tv, tl, pl), 0.0)
