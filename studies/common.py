@@ -26,7 +26,7 @@ if str(ROOT) not in sys.path:  # `python studies/x.py` from anywhere
     sys.path.insert(0, str(ROOT))
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
 
-from warp_rbrdf.paths import data_root  # noqa: E402
+from warp_rbrdf.paths import data_root, require_data_root  # noqa: E402
 from warp_rbrdf.scene import (CameraSpec, IntegratorSpec, LightSpec, MaterialSpec,  # noqa: E402
                               Scene, ShapeSpec)
 
@@ -52,14 +52,15 @@ ENV_ROTATION = {"rooitou": 80.0, "studio": 0.0, "potsdamer": 0.0}
 
 
 def data_path(rel: str) -> Path:
-    p = data_root() / rel
+    p = require_data_root(f"study data {rel!r}") / rel
     if not p.exists():
         raise FileNotFoundError(f"shared data file missing: {p} (set RBRDF_DATA)")
     return p
 
 
 def has_data(*rels) -> bool:
-    return all((data_root() / r).exists() for r in rels)
+    root = data_root()
+    return root is not None and all((root / r).exists() for r in rels)
 
 
 def all_samplers() -> tuple:

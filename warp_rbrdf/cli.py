@@ -11,7 +11,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
 from .errors import RenderError
@@ -22,6 +21,15 @@ metadata), shows a progress bar over image tiles and prints the render time (com
 reported separately), samples per second and threads. 'scene-format' prints the scene keys."""
 
 
+def _registry_help() -> str:
+    """The material types and samplers a scene can name (from :mod:`warp_rbrdf.registry`)."""
+    from . import registry
+
+    return ("material types: " + ", ".join(registry.MATERIAL_NAMES) + "\n"
+            "samplers (per material, [materials.NAME] sampler): " + ", ".join(registry.STRATEGY_NAMES)
+            + "\n'rbrdf scene-format' explains every key.")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="rbrdf", description=DESCRIPTION,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -29,7 +37,8 @@ def _parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="render a TOML scene (or the embedded default)",
                        description="Render a scene. Relative paths in the scene resolve against "
                                    "its folder; ${RBRDF_DATA}/... and data:... against $RBRDF_DATA "
-                                   "(default ../shared/data next to the project).")
+                                   "(default ../shared/data next to the checkout).",
+                       epilog=_registry_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("scene", nargs="?", help="scene file (.toml); omitted: the embedded default scene")
     r.add_argument("--spp", type=int, help="camera samples per pixel (default: the scene's integrator.spp)")
     r.add_argument("--seed", type=int, help="random seed (default: the scene's integrator.seed)")

@@ -39,6 +39,8 @@ class MaterialKind:
     summary: str
     suffixes: tuple = ()      # file types its ``file`` key accepts (empty: no file)
     module: str = ""          # implementation module
+    keys: tuple = ()          # scene keys it reads besides type / sampler / cdf, among
+                              # albedo, file, scale, statistic (see scene-format)
 
     def impl(self):
         return importlib.import_module(self.module)
@@ -89,16 +91,16 @@ COMBINE_LIGHT = 1    # environment sample only (the technique continues longer p
 COMBINE_MIS = 2      # both, power heuristic
 
 MATERIALS = (
-    MaterialKind("lambert", 0, "albedo / pi (albedo: a number or [r, g, b])",
-                 (), "warp_rbrdf.materials.lambert"),
+    MaterialKind("lambert", 0, "albedo / pi", (), "warp_rbrdf.materials.lambert", ("albedo",)),
     MaterialKind("measured", 1, "3-D (theta_h, theta_d, phi_d) MERL-grid table, nearest bin "
                  "(MERL .binary, or RGL .bsdf resampled)", (".binary", ".bsdf"),
-                 "warp_rbrdf.materials.measured"),
+                 "warp_rbrdf.materials.measured", ("file", "scale")),
     MaterialKind("projected", 2, "2-D (theta_h, theta_d) median projection, nearest cluster "
                  "(.binary/.bsdf projected at load, or an .npz from `rbrdf-fit project`)",
-                 (".binary", ".bsdf", ".npz"), "warp_rbrdf.materials.projected"),
+                 (".binary", ".bsdf", ".npz"), "warp_rbrdf.materials.projected",
+                 ("file", "scale", "statistic")),
     MaterialKind("rational", 3, "rational fit P/Q from `rbrdf-fit brdf` (coefficient .json)",
-                 (".json",), "warp_rbrdf.materials.rational"),
+                 (".json",), "warp_rbrdf.materials.rational", ("file", "scale")),
 )
 
 TECHNIQUES = (

@@ -5,7 +5,7 @@ import os
 import threading
 
 from .errors import RenderError
-from .paths import PROJECT_ROOT
+from .paths import PROJECT_ROOT, in_checkout
 
 _lock = threading.Lock()
 _initialised = False
@@ -20,7 +20,7 @@ def init_warp():
     with _lock:
         if not _initialised:
             cache = os.environ.get("WARP_CACHE_PATH")
-            if cache is None and (PROJECT_ROOT / "pyproject.toml").is_file():
+            if cache is None and in_checkout():
                 cache = str(PROJECT_ROOT / ".warp_cache")
             if cache is not None:
                 wp.config.kernel_cache_dir = cache

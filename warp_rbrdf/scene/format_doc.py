@@ -1,0 +1,85 @@
+"""The scene-file reference printed by ``rbrdf scene-format``: fixed text for the camera,
+integrator, shapes and lights, and the material types and samplers listed from
+:mod:`warp_rbrdf.registry` (so a registered material or sampler documents itself)."""
+from __future__ import annotations
+
+import textwrap
+
+from .. import registry
+
+_HEAD = """\
+Scene file format (TOML). Every table and key is optional unless marked required.
+
+[camera]
+  origin = [0, 1, 4]        target = [0, 0.5, 0]      up = [0, 1, 0]      (look_at)
+  fov = 40.0                full angle in degrees along fov_axis
+  fov_axis = "x"            "x" or "y"
+  resolution = [256, 256]   [width, height] in pixels
+
+[integrator]
+  spp = 16                  camera samples per pixel
+  seed = 0                  same seed -> same image
+  max_depth = 1             1 = direct lighting; >1 adds indirect bounces
+  sampler = "mis"           default per-material sampler (see [materials.NAME] sampler)
+  pattern = "stratified"    sample generator: stratified (correlated multi-jitter) | independent
+  hide_environment = false  camera rays that miss all shapes return 0 instead of the environment
+  tile_size = 32            image tiles (pixels per side) launched from the thread pool
+  ray_epsilon = 0           shadow/bounce ray offset; 0 = automatic (1e-5 x scene size)
+
+"""
+
+_TAIL = """\
+[[shapes]]                  any number
+  type = "mesh"             mesh | sphere | plane   (required)
+  material = "NAME"         (required)
+  file = "..."              mesh: OBJ / PLY / GLB / STL (loaded with trimesh)
+  smooth_normals = true     mesh: interpolate vertex normals (false: flat facets)
+  center = [0, 0, 0]        sphere / plane
+  radius = 1.0              sphere
+  subdivisions = 5          sphere: icosphere level
+  size = [2, 2]             plane: extent along x and z; its normal is +Y before transform
+  transform = { scale = 1, rotate = [angle_deg, ax, ay, az] (or a list of them),
+                translate = [x, y, z] }     or  transform = { matrix = [[4x4]] }
+
+[[lights]]                  any number of directional lights, at most one environment
+  type = "directional"      directional | envmap | constant | sky   (required)
+  irradiance = [1, 1, 1]    directional: W/m^2 on a surface facing the light
+  direction = [0, -1, 0]    directional: direction the light travels
+  colinear_with_view = false  directional: light travels along the view (target - origin)
+  file = "..."              envmap: lat-long .hdr / .exr (read with OpenImageIO)
+  scale = 1.0               envmap / sky: radiance multiplier
+  rotate = [angle_deg, ax, ay, az]   envmap / sky: rotation of the map (or a list of them)
+  radiance = [1, 1, 1]      constant: uniform environment radiance
+  sun_elevation = 35.0      sky: degrees above the horizon
+  sun_azimuth = 135.0       sky: degrees, 0 = -Z, 90 = +X (the lat-long u convention)
+  resolution = [512, 256]   sky: size of the tabulated map
+
+Paths: "${RBRDF_DATA}/x" or "data:x" resolve through $RBRDF_DATA (default ../shared/data next
+to the project); "pkg:x" is warp_rbrdf/data/x; other relative paths are relative to the scene.
+"""
+
+
+def _materials_section() -> str:
+    lines = ["[materials.NAME]            one table per material, referenced by name from shapes",
+             f"  type = \"lambert\"          {' | '.join(registry.MATERIAL_NAMES)}   (required)"]
+    for k in registry.MATERIALS:
+        suffixes = f" (file: {' '.join(k.suffixes)})" if k.suffixes else ""
+        keys = f" keys: {', '.join(k.keys)}" if k.keys else ""
+        lines += textwrap.wrap(f"{k.name}: {k.summary}{suffixes};{keys}", 92,
+                               initial_indent=" " * 28, subsequent_indent=" " * 30)
+    lines += ["  sampler = <integrator.sampler>   one of:"]
+    for s in registry.STRATEGIES:
+        fb = f" (fallback: {s.fallback})" if s.fallback else ""
+        lines += textwrap.wrap(f"{s.name}: {s.summary}{fb}", 92,
+                               initial_indent=" " * 28, subsequent_indent=" " * 30)
+    lines += [
+        "  cdf = \"...\"               rbrdf-cdf .json from `rbrdf-fit cdf` (tables + rational inverse",
+        "                            CDFs); without it tables are built (and rational CDFs fitted) at load",
+        "  albedo = 0.8              number or [r, g, b]",
+        "  file = \"...\"              the material's file (types above); relative to the scene",
+        "  statistic = \"median\"      projection of a 3-D file: median | mean | geometric | harmonic | rms",
+        "  scale = 1.0               number or [r, g, b] multiplier", ""]
+    return "\n".join(lines) + "\n"
+
+
+FORMAT_DOC = _HEAD + _materials_section() + _TAIL
