@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
     rng = np.random.default_rng(0)
-    from fit.angles import spherical_to_direction
+    from fit.formats.angles import spherical_to_direction
 
     tv = np.arccos(rng.random(n))
     wo = spherical_to_direction(np.sort(tv) if order == "coherent" else tv, rng.random(n) * 2 * np.pi)
@@ -60,8 +60,8 @@ def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
 
 
 def variances(evaluate, fit, n=200_000):
-    from fit.angles import spherical_to_direction
-    from fit.cdf_table import LUMINANCE
+    from fit.formats.angles import spherical_to_direction
+    from fit.formats.colour import LUMINANCE
 
     rng = np.random.default_rng(1)
     res = {}
@@ -107,7 +107,7 @@ def main(argv=None):
     from analytic import lambert
     from conftest import DATA
     from fit.cdf_fit import fit_cdf, load
-    from fit.io import load_measured
+    from fit.formats import load_measured
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec

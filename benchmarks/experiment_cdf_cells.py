@@ -64,7 +64,8 @@ from numpy.polynomial import polynomial as P
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from fit.cdf_table import LUMINANCE, CDFTable, inverse_pdf, table_where  # noqa: E402
+from fit.cdf_table import CDFTable, inverse_pdf, table_where  # noqa: E402
+from fit.formats.colour import LUMINANCE
 
 HALF_PI = 0.5 * np.pi
 CAP = float("inf")   # interval half-width <= CAP * the point's cell mass (0.2: a map keeps >= 20 % of every cell's mass)
@@ -274,7 +275,7 @@ def fit_map(cdf, edges, B: float, over, max_degree: int, time_limit):
 
 def table_relative_variance(table: CDFTable, evaluate, v: int, n: int, seed: int = 1) -> float:
     """variance / mean^2 of the tabulated sampler's luminance albedo estimator at row v's angle."""
-    from fit.angles import spherical_to_direction
+    from fit.formats.angles import spherical_to_direction
 
     rng = np.random.default_rng(seed)
     mu, tau = rng.random(n), rng.random(n)
@@ -473,7 +474,7 @@ def warp_speed(table: CDFTable, cells: CellMaps, n: int = 1_000_000, reps: int =
     """Samples/s of the mock-up cells sampler and of the renderer's tabulated sampler
     (:func:`warp_rbrdf.cdf_sampling.tab_sample`), same view directions and random numbers,
     one thread, best of ``reps``; theta-space maps only."""
-    from fit.angles import spherical_to_direction
+    from fit.formats.angles import spherical_to_direction
 
     if cells.space != "theta":
         raise ValueError("the Warp mock-up evaluates theta-space maps only")
@@ -544,7 +545,7 @@ def main(argv=None):
 
         evaluate = lambert((0.8, 0.6, 0.4))
     else:
-        from fit.io import load_measured
+        from fit.formats import load_measured
         from studies.common import data_path
 
         evaluate = load_measured(data_path(f"rgl/{a.material}.bsdf")).evaluate

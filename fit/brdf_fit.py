@@ -47,8 +47,9 @@ import numpy as np
 from .coefficients import (PiecewiseRationalModel, RationalModel, Variable, apply_input_transform,
                            apply_value_transform)
 from .fitter import FitResult, IntervalRationalFitter, intervals_from_spread, intervals_from_tolerance
-from .cdf_table import LUMINANCE
-from .measured import N_PHI_D, MeasuredBRDF, ProjectedBRDF
+from .formats.colour import LUMINANCE
+from .formats.grid import N_PHI_D
+from .formats.measured import MeasuredBRDF, ProjectedBRDF
 
 GRAZING_CUTOFF_DEG = 79.0
 THETA_D_MAX_DEG = 78.5

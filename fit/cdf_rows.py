@@ -169,7 +169,7 @@ def variance_ratio(table: CDFTable, sample, evaluate, v: int, n: int = 32768, se
     tabulated sampler's, at row ``v``'s view angle ``table.theta_v[v]`` (same n uniform
     (mu, tau) pairs for both, fixed seed). ``evaluate(wi (N, 3), wo (3,)) -> (N, 3)`` RGB BRDF
     in 1/sr (the material tabulated)."""
-    from .angles import spherical_to_direction
+    from .formats.angles import spherical_to_direction
     from .cdf_table import LUMINANCE, inverse_pdf
 
     rng = np.random.default_rng(seed)

@@ -23,7 +23,7 @@ Input files: MERL-MIT '.binary' (90x90x180 theta_h/theta_d/phi_d, RGB) and RGL-E
 
 def _cmd_info(args) -> int:
     from .albedo import directional_albedo
-    from .io import load_measured
+    from .formats import load_measured
 
     b = load_measured(args.file)
     print(f"file            {b.source}")
@@ -54,7 +54,7 @@ def _add_projection_args(p) -> None:
 
 
 def _project_from_args(args):
-    from .io import load_measured
+    from .formats import load_measured
     from .projection import project
 
     return project(load_measured(args.file), statistic=args.statistic,

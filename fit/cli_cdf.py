@@ -9,7 +9,7 @@ from .cdf_fit import TIME_LIMIT_S
 
 def _load_or_fit(args, log=print):
     from .cdf_fit import fit_cdf, file_source, load
-    from .io import load_measured
+    from .formats import load_measured
 
     path = Path(args.file)
     if path.suffix.lower() == ".json":

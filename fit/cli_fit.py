@@ -14,7 +14,7 @@ def _cmd_brdf(args) -> int:
 
     from .brdf_fit import INTERVALS, fit_brdf
     from .coefficients import save
-    from .io import load_measured
+    from .formats import load_measured
 
     b = load_measured(args.file)
     bar = tqdm(desc=f"fitting {b.name}", unit="LP", leave=False, disable=None)  # None: off when not a terminal

@@ -161,7 +161,7 @@ class _BRDFEvaluation:
 
     def evaluate(self, wi, wo) -> np.ndarray:
         """rho(wi, wo) in 1/sr for local unit directions ``(..., 3)``; 0 below the horizon."""
-        from .angles import directions_to_half_diff
+        from .formats.angles import directions_to_half_diff
 
         wi = np.asarray(wi, float)
         wo = np.asarray(wo, float)

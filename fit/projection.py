@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .angles import cos_theta_i_o
-from .measured import MeasuredBRDF, ProjectedBRDF, phi_d_centres, theta_d_centres, theta_h_centres
+from .formats.angles import cos_theta_i_o
+from .formats.grid import phi_d_centres, theta_d_centres, theta_h_centres
+from .formats.measured import MeasuredBRDF, ProjectedBRDF
 
 STATISTICS = ("median", "mean", "geometric", "harmonic", "rms")
 GRAZING_ANGLES = ("theta_io", "theta_d")

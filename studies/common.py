@@ -75,7 +75,7 @@ def all_samplers() -> tuple:
 @lru_cache(maxsize=16)
 def measured(name: str):
     """The 3-D MERL-grid table (fit.measured.MeasuredBRDF) of a material key or a file path."""
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     path = data_path(MATERIALS[name]) if name in MATERIALS else Path(name)
     return load_measured(path)

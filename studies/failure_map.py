@@ -67,8 +67,8 @@ def mirror_lobe_file(path, exponent: int = MIRROR_EXPONENT, kd: float = 0.02, ks
     """Write the near-mirror lobe as an exact-layout MERL ``.binary`` and return its path.
 
     rho = kd / pi + ks (n + 8) / (8 pi) cos^n theta_h  (grey; normalized Blinn-Phong)."""
-    from fit.measured import MeasuredBRDF
-    from fit.merl import write_merl
+    from fit.formats.measured import MeasuredBRDF
+    from fit.formats.merl import write_merl
 
     path = Path(path)
     if path.exists():
@@ -94,7 +94,7 @@ def load_mirror(out_dir) -> object:
 
 @lru_cache(maxsize=4)
 def _load_mirror(out_dir: str):
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     return load_measured(mirror_lobe_file(Path(out_dir) / f"mirror_n{MIRROR_EXPONENT}.binary"))
 
@@ -237,7 +237,7 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
             other[f"projection_de_{g}"] = projection_error(g, "studio", "ibiza", res, spp)
             bar.update(1)
     if "fit" in cases:
-        from fit.measured import ProjectedBRDF  # noqa: F401
+        from fit.formats.measured import ProjectedBRDF  # noqa: F401
         from fit.projection import project
 
         mirror = load_mirror(out)

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
-from fit.angles import spherical_to_direction
+from fit.formats.angles import spherical_to_direction
 from fit.cdf_fit import fit_cdf, load, verify
 from fit.cdf_pieces import _piece, build_pieces, rq_eval, sample_pieces, verify_pieces
-from fit.cdf_table import LUMINANCE, tabulate
+from fit.cdf_table import tabulate
+from fit.formats.colour import LUMINANCE
 from test_cdf_samplers import (THETA_V, _assert_albedo_matches_quadrature, _chi2_pvalue, _rational_cell_probs,
                                 warp_rational_samples)
 
@@ -21,7 +22,7 @@ from analytic import lambert
 
 @pytest.fixture(scope="module")
 def satin():
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     b = load_measured(data_file("rgl/satin_rosaline_rgb.bsdf"))
     fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8), layout="pieces")
@@ -91,7 +92,7 @@ def test_pieces_sampler_chi2_and_unbiased_on_rgl(name):
     probabilities from the inverse of its monotone map) and the derivative estimator of the
     luminance albedo against quadrature (3 sigma), theta_v 0/45/85 deg; gate off so every
     row's maps are tested."""
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     brdf = load_measured(data_file(f"rgl/{name}.bsdf"))
     fit = fit_cdf(brdf.evaluate, name=name, table_params=dict(n_v=16), layout="pieces",

@@ -7,9 +7,10 @@ import pytest
 
 from conftest import RGL_MATERIALS, data_file
 from fit.albedo import directional_albedo
-from fit.angles import spherical_to_direction
+from fit.formats.angles import spherical_to_direction
 from fit.cdf_fit import CDFFit, fit_cdf, verify
-from fit.cdf_table import LUMINANCE, tabulate
+from fit.cdf_table import tabulate
+from fit.formats.colour import LUMINANCE
 from test_cdf_table import _chi2_pvalue, _expected_cell_probs
 
 from analytic import lambert
@@ -19,7 +20,7 @@ THETA_V = [0.0, np.radians(45), np.radians(85)]
 
 @pytest.fixture(scope="module")
 def rgl():
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     out = {}
     for name in RGL_MATERIALS:
@@ -41,7 +42,7 @@ def lambert_fit():
 def rows_fit():
     """Rows layout (fit.cdf_rows) on satin_rosaline: per-row fits, some rows on the table
     (variance gate off, so that every verified map is kept and tested)."""
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     b = load_measured(data_file("rgl/satin_rosaline_rgb.bsdf"))
     fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8), layout="rows",
@@ -357,9 +358,9 @@ def test_rows_variance_gate_sends_costly_rows_to_the_table(rows_fit):
     """The variance gate measures what the sampler does: its ratio equals the ratio of the
     variances of the NumPy reference samplers (rational row vs table) on the same (mu, tau);
     rows above the limit are sampled with the table and say so; the gate off keeps them."""
-    from fit.angles import spherical_to_direction as sph
+    from fit.formats.angles import spherical_to_direction as sph
     from fit.cdf_rows import row_variance_ratio
-    from fit.cdf_table import LUMINANCE
+    from fit.formats.colour import LUMINANCE
 
     b, ungated = rows_fit
     n = 8192

@@ -5,8 +5,9 @@ import pytest
 from scipy import stats
 
 from fit.albedo import directional_albedo
-from fit.angles import spherical_to_direction
-from fit.cdf_table import LUMINANCE, tabulate
+from fit.formats.angles import spherical_to_direction
+from fit.cdf_table import tabulate
+from fit.formats.colour import LUMINANCE
 
 from analytic import glossy_lobe, lambert
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from fit.cli import main
-from fit.measured import MeasuredBRDF, ProjectedBRDF
-from fit.merl import write_merl
+from fit.formats.measured import MeasuredBRDF, ProjectedBRDF
+from fit.formats.merl import write_merl
 
 from analytic import glossy_lobe, lambert
 

@@ -234,7 +234,7 @@ def failure_map(tmp_path_factory, rgl_data):
 
 
 def test_mirror_lobe_file_is_exact_merl_layout(failure_map):
-    from fit.merl import MERL_FILE_BYTES, read_merl
+    from fit.formats.merl import MERL_FILE_BYTES, read_merl
     from studies import failure_map as fm
 
     p = failure_map["out"] / f"mirror_n{fm.MIRROR_EXPONENT}.binary"

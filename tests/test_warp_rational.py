@@ -62,7 +62,7 @@ def test_rational_matches_numpy(value_transform):
     spec = MaterialSpec(name="m", type="rational", data=model)
     r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
     rng = np.random.default_rng(5)
-    from fit.angles import spherical_to_direction
+    from fit.formats.angles import spherical_to_direction
 
     n = 5000
     wi = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)

@@ -272,7 +272,7 @@ def _load_measured(spec, file, key):
     if spec.data is not None:
         return spec.data
     try:
-        from fit.io import load_measured
+        from fit.formats import load_measured
 
         return load_measured(spec.file)
     except ImportError as e:
@@ -288,7 +288,7 @@ def _load_projected(spec, file, key):
         return spec.data
     try:
         if spec.file.suffix.lower() == ".npz":
-            from fit.measured import ProjectedBRDF
+            from fit.formats.measured import ProjectedBRDF
 
             return ProjectedBRDF.load(spec.file)
         from fit.projection import project
