@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from fit.formats import load_measured  # noqa: E402
 from fit.formats.measured import MeasuredBRDF  # noqa: E402
 from fit.formats.merl import write_merl  # noqa: E402
-from fit.projection import STATISTICS, project  # noqa: E402
+from fit.projection.project import STATISTICS, project  # noqa: E402
 
 
 def main(argv=None) -> int:

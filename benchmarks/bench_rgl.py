@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from fit.albedo import directional_albedo  # noqa: E402
+from fit.projection.albedo import directional_albedo  # noqa: E402
 from fit.formats.angles import spherical_to_direction  # noqa: E402
 from fit.formats.rgl import read_rgl  # noqa: E402
 
@@ -60,7 +60,7 @@ def write_thumbnail(measured, path, scale: int = 2) -> None:
     matplotlib.use("Agg")
     import matplotlib.image as mpimg
 
-    from fit.projection import project
+    from fit.projection.project import project
 
     p = project(measured).value  # (theta_h, theta_d, 3), NaN where empty
     lum = p @ np.array([0.2126, 0.7152, 0.0722])

@@ -142,7 +142,7 @@ def project_for_fit(brdf, grazing_cutoff_deg: float = GRAZING_CUTOFF_DEG) -> Pro
     """Median projection with the grazing cut-off on max(theta_i, theta_o)."""
     if isinstance(brdf, ProjectedBRDF):
         return brdf
-    from .projection import project
+    from .projection.project import project
 
     return project(brdf, statistic="median", grazing_cutoff_deg=grazing_cutoff_deg, grazing_angle="theta_io")
 
@@ -152,7 +152,7 @@ def white_sky_albedo(p: ProjectedBRDF, n_incidence: int = 9) -> np.ndarray:
     sky light reflected, ``A = 2 int_0^{pi/2} a(theta_i) cos(theta_i) sin(theta_i) d theta_i``
     with ``a`` the directional albedo of the projected table (:mod:`fit.albedo`; midpoint
     rule, ``n_incidence`` nodes in theta_i; empty clusters count as 0)."""
-    from .albedo import directional_albedo
+    from .projection.albedo import directional_albedo
 
     def ev(wi, wo):
         return np.nan_to_num(p.evaluate(wi, wo), nan=0.0)

@@ -22,7 +22,7 @@ Input files: MERL-MIT '.binary' (90x90x180 theta_h/theta_d/phi_d, RGB) and RGL-E
 
 
 def _cmd_info(args) -> int:
-    from .albedo import directional_albedo
+    from .projection.albedo import directional_albedo
     from .formats import load_measured
 
     b = load_measured(args.file)
@@ -43,7 +43,7 @@ def _cmd_info(args) -> int:
 
 
 def _add_projection_args(p) -> None:
-    from .projection import GRAZING_ANGLES, STATISTICS
+    from .projection.project import GRAZING_ANGLES, STATISTICS
 
     p.add_argument("--statistic", choices=STATISTICS, default="median",
                    help="cluster statistic stored as the projected value (default: median)")
@@ -55,7 +55,7 @@ def _add_projection_args(p) -> None:
 
 def _project_from_args(args):
     from .formats import load_measured
-    from .projection import project
+    from .projection.project import project
 
     return project(load_measured(args.file), statistic=args.statistic,
                    grazing_cutoff_deg=args.grazing_cutoff, grazing_angle=args.grazing_angle)
@@ -73,7 +73,7 @@ def _cmd_project(args) -> int:
 
 
 def _cmd_plot(args) -> int:
-    from .plots import plot_projection
+    from .projection.plots import plot_projection
 
     p = _project_from_args(args)
     files = plot_projection(p, args.out)

@@ -83,7 +83,7 @@ def measured(name: str):
 
 @lru_cache(maxsize=16)
 def projected(name: str, statistic: str = "median"):
-    from fit.projection import project
+    from fit.projection.project import project
 
     return project(measured(name), statistic=statistic)
 

@@ -127,7 +127,7 @@ def sampler_noise(geometry, light, spec, samplers, resolution, spp, seeds) -> di
 
 def projection_error(geometry, light, material_key, resolution, spp, data=None) -> dict:
     """ΔE2000 of the 2-D projection against the 3-D table (sampler light, same seed)."""
-    from fit.projection import project
+    from fit.projection.project import project
 
     m3 = data if data is not None else C.measured(material_key)
     m2 = project(m3) if data is not None else C.projected(material_key)
@@ -238,7 +238,7 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
             bar.update(1)
     if "fit" in cases:
         from fit.formats.measured import ProjectedBRDF  # noqa: F401
-        from fit.projection import project
+        from fit.projection.project import project
 
         mirror = load_mirror(out)
         pm = project(mirror)

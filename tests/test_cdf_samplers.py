@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
-from fit.albedo import directional_albedo
+from fit.projection.albedo import directional_albedo
 from fit.formats.angles import spherical_to_direction
 from fit.cdf_fit import CDFFit, fit_cdf, verify
 from fit.cdf_table import tabulate

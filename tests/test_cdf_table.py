@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from fit.albedo import directional_albedo
+from fit.projection.albedo import directional_albedo
 from fit.formats.angles import spherical_to_direction
 from fit.cdf_table import tabulate
 from fit.formats.colour import LUMINANCE

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
-from fit.albedo import directional_albedo
+from fit.projection.albedo import directional_albedo
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.errors import BRDFFileError
 from fit.formats.grid import phi_d_centres, theta_d_centres, theta_h_centres

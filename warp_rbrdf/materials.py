@@ -291,7 +291,7 @@ def _load_projected(spec, file, key):
             from fit.formats.measured import ProjectedBRDF
 
             return ProjectedBRDF.load(spec.file)
-        from fit.projection import project
+        from fit.projection.project import project
 
         return project(_load_measured(spec, file, key), statistic=spec.statistic)
     except SceneError:
