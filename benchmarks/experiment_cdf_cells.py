@@ -255,7 +255,7 @@ def fit_map(cdf, edges, B: float, over, max_degree: int, time_limit):
     """Fit, normalise and certify one 1-D map from the CDF values ``cdf`` at the values
     ``edges`` (n + 1 increasing; the map's range is [0, edges[-1]]): ``(p, q, info)``; p, q
     None when it fails."""
-    from fit.fitter import IntervalRationalFitter
+    from fit.rational.fitter import IntervalRationalFitter
 
     span = float(edges[-1])
     x, y, lo, hi = _intervals(cdf, edges, B, over)

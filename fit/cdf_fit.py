@@ -50,7 +50,7 @@ import numpy as np
 
 from .cdf_table import CDFTable, inverse_cdf_phi, inverse_cdf_theta, table_where, tabulate
 from .errors import BRDFFileError
-from .rational import RationalFunction
+from .rational.function import RationalFunction
 
 FORMAT = "rbrdf-cdf"
 VERSION = 2   # 2: optional "layout"/"rows" (fit.cdf_rows); version-1 files (global layout) still load
@@ -227,7 +227,7 @@ def _verify_phi(G: RationalFunction) -> dict:
 def _grid_poly(exponents, coef, domain, axes, dvar=None) -> np.ndarray:
     """Chebyshev polynomial (or its derivative in ``dvar``) on the tensor grid ``axes``,
     shape ``tuple(len(a) for a in axes)``, by contracting one 1-D table per axis."""
-    from .rational import _cheb_deriv_table, _cheb_table
+    from .rational.basis import chebyshev_derivative_table, chebyshev_table
 
     exponents = np.asarray(exponents, int)
     kmax = exponents.max(axis=0)
@@ -238,9 +238,9 @@ def _grid_poly(exponents, coef, domain, axes, dvar=None) -> np.ndarray:
         lo, hi = domain[v]
         t = (2.0 * np.asarray(a, float) - (lo + hi)) / (hi - lo)
         if v == dvar:
-            T = _cheb_deriv_table(t, int(kmax[v])) * (2.0 / (hi - lo))
+            T = chebyshev_derivative_table(t, int(kmax[v])) * (2.0 / (hi - lo))
         else:
-            T = _cheb_table(t, int(kmax[v]))
+            T = chebyshev_table(t, int(kmax[v]))
         # contract the leading coefficient axis with T (points x k); the new axis goes last
         out = np.tensordot(out, T[:, :int(kmax[v]) + 1], axes=([0], [1]))
     return out
@@ -266,8 +266,8 @@ def monotone_refit(f: RationalFunction, var: int, X, lower, upper, axes, span: f
     """
     from scipy.optimize import linprog
 
-    from .fitter import IncrementalLP
-    from .rational import chebyshev_basis, chebyshev_basis_derivative
+    from .rational.lp import IncrementalLP
+    from .rational.basis import chebyshev_basis, chebyshev_basis_derivative
 
     X = np.asarray(X, float)
     lower = np.asarray(lower, float)
@@ -489,7 +489,8 @@ class CDFFit:
 
     # Persistence ------------------------------------------------------------------------------
     def to_dict(self) -> dict:
-        from .coefficients import RationalModel, Variable
+        from .rational.coefficient_file import to_dict as model_to_dict
+        from .rational.model import RationalModel, Variable
 
         def model(f, names, out, rng):
             if f is None:
@@ -500,7 +501,7 @@ class CDFFit:
                               functions=[f], outputs=(out,), value_min=None, value_name=out,
                               value_unit="rad",
                               domain_policy={"outside": "clamp", "value": f"clamp to {rng}"})
-            return m.to_dict()
+            return model_to_dict(m)
 
         t = self.table
         return {
@@ -561,7 +562,7 @@ def _jsonable(o):
 
 
 def from_dict(d: dict, path=None) -> CDFFit:
-    from .coefficients import from_dict as model_from_dict
+    from .rational.coefficient_file import from_dict as model_from_dict
 
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise BRDFFileError(path, f"not an {FORMAT} file")
@@ -636,7 +637,7 @@ def table_only(evaluate, table_params: dict | None = None, reason: str = "table 
 def fit_theta(table: CDFTable, tol: float = 0.03, n_theta_v: int = 0, n_mu: int = 33,
               max_degree: int = 10, over=(-0.01, 0.01), time_limit: float | None = None):
     """Fit F(theta_v, mu) ~ CDF^-1_v(mu). Returns (FitResult, data info)."""
-    from .fitter import IntervalRationalFitter
+    from .rational.fitter import IntervalRationalFitter
 
     tv = np.concatenate([[0.0], table.theta_v, [HALF_PI]]) if n_theta_v <= 0 else np.linspace(0, HALF_PI, n_theta_v)
     mu = _cheb_points(n_mu)
@@ -657,7 +658,7 @@ def fit_phi(table: CDFTable, tol: float = 0.15, n_theta_v: int = 9, n_theta_l: i
     the default fits one degree pair and returns the least-violating fit when the intervals
     cannot all be met -- accuracy only affects variance; monotonicity, covering and Q > 0 are
     verified afterwards and decide the fallback. ``degrees=None`` runs the full search."""
-    from .fitter import IntervalRationalFitter
+    from .rational.fitter import IntervalRationalFitter
 
     tv = np.linspace(0, HALF_PI, n_theta_v)
     tl = np.linspace(0, HALF_PI, n_theta_l)

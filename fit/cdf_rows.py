@@ -39,7 +39,7 @@ import time
 import numpy as np
 
 from .cdf_table import CDFTable, _inverse_phi_rows, _inverse_theta_rows
-from .rational import RationalFunction
+from .rational.function import RationalFunction
 
 HALF_PI = 0.5 * np.pi
 ROW_VERIFY = {"theta": 2049, "phi": (65, 513)}
@@ -114,7 +114,7 @@ def _repair(f, var, X, lo, hi, axes, span, deadline):
 def fit_row(table: CDFTable, v: int, delta_theta: float, delta_phi: float, n_mu: int, n_theta_l: int,
             n_u: int, max_degree_theta: int, max_degree_phi: int, row_time_limit: float | None):
     """Fit and verify row ``v``: ``(F, G, info)``; F or G None when its fit gave nothing."""
-    from .fitter import IntervalRationalFitter
+    from .rational.fitter import IntervalRationalFitter
 
     t0 = time.perf_counter()
     mu = _cheb01(n_mu)

@@ -12,8 +12,8 @@ from .errors import RbrdfError
 def _cmd_brdf(args) -> int:
     from tqdm import tqdm
 
-    from .brdf_fit import INTERVALS, fit_brdf
-    from .coefficients import save
+    from .rational.brdf_fit import INTERVALS, fit_brdf
+    from .rational.coefficient_file import save
     from .formats import load_measured
 
     b = load_measured(args.file)
@@ -64,7 +64,7 @@ def _cmd_brdf(args) -> int:
 
 
 def register(subparsers) -> None:
-    from .brdf_fit import INTERVALS
+    from .rational.brdf_fit import INTERVALS
 
     p = subparsers.add_parser(
         "brdf", help="fit R, G, B with rational functions inside a tolerance; write JSON coefficients",

@@ -151,7 +151,7 @@ def fit_channel(proj, tol, abs_floor, stride, max_degree, channel=1, theta_d_max
     interval is relative, value >= abs_floor / tol (``max_rel_err_relative``; the share of such
     points is ``relative_share``). Below that value the floor sets the interval, so a fit inside
     its intervals may be off by many times the value there."""
-    from fit.fitter import IntervalRationalFitter
+    from fit.rational.fitter import IntervalRationalFitter
 
     th = proj.theta_h[::stride]
     td = proj.theta_d[::stride]

@@ -33,7 +33,7 @@ FIT_DIR = C.ROOT / "results" / "fits"
 def brdf_fit_available() -> tuple[bool, str]:
     """Whether ``fit.brdf_fit`` imports and the CLI has a ``brdf`` command."""
     try:
-        import fit.brdf_fit  # noqa: F401
+        import fit.rational.brdf_fit  # noqa: F401
     except Exception as e:  # noqa: BLE001
         return False, f"fit.brdf_fit not importable ({type(e).__name__}: {e})"
     from fit import cli
@@ -63,7 +63,7 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
     fitter's flagged best effort; ``--allow-infeasible``). Without it such a fit, cached or new,
     is refused with the fitter's own summary as the reason, so a study never renders a fit it
     believes guaranteed when it is not."""
-    from fit.coefficients import load
+    from fit.rational.coefficient_file import load, save
 
     fit_dir = Path(fit_dir or FIT_DIR)
     fit_dir.mkdir(parents=True, exist_ok=True)
@@ -120,7 +120,7 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
             errors.append(f"direct fit failed: {type(e).__name__}: {e}")
         else:
             m.fit_info["time_s"] = time.perf_counter() - t0
-            m.save(out)
+            save(m, out)
             return m, dict(info, source="direct", file=str(out), fit_seconds=m.fit_info["time_s"])
     return None, dict(info, source=None, error="; ".join(errors) or "no fit available")
 
@@ -129,8 +129,8 @@ def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_m
                max_degree: int = 8, stride: int = 1, proj=None):
     """Stand-in fit (see the module docstring): IntervalRationalFitter per channel on the median
     projection. ``abs_floor`` = ``abs_floor_rel`` x the channel's largest value."""
-    from fit.coefficients import RationalModel, Variable
-    from fit.fitter import IntervalRationalFitter
+    from fit.rational.model import RationalModel, Variable
+    from fit.rational.fitter import IntervalRationalFitter
 
     pj = proj if proj is not None else C.projected(material)
     th = pj.theta_h[::stride]

@@ -25,7 +25,7 @@ def test_positive_on_unit_certificate():
 
 
 def test_power_conversion_and_normalisation():
-    from fit.rational import RationalFunction
+    from fit.rational.function import RationalFunction
 
     f = RationalFunction([[0.0, 1.0]], [[0], [1], [2]], [0.3, 1.0, 0.2], [[0], [1]], [2.0, 0.5])
     p, q = E.to_power(f)

@@ -21,7 +21,7 @@ SUPPORTED_VARIABLES = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
 
 def rational_available() -> bool:
     try:
-        import fit.coefficients  # noqa: F401
+        import fit.rational.coefficient_file  # noqa: F401
     except ImportError:
         return False
     return True
@@ -33,7 +33,7 @@ def load_rational(spec, file="<scene>", key="materials"):
         model = spec.data
     else:
         try:
-            from fit.coefficients import load
+            from fit.rational.coefficient_file import load
         except ImportError as e:
             raise SceneError(file, f"{key}.file", f"rational materials need fit.coefficients ({e})") from None
         try:
