@@ -1,4 +1,4 @@
-"""Benchmark of the RGL-EPFL reader (fit.rgl) on one core, plus the per-material albedo table.
+"""Benchmark of the RGL-EPFL reader (fit.formats.rgl) on one core, plus the per-material albedo table.
 
     python benchmarks/bench_rgl.py [FILE ...] [--n 1000000] [--repeats 5] [--thumbnails DIR]
 

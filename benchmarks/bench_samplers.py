@@ -12,9 +12,9 @@
    1 / (variance * time per sample) with the Warp sampling times.
 
 Usage: python benchmarks/bench_samplers.py [--n 1000000] [--materials a,b] [--cdf-dir DIR]
-       [--layout pieces|rows|global] [--max-variance-ratio R | none] [--n-u 16,32,64]
+       [--layout pieces|global] [--max-variance-ratio R | none] [--n-u 16,32,64]
 (``--layout``: how the rational inverse CDFs are built here, default the fitter's default
-"pieces" (fit.cdf_pieces, 2-20 s per material, mostly the variance gate); "rows" takes 16-18 s per material.)
+"pieces" (fit.sampling.pieces, 2-20 s per material, mostly the variance gate).)
 (``--max-variance-ratio none`` builds without the variance gate, so every verified row is
 rational: the speed of the rational rows themselves.)
 (``--cdf-dir``: rbrdf-cdf files named MATERIAL.json from `rbrdf-fit cdf`.)
@@ -94,19 +94,20 @@ def main(argv=None):
     ap.add_argument("--cdf-dir", default=None)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--max-variance-ratio", default=None,
-                    help="variance gate of the pieces / rows layout (default: the layout's default; 'none': off)")
+                    help="variance gate of the pieces layout (default: the layout's default; 'none': off)")
     ap.add_argument("--n-u", default=None,
                     help="pieces layout: phi pieces per map, one count or comma-separated candidates "
                          "(default: the layout's, 16,32,64: the fewest that pass the gate)")
-    ap.add_argument("--layout", default="pieces", choices=("pieces", "rows", "global"),
-                    help="layout of the rational inverse CDFs fitted here (default %(default)s; fit.cdf_fit)")
+    ap.add_argument("--layout", default="pieces", choices=("pieces", "global"),
+                    help="layout of the rational inverse CDFs fitted here (default %(default)s; "
+                         "fit.sampling.cdf_file)")
     args = ap.parse_args(argv)
     import warp as wp
 
     wp.config.quiet = True
     from analytic import lambert
     from conftest import DATA
-    from fit.cdf_fit import fit_cdf, load
+    from fit.sampling.cdf_file import fit_cdf, load
     from fit.formats import load_measured
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
@@ -128,7 +129,7 @@ def main(argv=None):
             kw = {} if gate is None else {"max_variance_ratio": None if gate == "none" else float(gate)}
             pkw = dict(kw, **({} if args.n_u is None else {"n_u": [int(x) for x in args.n_u.split(",")]}))
             fit = load(cdf) if cdf and cdf.exists() else fit_cdf(ev, name=name, layout=args.layout,
-                                                                 rows_kw=kw, pieces_kw=pkw)
+                                                                 pieces_kw=pkw)
             print(f"{name}: fit {time.perf_counter() - t0:.1f} s, fallback {fit.fallback} ({fit.reason})")
             spec = MaterialSpec(name="m", type="measured", data=b,
                                 sampler="rational" if not fit.fallback else "tabulated")
@@ -136,11 +137,10 @@ def main(argv=None):
         spec.cdf = fit
         r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=2, spp=1), device=args.device)
         r.compile()
-        if fit.rows is not None or fit.pieces is not None:
+        if fit.layout == "pieces" and fit.maps is not None:
             g = [i["variance"]["ratio"] for i in fit.fit_info["rows"] if "variance" in i]
-            n_ok = int(fit.pieces.row_ok.sum()) if fit.pieces is not None else sum(x is not None for x in fit.rows)
-            nu = f", {fit.pieces.n_u} phi pieces" if fit.pieces is not None else ""
-            print(f"{name} ({fit.layout} layout{nu}): rational on {n_ok}/{fit.table.n_v} view rows"
+            n_ok = int(fit.maps.row_ok.sum())
+            print(f"{name} ({fit.layout} layout, {fit.maps.n_u} phi pieces): rational on {n_ok}/{fit.table.n_v} view rows"
                   + (f"; variance gate, rational / tabulated per verified row: median {np.median(g):.2f}, "
                      f"range {min(g):.2f}-{max(g):.2f} ({len(g)} rows)" if g else ""))
         for order in ("random", "coherent"):   # the coherent rates (last) go into the efficiencies

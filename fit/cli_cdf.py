@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .cdf_fit import TIME_LIMIT_S
+from .sampling.cdf_file import LAYOUTS, TIME_LIMIT_S
 
 
 def _load_or_fit(args, log=print):
-    from .cdf_fit import fit_cdf, file_source, load
+    from .sampling.cdf_file import fit_cdf, file_source, load
     from .formats import load_measured
 
     path = Path(args.file)
@@ -17,7 +17,7 @@ def _load_or_fit(args, log=print):
     b = load_measured(path)
     params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
     if getattr(args, "table_only", False):
-        from .cdf_fit import table_only
+        from .sampling.cdf_file import table_only
 
         return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
                           source=file_source(path))
@@ -31,10 +31,10 @@ def _add_table_args(p):
     p.add_argument("--n-t", type=int, default=64, help="theta_l cells (default 64)")
     p.add_argument("--n-p", type=int, default=64, help="|phi_l| cells (default 64)")
     p.add_argument("--eps", type=float, default=0.02, help="cosine mixture weight (default 0.02)")
-    p.add_argument("--layout", choices=("pieces", "rows", "global"), default="pieces",
+    p.add_argument("--layout", choices=LAYOUTS, default="pieces",
                    help="pieces (default): monotone rational-quadratic pieces uniform in mu and u, "
-                        "constant-time lookup, the fastest sampler; rows: one fitted rational map pair "
-                        "per view row; global: the paper's bivariate/trivariate rational functions")
+                        "constant-time lookup, the fastest sampler; global: the paper's "
+                        "bivariate/trivariate rational functions")
     p.add_argument("--refinements", type=int, default=1, help="refit rounds when verification fails "
                                                                "(global layout)")
     p.add_argument("--table-only", action="store_true", help="tabulate only, no rational fit")
@@ -56,7 +56,7 @@ def _cmd_cdf(args) -> int:
 
 
 def _cmd_plot(args) -> int:
-    from .cdf_plots import plot_cdf
+    from .sampling.plots import plot_cdf
 
     args.table_only = args.table_only or Path(args.file).suffix.lower() != ".json"
     fit = _load_or_fit(args)
@@ -70,7 +70,7 @@ def register(sub) -> None:
                        description="Tabulate CDF^-1 of rho cos (luminance) per theta_v row, build the "
                                    "rational inverse CDFs (default layout 'pieces': per view row, monotone "
                                    "rational-quadratic pieces of equal mass, found in constant time; "
-                                   "'rows' / 'global': fitted with the interval rational fitter), verify "
+                                   "'global': fitted with the interval rational fitter), verify "
                                    "them (monotone, covering, no poles), send rows that fail or whose "
                                    "derivative estimator exceeds 1.2x the table's variance to the table, "
                                    "and write a versioned rbrdf-cdf JSON (fallback flag and per-row "

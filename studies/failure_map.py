@@ -2,7 +2,7 @@
 
 Cases (each pinned by a test in tests/test_studies.py):
 
-* ``mirror``: a near-mirror lobe written as an exact-layout MERL file (``fit.merl.write_merl``)
+* ``mirror``: a near-mirror lobe written as an exact-layout MERL file (``fit.formats.merl.write_merl``)
   from an analytic normalized Blinn-Phong lobe (exponent 5000, ~1 deg wide, peak ~200 /sr, plus
   a 2 % Lambert term) on a sphere under the studio map and under the tiny sun (rooitou);
 * ``grazing``: a plane seen at a grazing angle (view ~80 deg from the normal) against the same
@@ -320,7 +320,7 @@ def summary_markdown(rows, other, meta) -> str:
     if fits:
         L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, one "
                  f"cluster in {fits[0][1]['stride']} along each axis, degrees ≤ {fits[0][1]['max_degree']} "
-                 f"(fit.fitter.IntervalRationalFitter):\n")
+                 f"(fit.rational.fitter.IntervalRationalFitter):\n")
         L.append(C.md_table([[k[4:], v["tol"], f"{v['abs_floor']:.3g}", v["n_coefficients"],
                               "yes" if v["feasible"] else "NO", f"{100 * v['relative_share']:.0f} %",
                               v["max_rel_err_relative"], v["max_rel_err"], v["max_value"]]

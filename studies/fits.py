@@ -4,10 +4,10 @@ Order of preference (the first that works):
 
 1. ``results/fits/<material>_tol<t>.json`` made earlier by this module;
 2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t``;
-3. the project's fitter: ``rbrdf-fit brdf FILE --tol t --out X.json`` (``fit.brdf_fit``; run in a
+3. the project's fitter: ``rbrdf-fit brdf FILE --tol t --out X.json`` (``fit.rational.brdf_fit``; run in a
    subprocess with a time limit, so a slow fit cannot hang a study);
 4. only with ``allow_direct=True`` (the fit study's ``--direct-fallback``): a stand-in made here
-   with :class:`fit.fitter.IntervalRationalFitter` on the median projection (one function per
+   with :class:`fit.rational.fitter.IntervalRationalFitter` on the median projection (one function per
    channel over (sqrt theta_h, theta_d), theta_d <= 80 deg, intervals ``y +- max(t |y|, floor)``).
    It is labelled ``source = "direct"`` everywhere it is reported; it is not the shipped fitter.
 
@@ -31,11 +31,11 @@ FIT_DIR = C.ROOT / "results" / "fits"
 
 
 def brdf_fit_available() -> tuple[bool, str]:
-    """Whether ``fit.brdf_fit`` imports and the CLI has a ``brdf`` command."""
+    """Whether ``fit.rational.brdf_fit`` imports and the CLI has a ``brdf`` command."""
     try:
         import fit.rational.brdf_fit  # noqa: F401
     except Exception as e:  # noqa: BLE001
-        return False, f"fit.brdf_fit not importable ({type(e).__name__}: {e})"
+        return False, f"fit.rational.brdf_fit not importable ({type(e).__name__}: {e})"
     from fit import cli
 
     cli._register_optional_commands()
@@ -43,7 +43,7 @@ def brdf_fit_available() -> tuple[bool, str]:
     choices = next(a.choices for a in parser._actions if getattr(a, "choices", None))
     if "brdf" not in choices:
         return False, "rbrdf-fit has no 'brdf' command"
-    return True, "fit.brdf_fit + rbrdf-fit brdf"
+    return True, "fit.rational.brdf_fit + rbrdf-fit brdf"
 
 
 def _tag(tol: float) -> str:

@@ -6,7 +6,7 @@ from scipy import stats
 
 from fit.projection.albedo import directional_albedo
 from fit.formats.angles import spherical_to_direction
-from fit.cdf_table import tabulate
+from fit.sampling.table import tabulate
 from fit.formats.colour import LUMINANCE
 
 from analytic import glossy_lobe, lambert

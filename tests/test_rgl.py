@@ -1,4 +1,4 @@
-"""RGL-EPFL ``.bsdf`` reader and evaluation (fit.rgl)."""
+"""RGL-EPFL ``.bsdf`` reader and evaluation (fit.formats.rgl, fit.formats.tensor_file)."""
 from __future__ import annotations
 
 import struct

@@ -2,12 +2,12 @@
 
 Samplers (``sampler = ...`` per material in scene files):
 
-* ``"tabulated"``: the table of :mod:`fit.cdf_table` inverted by binary search (baseline);
+* ``"tabulated"``: the table of :mod:`fit.sampling.table` inverted by binary search (baseline);
   estimator f cos / pdf with the table's pdf.
-* ``"rational"``: the verified rational inverse CDFs of :mod:`fit.cdf_fit`: by default the
+* ``"rational"``: the verified rational inverse CDFs of :mod:`fit.sampling.cdf_file`: by default the
   pieces layout (:func:`pieces_sample`: one rational-quadratic piece per map, found without a
   search, coefficients in ``Materials.cdf_pw``), else generated unrolled float64 code per fit
-  (rows / global layouts); constant time either way; estimator f cos / pdf with pdf = 1 / alpha
+  (global layout); constant time either way; estimator f cos / pdf with pdf = 1 / alpha
   (eq. 3 of the supplementary text: for a monotone covering map this IS the sampled density).
 * ``"rational-derivative"``: same directions; the derivative estimator f cos * alpha
   (eq. 4), alpha = dtheta/dmu * dphi/dtau * sin(theta_l), without any pdf. It equals the
@@ -56,7 +56,7 @@ def tab_row(theta_v: float, n_v: int) -> int:
 @wp.func
 def tab_sample(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
                n_v: int, n_t: int, n_p: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
-    """(theta_l, phi_l, pdf) exactly as fit.cdf_table.CDFTable.sample (binary search)."""
+    """(theta_l, phi_l, pdf) exactly as fit.sampling.table.CDFTable.sample (binary search)."""
     v = tab_row(theta_v, n_v)
     st = off_t + v * (n_t + 1)
     j = wp.clamp(_count_le(cdf_t, st, n_t, mu) - 1, 0, n_t - 1)
@@ -147,7 +147,7 @@ def rel_phi_abs(wi: wp.vec3, phi_v: float) -> float:
 
 
 # --------------------------------------------------------------------------------------------
-# Pieces layout (fit.cdf_pieces): rational-quadratic pieces uniform in mu / u
+# Pieces layout (fit.sampling.pieces): rational-quadratic pieces uniform in mu / u
 # --------------------------------------------------------------------------------------------
 @wp.func
 def rq_piece(pw: wp.array(dtype=float), b: int, x: float) -> wp.vec2:
@@ -188,7 +188,7 @@ def rq_knots(pw: wp.array(dtype=float), b: int, x: float) -> wp.vec2:
 @wp.func
 def pieces_sample(pw: wp.array(dtype=float), off: int, n_v: int, n_mu: int, n_u: int,
                   va: wp.vec3, mu: float, tau: float) -> wp.vec4:
-    """(wi, alpha): the direction of (theta_l, phi_l) of fit.cdf_pieces.sample_pieces in the
+    """(wi, alpha): the direction of (theta_l, phi_l) of fit.sampling.pieces.sample_pieces in the
     view frame ``va`` (:func:`view_frame`) and alpha, on a rational row (the generated caller
     sends table rows to the table). Piece of mu: floor(mu n_mu), no search; sin and cos of
     theta_l computed once (end pieces: from y = sin^2 theta_l, no sin/cos at all). Theta pieces:
@@ -229,7 +229,7 @@ def pieces_sample(pw: wp.array(dtype=float), off: int, n_v: int, n_mu: int, n_u:
 
 @wp.func
 def maps_to_direction(q: wp.vec3, va: wp.vec3) -> wp.vec4:
-    """(wi, alpha) from (theta_l, phi_l, alpha) of a generated rows / global sampler; alpha < 0
+    """(wi, alpha) from (theta_l, phi_l, alpha) of a generated global sampler; alpha < 0
     (a table row) passes through."""
     if q[2] < 0.0:
         return wp.vec4(0.0, 0.0, 0.0, -1.0)
@@ -358,42 +358,18 @@ def _emit_maps(L, F, G, f_vars, g_vars):
 
 def generate_sampler_function(cdf_fit, name: str) -> str:
     """``@wp.func name(theta_v, mu, tau) -> vec3(theta_l, phi_l, alpha)`` for a verified fit:
-    the endpoint-normalized map of :meth:`fit.cdf_fit.CDFFit.sample`, float64, unrolled."""
+    the endpoint-normalized map of :meth:`fit.sampling.cdf_file.CDFFit.sample`, float64, unrolled."""
     L = ["@wp.func", f"def {name}(pw: wp.array(dtype=float), theta_v: float, mu: float, tau: float) -> wp.vec3:",
          f"    # generated rational inverse CDFs of {cdf_fit.name!r}",
          "    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))",
          "    m = wp.float64(mu)"]
-    return _emit_maps(L, cdf_fit.theta, cdf_fit.phi, ["tv"], ["tv"])
-
-
-def _row_function(F, G, name: str) -> str:
-    """``@wp.func name(mu, tau) -> vec3(theta_l, phi_l, alpha)`` of one row of the rows layout
-    (:mod:`fit.cdf_rows`): univariate F_v(mu), bivariate G_v(theta_l, u), same normalisation."""
-    L = ["@wp.func", f"def {name}(mu: float, tau: float) -> wp.vec3:", "    m = wp.float64(mu)"]
-    return _emit_maps(L, F, G, [], [])
-
-
-def generate_rows_sampler_function(cdf_fit, name: str) -> str:
-    """Rows layout: one generated function per verified row and a dispatcher
-    ``name(theta_v, mu, tau)`` that picks the row exactly as :func:`tab_row` does; a row
-    without a verified fit returns alpha = -1, which tells the caller to use the table."""
-    n_v = len(cdf_fit.rows)
-    parts, L = [], ["@wp.func", f"def {name}(pw: wp.array(dtype=float), theta_v: float, mu: float, tau: float) -> wp.vec3:",
-                    f"    # generated per-row rational inverse CDFs of {cdf_fit.name!r}",
-                    f"    v = CS.tab_row(theta_v, {n_v})"]
-    for v, r in enumerate(cdf_fit.rows):
-        if r is None:
-            continue
-        parts.append(_row_function(r[0], r[1], f"{name}_r{v}"))
-        L += [f"    if v == {v}:", f"        return {name}_r{v}(mu, tau)"]
-    L.append("    return wp.vec3(0.0, 0.0, -1.0)")
-    return "\n\n".join(parts + ["\n".join(L) + "\n"])
+    return _emit_maps(L, cdf_fit.maps.theta, cdf_fit.maps.phi, ["tv"], ["tv"])
 
 
 def generate_pieces_sampler_function(cdf_fit, name: str, offset: int) -> str:
-    """Pieces layout (:mod:`fit.cdf_pieces`): a call of :func:`pieces_sample` on the fit's
+    """Pieces layout (:mod:`fit.sampling.pieces`): a call of :func:`pieces_sample` on the fit's
     coefficients at ``offset`` in the packed array (:func:`pack_pieces`); no generated maps."""
-    t, pm = cdf_fit.table, cdf_fit.pieces
+    t, pm = cdf_fit.table, cdf_fit.maps
     L = ["@wp.func", f"def {name}(pw: wp.array(dtype=float), va: wp.vec3, mu: float, tau: float) -> wp.vec4:",
          f"    # pieces-layout inverse CDFs of {cdf_fit.name!r}"]
     table_rows = np.flatnonzero(~pm.row_ok)
@@ -411,37 +387,14 @@ def generate_sampler_functions(fits, pw_offsets=None):
     out = []
     for i, f in enumerate(fits):
         name = f"cdfsamp_{i}"
-        if f.pieces is not None:
+        if f.layout == "pieces":
             out.append((name, generate_pieces_sampler_function(f, name, pw_offsets[i])))
             continue
-        maps = (generate_rows_sampler_function(f, f"{name}_maps") if f.rows is not None
-                else generate_sampler_function(f, f"{name}_maps"))
+        maps = generate_sampler_function(f, f"{name}_maps")
         out.append((name, maps + "\n\n" + "\n".join([
             "@wp.func", f"def {name}(pw: wp.array(dtype=float), va: wp.vec3, mu: float, tau: float) -> wp.vec4:",
             f"    return CS.maps_to_direction({name}_maps(pw, va[0], mu, tau), va)"]) + "\n"))
     return out
-
-
-def pieces_phi_knots(pm) -> np.ndarray:
-    """(n_v, n_mu, n_u + 1, 2): the phi pieces ``(y_k, h, a0, a1)`` of ``pm`` as knots (value,
-    slope dy/dx in piece-local x): the form :func:`rq_knots` reads (half the bytes of the
-    pieces, which matters when view rows change from sample to sample: the phi maps of a
-    material are then read at random, 64 x 64 pieces = 2 MB as pieces, 1.06 MB as knots).
-    Raises ValueError where a verified row's pieces do not share their knots (their values or
-    slopes differ between the end of a piece and the start of the next)."""
-    c = pm.phi
-    y = np.concatenate([c[..., 0], (c[..., -1, 0] + c[..., -1, 1])[..., None]], axis=-1)
-    s_start = c[..., 2] * c[..., 1]                  # a0 h: slope at x = 0 of each piece
-    s_end = c[..., 3] * c[..., 1]                    # a1 h: slope at x = 1
-    s = np.concatenate([s_start, s_end[..., -1:]], axis=-1)
-    ok = np.asarray(pm.row_ok, bool)
-    tol = 1e-9 * (1.0 + np.abs(y[..., 1:-1]))
-    bad = (np.abs(c[..., :-1, 0] + c[..., :-1, 1] - y[..., 1:-1]) > tol) \
-        | (np.abs(s_end[..., :-1] - s[..., 1:-1]) > 1e-9 * (1.0 + np.abs(s[..., 1:-1])))
-    rows = np.flatnonzero(bad.any(axis=(-1, -2)) & ok)
-    if rows.size:
-        raise ValueError(f"phi pieces of rows {rows.tolist()} do not share their knots")
-    return np.stack([y, s], axis=-1)
 
 
 def pack_pieces(fits):
@@ -449,12 +402,14 @@ def pack_pieces(fits):
     ``[theta pieces (n_v, n_mu, 4), phi knots (n_v, n_mu, n_u + 1, 2)]`` (:func:`rq_piece`,
     :func:`rq_knots`); offset -1 for fits of other layouts (the table rows are literals of the
     generated code)."""
+    from fit.sampling.pieces import pieces_phi_knots
+
     parts, offsets, off = [], [], 0
     for f in fits:
-        if f.pieces is None:
+        if f.layout != "pieces":
             offsets.append(-1)
             continue
-        pm = f.pieces
+        pm = f.maps
         a = np.concatenate([pm.theta.ravel(), pieces_phi_knots(pm).ravel()])
         parts.append(a)
         offsets.append(off)
@@ -489,20 +444,20 @@ def prepare_sampler(spec, kind_data, log=print):
     name = spec.sampler
     if name not in TABLE_SAMPLERS:
         return name, None, None
-    from fit.cdf_table import tabulate
+    from fit.sampling.table import tabulate
 
     cdf = getattr(spec, "cdf", None)
     fitobj = None
     if cdf is not None:
         if isinstance(cdf, (str, bytes)) or hasattr(cdf, "suffix"):
-            from fit.cdf_fit import load
+            from fit.sampling.cdf_file import load
 
             fitobj = load(cdf)
         else:
             fitobj = cdf
     if name in RATIONAL_SAMPLERS:
         if fitobj is None:
-            from fit.cdf_fit import fit_cdf
+            from fit.sampling.cdf_file import fit_cdf
 
             log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
                 f"from `rbrdf-fit cdf` to skip this)")

@@ -35,7 +35,7 @@ def load_rational(spec, file="<scene>", key="materials"):
         try:
             from fit.rational.coefficient_file import load
         except ImportError as e:
-            raise SceneError(file, f"{key}.file", f"rational materials need fit.coefficients ({e})") from None
+            raise SceneError(file, f"{key}.file", f"rational materials need fit.rational.coefficient_file ({e})") from None
         try:
             model = load(spec.file)
         except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .formats.angles import spherical_to_direction
-from .formats.colour import LUMINANCE
+from ..formats.angles import spherical_to_direction
+from ..formats.colour import LUMINANCE
 
 
 @dataclass
