@@ -38,7 +38,6 @@ def brdf_fit_available() -> tuple[bool, str]:
         return False, f"fit.rational.brdf_fit not importable ({type(e).__name__}: {e})"
     from fit import cli
 
-    cli._register_optional_commands()
     parser = cli.build_parser()
     choices = next(a.choices for a in parser._actions if getattr(a, "choices", None))
     if "brdf" not in choices:

@@ -1,24 +1,21 @@
 """``rbrdf-fit cdf`` and ``rbrdf-fit plot-cdf``: importance-sampling tables and rational inverse
-CDFs (issue 6). Registered by :mod:`fit.cli` when this module exists."""
+CDFs (issue 6, :mod:`fit.sampling`). Registered by :mod:`fit.cli`."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from .sampling.cdf_file import LAYOUTS, TIME_LIMIT_S
+from ..formats import load_measured
+from ..sampling.cdf_file import LAYOUTS, TIME_LIMIT_S, file_source, fit_cdf, load, table_only
+from ..sampling.plots import plot_cdf
 
 
 def _load_or_fit(args, log=print):
-    from .sampling.cdf_file import fit_cdf, file_source, load
-    from .formats import load_measured
-
     path = Path(args.file)
     if path.suffix.lower() == ".json":
         return load(path)
     b = load_measured(path)
     params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
     if getattr(args, "table_only", False):
-        from .sampling.cdf_file import table_only
-
         return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
                           source=file_source(path))
     return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log, layout=args.layout,
@@ -56,8 +53,6 @@ def _cmd_cdf(args) -> int:
 
 
 def _cmd_plot(args) -> int:
-    from .sampling.plots import plot_cdf
-
     args.table_only = args.table_only or Path(args.file).suffix.lower() != ".json"
     fit = _load_or_fit(args)
     for f in plot_cdf(fit, args.out, prefix=args.prefix):
@@ -66,6 +61,7 @@ def _cmd_plot(args) -> int:
 
 
 def register(sub) -> None:
+    """Add ``cdf`` and ``plot-cdf`` to the sub-parsers ``sub``."""
     p = sub.add_parser("cdf", help="tabulate the sampling CDFs and fit rational inverse CDFs",
                        description="Tabulate CDF^-1 of rho cos (luminance) per theta_v row, build the "
                                    "rational inverse CDFs (default layout 'pieces': per view row, monotone "
