@@ -102,8 +102,8 @@ def main(argv=None) -> int:
         plot(rows, args.chart or "fit_coefficients_vs_tol.png", "log value, sqrt theta_h")
         return 0
 
-    from fit.rational.brdf_fit import fit_brdf
     from fit.formats import load_measured
+    from fit.rational.brdf_fit import fit_brdf
 
     rows = []
     model = None

@@ -30,9 +30,9 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from fit.projection.albedo import directional_albedo  # noqa: E402
 from fit.formats.angles import spherical_to_direction  # noqa: E402
 from fit.formats.rgl import read_rgl  # noqa: E402
+from fit.projection.albedo import directional_albedo  # noqa: E402
 
 
 def _timed(fn, repeats):

@@ -107,8 +107,8 @@ def main(argv=None):
     wp.config.quiet = True
     from analytic import lambert
     from conftest import DATA
-    from fit.sampling.cdf_file import fit_cdf, load
     from fit.formats import load_measured
+    from fit.sampling.cdf_file import fit_cdf, load
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec

@@ -128,8 +128,8 @@ def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_m
                max_degree: int = 8, stride: int = 1, proj=None):
     """Stand-in fit (see the module docstring): IntervalRationalFitter per channel on the median
     projection. ``abs_floor`` = ``abs_floor_rel`` x the channel's largest value."""
-    from fit.rational.model import RationalModel, Variable
     from fit.rational.fitter import IntervalRationalFitter
+    from fit.rational.model import RationalModel, Variable
 
     pj = proj if proj is not None else C.projected(material)
     th = pj.theta_h[::stride]

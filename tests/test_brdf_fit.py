@@ -7,10 +7,10 @@ import pytest
 
 from analytic import glossy_lobe
 from conftest import RGL_MATERIALS, data_file
-from fit.rational.brdf_fit import THETA_D_MAX_DEG, channel_data, fit_brdf, project_for_fit, white_sky_albedo
-from fit.rational.coefficient_file import load, save, to_dict
 from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import write_merl
+from fit.rational.brdf_fit import THETA_D_MAX_DEG, channel_data, fit_brdf, project_for_fit, white_sky_albedo
+from fit.rational.coefficient_file import load, save, to_dict
 
 
 @pytest.fixture(scope="module")
@@ -92,8 +92,8 @@ def test_single_function_over_the_whole_box(lobe_file):
 def test_rough_grazing_band_is_flagged_not_hidden(tmp_path):
     """Clusters beyond theta_d = 60 deg alternate by +-30 % from bin to bin: no smooth function
     meets 5 % there. The core stays guaranteed; the band is a flagged best effort."""
-    from fit.formats.angles import directions_to_half_diff
     from fit.formats import load_measured
+    from fit.formats.angles import directions_to_half_diff
 
     lobe = glossy_lobe(exponent=30.0)
 

@@ -10,10 +10,10 @@ import pytest
 
 from conftest import RGL_MATERIALS, data_file
 from fit.formats.angles import spherical_to_direction
+from fit.formats.colour import LUMINANCE
 from fit.sampling.cdf_file import fit_cdf, load, verify
 from fit.sampling.pieces import _piece, build_pieces, rq_eval, sample_pieces, verify_pieces
 from fit.sampling.table import tabulate
-from fit.formats.colour import LUMINANCE
 from test_cdf_samplers import (THETA_V, _assert_albedo_matches_quadrature, _chi2_pvalue, _rational_cell_probs,
                                 warp_rational_samples)
 

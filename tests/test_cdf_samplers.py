@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
-from fit.projection.albedo import directional_albedo
 from fit.formats.angles import spherical_to_direction
+from fit.formats.colour import LUMINANCE
+from fit.projection.albedo import directional_albedo
 from fit.sampling.cdf_file import CDFFit, fit_cdf, verify
 from fit.sampling.table import tabulate
-from fit.formats.colour import LUMINANCE
 from test_cdf_table import _chi2_pvalue, _expected_cell_probs
 
 from analytic import lambert

@@ -4,8 +4,8 @@ import os
 import numpy as np
 import pytest
 
-from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.errors import BRDFFileError
+from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.formats.grid import (MERL_SHAPE, phi_d_centres, phi_d_index, theta_d_centres, theta_d_index,
                               theta_h_centres, theta_h_index)
 from fit.formats.measured import MeasuredBRDF

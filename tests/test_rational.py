@@ -4,12 +4,12 @@ import json
 import numpy as np
 import pytest
 
-from fit.rational.coefficient_file import load, save
-from fit.rational.model import RationalModel, Variable
 from fit.errors import BRDFFileError
 from fit.rational.basis import chebyshev_basis, tensor_exponents, total_degree_exponents
 from fit.rational.bernstein import bernstein_coefficients
+from fit.rational.coefficient_file import load, save
 from fit.rational.function import RationalFunction, RationalRGB
+from fit.rational.model import RationalModel, Variable
 
 
 def _random_rf(n_vars, m, n, seed=0):

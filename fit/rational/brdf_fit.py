@@ -239,7 +239,7 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     _, tdg = np.meshgrid(p.theta_h, p.theta_d, indexing="ij")
     vals = p.value[tdg <= np.deg2rad(THETA_D_MAX_DEG) + 1e-12]
     value_max = 2.0 * float(np.nanmax(vals))
-    kw = dict(tol=tol, theta_h_transform=theta_h_transform, value_transform=value_transform, value_max=value_max,
+    kw = dict(tol=tol, theta_h_transform=theta_h_transform, value_transform=value_transform,
               offset=offset, max_degree=max_degree, max_den_degree=max_den_degree,
               floor_frac=floor_frac, spread_k=spread_k, rho_ref=rho_ref, progress=progress)
     if core_theta_d_deg == "auto":
@@ -270,11 +270,12 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
             band_fit = _fit_piece(p, band, band_intervals, partial=band_partial, **kw)
         pieces.append(band_fit)
     total = time.perf_counter() - t0
-    model = brdf_model(p, name, pieces, kw, intervals, band_intervals, total, source_file)
+    model = brdf_model(p, name, pieces, dict(kw, value_max=value_max), intervals, band_intervals, total,
+                       source_file)
     return BRDFFit(model, pieces, total)
 
 
-def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset, value_max,
+def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,
                max_degree, max_den_degree, floor_frac, spread_k, rho_ref, progress,
                stop_on_infeasible=False, partial=None, theta_h_range_deg=(0.0, 90.0)) -> PieceFit:
     a, b = theta_d_range_deg

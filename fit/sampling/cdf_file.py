@@ -47,8 +47,10 @@ VERSION = 2   # 2: "layout" key (pieces or global); version-1 files (global layo
 DEFAULTS = dict(n_v=32, n_t=64, n_p=64, sub=3, eps=0.02, noise=1e-6)
 TIME_LIMIT_S = 180.0   # default bound on fit_cdf's fitting time (s)
 LAYOUTS = ("pieces", "global")
-#: The file's description of the sampler. Its "rows" entry describes the per-row layout that
-#: was removed; it stays so that files keep their content (readers refuse "rows" files).
+#: The file's description of the sampler, as files have always stated it: its "rows" entry
+#: describes the removed per-row layout (readers refuse "rows" files) and its "pieces" entry
+#: names build_pieces by its old module (now fit.sampling.pieces.build_pieces); both stay so
+#: that files written for the same input keep their content.
 SAMPLER = {
     "theta_l": "pi/2 (F(theta_v, mu) - F(theta_v, 0)) / (F(theta_v, 1) - F(theta_v, 0))",
     "phi_l": "sign(tau - 1/2) pi (G(theta_v, theta_l, u) - G(.., 0)) / (G(.., 1) - G(.., 0)), u = |2 tau - 1|",
