@@ -4,7 +4,7 @@
    binary search vs generated rational inverse CDFs vs cosine), on the Warp CPU device unless
    --device says otherwise, for view directions in two orders: "coherent" (sorted by theta_v,
    as consecutive samples of a render tile see nearby view angles) and "random" (every
-   sample another view row: worst case for the per-row generated code and the branch
+   sample another view row: worst case for the per-row coefficient reads and the branch
    predictor). Per launch the best of 3.
 2. Variance per sample of the estimator of the luminance directional albedo
    integral rho cos dw at theta_v = 0, 45, 85 deg (NumPy), for cosine, tabulated, and the
