@@ -31,7 +31,7 @@ def warp_throughput(model, n: int = 1_000_000) -> float:
     """Evaluations per second of the rational material's generated Warp code (one launch, one
     CPU thread, median of 5, host<->device copies included)."""
     sys.path.insert(0, str(ROOT / "tests"))
-    from fit.angles import spherical_to_direction
+    from fit.formats.angles import spherical_to_direction
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
@@ -102,8 +102,8 @@ def main(argv=None) -> int:
         plot(rows, args.chart or "fit_coefficients_vs_tol.png", "log value, sqrt theta_h")
         return 0
 
-    from fit.brdf_fit import fit_brdf
-    from fit.io import load_measured
+    from fit.formats import load_measured
+    from fit.rational.brdf_fit import fit_brdf
 
     rows = []
     model = None

@@ -21,10 +21,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from fit.io import load_measured  # noqa: E402
-from fit.measured import MeasuredBRDF  # noqa: E402
-from fit.merl import write_merl  # noqa: E402
-from fit.projection import STATISTICS, project  # noqa: E402
+from fit.formats import load_measured  # noqa: E402
+from fit.formats.measured import MeasuredBRDF  # noqa: E402
+from fit.formats.merl import write_merl  # noqa: E402
+from fit.projection.project import STATISTICS, project  # noqa: E402
 
 
 def main(argv=None) -> int:

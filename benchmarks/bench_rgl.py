@@ -1,4 +1,4 @@
-"""Benchmark of the RGL-EPFL reader (fit.rgl) on one core, plus the per-material albedo table.
+"""Benchmark of the RGL-EPFL reader (fit.formats.rgl) on one core, plus the per-material albedo table.
 
     python benchmarks/bench_rgl.py [FILE ...] [--n 1000000] [--repeats 5] [--thumbnails DIR]
 
@@ -30,9 +30,9 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
-from fit.albedo import directional_albedo  # noqa: E402
-from fit.angles import spherical_to_direction  # noqa: E402
-from fit.rgl import read_rgl  # noqa: E402
+from fit.formats.angles import spherical_to_direction  # noqa: E402
+from fit.formats.rgl import read_rgl  # noqa: E402
+from fit.projection.albedo import directional_albedo  # noqa: E402
 
 
 def _timed(fn, repeats):
@@ -60,7 +60,7 @@ def write_thumbnail(measured, path, scale: int = 2) -> None:
     matplotlib.use("Agg")
     import matplotlib.image as mpimg
 
-    from fit.projection import project
+    from fit.projection.project import project
 
     p = project(measured).value  # (theta_h, theta_d, 3), NaN where empty
     lum = p @ np.array([0.2126, 0.7152, 0.0722])

@@ -4,7 +4,7 @@
    binary search vs generated rational inverse CDFs vs cosine), on the Warp CPU device unless
    --device says otherwise, for view directions in two orders: "coherent" (sorted by theta_v,
    as consecutive samples of a render tile see nearby view angles) and "random" (every
-   sample another view row: worst case for the per-row generated code and the branch
+   sample another view row: worst case for the per-row coefficient reads and the branch
    predictor). Per launch the best of 3.
 2. Variance per sample of the estimator of the luminance directional albedo
    integral rho cos dw at theta_v = 0, 45, 85 deg (NumPy), for cosine, tabulated, and the
@@ -12,9 +12,9 @@
    1 / (variance * time per sample) with the Warp sampling times.
 
 Usage: python benchmarks/bench_samplers.py [--n 1000000] [--materials a,b] [--cdf-dir DIR]
-       [--layout pieces|rows|global] [--max-variance-ratio R | none] [--n-u 16,32,64]
+       [--layout pieces|global] [--max-variance-ratio R | none] [--n-u 16,32,64]
 (``--layout``: how the rational inverse CDFs are built here, default the fitter's default
-"pieces" (fit.cdf_pieces, 2-20 s per material, mostly the variance gate); "rows" takes 16-18 s per material.)
+"pieces" (fit.sampling.pieces, 2-20 s per material, mostly the variance gate).)
 (``--max-variance-ratio none`` builds without the variance gate, so every verified row is
 rational: the speed of the rational rows themselves.)
 (``--cdf-dir``: rbrdf-cdf files named MATERIAL.json from `rbrdf-fit cdf`.)
@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
     rng = np.random.default_rng(0)
-    from fit.angles import spherical_to_direction
+    from fit.formats.angles import spherical_to_direction
 
     tv = np.arccos(rng.random(n))
     wo = spherical_to_direction(np.sort(tv) if order == "coherent" else tv, rng.random(n) * 2 * np.pi)
@@ -60,8 +60,8 @@ def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
 
 
 def variances(evaluate, fit, n=200_000):
-    from fit.angles import spherical_to_direction
-    from fit.cdf_table import LUMINANCE
+    from fit.formats.angles import spherical_to_direction
+    from fit.formats.colour import LUMINANCE
 
     rng = np.random.default_rng(1)
     res = {}
@@ -94,20 +94,21 @@ def main(argv=None):
     ap.add_argument("--cdf-dir", default=None)
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--max-variance-ratio", default=None,
-                    help="variance gate of the pieces / rows layout (default: the layout's default; 'none': off)")
+                    help="variance gate of the pieces layout (default: the layout's default; 'none': off)")
     ap.add_argument("--n-u", default=None,
                     help="pieces layout: phi pieces per map, one count or comma-separated candidates "
                          "(default: the layout's, 16,32,64: the fewest that pass the gate)")
-    ap.add_argument("--layout", default="pieces", choices=("pieces", "rows", "global"),
-                    help="layout of the rational inverse CDFs fitted here (default %(default)s; fit.cdf_fit)")
+    ap.add_argument("--layout", default="pieces", choices=("pieces", "global"),
+                    help="layout of the rational inverse CDFs fitted here (default %(default)s; "
+                         "fit.sampling.cdf_file)")
     args = ap.parse_args(argv)
     import warp as wp
 
     wp.config.quiet = True
     from analytic import lambert
     from conftest import DATA
-    from fit.cdf_fit import fit_cdf, load
-    from fit.io import load_measured
+    from fit.formats import load_measured
+    from fit.sampling.cdf_file import fit_cdf, load
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
@@ -128,7 +129,7 @@ def main(argv=None):
             kw = {} if gate is None else {"max_variance_ratio": None if gate == "none" else float(gate)}
             pkw = dict(kw, **({} if args.n_u is None else {"n_u": [int(x) for x in args.n_u.split(",")]}))
             fit = load(cdf) if cdf and cdf.exists() else fit_cdf(ev, name=name, layout=args.layout,
-                                                                 rows_kw=kw, pieces_kw=pkw)
+                                                                 pieces_kw=pkw)
             print(f"{name}: fit {time.perf_counter() - t0:.1f} s, fallback {fit.fallback} ({fit.reason})")
             spec = MaterialSpec(name="m", type="measured", data=b,
                                 sampler="rational" if not fit.fallback else "tabulated")
@@ -136,11 +137,10 @@ def main(argv=None):
         spec.cdf = fit
         r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=2, spp=1), device=args.device)
         r.compile()
-        if fit.rows is not None or fit.pieces is not None:
+        if fit.layout == "pieces" and fit.maps is not None:
             g = [i["variance"]["ratio"] for i in fit.fit_info["rows"] if "variance" in i]
-            n_ok = int(fit.pieces.row_ok.sum()) if fit.pieces is not None else sum(x is not None for x in fit.rows)
-            nu = f", {fit.pieces.n_u} phi pieces" if fit.pieces is not None else ""
-            print(f"{name} ({fit.layout} layout{nu}): rational on {n_ok}/{fit.table.n_v} view rows"
+            n_ok = int(fit.maps.row_ok.sum())
+            print(f"{name} ({fit.layout} layout, {fit.maps.n_u} phi pieces): rational on {n_ok}/{fit.table.n_v} view rows"
                   + (f"; variance gate, rational / tabulated per verified row: median {np.median(g):.2f}, "
                      f"range {min(g):.2f}-{max(g):.2f} ({len(g)} rows)" if g else ""))
         for order in ("random", "coherent"):   # the coherent rates (last) go into the efficiencies

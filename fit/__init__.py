@@ -1,7 +1,35 @@
 """warp-rbrdf fitter: measured isotropic BRDFs, their (theta_h, theta_d) projection and
-rational-function fits with guaranteed error. Pure NumPy/SciPy; never imports Warp."""
-from .errors import BRDFFileError, RbrdfError
-from .measured import MeasuredBRDF, ProjectedBRDF, MERL_SHAPE
+rational-function fits with guaranteed error. Pure NumPy/SciPy; never imports Warp.
 
-__all__ = ["BRDFFileError", "RbrdfError", "MeasuredBRDF", "ProjectedBRDF", "MERL_SHAPE"]
+Sub-packages: :mod:`fit.formats` (measured-BRDF files and types), :mod:`fit.projection`,
+:mod:`fit.rational` (rational functions, the interval fitter, coefficient files, ``fit_brdf``),
+:mod:`fit.sampling` (tabulated and rational inverse CDFs, ``fit_cdf``), :mod:`fit.cli`
+(``rbrdf-fit``).
+
+The public API below keeps ``import fit`` cheap: ``fit_brdf``, ``fit_cdf`` and ``load_cdf``
+(SciPy's optimizer and interpolators) are imported on first use.
+"""
+from importlib import import_module
+
+from .errors import BRDFFileError, RbrdfError
+from .formats import load_measured
+from .formats.measured import MeasuredBRDF, ProjectedBRDF
+from .projection.project import project
+from .rational.coefficient_file import load as load_coefficients
+
+__all__ = ["BRDFFileError", "RbrdfError", "MeasuredBRDF", "ProjectedBRDF", "load_measured", "project",
+           "fit_brdf", "fit_cdf", "load_coefficients", "load_cdf"]
 __version__ = "0.1.0"
+
+_LAZY = {"fit_brdf": ("fit.rational.brdf_fit", "fit_brdf"),
+         "fit_cdf": ("fit.sampling.cdf_file", "fit_cdf"),
+         "load_cdf": ("fit.sampling.cdf_file", "load")}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        module, attr = _LAZY[name]
+        value = getattr(import_module(module), attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'fit' has no attribute {name!r}")

@@ -74,8 +74,8 @@ def all_samplers() -> tuple:
 # Materials
 @lru_cache(maxsize=16)
 def measured(name: str):
-    """The 3-D MERL-grid table (fit.measured.MeasuredBRDF) of a material key or a file path."""
-    from fit.io import load_measured
+    """The 3-D MERL-grid table (fit.formats.measured.MeasuredBRDF) of a material key or a file path."""
+    from fit.formats import load_measured
 
     path = data_path(MATERIALS[name]) if name in MATERIALS else Path(name)
     return load_measured(path)
@@ -83,7 +83,7 @@ def measured(name: str):
 
 @lru_cache(maxsize=16)
 def projected(name: str, statistic: str = "median"):
-    from fit.projection import project
+    from fit.projection.project import project
 
     return project(measured(name), statistic=statistic)
 
@@ -154,12 +154,12 @@ CDF_TIME_LIMIT_S: float | None = None   # bound on each rational CDF fit (None: 
 
 def cdf_for(spec: MaterialSpec, rational: bool):
     """The inverse-CDF table (``rational`` False) or table + verified rational fit of an
-    in-memory material, as a ``fit.cdf_fit.CDFFit``, made once per (data, type, scale) in this
+    in-memory material, as a ``fit.sampling.cdf_file.CDFFit``, made once per (data, type, scale) in this
     process and shared by every scene and sampler that uses it (the renderer would otherwise
     tabulate, and fit, again for each one). ``None`` for materials without in-memory data."""
     if spec.type == "lambert" or spec.data is None or isinstance(spec.data, (str, Path)):
         return None
-    from fit.cdf_fit import fit_cdf, table_only
+    from fit.sampling.cdf_file import fit_cdf, table_only
     from warp_rbrdf import registry
 
     key = (id(spec.data), spec.type, tuple(np.broadcast_to(np.asarray(spec.scale, float), 3)))

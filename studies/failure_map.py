@@ -2,7 +2,7 @@
 
 Cases (each pinned by a test in tests/test_studies.py):
 
-* ``mirror``: a near-mirror lobe written as an exact-layout MERL file (``fit.merl.write_merl``)
+* ``mirror``: a near-mirror lobe written as an exact-layout MERL file (``fit.formats.merl.write_merl``)
   from an analytic normalized Blinn-Phong lobe (exponent 5000, ~1 deg wide, peak ~200 /sr, plus
   a 2 % Lambert term) on a sphere under the studio map and under the tiny sun (rooitou);
 * ``grazing``: a plane seen at a grazing angle (view ~80 deg from the normal) against the same
@@ -67,8 +67,8 @@ def mirror_lobe_file(path, exponent: int = MIRROR_EXPONENT, kd: float = 0.02, ks
     """Write the near-mirror lobe as an exact-layout MERL ``.binary`` and return its path.
 
     rho = kd / pi + ks (n + 8) / (8 pi) cos^n theta_h  (grey; normalized Blinn-Phong)."""
-    from fit.measured import MeasuredBRDF
-    from fit.merl import write_merl
+    from fit.formats.measured import MeasuredBRDF
+    from fit.formats.merl import write_merl
 
     path = Path(path)
     if path.exists():
@@ -94,7 +94,7 @@ def load_mirror(out_dir) -> object:
 
 @lru_cache(maxsize=4)
 def _load_mirror(out_dir: str):
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     return load_measured(mirror_lobe_file(Path(out_dir) / f"mirror_n{MIRROR_EXPONENT}.binary"))
 
@@ -127,7 +127,7 @@ def sampler_noise(geometry, light, spec, samplers, resolution, spp, seeds) -> di
 
 def projection_error(geometry, light, material_key, resolution, spp, data=None) -> dict:
     """ΔE2000 of the 2-D projection against the 3-D table (sampler light, same seed)."""
-    from fit.projection import project
+    from fit.projection.project import project
 
     m3 = data if data is not None else C.measured(material_key)
     m2 = project(m3) if data is not None else C.projected(material_key)
@@ -151,7 +151,7 @@ def fit_channel(proj, tol, abs_floor, stride, max_degree, channel=1, theta_d_max
     interval is relative, value >= abs_floor / tol (``max_rel_err_relative``; the share of such
     points is ``relative_share``). Below that value the floor sets the interval, so a fit inside
     its intervals may be off by many times the value there."""
-    from fit.fitter import IntervalRationalFitter
+    from fit.rational.fitter import IntervalRationalFitter
 
     th = proj.theta_h[::stride]
     td = proj.theta_d[::stride]
@@ -237,8 +237,8 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
             other[f"projection_de_{g}"] = projection_error(g, "studio", "ibiza", res, spp)
             bar.update(1)
     if "fit" in cases:
-        from fit.measured import ProjectedBRDF  # noqa: F401
-        from fit.projection import project
+        from fit.formats.measured import ProjectedBRDF  # noqa: F401
+        from fit.projection.project import project
 
         mirror = load_mirror(out)
         pm = project(mirror)
@@ -320,7 +320,7 @@ def summary_markdown(rows, other, meta) -> str:
     if fits:
         L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, one "
                  f"cluster in {fits[0][1]['stride']} along each axis, degrees ≤ {fits[0][1]['max_degree']} "
-                 f"(fit.fitter.IntervalRationalFitter):\n")
+                 f"(fit.rational.fitter.IntervalRationalFitter):\n")
         L.append(C.md_table([[k[4:], v["tol"], f"{v['abs_floor']:.3g}", v["n_coefficients"],
                               "yes" if v["feasible"] else "NO", f"{100 * v['relative_share']:.0f} %",
                               v["max_rel_err_relative"], v["max_rel_err"], v["max_value"]]

@@ -3,7 +3,7 @@ evaluation cost.
 
 For each material and tolerance a rational fit is obtained through :mod:`studies.fits` (the
 project's fitter ``rbrdf-fit brdf`` when it exists; with ``--direct-fallback`` a labelled
-stand-in built on :class:`fit.fitter.IntervalRationalFitter`). Then:
+stand-in built on :class:`fit.rational.fitter.IntervalRationalFitter`). Then:
 
 * coefficients (total over R, G, B), fit seconds, whether every channel met its intervals;
 * render error: a sphere under the environment map (sampler "light", same seed for every

@@ -4,10 +4,10 @@ Order of preference (the first that works):
 
 1. ``results/fits/<material>_tol<t>.json`` made earlier by this module;
 2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t``;
-3. the project's fitter: ``rbrdf-fit brdf FILE --tol t --out X.json`` (``fit.brdf_fit``; run in a
+3. the project's fitter: ``rbrdf-fit brdf FILE --tol t --out X.json`` (``fit.rational.brdf_fit``; run in a
    subprocess with a time limit, so a slow fit cannot hang a study);
 4. only with ``allow_direct=True`` (the fit study's ``--direct-fallback``): a stand-in made here
-   with :class:`fit.fitter.IntervalRationalFitter` on the median projection (one function per
+   with :class:`fit.rational.fitter.IntervalRationalFitter` on the median projection (one function per
    channel over (sqrt theta_h, theta_d), theta_d <= 80 deg, intervals ``y +- max(t |y|, floor)``).
    It is labelled ``source = "direct"`` everywhere it is reported; it is not the shipped fitter.
 
@@ -31,19 +31,18 @@ FIT_DIR = C.ROOT / "results" / "fits"
 
 
 def brdf_fit_available() -> tuple[bool, str]:
-    """Whether ``fit.brdf_fit`` imports and the CLI has a ``brdf`` command."""
+    """Whether ``fit.rational.brdf_fit`` imports and the CLI has a ``brdf`` command."""
     try:
-        import fit.brdf_fit  # noqa: F401
+        import fit.rational.brdf_fit  # noqa: F401
     except Exception as e:  # noqa: BLE001
-        return False, f"fit.brdf_fit not importable ({type(e).__name__}: {e})"
+        return False, f"fit.rational.brdf_fit not importable ({type(e).__name__}: {e})"
     from fit import cli
 
-    cli._register_optional_commands()
     parser = cli.build_parser()
     choices = next(a.choices for a in parser._actions if getattr(a, "choices", None))
     if "brdf" not in choices:
         return False, "rbrdf-fit has no 'brdf' command"
-    return True, "fit.brdf_fit + rbrdf-fit brdf"
+    return True, "fit.rational.brdf_fit + rbrdf-fit brdf"
 
 
 def _tag(tol: float) -> str:
@@ -63,7 +62,7 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
     fitter's flagged best effort; ``--allow-infeasible``). Without it such a fit, cached or new,
     is refused with the fitter's own summary as the reason, so a study never renders a fit it
     believes guaranteed when it is not."""
-    from fit.coefficients import load
+    from fit.rational.coefficient_file import load, save
 
     fit_dir = Path(fit_dir or FIT_DIR)
     fit_dir.mkdir(parents=True, exist_ok=True)
@@ -120,7 +119,7 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
             errors.append(f"direct fit failed: {type(e).__name__}: {e}")
         else:
             m.fit_info["time_s"] = time.perf_counter() - t0
-            m.save(out)
+            save(m, out)
             return m, dict(info, source="direct", file=str(out), fit_seconds=m.fit_info["time_s"])
     return None, dict(info, source=None, error="; ".join(errors) or "no fit available")
 
@@ -129,8 +128,8 @@ def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_m
                max_degree: int = 8, stride: int = 1, proj=None):
     """Stand-in fit (see the module docstring): IntervalRationalFitter per channel on the median
     projection. ``abs_floor`` = ``abs_floor_rel`` x the channel's largest value."""
-    from fit.coefficients import RationalModel, Variable
-    from fit.fitter import IntervalRationalFitter
+    from fit.rational.fitter import IntervalRationalFitter
+    from fit.rational.model import RationalModel, Variable
 
     pj = proj if proj is not None else C.projected(material)
     th = pj.theta_h[::stride]

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fit.angles import directions_to_half_diff
+from fit.formats.angles import directions_to_half_diff
 
 
 def lambert(albedo=(0.8, 0.5, 0.2)):

@@ -1,8 +1,8 @@
 import numpy as np
 from hypothesis import given, settings, strategies as st
 
-from fit.angles import (cos_theta_i_o, direction_to_spherical, directions_to_half_diff,
-                        half_diff_to_directions, spherical_to_direction)
+from fit.formats.angles import (cos_theta_i_o, direction_to_spherical, directions_to_half_diff,
+                                half_diff_to_directions, spherical_to_direction)
 
 angle = st.floats(0.0, np.pi / 2, allow_nan=False)
 azimuth = st.floats(-np.pi, np.pi, allow_nan=False)

@@ -1,4 +1,4 @@
-"""Pieces layout of the rational inverse CDFs (fit.cdf_pieces, issue 6): the construction's
+"""Pieces layout of the rational inverse CDFs (fit.sampling.pieces, issue 6): the construction's
 guarantees, tampered pieces detected, chi-square and unbiasedness on every shared RGL material,
 the variance gate, file round trip, Warp == NumPy, and a render that agrees with the table's."""
 from __future__ import annotations
@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
-from fit.angles import spherical_to_direction
-from fit.cdf_fit import fit_cdf, load, verify
-from fit.cdf_pieces import _piece, build_pieces, rq_eval, sample_pieces, verify_pieces
-from fit.cdf_table import LUMINANCE, tabulate
+from fit.formats.angles import spherical_to_direction
+from fit.formats.colour import LUMINANCE
+from fit.sampling.cdf_file import fit_cdf, load, verify
+from fit.sampling.pieces import _piece, build_pieces, rq_eval, sample_pieces, verify_pieces
+from fit.sampling.table import tabulate
 from test_cdf_samplers import (THETA_V, _assert_albedo_matches_quadrature, _chi2_pvalue, _rational_cell_probs,
                                 warp_rational_samples)
 
@@ -21,7 +22,7 @@ from analytic import lambert
 
 @pytest.fixture(scope="module")
 def satin():
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     b = load_measured(data_file("rgl/satin_rosaline_rgb.bsdf"))
     fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8), layout="pieces")
@@ -39,10 +40,10 @@ def test_pieces_interpolate_the_table_and_are_monotone():
     edges = np.linspace(0, np.pi / 2, table.n_t + 1)
     for v in range(table.n_v):
         mu = np.linspace(0, 1, 17)
-        t, _ = pm.theta_map(np.full(mu.shape, v), mu)
+        t, _ = pm.row_theta_map(np.full(mu.shape, v), mu)
         np.testing.assert_allclose(t, np.interp(mu, table.cdf_theta[v], edges), atol=1e-12)
         mu = np.linspace(1e-4, 1 - 1e-4, 4001)
-        t, d = pm.theta_map(np.full(mu.shape, v), mu)
+        t, d = pm.row_theta_map(np.full(mu.shape, v), mu)
         assert np.all(np.diff(t) >= 0) and np.all(d > 0)
         fd = np.gradient(t, mu)
         inner = (mu > 1.5 / 16) & (mu < 14.5 / 16) & (np.abs(mu * 16 - np.round(mu * 16)) > 0.01)
@@ -64,18 +65,18 @@ def test_tampered_pieces_are_detected_and_their_rows_go_to_the_table(satin):
     _, fit = satin
     cases = {}
     bad = copy.deepcopy(fit)
-    bad.pieces.theta[2, 10, 2] = -3.0        # a0 < 0: decreasing near the piece's start
+    bad.maps.theta[2, 10, 2] = -3.0          # a0 < 0: decreasing near the piece's start
     cases["fold"] = (bad, 2)
     bad = copy.deepcopy(fit)
-    bad.pieces.phi[5, 7, 3, 0] += 0.05        # jumps past the previous piece's end: a gap
+    bad.maps.phi[5, 7, 3, 0] += 0.05          # jumps past the previous piece's end: a gap
     cases["gap"] = (bad, 5)
     bad = copy.deepcopy(fit)
-    bad.pieces.phi[1, 0, 0, 2:] = -4.0        # 1 + (a0 + a1 - 2) x(1 - x) = 0 at x = 1/2
+    bad.maps.phi[1, 0, 0, 2:] = -4.0          # 1 + (a0 + a1 - 2) x(1 - x) = 0 at x = 1/2
     cases["pole"] = (bad, 1)
     for what, (b, row) in cases.items():
-        assert not verify_pieces(b.pieces)["rows"][row], what
+        assert not verify_pieces(b.maps)["rows"][row], what
         verify(b)
-        assert not b.pieces.row_ok[row] and b.pieces.row_ok.sum() == fit.table.n_v - 1, what
+        assert not b.maps.row_ok[row] and b.maps.row_ok.sum() == fit.table.n_v - 1, what
         tv = np.full(64, b.table.theta_v[row])
         rng = np.random.default_rng(0)
         mu, tau = rng.random(64), rng.random(64)
@@ -91,12 +92,12 @@ def test_pieces_sampler_chi2_and_unbiased_on_rgl(name):
     probabilities from the inverse of its monotone map) and the derivative estimator of the
     luminance albedo against quadrature (3 sigma), theta_v 0/45/85 deg; gate off so every
     row's maps are tested."""
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     brdf = load_measured(data_file(f"rgl/{name}.bsdf"))
     fit = fit_cdf(brdf.evaluate, name=name, table_params=dict(n_v=16), layout="pieces",
                   pieces_kw=dict(max_variance_ratio=None))
-    assert not fit.fallback and fit.pieces.row_ok.all(), fit.reason
+    assert not fit.fallback and fit.maps.row_ok.all(), fit.reason
     rng = np.random.default_rng(5)
     n = 60_000
     for tv in THETA_V:
@@ -114,7 +115,7 @@ def _direct_ratio(b, fit, v, n):
     mu, tau = rng.random(n), rng.random(n)
     tv = np.full(n, fit.table.theta_v[v])
     wo = spherical_to_direction(tv[0], 0.0)
-    ungated = copy.deepcopy(fit.pieces)
+    ungated = copy.deepcopy(fit.maps)
     ungated.row_ok[:] = True
     tl, pl, a = sample_pieces(fit.table, ungated, tv, mu, tau)
     e_r = (b.evaluate(spherical_to_direction(tl, pl), wo) @ LUMINANCE) * np.cos(tl) * a
@@ -139,7 +140,7 @@ def test_pieces_variance_gate(satin):
     assert "variance_first" not in infos[v] and ratios[v] == pytest.approx(_direct_ratio(b, fit, v, n), rel=1e-9)
     lim = float(np.median(ratios))
     gated = fit_cdf(b.evaluate, name="satin", table=fit.table, layout="pieces",
-                    pieces_kw=dict(max_variance_ratio=lim, n_u=fit.pieces.n_u))
+                    pieces_kw=dict(max_variance_ratio=lim, n_u=fit.maps.n_u))
     ginfo = gated.fit_info["rows"]
     again = [i for i, r in enumerate(first) if lim / 1.25 < r <= 2 * lim]
     assert again and [i for i, g in enumerate(ginfo) if "variance_first" in g] == again
@@ -147,7 +148,7 @@ def test_pieces_variance_gate(satin):
     assert ginfo[w]["variance"]["n"] == 8 * n
     assert ginfo[w]["variance"]["ratio"] == pytest.approx(_direct_ratio(b, fit, w, 8 * n), rel=1e-9)
     final = np.array([g["variance"]["ratio"] for g in ginfo])
-    ok = gated.pieces.row_ok
+    ok = gated.maps.row_ok
     assert ok.tolist() == (final <= lim).tolist() and 0 < ok.sum() < len(ok)
     assert all(i["reason"] == f"variance > {lim:g} x the table's" for i, o in zip(ginfo, ok) if not o)
     assert "sampled with the table" in gated.reason
@@ -157,10 +158,10 @@ def test_pieces_phi_count_is_the_fewest_that_keeps_rows_within_the_gate(satin):
     """n_u candidates: the first count whose rows all pass the gate ends the search; else the
     count with the most rational rows, the smallest on ties (checked against each count built
     alone). Satin passes the default gate with the fewest pieces."""
-    from fit.cdf_pieces import _fit_pieces_once, fit_pieces
+    from fit.sampling.variance_gate import _fit_pieces_once, fit_pieces
 
     b, fit = satin
-    assert fit.pieces.n_u == 16 and fit.fit_info["n_u_tried"] == {16: fit.table.n_v}
+    assert fit.maps.n_u == 16 and fit.fit_info["n_u_tried"] == {16: fit.table.n_v}
     ratios = np.array([i["variance"]["ratio"] for i in fit.fit_info["rows"]])
     lim = float(np.sort(ratios)[-3])          # strict enough that 16 pieces leave rows behind
     alone = {nu: _fit_pieces_once(fit.table, b.evaluate, 64, nu, lim, 32768, 8)[1]["verified_rows"]
@@ -182,10 +183,10 @@ def test_warp_phi_knots_share_values_and_slopes(satin):
     """The Warp array stores the phi maps as knots (value, slope): they reproduce every piece's
     ends; a verified row whose pieces do not share a knot cannot be packed (ValueError), a
     table row can."""
-    from warp_rbrdf.techniques.cdf_data import pieces_phi_knots
+    from fit.sampling.pieces import pieces_phi_knots
 
     _, fit = satin
-    pm = fit.pieces
+    pm = fit.maps
     kn = pieces_phi_knots(pm)
     assert kn.shape == pm.phi.shape[:-2] + (pm.n_u + 1, 2)
     np.testing.assert_allclose(kn[..., :-1, 0], pm.phi[..., 0])
@@ -205,13 +206,13 @@ def test_pieces_file_round_trip(satin, tmp_path):
     pieces and the same samples; a row flag list of the wrong length is an error."""
     _, fit = satin
     fit = copy.deepcopy(fit)
-    fit.pieces.row_ok[3] = False
+    fit.maps.row_ok[3] = False
     p = tmp_path / "satin_cdf.json"
     fit.save(p)
     g = load(p)
-    assert g.layout == "pieces" and g.pieces.row_ok.tolist() == fit.pieces.row_ok.tolist()
-    np.testing.assert_array_equal(g.pieces.theta, fit.pieces.theta)
-    np.testing.assert_array_equal(g.pieces.phi, fit.pieces.phi)
+    assert g.layout == "pieces" and g.maps.row_ok.tolist() == fit.maps.row_ok.tolist()
+    np.testing.assert_array_equal(g.maps.theta, fit.maps.theta)
+    np.testing.assert_array_equal(g.maps.phi, fit.maps.phi)
     rng = np.random.default_rng(1)
     tv, mu, tau = rng.random(500) * 1.5, rng.random(500), rng.random(500)
     for a, b in zip(fit.sample(tv, mu, tau), g.sample(tv, mu, tau)):
@@ -238,7 +239,7 @@ def test_pieces_warp_equals_numpy_and_renders_agree(satin):
 
     b, fit = satin
     fit = copy.deepcopy(fit)
-    fit.pieces.row_ok[2] = False              # one table row: the Warp code must branch to it
+    fit.maps.row_ok[2] = False                # one table row: the Warp code must branch to it
     r, tv, pv, xi, wi, w = warp_rational_samples(b, fit)
     wo = spherical_to_direction(tv, pv)
     tl, pl, alpha = fit.sample(tv, xi[:, 0], xi[:, 1])
@@ -257,3 +258,29 @@ def test_pieces_warp_equals_numpy_and_renders_agree(satin):
         means[s] = (img.reshape(-1, 3).mean(0), np.sqrt(var.reshape(-1, 3).sum(0) / 256) / img[..., 0].size)
     (m1, s1), (m2, s2) = means.values()
     assert np.all(np.abs(m1 - m2) < 4 * np.hypot(s1, s2)), means
+
+
+def test_pieces_inverse_maps_and_plot_cdf(satin, tmp_path):
+    """inverse_theta / inverse_phi are the maps fit.sample uses on rational rows and NaN on
+    table rows; plot-cdf draws the pieces layout (two PNGs)."""
+    from fit.sampling.plots import plot_cdf
+
+    _, fit = satin
+    fit = copy.deepcopy(fit)
+    fit.maps.row_ok[2] = False                # one table row
+    n_v = fit.table.n_v
+    rng = np.random.default_rng(2)
+    mu, tau = rng.random(400), rng.random(400)
+    for v in range(n_v):
+        tv = (v + 0.5) * (np.pi / 2) / n_v
+        th = fit.inverse_theta(tv, mu)
+        ph = fit.inverse_phi(tv, th, np.abs(2 * tau - 1))
+        if not fit.maps.row_ok[v]:
+            assert np.isnan(th).all() and np.isnan(ph).all()
+            continue
+        tl, pl, _ = fit.sample(tv, mu, tau)
+        np.testing.assert_allclose(th, tl, atol=1e-12)
+        np.testing.assert_allclose(ph, np.abs(pl), atol=1e-12)
+    files = plot_cdf(fit, tmp_path, prefix="satin")
+    assert [f.name for f in files] == ["satin_theta.png", "satin_phi.png"]
+    assert all(f.stat().st_size > 10_000 for f in files)

@@ -6,10 +6,11 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
-from fit.albedo import directional_albedo
-from fit.angles import spherical_to_direction
-from fit.cdf_fit import CDFFit, fit_cdf, verify
-from fit.cdf_table import LUMINANCE, tabulate
+from fit.formats.angles import spherical_to_direction
+from fit.formats.colour import LUMINANCE
+from fit.projection.albedo import directional_albedo
+from fit.sampling.cdf_file import CDFFit, fit_cdf, verify
+from fit.sampling.table import tabulate
 from test_cdf_table import _chi2_pvalue, _expected_cell_probs
 
 from analytic import lambert
@@ -19,7 +20,7 @@ THETA_V = [0.0, np.radians(45), np.radians(85)]
 
 @pytest.fixture(scope="module")
 def rgl():
-    from fit.io import load_measured
+    from fit.formats import load_measured
 
     out = {}
     for name in RGL_MATERIALS:
@@ -35,19 +36,6 @@ def lambert_fit():
                   phi_kw=dict(degrees=(2, 1)), refinements=0, layout="global")
     assert not fit.fallback, fit.reason
     return f, fit
-
-
-@pytest.fixture(scope="module")
-def rows_fit():
-    """Rows layout (fit.cdf_rows) on satin_rosaline: per-row fits, some rows on the table
-    (variance gate off, so that every verified map is kept and tested)."""
-    from fit.io import load_measured
-
-    b = load_measured(data_file("rgl/satin_rosaline_rgb.bsdf"))
-    fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8), layout="rows",
-                  rows_kw=dict(max_variance_ratio=None))
-    assert fit.layout == "rows" and not fit.fallback, fit.reason
-    return b, fit
 
 
 @pytest.mark.parametrize("name", RGL_MATERIALS)
@@ -126,7 +114,7 @@ def test_broken_fits_trigger_fallback(lambert_fit):
     _, fit = lambert_fit
     # non-monotone: add a large oscillation in mu to the theta numerator
     bad = copy.deepcopy(fit)
-    th = bad.theta
+    th = bad.maps.theta
     e = np.array([[0, 5]])
     scale = 3.0 * np.abs(th.num_coef).max()
     th.num_exponents = np.vstack([th.num_exponents, e])
@@ -135,8 +123,8 @@ def test_broken_fits_trigger_fallback(lambert_fit):
     assert bad.fallback and not bad.verification["theta"]["monotone_grid"]
     # a pole: denominator through zero
     bad2 = copy.deepcopy(fit)
-    bad2.phi.den_coef = bad2.phi.den_coef.copy()
-    bad2.phi.den_coef[0] = -0.5
+    bad2.maps.phi.den_coef = bad2.maps.phi.den_coef.copy()
+    bad2.maps.phi.den_coef[0] = -0.5
     verify(bad2)
     assert bad2.fallback and not bad2.verification["phi"]["q_certified"]
     # the renderer falls back explicitly (printed) to the tabulated sampler
@@ -154,13 +142,13 @@ def test_broken_fits_trigger_fallback(lambert_fit):
 def test_cdf_fit_time_limit_falls_back_explicitly():
     # no time to fit: the material falls back to the tabulated sampler and says why
     fit = fit_cdf(lambert((0.8, 0.6, 0.4)), name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32),
-                  refinements=0, time_limit_s=0.0, layout="rows")
+                  refinements=0, time_limit_s=0.0, layout="global")
     assert fit.fallback and "time limit" in fit.reason
     assert fit.table is not None and fit.fit_info["time_limit_reached"]
 
 
 def test_cdf_file_round_trip(lambert_fit, tmp_path):
-    from fit.cdf_fit import load
+    from fit.sampling.cdf_file import load
 
     _, fit = lambert_fit
     fit.save(tmp_path / "c.json")
@@ -168,6 +156,24 @@ def test_cdf_file_round_trip(lambert_fit, tmp_path):
     assert g.fallback is False and g.verification["theta"]["ok"]
     x = np.random.default_rng(0).random((100, 3))
     np.testing.assert_allclose(g.sample(x[:, 0], x[:, 1], x[:, 2])[2], fit.sample(x[:, 0], x[:, 1], x[:, 2])[2])
+
+
+def test_rows_layout_file_is_refused(lambert_fit, tmp_path):
+    """Files of the removed per-view-row layout ("layout": "rows") are refused in one line."""
+    import json
+
+    from fit.errors import BRDFFileError
+    from fit.sampling.cdf_file import load
+
+    _, fit = lambert_fit
+    p = tmp_path / "rows.json"
+    fit.save(p)
+    d = json.loads(p.read_text())
+    d.update(layout="rows", rows=[None] * fit.table.n_v)
+    p.write_text(json.dumps(d))
+    with pytest.raises(BRDFFileError) as e:
+        load(p)
+    assert str(e.value) == f"{p}: layout 'rows' is no longer supported; re-run rbrdf-fit cdf"
 
 
 # ---- Warp ---------------------------------------------------------------------------------
@@ -245,19 +251,21 @@ def test_monotone_refit_repairs_a_fold_and_stays_unbiased(lambert_fit):
     with quadrature and passes the chi-square test."""
     import copy
 
-    from fit.cdf_fit import HALF_PI, _verify_theta, fit_theta, monotone_refit, verify_axes
+    from fit.formats.angles import HALF_PI
+    from fit.sampling.global_layout import fit_theta, verify_axes, verify_theta
+    from fit.sampling.monotone import monotone_refit
 
     f, fit = lambert_fit
     bad = copy.deepcopy(fit)
-    th = bad.theta
+    th = bad.maps.theta
     th.num_exponents = np.vstack([th.num_exponents, [[0, 5]]])
     th.num_coef = np.concatenate([th.num_coef, [3.0 * np.abs(th.num_coef).max()]])
-    assert not _verify_theta(th)["monotone_grid"]
+    assert not verify_theta(th)["monotone_grid"]
     _, _, (X, lo, hi) = fit_theta(fit.table)
     g, info = monotone_refit(th, 1, X, lo, hi, verify_axes("theta"), HALF_PI)
     assert g is not None and info["min_slope"] > 0
     assert np.array_equal(g.den_coef, th.den_coef)             # Q (and its certificate) kept
-    bad.theta = g
+    bad.maps.theta = g
     verify(bad)
     assert not bad.fallback, bad.reason
     rng = np.random.default_rng(11)
@@ -272,60 +280,7 @@ def test_monotone_refit_repairs_a_fold_and_stays_unbiased(lambert_fit):
         assert abs(est.mean() - q) < 3 * est.std() / np.sqrt(n) + 1e-6
 
 
-@pytest.mark.parametrize("name", [
-    "satin_rosaline_rgb",
-    pytest.param("paper_white_rgb", marks=pytest.mark.slow),
-    pytest.param("colodur_napoli_4f_rgb", marks=pytest.mark.slow),
-    pytest.param("vch_golden_yellow_rgb", marks=pytest.mark.slow),
-    pytest.param("cc_ibiza_sunset_rgb", marks=pytest.mark.slow),
-    pytest.param("cc_iris_purple_gem_rgb", marks=pytest.mark.slow)])
-def test_rational_sampler_on_rgl_material(rgl, name):
-    """The rational inverse CDFs of a measured material (fitted, repaired where they fold,
-    verified): chi-square against the sampler's own density and the derivative estimator of
-    the luminance albedo against quadrature (3 sigma + quadrature uncertainty), theta_v 0/45/85.
-    The variance gate is off here so that the maps themselves are tested on every row."""
-    brdf, table = rgl[name]
-    fit = fit_cdf(brdf.evaluate, name=name, table=table, layout="rows", rows_kw=dict(max_variance_ratio=None))
-    assert not fit.fallback, fit.reason
-    rng = np.random.default_rng(5)
-    n = 60_000
-    for tv in THETA_V:
-        tl, pl, alpha = fit.sample(tv, rng.random(n), rng.random(n))
-        probs, te, pe = _rational_cell_probs(fit, tv)
-        counts, _, _ = np.histogram2d(tl, pl, bins=[te, pe])
-        assert _chi2_pvalue(counts, probs, n) > 1e-4, (name, tv)
-        _assert_albedo_matches_quadrature(brdf, tv, tl, pl, alpha, name)
-
-
-# ---- rows layout (fit.cdf_rows) -------------------------------------------------------------
-def test_rows_layout_round_trip_and_broken_row_goes_to_table(rows_fit, tmp_path):
-    import copy
-
-    from fit.cdf_fit import load
-
-    _, fit = rows_fit
-    fit.save(tmp_path / "r.json")
-    g = load(tmp_path / "r.json")
-    assert g.layout == "rows" and [r is None for r in g.rows] == [r is None for r in fit.rows]
-    x = np.random.default_rng(0).random((500, 3)) * [np.pi / 2, 1, 1]
-    np.testing.assert_allclose(g.sample(*x.T)[2], fit.sample(*x.T)[2])
-    # a pole in one row's phi denominator: that row (only) drops to the table, explicitly
-    v = next(i for i, r in enumerate(fit.rows) if r is not None)
-    bad = copy.deepcopy(fit)
-    G = bad.rows[v][1]
-    G.den_coef = G.den_coef.copy()
-    G.den_coef[0] = -0.5
-    verify(bad)
-    assert bad.rows[v] is None and not bad.verification["rows"][v]["phi_q_certified"]
-    assert sum(r is not None for r in bad.rows) == sum(r is not None for r in fit.rows) - 1
-    # that row now samples exactly like the table
-    tv = (v + 0.5) * (np.pi / 2) / len(fit.rows)
-    mu, tau = np.random.default_rng(1).random((2, 200))
-    tl, pl, a = bad.sample(tv, mu, tau)
-    t2, p2, pdf = fit.table.sample(tv, mu, tau)
-    np.testing.assert_allclose(np.c_[tl, pl, a], np.c_[t2, p2, 1 / pdf])
-
-
+# ---- Warp samples of a measured material (used by test_cdf_pieces) ---------------------------
 def warp_rational_samples(brdf, fit, n: int = 4000):
     """Renderer (plane, measured ``brdf`` with rational inverse CDFs ``fit``) and 4000 Warp
     samples of its rational-derivative strategy: ``(renderer, theta_v, phi_v, xi, wi, alpha)``
@@ -344,80 +299,3 @@ def warp_rational_samples(brdf, fit, n: int = 4000):
     xi = rng.random((n, 2)) * 0.998 + 0.001
     wi, w = r.sample_material("m", spherical_to_direction(tv, pv), xi, "rational-derivative")
     return r, tv, pv, xi, wi, w
-
-
-def test_rows_layout_warp_equals_numpy(rows_fit):
-    """Generated per-row Warp code == NumPy (rational rows and table rows alike)."""
-    b, fit = rows_fit
-    _, tv, pv, xi, wi, w = warp_rational_samples(b, fit)
-    tl, pl, alpha = fit.sample(tv, xi[:, 0], xi[:, 1])
-    np.testing.assert_allclose(wi, spherical_to_direction(tl, pv + pl), atol=5e-4)
-    np.testing.assert_allclose(w, alpha, rtol=3e-3, atol=1e-5)
-
-
-def test_rows_variance_gate_sends_costly_rows_to_the_table(rows_fit):
-    """The variance gate measures what the sampler does: its ratio equals the ratio of the
-    variances of the NumPy reference samplers (rational row vs table) on the same (mu, tau);
-    rows above the limit are sampled with the table and say so; the gate off keeps them."""
-    from fit.angles import spherical_to_direction as sph
-    from fit.cdf_rows import row_variance_ratio
-    from fit.cdf_table import LUMINANCE
-
-    b, ungated = rows_fit
-    n = 8192
-    ratios = {}
-    for v, r in enumerate(ungated.rows):
-        if r is None:
-            continue
-        g = row_variance_ratio(ungated.table, *r, b.evaluate, v, n=n, seed=3)
-        rng = np.random.default_rng(3)
-        mu, tau = rng.random(n), rng.random(n)
-        tv = ungated.table.theta_v[v]
-        wo = sph(tv, 0.0)
-        tl, pl, a = ungated.sample(np.full(n, tv), mu, tau)
-        e_r = (b.evaluate(sph(tl, pl), wo) @ LUMINANCE) * np.cos(tl) * a
-        tl, pl, pdf = ungated.table.sample(np.full(n, tv), mu, tau)
-        e_t = (b.evaluate(sph(tl, pl), wo) @ LUMINANCE) * np.cos(tl) / pdf
-        assert g["ratio"] == pytest.approx(np.var(e_r) / np.var(e_t), rel=1e-9)
-        # both estimators are unbiased for the same integral: means agree within 4 sigma
-        sd = np.sqrt((np.var(e_r) + np.var(e_t)) / n)
-        assert abs(g["mean_rational"] - g["mean_table"]) < 4 * sd + 1e-12
-        ratios[v] = g["ratio"]
-    # a limit between the smallest and largest measured ratio splits the rows
-    lim = float(np.median(list(ratios.values())))
-    gated = fit_cdf(b.evaluate, name="satin", table=ungated.table, layout="rows",
-                    rows_kw=dict(max_variance_ratio=lim, gate_samples=8192))
-    infos = gated.fit_info["rows"]
-    for v, r in enumerate(gated.rows):
-        if "variance" in infos[v]:
-            ratio = infos[v]["variance"]["ratio"]
-            assert (r is None) == (not ratio <= lim)
-            if r is None:
-                assert infos[v]["reason"] == f"variance above {lim:g}x the table's"
-    assert any(r is None and "variance" in i for r, i in zip(gated.rows, infos))
-    assert "variance above" in gated.reason
-
-
-def test_rows_inverse_maps_and_plot_cdf(rows_fit, tmp_path):
-    """inverse_theta / inverse_phi are the maps fit.sample uses on rational rows and NaN on
-    table rows; plot-cdf draws the rows layout (two PNGs)."""
-    from fit.cdf_plots import plot_cdf
-
-    _, fit = rows_fit
-    n_v = len(fit.rows)
-    rng = np.random.default_rng(2)
-    mu, tau = rng.random(400), rng.random(400)
-    for v, r in enumerate(fit.rows):
-        tv = (v + 0.5) * (np.pi / 2) / n_v
-        th = fit.inverse_theta(tv, mu)
-        ph = fit.inverse_phi(tv, th, np.abs(2 * tau - 1))
-        if r is None:
-            assert np.isnan(th).all() and np.isnan(ph).all()
-            continue
-        tl, pl, _ = fit.sample(tv, mu, tau)
-        np.testing.assert_allclose(th, tl, atol=1e-12)
-        np.testing.assert_allclose(ph, np.abs(pl), atol=1e-12)
-    assert any(r is None for r in fit.rows) and any(r is not None for r in fit.rows)
-    files = plot_cdf(fit, tmp_path, prefix="satin")
-    assert [f.name for f in files] == ["satin_theta.png", "satin_phi.png"]
-    assert all(f.stat().st_size > 10_000 for f in files)

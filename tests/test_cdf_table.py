@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from fit.albedo import directional_albedo
-from fit.angles import spherical_to_direction
-from fit.cdf_table import LUMINANCE, tabulate
+from fit.formats.angles import spherical_to_direction
+from fit.formats.colour import LUMINANCE
+from fit.projection.albedo import directional_albedo
+from fit.sampling.table import tabulate
 
 from analytic import glossy_lobe, lambert
 

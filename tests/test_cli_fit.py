@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from fit.cli import main
-from fit.measured import MeasuredBRDF, ProjectedBRDF
-from fit.merl import write_merl
+from fit.formats.measured import MeasuredBRDF, ProjectedBRDF
+from fit.formats.merl import write_merl
 
 from analytic import glossy_lobe, lambert
 
@@ -74,9 +74,9 @@ def test_console_script_help():
 
 
 def test_fit_package_does_not_import_warp():
-    """Every module of the fitter imports without pulling in Warp."""
+    """Every module of the fitter (sub-packages included) imports without pulling in Warp."""
     code = ("import sys, pkgutil, importlib, fit; "
-            "[importlib.import_module('fit.' + m.name) for m in pkgutil.iter_modules(fit.__path__)]; "
+            "[importlib.import_module(m.name) for m in pkgutil.walk_packages(fit.__path__, 'fit.')]; "
             "print('warp' in sys.modules)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
@@ -84,11 +84,11 @@ def test_fit_package_does_not_import_warp():
 
 
 def test_cdf_table_only_writes_a_flagged_table(lambert_file, tmp_path, capsys):
-    from fit.cdf_fit import load
+    from fit.sampling.cdf_file import load
 
     out = tmp_path / "l_cdf.json"
     assert main(["cdf", str(lambert_file), "--table-only", "--n-v", "4", "--n-t", "16", "--n-p", "16",
                  "--out", str(out)]) == 0
     fit = load(out)
-    assert fit.fallback and "--table-only" in fit.reason and fit.theta is None
+    assert fit.fallback and "--table-only" in fit.reason and fit.maps is None
     assert fit.table is not None and fit.table_params["n_t"] == 16

@@ -4,7 +4,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from conftest import data_file
-from fit.fitter import IntervalRationalFitter, intervals_from_tolerance
+from fit.rational.fitter import IntervalRationalFitter, intervals_from_tolerance
 
 KIRBY2_CERTIFIED = [1.6745063063e+00, -1.3927397867e-01, 2.5961181191e-03,
                     -1.7241811870e-03, 2.1664802578e-05]
@@ -26,7 +26,7 @@ def test_kirby2_interval_fit_then_least_squares():
     r = IntervalRationalFitter(tol=0.05, abs_floor=0.2, degrees=(2, 2)).fit(x, y)
     assert r.valid and (r.num_degree, r.den_degree) == (2, 2)
     f = r.function.normalized()
-    from fit.rational import RationalFunction
+    from fit.rational.function import RationalFunction
 
     def make(z):
         return RationalFunction(f.domain, f.num_exponents, z[:3], f.den_exponents, np.r_[1.0, z[3:]])

@@ -4,11 +4,12 @@ import os
 import numpy as np
 import pytest
 
-from fit.angles import half_diff_to_directions, spherical_to_direction
 from fit.errors import BRDFFileError
-from fit.measured import (MERL_SHAPE, MeasuredBRDF, phi_d_centres, phi_d_index, theta_d_centres,
-                          theta_d_index, theta_h_centres, theta_h_index)
-from fit.merl import MERL_FILE_BYTES, MERL_SCALE, read_merl, write_merl
+from fit.formats.angles import half_diff_to_directions, spherical_to_direction
+from fit.formats.grid import (MERL_SHAPE, phi_d_centres, phi_d_index, theta_d_centres, theta_d_index,
+                              theta_h_centres, theta_h_index)
+from fit.formats.measured import MeasuredBRDF
+from fit.formats.merl import MERL_FILE_BYTES, MERL_SCALE, read_merl, write_merl
 
 from analytic import glossy_lobe, lambert
 

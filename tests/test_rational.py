@@ -4,10 +4,12 @@ import json
 import numpy as np
 import pytest
 
-from fit.coefficients import RationalModel, Variable, load, save
 from fit.errors import BRDFFileError
-from fit.rational import (RationalFunction, RationalRGB, bernstein_coefficients, chebyshev_basis,
-                          tensor_exponents, total_degree_exponents)
+from fit.rational.basis import chebyshev_basis, tensor_exponents, total_degree_exponents
+from fit.rational.bernstein import bernstein_coefficients
+from fit.rational.coefficient_file import load, save
+from fit.rational.function import RationalFunction, RationalRGB
+from fit.rational.model import RationalModel, Variable
 
 
 def _random_rf(n_vars, m, n, seed=0):
@@ -123,7 +125,7 @@ def test_json_errors(tmp_path):
 
 
 def _piecewise():
-    from fit.coefficients import PiecewiseRationalModel
+    from fit.rational.model import PiecewiseRationalModel
 
     edges = [0.0, 0.6, 1.3]
     pieces = []

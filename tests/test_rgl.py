@@ -1,4 +1,4 @@
-"""RGL-EPFL ``.bsdf`` reader and evaluation (fit.rgl)."""
+"""RGL-EPFL ``.bsdf`` reader and evaluation (fit.formats.rgl, fit.formats.tensor_file)."""
 from __future__ import annotations
 
 import struct
@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
-from fit.albedo import directional_albedo
-from fit.angles import half_diff_to_directions, spherical_to_direction
 from fit.errors import BRDFFileError
-from fit.measured import MeasuredBRDF, phi_d_centres, theta_d_centres, theta_h_centres
-from fit.rgl import RGLBRDF, parse_tensor_file, read_rgl, read_tensor_file, write_tensor_file
+from fit.formats.angles import half_diff_to_directions, spherical_to_direction
+from fit.formats.grid import phi_d_centres, theta_d_centres, theta_h_centres
+from fit.formats.measured import MeasuredBRDF
+from fit.formats.rgl import RGLBRDF, read_rgl
+from fit.formats.tensor_file import parse_tensor_file, read_tensor_file, write_tensor_file
+from fit.projection.albedo import directional_albedo
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 # Materials without a sharp specular lobe (paint, paper, satin film) and glossy vinyl films.

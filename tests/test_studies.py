@@ -161,7 +161,7 @@ def test_view_angle_is_measured_to_each_pixels_ray_not_the_camera_axis():
 def test_fit_study_smoke(tmp_path, rgl_data):
     """Fit (the project's fitter if present, otherwise the labelled direct stand-in) at a tiny
     size, render it, ΔE and evaluation cost."""
-    import fit.fitter  # noqa: F401
+    import fit.rational.fitter  # noqa: F401
     from studies import fit_study
 
     r = fit_study.run("smoke", tmp_path, allow_direct=True, quiet=True)
@@ -201,7 +201,7 @@ def test_model_summary_core_guarantee_follows_the_fitters_record(tmp_path):
     fit whose band alone failed is "core", and one whose core failed is not."""
     import copy
 
-    from fit.coefficients import load
+    from fit.rational.coefficient_file import load, save
     from studies import fits as F
     from warp_rbrdf.paths import PACKAGE_DATA
 
@@ -213,7 +213,7 @@ def test_model_summary_core_guarantee_follows_the_fitters_record(tmp_path):
     assert not F.model_summary(bad)["core_guaranteed"]
     # a flagged file in the cache is refused unless the caller accepts best efforts
     tol = float(m.fit_info["tolerance"])
-    bad.save(tmp_path / f"paper_white_rgb_tol{F._tag(tol)}_cli.json")
+    save(bad, tmp_path / f"paper_white_rgb_tol{F._tag(tol)}_cli.json")
     none, info = F.rational_model("paper", tol, allow_fit=False, fit_dir=tmp_path)
     assert none is None and "flagged" in info["error"]
     got, info = F.rational_model("paper", tol, allow_fit=False, fit_dir=tmp_path, allow_infeasible=True)
@@ -234,7 +234,7 @@ def failure_map(tmp_path_factory, rgl_data):
 
 
 def test_mirror_lobe_file_is_exact_merl_layout(failure_map):
-    from fit.merl import MERL_FILE_BYTES, read_merl
+    from fit.formats.merl import MERL_FILE_BYTES, read_merl
     from studies import failure_map as fm
 
     p = failure_map["out"] / f"mirror_n{fm.MIRROR_EXPONENT}.binary"

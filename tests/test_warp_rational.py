@@ -1,4 +1,4 @@
-"""The generated Warp code of rational materials against fit.coefficients' NumPy evaluation."""
+"""The generated Warp code of rational materials against fit.rational.model's NumPy evaluation."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,26 +8,28 @@ from warp_rbrdf import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.scene import MaterialSpec
 
-import fit.coefficients as coefficients  # noqa: E402
-import fit.rational as rational  # noqa: E402
+import fit.rational.basis as basis  # noqa: E402
+import fit.rational.coefficient_file as coefficient_file  # noqa: E402
+import fit.rational.function as function  # noqa: E402
+import fit.rational.model as model_types  # noqa: E402
 
 
 def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radians(80.0)), value_max=None):
     rng = np.random.default_rng(seed)
     dom = [(0.0, np.pi / 2), tuple(theta_d_range)]
-    variables = [coefficients.Variable("theta_h", "rad", "sqrt", dom[0]),
-                 coefficients.Variable("theta_d", "rad", "identity", dom[1])]
+    variables = [model_types.Variable("theta_h", "rad", "sqrt", dom[0]),
+                 model_types.Variable("theta_d", "rad", "identity", dom[1])]
     rf_dom = np.array([v.rf_domain for v in variables])
-    num_e = rational.tensor_exponents((5, 3))
-    den_e = rational.total_degree_exponents(2, 2)
+    num_e = basis.tensor_exponents((5, 3))
+    den_e = basis.total_degree_exponents(2, 2)
     funcs = []
     for c in range(3):
         p = rng.normal(size=len(num_e)) * 0.3
         p[0] = 1.5 + c
         q = rng.normal(size=len(den_e)) * 0.05
         q[0] = 1.0
-        funcs.append(rational.RationalFunction(rf_dom, num_e, p, den_e, q))
-    return coefficients.RationalModel(name="random", variables=variables, functions=funcs,
+        funcs.append(function.RationalFunction(rf_dom, num_e, p, den_e, q))
+    return model_types.RationalModel(name="random", variables=variables, functions=funcs,
                                       value_transform=value_transform, value_max=value_max,
                                       value_offset=0.01 if value_transform == "log" else 0.0)
 
@@ -42,17 +44,17 @@ def piecewise_model(value_transform="log"):
     sub = []
     for j in range(2):
         m = random_model(value_transform, seed=10 + j, theta_d_range=(e[0], e[1]), value_max=8.0)
-        m.variables[0] = coefficients.Variable("theta_h", "rad", "sqrt", (h[j], h[j + 1]))
+        m.variables[0] = model_types.Variable("theta_h", "rad", "sqrt", (h[j], h[j + 1]))
         for f in m.functions:
             f.domain[0] = m.variables[0].rf_domain
         sub.append(m)
-    pieces[0] = coefficients.PiecewiseRationalModel(
-        name="peak", variables=[coefficients.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
-                                coefficients.Variable("theta_d", "rad", "identity", (e[0], e[1]))],
+    pieces[0] = model_types.PiecewiseRationalModel(
+        name="peak", variables=[model_types.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                                model_types.Variable("theta_d", "rad", "identity", (e[0], e[1]))],
         split_variable="theta_h", edges=h, pieces=sub)
-    return coefficients.PiecewiseRationalModel(
-        name="pieces", variables=[coefficients.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
-                                  coefficients.Variable("theta_d", "rad", "identity", (e[0], e[-1]))],
+    return model_types.PiecewiseRationalModel(
+        name="pieces", variables=[model_types.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                                  model_types.Variable("theta_d", "rad", "identity", (e[0], e[-1]))],
         split_variable="theta_d", edges=list(e), pieces=pieces)
 
 
@@ -62,7 +64,7 @@ def test_rational_matches_numpy(value_transform):
     spec = MaterialSpec(name="m", type="rational", data=model)
     r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
     rng = np.random.default_rng(5)
-    from fit.angles import spherical_to_direction
+    from fit.formats.angles import spherical_to_direction
 
     n = 5000
     wi = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
@@ -78,7 +80,7 @@ def test_rational_matches_numpy(value_transform):
 def test_rational_file_round_trip(tmp_path):
     model = random_model()
     path = tmp_path / "m.json"
-    coefficients.save(model, path)
+    coefficient_file.save(model, path)
     from warp_rbrdf.scene import parse_scene
 
     sc = parse_scene(f"""
@@ -102,7 +104,7 @@ def test_default_scene_uses_shipped_coefficients(tmp_path, monkeypatch):
     import warp_rbrdf.defaults as defaults
     import warp_rbrdf.paths as paths
 
-    coefficients.save(random_model(), tmp_path / "shipped.json")
+    coefficient_file.save(random_model(), tmp_path / "shipped.json")
     monkeypatch.setattr(defaults, "PACKAGE_DATA", tmp_path)
     monkeypatch.setattr(paths, "PACKAGE_DATA", tmp_path)
     sc = defaults.default_scene()
@@ -116,9 +118,9 @@ def test_nested_piecewise_file_round_trip(tmp_path):
     """A theta_d-piecewise model whose first piece is split again in theta_h (version 2, nested
     pieces) and an upper value clamp survive a JSON round trip bit for bit."""
     model = piecewise_model()
-    coefficients.save(model, tmp_path / "nested.json")
-    back = coefficients.load(tmp_path / "nested.json")
-    assert isinstance(back.pieces[0], coefficients.PiecewiseRationalModel)
+    coefficient_file.save(model, tmp_path / "nested.json")
+    back = coefficient_file.load(tmp_path / "nested.json")
+    assert isinstance(back.pieces[0], model_types.PiecewiseRationalModel)
     assert back.value_max == 8.0 and back.n_coefficients == model.n_coefficients
     x = np.random.default_rng(2).uniform([0, 0], [1.6, 1.5], size=(4000, 2))
     got = back(x)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
+from fit.formats import load_measured
 
 from ..errors import SceneError
 from .data import LoadedMaterial, Materials
@@ -15,8 +16,6 @@ def read(spec, scene_file, key):
     """The :class:`MeasuredBRDF` of a spec (``spec.data`` when given in memory, else its file)."""
     if spec.data is not None:
         return spec.data
-    from fit.io import load_measured  # MERGE: fit.formats
-
     try:
         return load_measured(spec.file)
     except Exception as e:  # noqa: BLE001 - BRDFFileError and I/O errors, reported in one line

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
+from fit.formats.measured import ProjectedBRDF
+from fit.projection.project import project
 
 from ..errors import SceneError
 from . import measured
@@ -16,15 +18,11 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     if spec.data is not None:
         p = spec.data
     elif spec.file.suffix.lower() == ".npz":
-        from fit.measured import ProjectedBRDF  # MERGE: fit.formats.measured
-
         try:
             p = ProjectedBRDF.load(spec.file)
         except Exception as e:  # noqa: BLE001 - one line
             raise SceneError(scene_file, f"{key}.file", f"cannot read projected BRDF ({e})") from None
     else:
-        from fit.projection import project
-
         p = project(measured.read(spec, scene_file, key), statistic=spec.statistic)
     return LoadedMaterial(spec, p, measured.scaled(p.evaluate, spec.scale),
                           table=np.nan_to_num(p.value, nan=0.0))

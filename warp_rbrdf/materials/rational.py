@@ -1,8 +1,8 @@
-"""``rational``: the fitter's ``rbrdf-rational`` coefficient files (:mod:`fit.coefficients`,
+"""``rational``: the fitter's ``rbrdf-rational`` coefficient files (:mod:`fit.rational.coefficient_file`,
 versions 1 and 2) compiled to generated, fully unrolled Warp code; ``scale`` multiplies them.
 
 For each rational material the generator writes one ``@wp.func`` ``(wi, wo) -> vec3`` that
-follows the file's evaluation recipe exactly (see :mod:`fit.coefficients`): Rusinkiewicz angles
+follows the file's evaluation recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles
 -> clamp onto the fitted domain -> input transform (identity / sqrt) -> map onto [-1, 1] ->
 Chebyshev recurrences up to the largest exponent used -> P/Q per channel as sums grouped by the
 first variable's exponent -> value transform (linear / log) -> ``max(y, min)``; 0 below the
@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
+from fit.rational.coefficient_file import load as load_coefficients
 
 from ..codegen import lit as _lit
 from ..codegen import load_generated
@@ -27,12 +28,10 @@ SUPPORTED_VARIABLES = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
 
 
 def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
-    """The :class:`fit.coefficients.RationalModel` of a material spec (``spec.data`` or file)."""
+    """The :class:`fit.rational.model.RationalModel` of a material spec (``spec.data`` or file)."""
     if spec.data is not None:
         model = spec.data
     else:
-        from fit.coefficients import load as load_coefficients  # MERGE: fit.rational.coefficient_file
-
         try:
             model = load_coefficients(spec.file)
         except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line
@@ -77,7 +76,7 @@ def _poly(lines, name, exps, coefs):
 def generate_function(model, name: str) -> str:
     """Source of ``@wp.func name(wi, wo) -> wp.vec3`` for a rational BRDF model; a piecewise
     model (file version 2) gets one function per piece (``name_p0``, ...) and a dispatcher
-    that picks the piece from the split variable, clamped as in :mod:`fit.coefficients`."""
+    that picks the piece from the split variable, clamped as in :mod:`fit.rational.coefficient_file`."""
     pieces = getattr(model, "pieces", None)
     if pieces is None:
         return _generate_single(model, name)

@@ -52,7 +52,7 @@ class MaterialSpec:
     statistic: str = "median"
     scale: tuple = (1.0, 1.0, 1.0)
     data: Any = None          # in-memory table / rational function (Python API only)
-    cdf: Any = None           # rbrdf-cdf file path or in-memory fit.cdf_fit.CDFFit
+    cdf: Any = None           # rbrdf-cdf file path or in-memory fit.sampling.cdf_file.CDFFit
 
 
 @dataclass

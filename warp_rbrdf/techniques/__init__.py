@@ -12,6 +12,6 @@ Every technique module has the Warp functions
 techniques return the two above; the rational one adds generated code for global-layout fits),
 and the NumPy references ``numpy_sample(cdf, wo, xi) -> (wi, weight)`` and
 ``numpy_pdf(cdf, wi, wo)``, where ``cdf`` is the material's inverse-CDF data (None, a
-:class:`fit.cdf_table.CDFTable` or a :class:`fit.cdf_fit.CDFFit`). :mod:`.cdf_data` prepares and
+:class:`fit.sampling.table.CDFTable` or a :class:`fit.sampling.cdf_file.CDFFit`). :mod:`.cdf_data` prepares and
 packs that data.
 """

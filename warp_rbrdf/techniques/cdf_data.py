@@ -13,6 +13,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from fit.sampling.cdf_file import fit_cdf
+from fit.sampling.cdf_file import load as load_cdf
+from fit.sampling.pieces import PieceMaps, pieces_phi_knots
+from fit.sampling.table import tabulate
 
 from .. import registry
 from ..errors import SceneError
@@ -25,18 +29,16 @@ def _read_cdf(spec, scene_file, key):
     cdf = getattr(spec, "cdf", None)
     if cdf is None or not isinstance(cdf, (str, bytes, Path)):
         return cdf
-    from fit.cdf_fit import load  # MERGE: fit.sampling.cdf_file
-
     try:
-        return load(cdf)
+        return load_cdf(cdf)
     except Exception as e:  # noqa: BLE001 - BRDFFileError and I/O errors, one line
         raise SceneError(scene_file, f"{key}.cdf", f"cannot read CDF file ({e})") from None
 
 
 def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
     """``(strategy actually used, inverse-CDF data)`` of one material: data None (hemisphere
-    techniques), a :class:`fit.cdf_table.CDFTable` (tabulated) or a verified
-    :class:`fit.cdf_fit.CDFFit` (rational)."""
+    techniques), a :class:`fit.sampling.table.CDFTable` (tabulated) or a verified
+    :class:`fit.sampling.cdf_file.CDFFit` (rational)."""
     strat = registry.strategy(spec.sampler)
     tech = registry.technique(strat.technique)
     if not tech.needs_table:
@@ -44,8 +46,6 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
     fitobj = _read_cdf(spec, scene_file, key)
     if tech.needs_fit:
         if fitobj is None:
-            from fit.cdf_fit import fit_cdf  # MERGE: fit.sampling.cdf_file
-
             log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
                 f"from `rbrdf-fit cdf` to skip this)")
             fitobj = fit_cdf(loaded.evaluate, name=spec.name)
@@ -56,31 +56,7 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
         return strat, fitobj
     if fitobj is not None:
         return strat, fitobj.table
-    from fit.cdf_table import tabulate  # MERGE: fit.sampling.table
-
     return strat, tabulate(loaded.evaluate)
-
-
-def pieces_phi_knots(pm) -> np.ndarray:  # MERGE: moves to fit.sampling.pieces
-    """(n_v, n_mu, n_u + 1, 2): the phi pieces ``(y_k, h, a0, a1)`` of ``pm`` as knots (value,
-    slope dy/dx in piece-local x): the form :func:`.rational.rq_knots` reads (half the bytes of
-    the pieces, which matters when view rows change from sample to sample: the phi maps of a
-    material are then read at random, 64 x 64 pieces = 2 MB as pieces, 1.06 MB as knots).
-    Raises ValueError where a verified row's pieces do not share their knots (their values or
-    slopes differ between the end of a piece and the start of the next)."""
-    c = pm.phi
-    y = np.concatenate([c[..., 0], (c[..., -1, 0] + c[..., -1, 1])[..., None]], axis=-1)
-    s_start = c[..., 2] * c[..., 1]                  # a0 h: slope at x = 0 of each piece
-    s_end = c[..., 3] * c[..., 1]                    # a1 h: slope at x = 1
-    s = np.concatenate([s_start, s_end[..., -1:]], axis=-1)
-    ok = np.asarray(pm.row_ok, bool)
-    tol = 1e-9 * (1.0 + np.abs(y[..., 1:-1]))
-    bad = (np.abs(c[..., :-1, 0] + c[..., :-1, 1] - y[..., 1:-1]) > tol) \
-        | (np.abs(s_end[..., :-1] - s[..., 1:-1]) > 1e-9 * (1.0 + np.abs(s[..., 1:-1])))
-    rows = np.flatnonzero(bad.any(axis=(-1, -2)) & ok)
-    if rows.size:
-        raise ValueError(f"phi pieces of rows {rows.tolist()} do not share their knots")
-    return np.stack([y, s], axis=-1)
 
 
 def pack(cdfs) -> dict:
@@ -102,8 +78,8 @@ def pack(cdfs) -> dict:
         info[m, CDF_LAYOUT] = LAYOUT_NONE
         if cdf is table:
             continue
-        if cdf.pieces is not None:  # MERGE: cdf.maps
-            pm = cdf.pieces
+        if isinstance(cdf.maps, PieceMaps):
+            pm = cdf.maps
             info[m, CDF_LAYOUT] = LAYOUT_PIECES
             info[m, CDF_MAPS] = pw.add(np.concatenate([pm.theta.ravel(), pieces_phi_knots(pm).ravel()]))
             info[m, [CDF_N_MU, CDF_N_U]] = pm.n_mu, pm.n_u

@@ -1,5 +1,5 @@
 """``tabulated`` technique: the material's tabulated inverse CDFs of rho cos (luminance) per
-view row (:class:`fit.cdf_table.CDFTable`), inverted by binary search, exactly as
+view row (:class:`fit.sampling.table.CDFTable`), inverted by binary search, exactly as
 :meth:`CDFTable.sample` (its NumPy reference). Weight 1/pdf with the table's exact density.
 
 Frame: ``theta_v, phi_v`` of ``wo`` in the local frame; the sampled light's azimuth ``phi_l`` is
@@ -37,7 +37,7 @@ def tab_row(theta_v: float, n_v: int) -> int:
 @wp.func
 def tab_sample(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
                n_v: int, n_t: int, n_p: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
-    """(theta_l, phi_l, pdf) exactly as fit.cdf_table.CDFTable.sample (binary search)."""
+    """(theta_l, phi_l, pdf) exactly as fit.sampling.table.CDFTable.sample (binary search)."""
     v = tab_row(theta_v, n_v)
     st = off_t + v * (n_t + 1)
     j = wp.clamp(_count_le(cdf_t, st, n_t, mu) - 1, 0, n_t - 1)

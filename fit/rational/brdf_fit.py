@@ -9,7 +9,7 @@ Domain and grazing policy (stored in the coefficient file's ``domain_policy`` an
 * The fitted box is ``theta_h in [0, 90] deg`` x ``theta_d in [0, THETA_D_MAX_DEG = 78.5] deg``,
   split in theta_d into a **guaranteed core** ``[0, core]`` and a **grazing band**
   ``[core, 78.5]``, each with its own rational functions (file version 2, see
-  :class:`fit.coefficients.PiecewiseRationalModel`). ``core`` is the largest of
+  :class:`fit.rational.model.PiecewiseRationalModel`). ``core`` is the largest of
   ``CORE_CANDIDATES_DEG`` (60, 50, 40 deg) on which every channel meets the tolerance, or a
   value given by the caller (78.5: one function per channel over the whole box, version 1).
   Why: near grazing the median clusters keep only the phi_d samples that survive the cut-off,
@@ -44,17 +44,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .coefficients import (PiecewiseRationalModel, RationalModel, Variable, apply_input_transform,
-                           apply_value_transform)
+from ..formats.colour import LUMINANCE
+from ..formats.grid import N_PHI_D
+from ..formats.measured import ProjectedBRDF
+from ..projection.albedo import directional_albedo
+from ..projection.project import project
+from .brdf_model import CHANNELS, GRAZING_CUTOFF_DEG, THETA_D_MAX_DEG, brdf_model, split_core
 from .fitter import FitResult, IntervalRationalFitter, intervals_from_spread, intervals_from_tolerance
-from .cdf_table import LUMINANCE
-from .measured import N_PHI_D, MeasuredBRDF, ProjectedBRDF
+from .model import Variable, apply_input_transform, apply_value_transform, invert_value_transform
 
-GRAZING_CUTOFF_DEG = 79.0
-THETA_D_MAX_DEG = 78.5
-THETA_H_MAX = 0.5 * np.pi
 INTERVALS = ("tol", "tol+spread")
-CHANNELS = ("R", "G", "B")
 
 
 @dataclass
@@ -81,13 +80,6 @@ class PieceFit:
     @property
     def valid(self) -> bool:
         return not self.rejected and len(self.results) == 3 and all(r.valid for r in self.results)
-
-
-def split_core(pieces) -> tuple:
-    """``(core pieces, band pieces)``: the core is every piece with the first piece's theta_d
-    range (``fit_brdf`` puts the core first)."""
-    core = [pc for pc in pieces if pc.theta_d_range_deg == pieces[0].theta_d_range_deg]
-    return core, [pc for pc in pieces if pc.theta_d_range_deg != pieces[0].theta_d_range_deg]
 
 
 @dataclass
@@ -141,18 +133,14 @@ def project_for_fit(brdf, grazing_cutoff_deg: float = GRAZING_CUTOFF_DEG) -> Pro
     """Median projection with the grazing cut-off on max(theta_i, theta_o)."""
     if isinstance(brdf, ProjectedBRDF):
         return brdf
-    from .projection import project
-
     return project(brdf, statistic="median", grazing_cutoff_deg=grazing_cutoff_deg, grazing_angle="theta_io")
 
 
 def white_sky_albedo(p: ProjectedBRDF, n_incidence: int = 9) -> np.ndarray:
     """Bihemispherical reflectance A per channel, shape (3,): the fraction of uniform white
     sky light reflected, ``A = 2 int_0^{pi/2} a(theta_i) cos(theta_i) sin(theta_i) d theta_i``
-    with ``a`` the directional albedo of the projected table (:mod:`fit.albedo`; midpoint
+    with ``a`` the directional albedo of the projected table (:mod:`fit.projection.albedo`; midpoint
     rule, ``n_incidence`` nodes in theta_i; empty clusters count as 0)."""
-    from .albedo import directional_albedo
-
     def ev(wi, wo):
         return np.nan_to_num(p.evaluate(wi, wo), nan=0.0)
 
@@ -251,7 +239,7 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     _, tdg = np.meshgrid(p.theta_h, p.theta_d, indexing="ij")
     vals = p.value[tdg <= np.deg2rad(THETA_D_MAX_DEG) + 1e-12]
     value_max = 2.0 * float(np.nanmax(vals))
-    kw = dict(tol=tol, theta_h_transform=theta_h_transform, value_transform=value_transform, value_max=value_max,
+    kw = dict(tol=tol, theta_h_transform=theta_h_transform, value_transform=value_transform,
               offset=offset, max_degree=max_degree, max_den_degree=max_den_degree,
               floor_frac=floor_frac, spread_k=spread_k, rho_ref=rho_ref, progress=progress)
     if core_theta_d_deg == "auto":
@@ -282,11 +270,12 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
             band_fit = _fit_piece(p, band, band_intervals, partial=band_partial, **kw)
         pieces.append(band_fit)
     total = time.perf_counter() - t0
-    model = _model(p, name, pieces, kw, intervals, band_intervals, total, source_file)
+    model = brdf_model(p, name, pieces, dict(kw, value_max=value_max), intervals, band_intervals, total,
+                       source_file)
     return BRDFFit(model, pieces, total)
 
 
-def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset, value_max,
+def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,
                max_degree, max_den_degree, floor_frac, spread_k, rho_ref, progress,
                stop_on_infeasible=False, partial=None, theta_h_range_deg=(0.0, 90.0)) -> PieceFit:
     a, b = theta_d_range_deg
@@ -349,100 +338,6 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
     return piece
 
 
-def _piece_model(pc, name, kw, vt, offset) -> RationalModel:
-    variables = [Variable("theta_h", "rad", kw["theta_h_transform"], tuple(np.deg2rad(pc.theta_h_range_deg))),
-                 Variable("theta_d", "rad", "identity", tuple(np.deg2rad(pc.theta_d_range_deg)))]
-    finfo = []
-    for r, err in zip(pc.results, pc.errors):
-        finfo.append({"feasible": bool(r.feasible), "valid": bool(r.valid),
-                      "num_degree": r.num_degree, "den_degree": r.den_degree, **err,
-                      "q_certificate": {"certified": bool(r.certificate and r.certificate.certified),
-                                        "lower_bound": r.certificate.lower_bound if r.certificate else None,
-                                        "method": r.certificate.method if r.certificate else ""},
-                      "fit_time_s": r.time_s})
-    return RationalModel(name=name, variables=variables, functions=[r.function for r in pc.results],
-                         outputs=CHANNELS, kind="brdf", value_transform=vt, value_offset=offset,
-                         value_min=0.0, value_max=kw["value_max"], function_info=finfo)
-
-
-def _piece_info(pc) -> dict:
-    return {"theta_d_range_deg": list(pc.theta_d_range_deg), "theta_h_range_deg": list(pc.theta_h_range_deg),
-            "intervals": pc.intervals,
-            "partial_clusters": (None if pc.partial is None else
-                                 {"min_sample_fraction": pc.partial[0], "factor": pc.partial[1]}),
-            "guaranteed": pc.valid,
-            "max_interval_ratio": max(e["max_interval_ratio"] for e in pc.errors),
-            "max_rel_error": max(e["max_rel_error"] for e in pc.errors)}
-
-
-def _model(p, name, pieces, kw, intervals, band_intervals, total, source_file):
-    tol, vt, offset = kw["tol"], kw["value_transform"], kw["offset"]
-    floors = [kw["floor_frac"] * tol * float(r) for r in kw["rho_ref"]]
-    core = pieces[0].theta_d_range_deg[1]
-    groups: dict = {}
-    for pc in pieces:                       # theta_d ranges in order, theta_h sub-pieces inside
-        groups.setdefault(pc.theta_d_range_deg, []).append(pc)
-    models, infos = [], []
-    for (a, b), grp in groups.items():
-        grp_infos = [_piece_info(pc) for pc in grp]
-        if len(grp) == 1:
-            models.append(_piece_model(grp[0], name, kw, vt, offset))
-            infos.append(grp_infos[0])
-            continue
-        edges = [grp[0].theta_h_range_deg[0]] + [pc.theta_h_range_deg[1] for pc in grp]
-        models.append(PiecewiseRationalModel(
-            name=name, variables=[Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
-                                  Variable("theta_d", "rad", "identity", tuple(np.deg2rad([a, b])))],
-            split_variable="theta_h", edges=[float(np.deg2rad(e)) for e in edges],
-            pieces=[_piece_model(pc, name, kw, vt, offset) for pc in grp], kind="brdf",
-            piece_info=grp_infos))
-        infos.append({"theta_d_range_deg": [a, b], "theta_h_split_deg": edges[1:-1], "intervals": grp[0].intervals,
-                      "guaranteed": all(pc.valid for pc in grp),
-                      "max_interval_ratio": max(i["max_interval_ratio"] for i in grp_infos),
-                      "max_rel_error": max(i["max_rel_error"] for i in grp_infos)})
-    core_pcs, band = split_core(pieces)
-    core_ok = all(pc.valid for pc in core_pcs)
-    split_txt = (f", split at theta_h = {pieces[0].theta_h_range_deg[1]:g} deg into a peak piece and the rest"
-                 if pieces[0].theta_h_range_deg != (0.0, 90.0) else "")
-    policy = {
-        "outside": "clamp", "below_horizon": "zero", "theta_d_max_deg": THETA_D_MAX_DEG,
-        "guaranteed_theta_d_max_deg": core if core_ok else None,
-        "grazing": (f"samples with max(theta_i, theta_o) > {GRAZING_CUTOFF_DEG} deg dropped before the "
-                    f"median projection; theta_d > {THETA_D_MAX_DEG} deg is clamped to "
-                    f"{THETA_D_MAX_DEG} deg (value at the cut-off, no 1/cos growth)"),
-        "guarantee": (f"theta_d <= {core:g} deg{split_txt}: every cluster within {intervals!r} intervals "
-                      f"(relative {tol:g}, absolute floor tol * A_Y / pi, A_Y = white-sky luminance albedo)"
-                      + (f"; {core:g} < theta_d <= {THETA_D_MAX_DEG} deg: {band_intervals!r} intervals"
-                         + (f" (clusters with < {band[0].partial[0]:g} of their samples left by the "
-                            f"grazing cut-off: within a factor {band[0].partial[1]:g})"
-                            if band[0].partial else "") + ", "
-                         f"{'met' if band[0].valid else 'best effort (NOT met, see pieces)'}"
-                         if band else "") + "; Q > 0 on every piece's box (Bernstein certificate)"),
-    }
-    fit_info = {"tolerance": tol, "tolerance_kind": "relative", "intervals": intervals,
-                "band_intervals": band_intervals if len(pieces) > 1 else None,
-                "spread_k": kw["spread_k"], "abs_floor": floors, "floor_frac": kw["floor_frac"],
-                "white_sky_albedo": [float(np.pi * r) for r in kw["rho_ref"]],
-                "statistic": "median", "grazing_cutoff_deg": GRAZING_CUTOFF_DEG, "time_s": total,
-                "fitter": "fit.fitter.IntervalRationalFitter (LP, HiGHS, constraint generation)",
-                "max_degree": kw["max_degree"], "max_den_degree": kw["max_den_degree"],
-                "core_theta_d_deg": core,
-                "theta_h_split_deg": (pieces[0].theta_h_range_deg[1]
-                                      if pieces[0].theta_h_range_deg != (0.0, 90.0) else None),
-                "feasible": [all(bool(pc.results[c].feasible) for pc in core_pcs) for c in range(3)],
-                "valid": [all(bool(pc.results[c].valid) for pc in core_pcs) for c in range(3)]}
-    source = {"file": source_file or (p.source.split("/")[-1] if p.source else ""), "sha256": p.source_sha256}
-    if len(models) == 1:
-        m = models[0]
-        m.domain_policy, m.fit_info, m.source = policy, fit_info, source
-        return m
-    return PiecewiseRationalModel(
-        name=name, variables=[Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
-                              Variable("theta_d", "rad", "identity", (0.0, float(np.deg2rad(THETA_D_MAX_DEG))))],
-        split_variable="theta_d", edges=[float(np.deg2rad(x)) for x in (0.0, core, THETA_D_MAX_DEG)],
-        pieces=models, kind="brdf", domain_policy=policy, fit_info=fit_info, piece_info=infos, source=source)
-
-
 def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: float, tol: float) -> dict:
     """Errors in 1/sr space of one channel on its fitted clusters.
 
@@ -451,8 +346,6 @@ def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: f
     |fit - y| / (distance from y to the interval's bound on the side of fit) (<= 1: every
     cluster inside its interval); ``inside``: fraction of clusters inside.
     """
-    from .coefficients import invert_value_transform
-
     f = np.maximum(invert_value_transform(r.function(U), value_transform, offset), 0.0)
     e = np.abs(f - d.y)
     # Distance to y over the distance from y to the bound on that side (intervals may be

@@ -1,4 +1,6 @@
-"""``rbrdf-fit brdf FILE --tol 0.05 --out material.json``: rational fit of a measured BRDF.
+"""``rbrdf-fit brdf FILE --tol 0.05 --out material.json``: rational fit of a measured BRDF
+(:func:`fit.rational.brdf_fit.fit_brdf`), written as an ``rbrdf-rational`` coefficient file
+(:mod:`fit.rational.coefficient_file`), with a per-piece, per-channel summary table.
 
 Registered by :mod:`fit.cli` (it calls :func:`register` with its sub-parsers).
 """
@@ -6,15 +8,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .errors import RbrdfError
+from ..errors import RbrdfError
+from ..formats import load_measured
+from ..rational.brdf_fit import INTERVALS, fit_brdf
+from ..rational.coefficient_file import save
 
 
 def _cmd_brdf(args) -> int:
-    from tqdm import tqdm
-
-    from .brdf_fit import INTERVALS, fit_brdf
-    from .coefficients import save
-    from .io import load_measured
+    from tqdm import tqdm   # the progress bar, imported only when a fit runs
 
     b = load_measured(args.file)
     bar = tqdm(desc=f"fitting {b.name}", unit="LP", leave=False, disable=None)  # None: off when not a terminal
@@ -64,8 +65,7 @@ def _cmd_brdf(args) -> int:
 
 
 def register(subparsers) -> None:
-    from .brdf_fit import INTERVALS
-
+    """Add ``brdf`` to the sub-parsers ``subparsers``."""
     p = subparsers.add_parser(
         "brdf", help="fit R, G, B with rational functions inside a tolerance; write JSON coefficients",
         description="Project the BRDF onto (theta_h, theta_d) (median, grazing samples beyond 79 deg "
@@ -73,7 +73,7 @@ def register(subparsers) -> None:
                     "coefficients inside the intervals (LP with constraint generation) on a "
                     "guaranteed core theta_d <= core and, separately, on the grazing band up to "
                     "78.5 deg; certify Q > 0 and write an rbrdf-rational JSON file (version 2 when "
-                    "piecewise; see fit.coefficients). Absolute floor: tol * A_Y / pi (A_Y = white-"
+                    "piecewise; see fit.rational.coefficient_file). Absolute floor: tol * A_Y / pi (A_Y = white-"
                     "sky luminance albedo).")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
     p.add_argument("--tol", type=float, default=0.05, help="relative tolerance (default 0.05)")

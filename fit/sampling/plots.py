@@ -1,7 +1,7 @@
 """Plots of the sampling densities and inverse CDFs (``rbrdf-fit plot-cdf``), as in the
 supplementary figures 6-9: PDF_v(theta_l) and CDF^-1_v(mu) for theta_v = 0, 45, 85 deg, and slices
 of PDF_v(phi_l | theta_l) and CDF^-1_v(tau | theta_l) for several theta_v (tabulated: solid;
-rational fit, when verified: dashed; in the rows layout only view rows with a rational fit
+rational maps, when verified: dashed; in the pieces layout only view rows with rational maps
 show a dashed curve, the others are sampled with the table)."""
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cdf_table import inverse_cdf_phi, inverse_cdf_theta, pdf_phi, pdf_theta
+from .table import inverse_cdf_phi, inverse_cdf_theta, pdf_phi, pdf_theta
 
 
 def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:

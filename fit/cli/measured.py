@@ -1,30 +1,19 @@
-"""``rbrdf-fit``: command line of the fitter.
+"""``rbrdf-fit info``, ``rbrdf-fit project`` and ``rbrdf-fit plot``: what a measured BRDF file
+holds, its (theta_h, theta_d) projection saved as ``.npz``, and PNG plots of the projection.
 
-Every sub-command prints errors about files as one line (``rbrdf-fit: error: FILE: problem``)
-and exits with status 2, without a traceback.
+Angles are printed in degrees, BRDF values in 1/sr.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 from pathlib import Path
 
-import numpy as np
-
-from .errors import RbrdfError
-
-DESCRIPTION = """\
-Fit measured isotropic BRDFs with rational functions (Rational BRDF, Pacanowski et al. 2012).
-
-Input files: MERL-MIT '.binary' (90x90x180 theta_h/theta_d/phi_d, RGB) and RGL-EPFL isotropic
-'.bsdf' (resampled onto the MERL grid). Angles are printed in degrees, BRDF values in 1/sr.
-"""
+from ..formats import load_measured
+from ..projection.albedo import directional_albedo
+from ..projection.plots import plot_projection
+from ..projection.project import GRAZING_ANGLES, STATISTICS, project
 
 
 def _cmd_info(args) -> int:
-    from .albedo import directional_albedo
-    from .io import load_measured
-
     b = load_measured(args.file)
     print(f"file            {b.source}")
     print(f"material        {b.name}")
@@ -43,8 +32,6 @@ def _cmd_info(args) -> int:
 
 
 def _add_projection_args(p) -> None:
-    from .projection import GRAZING_ANGLES, STATISTICS
-
     p.add_argument("--statistic", choices=STATISTICS, default="median",
                    help="cluster statistic stored as the projected value (default: median)")
     p.add_argument("--grazing-cutoff", type=float, default=None, metavar="DEG",
@@ -54,9 +41,6 @@ def _add_projection_args(p) -> None:
 
 
 def _project_from_args(args):
-    from .io import load_measured
-    from .projection import project
-
     return project(load_measured(args.file), statistic=args.statistic,
                    grazing_cutoff_deg=args.grazing_cutoff, grazing_angle=args.grazing_angle)
 
@@ -73,8 +57,6 @@ def _cmd_project(args) -> int:
 
 
 def _cmd_plot(args) -> int:
-    from .plots import plot_projection
-
     p = _project_from_args(args)
     files = plot_projection(p, args.out)
     for f in files:
@@ -82,11 +64,8 @@ def _cmd_plot(args) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="rbrdf-fit", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
+def register(sub) -> None:
+    """Add ``info``, ``project`` and ``plot`` to the sub-parsers ``sub``."""
     p = sub.add_parser("info", help="dimensions, valid fraction, value range and normal-incidence albedo",
                        description="Print what a measured BRDF file holds.")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
@@ -108,45 +87,3 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder for the PNG files")
     _add_projection_args(p)
     p.set_defaults(func=_cmd_plot)
-
-    for register in _EXTRA_COMMANDS:
-        register(sub)
-    return parser
-
-
-#: Functions ``register(subparsers)`` that add further sub-commands (fitter, CDFs, ...).
-_EXTRA_COMMANDS: list = []
-
-
-def _register_optional_commands() -> None:
-    """Import the modules that add sub-commands, if they exist."""
-    import importlib
-
-    for mod in ("fit.cli_fit", "fit.cli_cdf"):
-        try:
-            m = importlib.import_module(mod)
-        except ModuleNotFoundError as e:
-            if e.name != mod:
-                raise
-            continue
-        if m.register not in _EXTRA_COMMANDS:
-            _EXTRA_COMMANDS.append(m.register)
-
-
-def main(argv=None) -> int:
-    _register_optional_commands()
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    np.set_printoptions(precision=4, suppress=True)
-    try:
-        return int(args.func(args) or 0)
-    except RbrdfError as e:
-        print(f"rbrdf-fit: error: {e}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("rbrdf-fit: interrupted", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())

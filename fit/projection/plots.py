@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .measured import ProjectedBRDF
+from ..formats.measured import ProjectedBRDF
 
 GRAZING_DEG = 80.0
 _CHANNEL_COLOURS = ("tab:red", "tab:green", "tab:blue")

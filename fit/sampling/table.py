@@ -26,9 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .angles import spherical_to_direction
-
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])  # Rec.709
+from ..formats.angles import spherical_to_direction
+from ..formats.colour import LUMINANCE
 
 
 @dataclass

@@ -20,6 +20,9 @@ from __future__ import annotations
 
 import numpy as np
 
+#: pi / 2 in radians: the largest polar angle of the upper hemisphere. The one definition of
+#: this constant in the fit package; every module takes it from here.
+HALF_PI = 0.5 * np.pi
 _EPS = 1e-12
 
 

@@ -1,64 +1,24 @@
 """In-memory measured BRDF types on the MERL (theta_h, theta_d, phi_d) grid and its projection.
 
-The MERL-MIT layout samples an isotropic BRDF on 90 x 90 x 180 bins:
-
-* theta_h in [0, pi/2): bin ``i`` covers ``sqrt(theta_h / (pi/2)) * 90`` in ``[i, i+1)``
-  (denser near the specular peak); bin centre ``((i + 0.5) / 90)**2 * pi/2``.
-* theta_d in [0, pi/2): bin ``j`` covers ``theta_d / (pi/2) * 90`` in ``[j, j+1)``;
-  centre ``(j + 0.5) / 90 * pi/2``.
-* phi_d in [0, pi) (reciprocity folds phi_d and phi_d + pi together): bin ``k`` covers
-  ``phi_d / pi * 180`` in ``[k, k+1)``; centre ``(k + 0.5) / 180 * pi``.
+:class:`MeasuredBRDF` holds a BRDF tabulated on the MERL-MIT grid (:mod:`fit.formats.grid`:
+90 x 90 x 180 bins in theta_h, theta_d, phi_d); :class:`ProjectedBRDF` holds its projection onto
+the 90 x 90 (theta_h, theta_d) clusters (:mod:`fit.projection.project`) and its ``.npz``
+persistence; :func:`file_sha256` fingerprints source files.
 
 Values are RGB reflectance in 1/sr, *without* the cosine factor (conventions.md).
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from .angles import directions_to_half_diff
-from .errors import BRDFFileError
-
-N_THETA_H = 90
-N_THETA_D = 90
-N_PHI_D = 180
-MERL_SHAPE = (N_THETA_H, N_THETA_D, N_PHI_D)
-HALF_PI = 0.5 * np.pi
-
-
-def theta_h_centres() -> np.ndarray:
-    """Bin centres of theta_h in radians, shape (90,)."""
-    return ((np.arange(N_THETA_H) + 0.5) / N_THETA_H) ** 2 * HALF_PI
-
-
-def theta_d_centres() -> np.ndarray:
-    """Bin centres of theta_d in radians, shape (90,)."""
-    return (np.arange(N_THETA_D) + 0.5) / N_THETA_D * HALF_PI
-
-
-def phi_d_centres() -> np.ndarray:
-    """Bin centres of phi_d in radians in [0, pi), shape (180,)."""
-    return (np.arange(N_PHI_D) + 0.5) / N_PHI_D * np.pi
-
-
-def theta_h_index(theta_h) -> np.ndarray:
-    """MERL bin of theta_h (radians): ``floor(90 * sqrt(theta_h / (pi/2)))``, clamped."""
-    t = np.clip(np.asarray(theta_h, float), 0.0, None)
-    return np.clip(np.floor(np.sqrt(t / HALF_PI) * N_THETA_H), 0, N_THETA_H - 1).astype(np.intp)
-
-
-def theta_d_index(theta_d) -> np.ndarray:
-    """MERL bin of theta_d (radians): ``floor(theta_d / (pi/2) * 90)``, clamped."""
-    t = np.asarray(theta_d, float)
-    return np.clip(np.floor(t / HALF_PI * N_THETA_D), 0, N_THETA_D - 1).astype(np.intp)
-
-
-def phi_d_index(phi_d) -> np.ndarray:
-    """MERL bin of phi_d (radians), folded to [0, pi) by reciprocity, clamped."""
-    p = np.mod(np.asarray(phi_d, float), np.pi)
-    return np.clip(np.floor(p / np.pi * N_PHI_D), 0, N_PHI_D - 1).astype(np.intp)
+from ..errors import BRDFFileError
+from .angles import directions_to_half_diff, half_diff_to_directions
+from .grid import (MERL_SHAPE, phi_d_centres, phi_d_index, theta_d_centres, theta_d_index, theta_h_centres,
+                   theta_h_index)
 
 
 def _above_horizon(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -152,8 +112,6 @@ class MeasuredBRDF:
         Triplets whose light or view direction is at or below the horizon are marked invalid,
         as in measured MERL files.
         """
-        from .angles import half_diff_to_directions
-
         th = theta_h_centres()[:, None, None]
         td = theta_d_centres()[None, :, None]
         pd = phi_d_centres()[None, None, :]
@@ -274,8 +232,6 @@ class ProjectedBRDF:
 
 def file_sha256(path) -> str:
     """Hex sha256 of a file's bytes."""
-    import hashlib
-
     h = hashlib.sha256()
     with open(Path(path), "rb") as f:
         for chunk in iter(lambda: f.read(1 << 20), b""):

@@ -1,24 +1,21 @@
 """``rbrdf-fit cdf`` and ``rbrdf-fit plot-cdf``: importance-sampling tables and rational inverse
-CDFs (issue 6). Registered by :mod:`fit.cli` when this module exists."""
+CDFs (issue 6, :mod:`fit.sampling`). Registered by :mod:`fit.cli`."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from .cdf_fit import TIME_LIMIT_S
+from ..formats import load_measured
+from ..sampling.cdf_file import LAYOUTS, TIME_LIMIT_S, file_source, fit_cdf, load, table_only
+from ..sampling.plots import plot_cdf
 
 
 def _load_or_fit(args, log=print):
-    from .cdf_fit import fit_cdf, file_source, load
-    from .io import load_measured
-
     path = Path(args.file)
     if path.suffix.lower() == ".json":
         return load(path)
     b = load_measured(path)
     params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
     if getattr(args, "table_only", False):
-        from .cdf_fit import table_only
-
         return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
                           source=file_source(path))
     return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log, layout=args.layout,
@@ -31,10 +28,10 @@ def _add_table_args(p):
     p.add_argument("--n-t", type=int, default=64, help="theta_l cells (default 64)")
     p.add_argument("--n-p", type=int, default=64, help="|phi_l| cells (default 64)")
     p.add_argument("--eps", type=float, default=0.02, help="cosine mixture weight (default 0.02)")
-    p.add_argument("--layout", choices=("pieces", "rows", "global"), default="pieces",
+    p.add_argument("--layout", choices=LAYOUTS, default="pieces",
                    help="pieces (default): monotone rational-quadratic pieces uniform in mu and u, "
-                        "constant-time lookup, the fastest sampler; rows: one fitted rational map pair "
-                        "per view row; global: the paper's bivariate/trivariate rational functions")
+                        "constant-time lookup, the fastest sampler; global: the paper's "
+                        "bivariate/trivariate rational functions")
     p.add_argument("--refinements", type=int, default=1, help="refit rounds when verification fails "
                                                                "(global layout)")
     p.add_argument("--table-only", action="store_true", help="tabulate only, no rational fit")
@@ -56,8 +53,6 @@ def _cmd_cdf(args) -> int:
 
 
 def _cmd_plot(args) -> int:
-    from .cdf_plots import plot_cdf
-
     args.table_only = args.table_only or Path(args.file).suffix.lower() != ".json"
     fit = _load_or_fit(args)
     for f in plot_cdf(fit, args.out, prefix=args.prefix):
@@ -66,11 +61,12 @@ def _cmd_plot(args) -> int:
 
 
 def register(sub) -> None:
+    """Add ``cdf`` and ``plot-cdf`` to the sub-parsers ``sub``."""
     p = sub.add_parser("cdf", help="tabulate the sampling CDFs and fit rational inverse CDFs",
                        description="Tabulate CDF^-1 of rho cos (luminance) per theta_v row, build the "
                                    "rational inverse CDFs (default layout 'pieces': per view row, monotone "
                                    "rational-quadratic pieces of equal mass, found in constant time; "
-                                   "'rows' / 'global': fitted with the interval rational fitter), verify "
+                                   "'global': fitted with the interval rational fitter), verify "
                                    "them (monotone, covering, no poles), send rows that fail or whose "
                                    "derivative estimator exceeds 1.2x the table's variance to the table, "
                                    "and write a versioned rbrdf-cdf JSON (fallback flag and per-row "

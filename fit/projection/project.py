@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .angles import cos_theta_i_o
-from .measured import MeasuredBRDF, ProjectedBRDF, phi_d_centres, theta_d_centres, theta_h_centres
+from ..formats.angles import cos_theta_i_o
+from ..formats.grid import phi_d_centres, theta_d_centres, theta_h_centres
+from ..formats.measured import MeasuredBRDF, ProjectedBRDF
 
 STATISTICS = ("median", "mean", "geometric", "harmonic", "rms")
 GRAZING_ANGLES = ("theta_io", "theta_d")
@@ -20,7 +21,7 @@ GRAZING_ANGLES = ("theta_io", "theta_d")
 def below_horizon_counts() -> np.ndarray:
     """Per (theta_h, theta_d) cluster, the number of phi_d bin centres whose light or view
     direction is at or below the tangent plane (closed form, see
-    :func:`fit.angles.cos_theta_i_o`). Shape (90, 90), int."""
+    :func:`fit.formats.angles.cos_theta_i_o`). Shape (90, 90), int."""
     ci, co = _cos_io_grid()
     return np.sum((ci <= 0.0) | (co <= 0.0), axis=-1)
 

@@ -1,10 +1,13 @@
 """Piecewise rational inverse CDFs with pieces uniform in the CDF variable (issue 6): the
-``"pieces"`` layout of :mod:`fit.cdf_fit`.
+default ``"pieces"`` layout of :mod:`fit.sampling.cdf_file` (its construction, checks and
+reference sampler; the variance gate that decides which rows use it is
+:mod:`fit.sampling.variance_gate`).
 
-Why a third layout. A sampler with ONE rational function per inverse CDF (the paper's
-``"global"`` layout, or one per view row, ``"rows"``) costs one long Horner chain per sample;
-on glossy materials the degree the variance target needs makes it slower than the table's
-binary search (measured: ``benchmarks/experiment_cdf_cells.py``). Here each inverse CDF is
+Why this layout. A sampler with ONE rational function per inverse CDF (the paper's
+``"global"`` layout, :mod:`fit.sampling.global_layout`, or one per view row, the former
+``"rows"`` layout) costs one long Horner chain per sample; on glossy materials the degree the
+variance target needs makes it slower than the table's binary search (measured with the
+per-cell experiment ``benchmarks/experiment_cdf_cells.py``, removed since). Here each inverse CDF is
 split into pieces of EQUAL MASS -- uniform in the CDF variable -- so a sample finds its piece
 with one multiplication (``k = floor(mu * n_mu)``), no search, and evaluates one rational
 function of degree (2, 2): constant time, a few flops.
@@ -12,7 +15,7 @@ function of degree (2, 2): constant time, a few flops.
 The maps (all angles in radians, CDF variables in [0, 1]):
 
 * ``theta_l = F_v(mu)``, one per view row ``v`` of the table (row of ``theta_v`` as
-  :meth:`fit.cdf_table.CDFTable.row`), ``n_mu`` pieces;
+  :meth:`fit.sampling.table.CDFTable.row`), ``n_mu`` pieces;
 * ``|phi_l| = G_vk(u)``, ``u = |2 tau - 1|``, one per (row ``v``, theta piece ``k``), ``n_u``
   pieces; ``phi_l < 0`` when tau < 1/2. ``G_vk`` inverts the table's conditional CDF of phi
   MIXED over the theta_l range of piece k (the table's cells weighted by their mass inside
@@ -30,7 +33,7 @@ cc_iris_purple_gem 11 / 23 / 32. Fewer phi pieces also sample faster when every 
 another view row (the phi maps are then read at random; vch: 1.62x / 1.65x the table's rate with
 32 pieces, 1.56x / 1.57x with 64, two runs each of ``benchmarks/bench_samplers.py --materials
 vch_golden_yellow_rgb --n-u N``). The Warp sampler stores the phi maps as knots (value, slope;
-:func:`warp_rbrdf.cdf_sampling.pieces_phi_knots`): 2 floats per piece instead of 4.
+:func:`pieces_phi_knots`): 2 floats per piece instead of 4.
 
 Each piece is the monotone rational-quadratic interpolant of Gregory & Delbourgo (IMA J. Numer.
 Anal. 2, 1982; the "rational-quadratic spline" of neural spline flows) between two knots:
@@ -57,10 +60,8 @@ which a rational piece follows badly. The first and last theta pieces therefore 
 ``dtheta/dmu sin(theta_l) = (dy/dmu) / (2 cos(theta_l))``. Measured on vch_golden_yellow (64 /
 32 pieces): the per-row variance ratio to the table has median 1.07 without this, 0.94 with it.
 
-**Variance gate.** As in :mod:`fit.cdf_rows`, a row whose maps have more than
-``max_variance_ratio`` times the table's variance per sample (luminance albedo estimator at
-the row's view angle, :func:`fit.cdf_rows.variance_ratio`) is sampled with the table; the
-per-row ratios and reasons are recorded.
+Rows whose pieces fail :func:`verify_pieces`, and rows the variance gate rejects, are sampled
+with the table (``PieceMaps.row_ok`` False).
 
 Storage: the pieces are a deterministic function of the table and ``(n_mu, n_u)``, so a file
 stores the table, ``n_mu``, ``n_u`` and the per-row decisions, and :func:`build_pieces`
@@ -68,16 +69,14 @@ recomputes the coefficients on load (milliseconds).
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
-from .cdf_table import CDFTable
-
-HALF_PI = 0.5 * np.pi
-PIECES_DEFAULTS = dict(n_mu=64, n_u=(16, 32, 64), max_variance_ratio=1.2, gate_samples=32768, gate_recheck=8)
+from ..formats.angles import HALF_PI
+from .maps import sample_maps
+from .table import CDFTable, table_where
 
 
 @dataclass
@@ -88,7 +87,15 @@ class PieceMaps:
     0 and n_mu - 1 in y = sin^2(theta_l), the others in theta_l (rad).
     ``phi``: (n_v, n_mu, n_u, 4) the same for |phi_l| (rad) on [0, pi], per theta piece.
     ``theta_knots``: (n_v, n_mu + 1) theta_l (rad) at the knots mu = k / n_mu.
-    ``row_ok``: (n_v,) bool, False where the row is sampled with the table."""
+    ``row_ok``: (n_v,) bool, False where the row is sampled with the table.
+
+    Per row: :meth:`row_theta_map`, :meth:`row_phi_map`. The layout interface of
+    :class:`fit.sampling.cdf_file.CDFFit` (``theta_map``, ``phi_map``, ``table_rows``,
+    ``verify``, ``to_dict`` / ``from_dict``) takes view angles and the table whose rows these
+    are."""
+
+    layout = "pieces"
+    complete = True       # the layout can sample (rows it cannot are handed to the table)
 
     theta: np.ndarray
     phi: np.ndarray
@@ -104,7 +111,7 @@ class PieceMaps:
     def n_u(self) -> int:
         return self.phi.shape[2]
 
-    def theta_map(self, v, mu):
+    def row_theta_map(self, v, mu):
         """``(theta_l, dtheta_l/dmu)`` of row(s) ``v`` at ``mu`` (arrays of one shape)."""
         n = self.n_mu
         k, x = _piece(mu, n)
@@ -124,12 +131,57 @@ class PieceMaps:
         k = (kn[..., 1:-1] <= np.asarray(theta_l, float)[..., None]).sum(-1)
         return np.clip(k, 0, self.n_mu - 1)
 
-    def phi_map(self, v, k, u):
+    def row_phi_map(self, v, k, u):
         """``(|phi_l|, d|phi_l|/du)`` of row(s) ``v``, theta piece(s) ``k`` at ``u``."""
         n = self.n_u
         kp, x = _piece(u, n)
         p, dp = rq_eval(self.phi[v, k, kp], x)
         return p, dp * n
+
+    # Layout interface (fit.sampling.cdf_file.CDFFit) ---------------------------------------
+    def theta_map(self, table: CDFTable, tv, mu):
+        """``(theta_l, dtheta_l/dmu)`` at view angles ``tv`` and ``mu``; NaN on table rows."""
+        v = table.row(tv)
+        t, d = self.row_theta_map(v, mu)
+        tab = ~self.row_ok[v]
+        return np.where(tab, np.nan, t), np.where(tab, np.nan, d)
+
+    def phi_map(self, table: CDFTable, tv, tl, u):
+        """``(|phi_l|, d|phi_l|/du)`` at ``(tv, theta_l, u)``, with the theta piece that holds
+        ``theta_l`` (:meth:`theta_piece`); NaN on table rows."""
+        v = table.row(tv)
+        p, d = self.row_phi_map(v, self.theta_piece(v, np.nan_to_num(tl)), u)
+        tab = ~self.row_ok[v]
+        return np.where(tab, np.nan, p), np.where(tab, np.nan, d)
+
+    def table_rows(self, table: CDFTable, tv) -> np.ndarray:
+        """True where the view angle's row is sampled with the table."""
+        return ~self.row_ok[table.row(tv)]
+
+    def verify(self, table: CDFTable):
+        """Re-check the pieces (:func:`verify_pieces`); a row that fails is handed to the table
+        (its ``row_ok`` cleared). Returns ``(verification, fallback, reason)``."""
+        ver = verify_pieces(self)
+        self.row_ok &= np.asarray(ver["rows"], bool)
+        n_ok, n = int(self.row_ok.sum()), table.n_v
+        reason = f"rational on {n_ok}/{n} view rows (others sampled with the table)" if n_ok else "no row rational"
+        return {"pieces": {k: ver[k] for k in ("ok", "failures")}}, n_ok == 0, reason
+
+    def to_dict(self, name: str = "") -> dict:
+        """The CDF file's ``pieces`` entry: the pieces are rebuilt from the table on load."""
+        return {"pieces": {"n_mu": self.n_mu, "n_u": self.n_u, "row_ok": [bool(x) for x in self.row_ok]}}
+
+    @classmethod
+    def from_dict(cls, pd: dict, table: CDFTable) -> "PieceMaps":
+        """Rebuild the pieces of a CDF file's ``pieces`` entry from its table; ValueError when
+        the row flags do not fit the table or a rational row's pieces fail verification."""
+        if len(pd["row_ok"]) != table.n_v:
+            raise ValueError(f"{len(pd['row_ok'])} row flags for {table.n_v} table rows")
+        pm = build_pieces(table, int(pd["n_mu"]), int(pd["n_u"]), row_ok=pd["row_ok"])
+        bad = ~np.asarray(verify_pieces(pm)["rows"]) & pm.row_ok
+        if bad.any():
+            raise ValueError(f"pieces of rows {np.flatnonzero(bad).tolist()} fail verification")
+        return pm
 
 
 def _piece(t, n: int):
@@ -255,87 +307,35 @@ def verify_pieces(pm: PieceMaps, n_check: int = 9) -> dict:
 def sample_pieces(table: CDFTable, pm: PieceMaps, theta_v, mu, tau):
     """``(theta_l, phi_l, alpha)`` of the pieces sampler (NumPy reference of the Warp one;
     rows with ``row_ok`` False use the table: alpha = 1 / its pdf)."""
-    from .cdf_fit import sample_maps
-    from .cdf_table import table_where
-
     tv, mu, tau = np.broadcast_arrays(*(np.asarray(a, float) for a in (theta_v, mu, tau)))
     v = table.row(tv)
     k = _piece(mu, pm.n_mu)[0]
 
     def phi_map(tl, u):
-        return pm.phi_map(v, k, u)
+        return pm.row_phi_map(v, k, u)
 
-    tl, pl, alpha = sample_maps(lambda m: pm.theta_map(v, m), phi_map, mu, tau)
+    tl, pl, alpha = sample_maps(lambda m: pm.row_theta_map(v, m), phi_map, mu, tau)
     return table_where(table, ~pm.row_ok[v], tv, mu, tau, tl, pl, alpha)
 
 
-def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu"],
-               n_u=PIECES_DEFAULTS["n_u"],
-               max_variance_ratio: float | None = PIECES_DEFAULTS["max_variance_ratio"],
-               gate_samples: int = PIECES_DEFAULTS["gate_samples"],
-               gate_recheck: int | None = PIECES_DEFAULTS["gate_recheck"], log=None):
-    """Build, verify and gate the pieces of ``table``. ``evaluate(wi, wo) -> (N, 3)`` (the
-    material tabulated) is needed for the variance gate (``max_variance_ratio`` None: no
-    gate). A row whose ratio on ``gate_samples`` pairs lies between limit / 1.25 and twice the
-    limit (0.96-2.4 for the default 1.2) is measured again on ``gate_recheck`` times as many,
-    and that measurement decides (the first is kept as ``variance_first``): a few rare large
-    weights decide a variance estimate, both ways (colodur_napoli_4f: three rows at 1.25-1.73x
-    on 32768 pairs were 0.39-0.58x on 262144; cc_ibiza_sunset, 32 phi pieces, theta_v = 85 deg:
-    1.23x on 2e5 pairs, 1.19x on 3e6). ``n_u``: phi pieces per map, or increasing candidates
-    (default 16, 32, 64): the fewest that keep every row within the gate, else the count with the most rational rows
-    (the smallest on ties). Returns ``(PieceMaps, info)``; ``info["rows"]`` has per row
-    ``ok``, ``reason`` and the gate's ``variance`` dict, ``info["n_u_tried"]`` the rational
-    rows per candidate tried."""
-    log = log or (lambda s: None)
-    t0 = time.perf_counter()
-    best, tried = None, {}
-    for nu in sorted(np.atleast_1d(n_u).astype(int).tolist()):
-        pm, info = _fit_pieces_once(table, evaluate, n_mu, nu, max_variance_ratio, gate_samples, gate_recheck)
-        tried[nu] = info["verified_rows"]
-        if best is None or info["verified_rows"] > best[1]["verified_rows"]:
-            best = (pm, info)
-        if not any(r.get("reason", "").startswith("variance") for r in info["rows"]):
-            break
-    pm, info = best
-    info.update(n_u_tried=tried, time_s=time.perf_counter() - t0)
-    ratios = [r["variance"]["ratio"] for r in info["rows"] if "variance" in r]
-    log(f"  pieces ({n_mu} theta x {info['n_u']} phi pieces per map; phi pieces tried: rational rows "
-        + ", ".join(f"{k}: {v}" for k, v in tried.items()) + f"): {info['verified_rows']}/{table.n_v} "
-        "rows rational" + (f"; variance ratio to the table per row: median {np.median(ratios):.2f}, range "
-                           f"{min(ratios):.2f}-{max(ratios):.2f}" if ratios else "")
-        + f" ({info['time_s']:.1f} s)")
-    pm.info = info
-    return pm, info
-
-
-def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_samples, gate_recheck=None):
-    """:func:`fit_pieces` for one phi piece count."""
-    from .cdf_rows import variance_ratio
-
-    pm = build_pieces(table, n_mu, n_u)
-    ver = verify_pieces(pm)
-    rows = []
-    ungated = PieceMaps(pm.theta, pm.phi, pm.theta_knots, np.ones(table.n_v, bool))
-    for v in range(table.n_v):
-        r = {"ok": bool(ver["rows"][v])}
-        if not r["ok"]:
-            r["reason"] = "construction check failed"
-        elif table.row_fallback[v]:
-            r.update(ok=False, reason="table row without BRDF mass (cosine fallback row)")
-        elif max_variance_ratio is not None and evaluate is not None:
-            def ratio(n):
-                return variance_ratio(table, lambda tv, m, t: sample_pieces(table, ungated, tv, m, t),
-                                      evaluate, v, n)
-            r["variance"] = ratio(gate_samples)
-            if gate_recheck and max_variance_ratio / 1.25 < r["variance"]["ratio"] <= 2.0 * max_variance_ratio:
-                r["variance_first"] = r["variance"]
-                r["variance"] = ratio(gate_samples * gate_recheck)
-            if not r["variance"]["ratio"] <= max_variance_ratio:
-                r.update(ok=False, reason=f"variance > {max_variance_ratio:g} x the table's")
-        rows.append(r)
-        pm.row_ok[v] = r["ok"]
-    info = {"n_mu": n_mu, "n_u": n_u, "max_variance_ratio": max_variance_ratio,
-            "gate_samples": gate_samples, "gate_recheck": gate_recheck,
-            "verified_rows": int(pm.row_ok.sum()), "n_rows": table.n_v, "rows": rows,
-            "verification": {k: ver[k] for k in ("ok", "failures")}}
-    return pm, info
+def pieces_phi_knots(pm: PieceMaps) -> np.ndarray:
+    """(n_v, n_mu, n_u + 1, 2): the phi pieces ``(y_k, h, a0, a1)`` of ``pm`` as knots (value,
+    slope dy/dx in piece-local x): the form the Warp sampler reads
+    (:func:`warp_rbrdf.techniques.rational.rq_knots`; half the bytes of the pieces, which matters when
+    view rows change from sample to sample: the phi maps of a material are then read at random,
+    64 x 64 pieces = 2 MB as pieces, 1.06 MB as knots). Raises ValueError where a verified row's
+    pieces do not share their knots (their values or slopes differ between the end of a piece
+    and the start of the next)."""
+    c = pm.phi
+    y = np.concatenate([c[..., 0], (c[..., -1, 0] + c[..., -1, 1])[..., None]], axis=-1)
+    s_start = c[..., 2] * c[..., 1]                  # a0 h: slope at x = 0 of each piece
+    s_end = c[..., 3] * c[..., 1]                    # a1 h: slope at x = 1
+    s = np.concatenate([s_start, s_end[..., -1:]], axis=-1)
+    ok = np.asarray(pm.row_ok, bool)
+    tol = 1e-9 * (1.0 + np.abs(y[..., 1:-1]))
+    bad = (np.abs(c[..., :-1, 0] + c[..., :-1, 1] - y[..., 1:-1]) > tol) \
+        | (np.abs(s_end[..., :-1] - s[..., 1:-1]) > 1e-9 * (1.0 + np.abs(s[..., 1:-1])))
+    rows = np.flatnonzero(bad.any(axis=(-1, -2)) & ok)
+    if rows.size:
+        raise ValueError(f"phi pieces of rows {rows.tolist()} do not share their knots")
+    return np.stack([y, s], axis=-1)

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import BRDFFileError
-from .measured import MERL_SHAPE, MeasuredBRDF, file_sha256
+from ..errors import BRDFFileError
+from .grid import MERL_SHAPE
+from .measured import MeasuredBRDF, file_sha256
 
 #: Multiplier from stored values to reflectance in 1/sr, per channel (R, G, B).
 MERL_SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .angles import spherical_to_direction
+from ..formats.angles import spherical_to_direction
 
 
 def directional_albedo(evaluate, theta_i: float, n_theta: int = 90, n_phi: int = 360) -> np.ndarray:

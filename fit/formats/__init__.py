@@ -1,0 +1,32 @@
+"""Measured-BRDF file formats and the types they are read into; open any supported file by its
+extension with :func:`load_measured`.
+
+* ``.binary``: MERL-MIT layout (:mod:`fit.formats.merl`).
+* ``.bsdf``: RGL-EPFL tensor files (:mod:`fit.formats.rgl`, container
+  :mod:`fit.formats.tensor_file`), resampled onto the MERL grid.
+
+The MERL grid itself is :mod:`fit.formats.grid`, the in-memory types :mod:`fit.formats.measured`,
+the angle conventions :mod:`fit.formats.angles`, the luminance weights :mod:`fit.formats.colour`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import BRDFFileError
+from .measured import MeasuredBRDF
+from .merl import read_merl
+from .rgl import read_rgl
+
+SUFFIXES = (".binary", ".bsdf")
+
+
+def load_measured(path) -> MeasuredBRDF:
+    """Read a measured BRDF as a :class:`MeasuredBRDF` on the MERL grid."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".binary":
+        return read_merl(path)
+    if suffix == ".bsdf":
+        return read_rgl(path).to_measured()
+    raise BRDFFileError(path, f"unknown BRDF file type {suffix or '(no extension)'!r}; "
+                              f"expected one of {', '.join(SUFFIXES)}")

@@ -1,0 +1,269 @@
+"""Rational models: rational functions (:mod:`fit.rational.function`) with their input and
+value transforms and domain policy, evaluated at physical inputs.
+
+* :class:`Variable`: an input's name, unit, transform (``"identity"``: u = x, ``"sqrt"``:
+  u = sqrt(x)) and domain in its own unit;
+* value transforms: ``"linear"`` (y = R(u)) or ``"log"`` (y = exp(R(u)) - offset), with the
+  clamps ``value_min`` / ``value_max``;
+* :class:`RationalModel`: one rational function per output on one box;
+* :class:`PiecewiseRationalModel`: rational models on consecutive intervals of one variable.
+
+For BRDFs the variables are ``theta_h`` then ``theta_d`` (radians) and the outputs R, G, B in
+1/sr; :meth:`~RationalModel.evaluate_brdf` and :meth:`~RationalModel.evaluate` (directions,
+0 below the horizon) are the BRDF. The file format that stores these models, and the exact
+evaluation recipe, are :mod:`fit.rational.coefficient_file`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..formats.angles import directions_to_half_diff
+
+INPUT_TRANSFORMS = ("identity", "sqrt")
+VALUE_TRANSFORMS = ("linear", "log")
+
+
+def apply_input_transform(x, transform: str):
+    x = np.asarray(x, dtype=np.float64)
+    if transform == "identity":
+        return x
+    if transform == "sqrt":
+        return np.sqrt(np.maximum(x, 0.0))
+    raise ValueError(f"unknown input transform {transform!r}")
+
+
+def apply_value_transform(y, transform: str, offset: float = 0.0):
+    """Data value -> fitted quantity (the inverse of step 5 of the evaluation recipe in
+    :mod:`fit.rational.coefficient_file`)."""
+    y = np.asarray(y, dtype=np.float64)
+    if transform == "linear":
+        return y
+    if transform == "log":
+        return np.log(y + offset)
+    raise ValueError(f"unknown value transform {transform!r}")
+
+
+def invert_value_transform(r, transform: str, offset: float = 0.0):
+    r = np.asarray(r, dtype=np.float64)
+    if transform == "linear":
+        return r
+    if transform == "log":
+        return np.exp(r) - offset
+    raise ValueError(f"unknown value transform {transform!r}")
+
+
+@dataclass
+class Variable:
+    name: str
+    unit: str
+    transform: str
+    domain: tuple
+
+    def __post_init__(self):
+        if self.transform not in INPUT_TRANSFORMS:
+            raise ValueError(f"unknown input transform {self.transform!r}")
+        lo, hi = (float(v) for v in self.domain)
+        if not hi > lo:
+            raise ValueError(f"variable {self.name}: empty domain [{lo}, {hi}]")
+        self.domain = (lo, hi)
+
+    @property
+    def rf_domain(self) -> tuple:
+        return tuple(float(apply_input_transform(v, self.transform)) for v in self.domain)
+
+
+class _BRDFEvaluation:
+    """``evaluate_brdf`` / ``evaluate`` for models whose ``__call__`` takes ``(theta_h, theta_d)``."""
+
+    def evaluate_brdf(self, theta_h, theta_d) -> np.ndarray:
+        """rho in 1/sr at Rusinkiewicz angles (radians); shape ``broadcast + (3,)``."""
+        th, td = np.broadcast_arrays(np.asarray(theta_h, float), np.asarray(theta_d, float))
+        return self(np.stack([th, td], axis=-1))
+
+    def evaluate(self, wi, wo) -> np.ndarray:
+        """rho(wi, wo) in 1/sr for local unit directions ``(..., 3)``; 0 below the horizon."""
+        wi = np.asarray(wi, float)
+        wo = np.asarray(wo, float)
+        th, _, td, _ = directions_to_half_diff(wi, wo)
+        out = self.evaluate_brdf(th, td)
+        wi, wo = np.broadcast_arrays(wi, wo)
+        above = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+        return np.where(above[..., None], out, 0.0)
+
+
+@dataclass
+class RationalModel(_BRDFEvaluation):
+    """Rational functions with their input/value transforms and domain policy (one file).
+
+    ``model(x)`` evaluates all outputs at physical inputs ``x`` of shape ``(..., n_vars)``,
+    returning ``(..., n_outputs)``. For BRDFs use :meth:`evaluate_brdf` (angles in radians)
+    or :meth:`evaluate` (directions).
+    """
+
+    name: str
+    variables: list
+    functions: list                      # RationalFunction per output (on the transformed domain)
+    outputs: tuple = ("R", "G", "B")
+    kind: str = "brdf"
+    value_transform: str = "linear"
+    value_offset: float = 0.0
+    value_min: float | None = 0.0
+    value_max: float | None = None       # output clamp from above (bounded in data-free corners)
+    value_name: str = "rho"
+    value_unit: str = "1/sr"
+    domain_policy: dict = field(default_factory=lambda: {"outside": "clamp", "below_horizon": "zero"})
+    fit_info: dict = field(default_factory=dict)
+    function_info: list = field(default_factory=list)   # per-output dicts (errors, certificate)
+    source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
+
+    def __post_init__(self):
+        self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]
+        self.outputs = tuple(self.outputs)
+        if len(self.functions) != len(self.outputs):
+            raise ValueError("one function per output is required")
+        if self.value_transform not in VALUE_TRANSFORMS:
+            raise ValueError(f"unknown value transform {self.value_transform!r}")
+        for f in self.functions:
+            if f.n_vars != len(self.variables):
+                raise ValueError("function and variable counts differ")
+        if not self.function_info:
+            self.function_info = [{} for _ in self.functions]
+
+    # Evaluation ----------------------------------------------------------------------------
+    @property
+    def n_vars(self) -> int:
+        return len(self.variables)
+
+    @property
+    def n_coefficients(self) -> int:
+        return sum(f.n_coefficients for f in self.functions)
+
+    def rf_inputs(self, x) -> np.ndarray:
+        """Physical inputs ``(..., n_vars)`` -> clamped, transformed RF inputs (steps 1-2)."""
+        x = np.asarray(x, dtype=np.float64)
+        cols = []
+        for v, var in enumerate(self.variables):
+            xv = x[..., v]
+            if self.domain_policy.get("outside", "clamp") == "clamp":
+                xv = np.clip(xv, var.domain[0], var.domain[1])
+            cols.append(apply_input_transform(xv, var.transform))
+        return np.stack(cols, axis=-1)
+
+    def __call__(self, x) -> np.ndarray:
+        u = self.rf_inputs(x)
+        vals = []
+        for f in self.functions:
+            r = f(u)
+            if self.value_max is not None and self.value_transform == "log":
+                r = np.minimum(r, np.log(self.value_max + self.value_offset))   # no exp overflow
+            vals.append(invert_value_transform(r, self.value_transform, self.value_offset))
+        out = np.stack(vals, axis=-1)
+        if self.value_min is not None:
+            out = np.maximum(out, self.value_min)
+        if self.value_max is not None:
+            out = np.minimum(out, self.value_max)
+        return out
+
+    # Persistence ---------------------------------------------------------------------------
+
+
+@dataclass
+class PiecewiseRationalModel(_BRDFEvaluation):
+    """Rational models on consecutive intervals of one variable (file version 2,
+    :mod:`fit.rational.coefficient_file`).
+
+    ``pieces[k]`` is a :class:`RationalModel` whose domain in ``split_variable`` is
+    ``[edges[k], edges[k + 1]]`` (same other variables, outputs and value transform).
+    Evaluation: clamp the inputs onto the whole box (``variables``), then evaluate the piece
+    ``k`` with ``edges[k] <= x <= edges[k + 1]`` (the lower piece at a shared edge). Each
+    piece carries its own guarantee in ``piece_info`` (e.g. the interval policy it meets).
+    """
+
+    name: str
+    variables: list
+    split_variable: str
+    edges: list
+    pieces: list
+    kind: str = "brdf"
+    domain_policy: dict = field(default_factory=lambda: {"outside": "clamp", "below_horizon": "zero"})
+    fit_info: dict = field(default_factory=dict)
+    piece_info: list = field(default_factory=list)
+    source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
+
+    def __post_init__(self):
+        self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]
+        names = [v.name for v in self.variables]
+        if self.split_variable not in names:
+            raise ValueError(f"split variable {self.split_variable!r} is not among {names}")
+        self.edges = [float(e) for e in self.edges]
+        if len(self.edges) != len(self.pieces) + 1 or np.any(np.diff(self.edges) <= 0):
+            raise ValueError("edges must be increasing, one more than the pieces")
+        self._axis = names.index(self.split_variable)
+        var = self.variables[self._axis]
+        if not (np.isclose(self.edges[0], var.domain[0]) and np.isclose(self.edges[-1], var.domain[1])):
+            raise ValueError(f"edges {self.edges} do not span the domain {var.domain} of {var.name}")
+        for k, piece in enumerate(self.pieces):
+            if [v.name for v in piece.variables] != names or piece.outputs != self.pieces[0].outputs:
+                raise ValueError(f"piece {k}: variables or outputs differ from the model's")
+            if not np.allclose(piece.variables[self._axis].domain, self.edges[k:k + 2]):
+                raise ValueError(f"piece {k}: {var.name} domain {piece.variables[self._axis].domain} "
+                                 f"!= [{self.edges[k]}, {self.edges[k + 1]}]")
+            if (piece.value_transform, piece.value_offset) != (self.pieces[0].value_transform,
+                                                               self.pieces[0].value_offset):
+                raise ValueError(f"piece {k}: value transform differs from piece 0")
+        if not self.piece_info:
+            self.piece_info = [{} for _ in self.pieces]
+
+    @property
+    def outputs(self) -> tuple:
+        return self.pieces[0].outputs
+
+    @property
+    def n_vars(self) -> int:
+        return len(self.variables)
+
+    @property
+    def n_coefficients(self) -> int:
+        return sum(p.n_coefficients for p in self.pieces)
+
+    @property
+    def functions(self) -> list:
+        """Every piece's functions, piece by piece."""
+        return [f for p in self.pieces for f in p.functions]
+
+    @property
+    def value_transform(self) -> str:
+        return self.pieces[0].value_transform
+
+    @property
+    def value_offset(self) -> float:
+        return self.pieces[0].value_offset
+
+    @property
+    def value_min(self):
+        return self.pieces[0].value_min
+
+    @property
+    def value_max(self):
+        return self.pieces[0].value_max
+
+    def piece_index(self, x_split) -> np.ndarray:
+        """Index of the piece that evaluates each value of the split variable (clamped)."""
+        inner = np.asarray(self.edges[1:-1])
+        return np.searchsorted(inner, np.asarray(x_split, float), side="left")
+
+    def __call__(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if self.domain_policy.get("outside", "clamp") == "clamp":
+            lo = np.array([v.domain[0] for v in self.variables])
+            hi = np.array([v.domain[1] for v in self.variables])
+            x = np.clip(x, lo, hi)
+        k = self.piece_index(x[..., self._axis])
+        out = np.zeros(x.shape[:-1] + (len(self.outputs),))
+        for i, piece in enumerate(self.pieces):
+            sel = k == i
+            if np.any(sel):
+                out[sel] = piece(x[sel])
+        return out
