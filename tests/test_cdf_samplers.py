@@ -1,5 +1,7 @@
-"""Inverse-CDF samplers (issue 6): tabulated on every shared RGL material, rational (verified
-fit) on a Lambert material, Warp == NumPy, unbiasedness, renders, fallback detection."""
+"""Inverse-CDF samplers: the tabulated sampler on every shared RGL material, the paper's global
+layout (verification, fallback, file round trip, monotone refit), renders with every sampler.
+The Warp samplers' own contract (chi-square, unbiasedness, Warp == NumPy, pdf) is
+tests/test_sampler_contract.py."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,13 +9,11 @@ import pytest
 
 from conftest import RGL_MATERIALS, data_file
 from fit.formats.angles import spherical_to_direction
-from fit.formats.colour import LUMINANCE
-from fit.projection.albedo import directional_albedo
-from fit.sampling.cdf_file import CDFFit, fit_cdf, verify
+from fit.sampling.cdf_file import fit_cdf, verify
 from fit.sampling.table import tabulate
-from test_cdf_table import _chi2_pvalue, _expected_cell_probs
 
 from analytic import lambert
+from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs, table_cell_probs
 
 THETA_V = [0.0, np.radians(45), np.radians(85)]
 
@@ -43,69 +43,13 @@ def test_tabulated_chi2_and_unbiased_rgl(rgl, name):
     brdf, table = rgl[name]
     rng = np.random.default_rng(3)
     n = 60_000
+    te, pe = edges(7, 9)
     for tv in THETA_V:
         tl, pl, pdf = table.sample(tv, rng.random(n), rng.random(n))
-        probs, te, pe = _expected_cell_probs(table, tv)
-        counts, _, _ = np.histogram2d(tl, pl, bins=[te, pe])
-        assert _chi2_pvalue(counts, probs, n) > 1e-4, (name, tv)
-        _assert_albedo_matches_quadrature(brdf, tv, tl, pl, 1.0 / pdf, name)
-
-
-def _assert_albedo_matches_quadrature(brdf, tv, tl, pl, weight, name):
-    """Unbiasedness of ``f cos * weight`` (weight = 1/pdf or alpha) for light samples
-    ``(tl, pl)`` at view ``tv``, against quadrature over the light (view fixed)."""
-    wi = spherical_to_direction(tl, pl)
-    wo = spherical_to_direction(tv, 0.0)
-    est = (brdf.evaluate(wi, wo) @ LUMINANCE) * np.cos(tl) * weight
-    m, se = est.mean(), est.std() / np.sqrt(len(est))
-    # Quadrature over the light with the view fixed (full azimuth range: the resampled RGL
-    # data are not mirror-symmetric in phi_l, 2.6 % apart on cc_iris_purple_gem at 45 deg).
-    swap = lambda a, b: brdf.evaluate(b, a)  # noqa: E731
-    q1 = directional_albedo(swap, tv) @ LUMINANCE
-    q2 = directional_albedo(swap, tv, 180, 720) @ LUMINANCE
-    # 3 sigma + the quadrature's own uncertainty (difference of two resolutions) + 0.5 %
-    # for the clear coats' near-normal mirror peak (heavy-tailed weights, midpoint rule)
-    assert abs(m - q2) < 3 * se + 2 * abs(q2 - q1) + 0.005 * q2, (name, tv, m, q2, se, q1)
-
-
-def _rational_cell_probs(fit: CDFFit, tv, nb_t=7, nb_p=9, nq=64):
-    """Exact cell probabilities of the rational sampler by inverting its monotone map."""
-    t_edges = np.linspace(0, np.pi / 2, nb_t + 1)
-    p_edges = np.linspace(-np.pi, np.pi, nb_p + 1)
-    mu_e = fit.theta_cdf(tv, t_edges)
-    probs = np.zeros((nb_t, nb_p))
-    for a in range(nb_t):
-        mu = mu_e[a] + (np.arange(nq) + 0.5) / nq * (mu_e[a + 1] - mu_e[a])
-        tl = fit.sample(tv, mu, 0.75)[0]
-        # P(phi in [lo, hi] | theta_l): symmetric half-range CDF C(|phi|) with mass 1/2 per side
-        C = lambda p: fit.phi_cdf_half(tv, tl, p)  # noqa: E731
-        for b in range(nb_p):
-            lo, hi = p_edges[b], p_edges[b + 1]
-            if lo >= 0:
-                pr = 0.5 * (C(hi) - C(lo))
-            elif hi <= 0:
-                pr = 0.5 * (C(-lo) - C(-hi))
-            else:
-                pr = 0.5 * (C(hi) + C(-lo))
-            probs[a, b] = (mu_e[a + 1] - mu_e[a]) * pr.mean()
-    return probs, t_edges, p_edges
-
-
-@pytest.mark.parametrize("tv", THETA_V)
-def test_rational_chi2_and_derivative_estimator(lambert_fit, tv):
-    f, fit = lambert_fit
-    rng = np.random.default_rng(7)
-    n = 40_000
-    tl, pl, alpha = fit.sample(tv, rng.random(n), rng.random(n))
-    probs, te, pe = _rational_cell_probs(fit, tv)
-    assert probs.sum() == pytest.approx(1.0, abs=1e-6)
-    counts, _, _ = np.histogram2d(tl, pl, bins=[te, pe])
-    assert _chi2_pvalue(counts, probs, n) > 1e-4
-    wi = spherical_to_direction(tl, pl)
-    wo = spherical_to_direction(tv, 0.0)
-    est = (f(wi, wo) @ LUMINANCE) * np.cos(tl) * alpha
-    q = directional_albedo(f, tv) @ LUMINANCE
-    assert abs(est.mean() - q) < 3 * est.std() / np.sqrt(n) + 1e-6
+        assert chi2_pvalue(histogram(tl, pl, te, pe), table_cell_probs(table, tv, te, pe), n) > 1e-4, (name, tv)
+        # + 0.5 %: the clear coats' near-normal mirror peak (heavy-tailed weights, midpoint rule)
+        assert_unbiased(brdf.evaluate, tv, spherical_to_direction(tl, pl), spherical_to_direction(tv, 0.0),
+                        1.0 / pdf, name, rel=0.005)
 
 
 def test_broken_fits_trigger_fallback(lambert_fit):
@@ -177,39 +121,6 @@ def test_rows_layout_file_is_refused(lambert_fit, tmp_path):
 
 
 # ---- Warp ---------------------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def warp_lambert(lambert_fit):
-    from warp_rbrdf import testing as T
-    from warp_rbrdf.renderer import Renderer
-
-    _, fit = lambert_fit
-    spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler="mis-rational")
-    spec.cdf = fit
-    r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=8, spp=64))
-    r.compile()
-    return r, fit
-
-
-def test_warp_samplers_equal_numpy(warp_lambert):
-    r, fit = warp_lambert
-    rng = np.random.default_rng(2)
-    n = 4000
-    tv = rng.random(n) * np.radians(88)
-    pv = rng.random(n) * 2 * np.pi
-    wo = spherical_to_direction(tv, pv)
-    xi = rng.random((n, 2)) * 0.998 + 0.001
-    for sampler in ("rational", "rational-derivative"):
-        wi, w = r.sample_material("m", wo, xi, sampler)
-        tl, pl, alpha = fit.sample(tv, xi[:, 0], xi[:, 1])
-        ref = spherical_to_direction(tl, pv + pl)
-        np.testing.assert_allclose(wi, ref, atol=2e-4)
-        np.testing.assert_allclose(w, alpha, rtol=2e-3, atol=1e-5)
-    wi, w = r.sample_material("m", wo, xi, "tabulated")
-    tl, pl, pdf = fit.table.sample(tv, xi[:, 0], xi[:, 1])
-    np.testing.assert_allclose(wi, spherical_to_direction(tl, pv + pl), atol=2e-4)
-    np.testing.assert_allclose(w, 1 / pdf, rtol=2e-3)
-
-
 def test_warp_renders_agree(lambert_fit):
     """A Lambert plane under a constant sky: every pixel is the albedo, with every sampler."""
     from warp_rbrdf import testing as T
@@ -270,32 +181,8 @@ def test_monotone_refit_repairs_a_fold_and_stays_unbiased(lambert_fit):
     assert not bad.fallback, bad.reason
     rng = np.random.default_rng(11)
     n = 40_000
+    te, pe = edges(7, 9)
     for tv in THETA_V:
         tl, pl, alpha = bad.sample(tv, rng.random(n), rng.random(n))
-        probs, te, pe = _rational_cell_probs(bad, tv)
-        counts, _, _ = np.histogram2d(tl, pl, bins=[te, pe])
-        assert _chi2_pvalue(counts, probs, n) > 1e-4
-        est = (f(spherical_to_direction(tl, pl), spherical_to_direction(tv, 0.0)) @ LUMINANCE) * np.cos(tl) * alpha
-        q = directional_albedo(f, tv) @ LUMINANCE
-        assert abs(est.mean() - q) < 3 * est.std() / np.sqrt(n) + 1e-6
-
-
-# ---- Warp samples of a measured material (used by test_cdf_pieces) ---------------------------
-def warp_rational_samples(brdf, fit, n: int = 4000):
-    """Renderer (plane, measured ``brdf`` with rational inverse CDFs ``fit``) and 4000 Warp
-    samples of its rational-derivative strategy: ``(renderer, theta_v, phi_v, xi, wi, alpha)``
-    for view angles below 89 deg and xi away from 0 and 1."""
-    from warp_rbrdf import testing as T
-    from warp_rbrdf.renderer import Renderer
-    from warp_rbrdf.scene import MaterialSpec
-
-    spec = MaterialSpec(name="m", type="measured", data=brdf, sampler="rational-derivative")
-    spec.cdf = fit
-    r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=2, spp=1))
-    r.compile()
-    rng = np.random.default_rng(4)
-    tv = rng.random(n) * np.radians(89)
-    pv = rng.random(n) * 2 * np.pi
-    xi = rng.random((n, 2)) * 0.998 + 0.001
-    wi, w = r.sample_material("m", spherical_to_direction(tv, pv), xi, "rational-derivative")
-    return r, tv, pv, xi, wi, w
+        assert chi2_pvalue(histogram(tl, pl, te, pe), map_cell_probs(bad, tv, te, pe), n) > 1e-4
+        assert_unbiased(f, tv, spherical_to_direction(tl, pl), spherical_to_direction(tv, 0.0), alpha, tv)

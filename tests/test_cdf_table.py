@@ -2,7 +2,6 @@
 zero-mass rows."""
 import numpy as np
 import pytest
-from scipy import stats
 
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
@@ -10,6 +9,7 @@ from fit.projection.albedo import directional_albedo
 from fit.sampling.table import tabulate
 
 from analytic import glossy_lobe, lambert
+from chi2 import chi2_pvalue, edges, histogram, table_cell_probs
 
 THETA_V = [0.0, np.radians(45), np.radians(85)]
 
@@ -20,53 +20,16 @@ def glossy():
     return f, tabulate(f, n_v=16, n_t=48, n_p=48)
 
 
-def _chi2_pvalue(counts, probs, n):
-    """Pearson chi-square p-value; cells expecting <= 5 samples are pooled into one."""
-    exp = probs.ravel() / probs.sum() * n
-    keep = exp > 5
-    obs = counts.ravel()
-    chi2 = ((obs[keep] - exp[keep]) ** 2 / exp[keep]).sum()
-    rest = exp[~keep].sum()
-    if rest > 0:
-        chi2 += (obs[~keep].sum() - rest) ** 2 / rest
-    return stats.chi2.sf(chi2, keep.sum())
-
-
-def _overlap(lo, hi, edges):
-    """Length of [lo, hi] inside each interval of ``edges``."""
-    return np.clip(np.minimum(hi, edges[1:]) - np.maximum(lo, edges[:-1]), 0, None)
-
-
-def _expected_cell_probs(table, theta_v, nb_t=7, nb_p=9):
-    """Exact probabilities of coarse (theta, phi) cells, not aligned with the table's cells,
-    from the table's CDF arrays alone (piecewise-uniform density inside each table cell)."""
-    v = table.row(theta_v)
-    m_t = np.diff(table.cdf_theta[v])            # (n_t,)
-    m_p = np.diff(table.cdf_phi[v], axis=1)      # (n_t, n_p) over |phi|
-    t_fine = np.linspace(0, np.pi / 2, table.n_t + 1)
-    p_fine = np.linspace(0, np.pi, table.n_p + 1)
-    t_edges = np.linspace(0, np.pi / 2, nb_t + 1)
-    p_edges = np.linspace(-np.pi, np.pi, nb_p + 1)
-    probs = np.zeros((nb_t, nb_p))
-    for a in range(nb_t):
-        ft = _overlap(t_edges[a], t_edges[a + 1], t_fine) / np.diff(t_fine)
-        for b in range(nb_p):
-            lo, hi = p_edges[b], p_edges[b + 1]
-            fp = (_overlap(max(lo, 0), max(hi, 0), p_fine) + _overlap(max(-hi, 0), max(-lo, 0), p_fine)) / np.diff(p_fine)
-            probs[a, b] = np.sum(m_t[:, None] * ft[:, None] * 0.5 * m_p * fp[None, :])
-    return probs, t_edges, p_edges
-
-
 @pytest.mark.parametrize("theta_v", THETA_V)
 def test_chi_square_against_own_density(glossy, theta_v):
     _, table = glossy
     rng = np.random.default_rng(11)
     n = 100_000
     tl, pl, _ = table.sample(theta_v, rng.random(n), rng.random(n))
-    probs, ct_edges, p_edges = _expected_cell_probs(table, theta_v)
+    t_edges, p_edges = edges(7, 9)                 # not aligned with the table's cells
+    probs = table_cell_probs(table, theta_v, t_edges, p_edges)
     assert probs.sum() == pytest.approx(1.0, abs=1e-12)
-    counts, _, _ = np.histogram2d(tl, pl, bins=[ct_edges, p_edges])
-    assert _chi2_pvalue(counts, probs, n) > 1e-3
+    assert chi2_pvalue(histogram(tl, pl, t_edges, p_edges), probs, n) > 1e-3
 
 
 def test_sample_pdf_equals_pdf_function(glossy):

@@ -55,6 +55,7 @@ class Renderer:
         self._build()
         self.setup_seconds = time.perf_counter() - t0
         self.compile_seconds = None
+        self._kernels = self._all_kernels = None
 
     # ------------------------------------------------------------------------------------------
     def _build(self):
@@ -115,12 +116,19 @@ class Renderer:
             techniques.append((c, sample, pdf, t.pdf_exact))
         return integrator.make_kernels(kinds, techniques)
 
+    @property
+    def kernels(self):
+        """The scene's kernels (:class:`warp_rbrdf.integrator.Kernels`); each is its own Warp
+        module, compiled (or loaded from the kernel cache) on its first launch."""
+        if self._kernels is None:
+            self._kernels = self._make_kernels()
+        return self._kernels
+
     def compile(self):
         """Generate and compile (or load from the kernel cache) the scene's render kernel."""
         if self.compile_seconds is not None:
             return self.compile_seconds
         t0 = time.perf_counter()
-        self.kernels = self._make_kernels()
         self.wp.load_module(self.kernels.render_tile.module, device=self.device)
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
@@ -203,13 +211,12 @@ class Renderer:
         return tech.code
 
     def kernels_for(self, t: int):
-        """Compiled kernels (:class:`warp_rbrdf.integrator.Kernels`) that can sample technique
+        """Kernels (:class:`warp_rbrdf.integrator.Kernels`) that can sample technique
         ``t``: the scene's, or, for a technique the scene does not use, kernels with every
         technique (for :meth:`sample_material`, :meth:`pdf_material` and the benchmarks)."""
-        self.compile()
         if t in self.material_data.techniques_used():
             return self.kernels
-        if getattr(self, "_all_kernels", None) is None:
+        if self._all_kernels is None:
             self._all_kernels = self._make_kernels(all_techniques=True)
         return self._all_kernels
 
@@ -219,7 +226,6 @@ class Renderer:
     def eval_material(self, name: str, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Evaluate material ``name`` with the Warp code at local direction pairs (N, 3)."""
         wp = self.wp
-        self.compile()
         m = self.material_index(name)
         wi, wo = self._array(wi, 3, wp.vec3), self._array(wo, 3, wp.vec3)
         out = wp.zeros(len(wi), dtype=wp.vec3, device=self.device)

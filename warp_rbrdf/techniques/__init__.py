@@ -1,6 +1,8 @@
 """BSDF sampling techniques, one module each, listed in :data:`warp_rbrdf.registry.TECHNIQUES`.
 
-Every technique module has the Warp functions
+Every technique module has ``kernel_functions(global_fits) -> (sample, pdf)``, the Warp
+functions for a scene's materials (most techniques return two fixed module functions; the
+rational one adds generated code for the global-layout fits it is given):
 
 * ``sample(mats: Materials, m: int, wo: vec3, xi: vec2) -> vec4``: a light direction ``wi``
   (local frame, z = normal) and its estimator weight (1/pdf, or alpha for the rational maps;
@@ -8,10 +10,8 @@ Every technique module has the Warp functions
 * ``pdf(mats, m, wi, wo) -> float``: the density in 1/sr that MIS uses (exact unless the
   registry says ``pdf_exact = False``),
 
-``kernel_functions(cdfs) -> (sample, pdf)`` (the functions for a scene's materials: most
-techniques return the two above; the rational one adds generated code for global-layout fits),
 and the NumPy references ``numpy_sample(cdf, wo, xi) -> (wi, weight)`` and
 ``numpy_pdf(cdf, wi, wo)``, where ``cdf`` is the material's inverse-CDF data (None, a
-:class:`fit.sampling.table.CDFTable` or a :class:`fit.sampling.cdf_file.CDFFit`). :mod:`.cdf_data` prepares and
-packs that data.
+:class:`fit.sampling.table.CDFTable` or a :class:`fit.sampling.cdf_file.CDFFit`).
+:mod:`.cdf_data` prepares and packs that data.
 """
