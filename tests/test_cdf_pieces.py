@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
+from fit.analytic import lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
 from fit.sampling.cdf_file import fit_cdf, load, verify
@@ -16,8 +17,6 @@ from fit.sampling.pieces import _piece, build_pieces, rq_eval, sample_pieces, ve
 from fit.sampling.table import tabulate
 from test_cdf_samplers import (THETA_V, _assert_albedo_matches_quadrature, _chi2_pvalue, _rational_cell_probs,
                                 warp_rational_samples)
-
-from analytic import lambert
 
 
 @pytest.fixture(scope="module")

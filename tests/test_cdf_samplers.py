@@ -6,14 +6,13 @@ import numpy as np
 import pytest
 
 from conftest import RGL_MATERIALS, data_file
+from fit.analytic import lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
 from fit.projection.albedo import directional_albedo
 from fit.sampling.cdf_file import CDFFit, fit_cdf, verify
 from fit.sampling.table import tabulate
 from test_cdf_table import _chi2_pvalue, _expected_cell_probs
-
-from analytic import lambert
 
 THETA_V = [0.0, np.radians(45), np.radians(85)]
 

@@ -4,12 +4,11 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from fit.analytic import glossy_lobe, lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
 from fit.projection.albedo import directional_albedo
 from fit.sampling.table import tabulate
-
-from analytic import glossy_lobe, lambert
 
 THETA_V = [0.0, np.radians(45), np.radians(85)]
 

@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from analytic import glossy_lobe, lambert
+from fit.analytic import glossy_lobe, lambert
 from conftest import RGL_MATERIALS, data_file
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
