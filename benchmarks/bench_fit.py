@@ -7,9 +7,9 @@ chart; and the evaluation throughput of a fitted model (NumPy, points per second
 ``--transforms`` instead compares the value / theta_h transforms (log or linear value, sqrt or
 identity theta_h) at the first tolerance.
 
-    taskset -c 0 python benchmarks/bench_fit.py --tols 0.01 0.05 0.1 \
+    taskset -c 0 python -m benchmarks.bench_fit --tols 0.01 0.05 0.1 \
         --chart docs/images/fit_coefficients_vs_tol.png --json results/bench_fit.json
-    taskset -c 0 python benchmarks/bench_fit.py --tols 0.05 --transforms --json results/fit_transforms.json
+    taskset -c 0 python -m benchmarks.bench_fit --tols 0.05 --transforms --json results/fit_transforms.json
 """
 from __future__ import annotations
 
@@ -24,13 +24,11 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 
 def warp_throughput(model, n: int = 1_000_000) -> float:
     """Evaluations per second of the rational material's generated Warp code (one launch, one
     CPU thread, median of 5, host<->device copies included)."""
-    sys.path.insert(0, str(ROOT / "tests"))
     from fit.formats.angles import spherical_to_direction
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
@@ -78,7 +76,8 @@ def plot(rows, path, what: str) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_fit", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=os.environ.get("RBRDF_DATA", str(ROOT.parent / "shared" / "data")))
     ap.add_argument("--materials", nargs="+", default=["paper_white_rgb", "satin_rosaline_rgb",
                     "colodur_napoli_4f_rgb", "vch_golden_yellow_rgb", "cc_ibiza_sunset_rgb",

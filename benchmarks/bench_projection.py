@@ -1,6 +1,6 @@
 """Benchmark: projection of one measured BRDF onto (theta_h, theta_d), on one core.
 
-    python benchmarks/bench_projection.py [FILE ...] [--repeats 7]
+    python -m benchmarks.bench_projection [FILE ...] [--repeats 7]
 
 Without files it uses an exact-layout MERL file written from an analytic glossy lobe, plus
 every RGL material found under $RBRDF_DATA/rgl (resampled once; resampling is not timed here).
@@ -18,8 +18,6 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
 
 from fit.formats import load_measured  # noqa: E402
 from fit.formats.measured import MeasuredBRDF  # noqa: E402
@@ -28,13 +26,14 @@ from fit.projection.project import STATISTICS, project  # noqa: E402
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_projection", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("files", nargs="*")
     ap.add_argument("--repeats", type=int, default=7)
     args = ap.parse_args(argv)
     files = list(args.files)
     if not files:
-        from analytic import glossy_lobe
+        from fit.analytic import glossy_lobe
 
         tmp = Path(tempfile.mkdtemp()) / "analytic_glossy.binary"
         write_merl(MeasuredBRDF.from_function(glossy_lobe(phi_mod=0.3), name="analytic_glossy"), tmp)

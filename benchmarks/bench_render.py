@@ -7,7 +7,7 @@ material lookups, the CMJ sample generation and the environment CDF sampling.
 The Embree reference casts, for the same number of samples, the same camera rays (closest hit,
 ``intersect``) and two occlusion rays per hit (``occluded``) with no shading at all.
 
-    python benchmarks/bench_render.py [--scene scenes/bunny_rooitou.toml] [--resolution 128]
+    python -m benchmarks.bench_render [--scene scenes/bunny_rooitou.toml] [--resolution 128]
                                       [--spp 16] [--repeats 5]
 
 Prints a table and a JSON line. Times are wall-clock medians over ``--repeats`` renders after
@@ -27,7 +27,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 
 def machine_scaling(threads=2, repeats=3):
@@ -147,7 +146,8 @@ def embree_rate(renderer, spp, threads, repeats):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_render", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--scene", default=str(ROOT / "scenes" / "bunny_rooitou.toml"))
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--spp", type=int, default=16)

@@ -1,6 +1,6 @@
 """Benchmark of the RGL-EPFL reader (fit.formats.rgl) on one core, plus the per-material albedo table.
 
-    python benchmarks/bench_rgl.py [FILE ...] [--n 1000000] [--repeats 5] [--thumbnails DIR]
+    python -m benchmarks.bench_rgl [FILE ...] [--n 1000000] [--repeats 5] [--thumbnails DIR]
 
 Without files it uses every ``*.bsdf`` under $RBRDF_DATA/rgl (default ../shared/data/rgl).
 For each material it prints the median (and min) over ``--repeats`` of
@@ -26,7 +26,6 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
@@ -79,7 +78,8 @@ def write_thumbnail(measured, path, scale: int = 2) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_rgl", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("files", nargs="*")
     ap.add_argument("--n", type=int, default=1_000_000, help="direction pairs per evaluate() call")
     ap.add_argument("--repeats", type=int, default=5)

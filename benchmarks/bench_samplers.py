@@ -11,7 +11,7 @@
    rational sampler where its fit is verified (else "fallback"), and the efficiency
    1 / (variance * time per sample) with the Warp sampling times.
 
-Usage: python benchmarks/bench_samplers.py [--n 1000000] [--materials a,b] [--cdf-dir DIR]
+Usage: python -m benchmarks.bench_samplers [--n 1000000] [--materials a,b] [--cdf-dir DIR]
        [--layout pieces|global] [--max-variance-ratio R | none] [--n-u 16,32,64]
 (``--layout``: how the rational inverse CDFs are built here, default the fitter's default
 "pieces" (fit.sampling.pieces, 2-20 s per material, mostly the variance gate).)
@@ -22,14 +22,10 @@ rational: the speed of the rational rows themselves.)
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
 
 
 def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
@@ -51,11 +47,11 @@ def warp_rate(renderer, name, sampler, n, reps=3, order="coherent"):
     best = np.inf
     for _ in range(reps):
         wp.synchronize()
-        t = time.perf_counter()
+        t0 = time.perf_counter()
         wp.launch(kernel, dim=n, inputs=[renderer.materials, m, t, dwo, dxi], outputs=[out],
                   device=renderer.device)
         wp.synchronize()
-        best = min(best, time.perf_counter() - t)
+        best = min(best, time.perf_counter() - t0)
     return n / best
 
 
@@ -87,7 +83,8 @@ def variances(evaluate, fit, n=200_000):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_samplers", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--materials", default="lambert,paper_white_rgb,satin_rosaline_rgb,vch_golden_yellow_rgb,"
                                            "cc_ibiza_sunset_rgb,cc_iris_purple_gem_rgb,colodur_napoli_4f_rgb")
@@ -105,12 +102,12 @@ def main(argv=None):
     import warp as wp
 
     wp.config.quiet = True
-    from analytic import lambert
-    from conftest import DATA
+    from fit.analytic import lambert
     from fit.formats import load_measured
     from fit.sampling.cdf_file import fit_cdf, load
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.paths import require_data_root
     from warp_rbrdf.scene import MaterialSpec
 
     print(f"warp {wp.__version__}, device {args.device}, n = {args.n} samples per launch")
@@ -121,7 +118,7 @@ def main(argv=None):
                           phi_kw=dict(degrees=(2, 1)), refinements=0)
             spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler="rational" if not fit.fallback else "tabulated")
         else:
-            b = load_measured(DATA / "rgl" / f"{name}.bsdf")
+            b = load_measured(require_data_root("bench_samplers") / "rgl" / f"{name}.bsdf")
             ev = b.evaluate
             cdf = Path(args.cdf_dir) / f"{name}.json" if args.cdf_dir else None
             t0 = time.perf_counter()

@@ -1,7 +1,10 @@
 """Shared helpers of the studies: data paths, in-memory scenes, sampler discovery, timed renders,
 image metrics (RMSE on an object mask, CIE ΔE2000 with colour-science), small writers and
 :func:`publish_docs` (each study's ``--docs``: charts to ``docs/images/``, the full report to
-``docs/study_<name>.md`` and the README block between the study's markers).
+``docs/study_<name>.md`` and the study's block in ``docs/results.md`` between its markers).
+
+The studies are run as modules from the checkout root (``python -m studies.convergence ...``);
+colour-science comes with the ``studies`` extra (``pip install -e ".[studies]"``).
 
 Every study builds its scenes in memory (no TOML files), with the object alone in front of a
 hidden environment (``hide_environment = true``) so that errors are measured on the object's
@@ -22,8 +25,6 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # `python studies/x.py` from anywhere
-    sys.path.insert(0, str(ROOT))
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
 
 from warp_rbrdf.paths import data_root, require_data_root  # noqa: E402
@@ -150,13 +151,21 @@ def make_scene(geometry: str, light: str, material: MaterialSpec, resolution: in
 _TABLES: dict = {}
 _FITS: dict = {}
 CDF_TIME_LIMIT_S: float | None = None   # bound on each rational CDF fit (None: fit_cdf's default)
+CDF_PIECES_KW: dict | None = None       # pieces layout options of the fits (None: fit_cdf's defaults)
+#: Pieces layout options of the smoke-size presets: one phi-piece count and no re-measurement of
+#: the variance gate's borderline rows (fit.sampling.variance_gate.fit_pieces). On the failure
+#: map's mirror lobe about 1 s instead of about 30 s, with the same kind of outcome (some rows
+#: rational, the others sampled with the table, with the reason).
+SMALL_CDF_PIECES = dict(n_u=(16,), gate_recheck=None)
 
 
 def cdf_for(spec: MaterialSpec, rational: bool):
     """The inverse-CDF table (``rational`` False) or table + verified rational fit of an
     in-memory material, as a ``fit.sampling.cdf_file.CDFFit``, made once per (data, type, scale) in this
     process and shared by every scene and sampler that uses it (the renderer would otherwise
-    tabulate, and fit, again for each one). ``None`` for materials without in-memory data."""
+    tabulate, and fit, again for each one); the fit with :data:`CDF_TIME_LIMIT_S` and
+    :data:`CDF_PIECES_KW` (a fit made with other values is not reused). ``None`` for materials
+    without in-memory data."""
     if spec.type == "lambert" or spec.data is None or isinstance(spec.data, (str, Path)):
         return None
     from fit.sampling.cdf_file import fit_cdf, table_only
@@ -168,10 +177,12 @@ def cdf_for(spec: MaterialSpec, rational: bool):
         _TABLES[key] = (table_only(evaluate, reason="table only (studies cache)", name=spec.name), spec.data)
     if not rational:
         return _TABLES[key][0]
-    if key not in _FITS:
+    fit_key = key + (CDF_TIME_LIMIT_S, repr(sorted((CDF_PIECES_KW or {}).items())))
+    if fit_key not in _FITS:
         kw = {} if CDF_TIME_LIMIT_S is None else {"time_limit_s": CDF_TIME_LIMIT_S}
-        _FITS[key] = fit_cdf(evaluate, name=spec.name, table=_TABLES[key][0].table, **kw)
-    return _FITS[key]
+        _FITS[fit_key] = fit_cdf(evaluate, name=spec.name, table=_TABLES[key][0].table,
+                                 pieces_kw=CDF_PIECES_KW, **kw)
+    return _FITS[fit_key]
 
 
 def with_sampler(scene: Scene, sampler: str) -> Scene:
@@ -350,61 +361,66 @@ def progress(iterable=None, **kw):
 
 
 # --------------------------------------------------------------------------------------------
-# Publishing (``--docs``): docs/images/study_*.png, docs/study_<name>.md, the README block
-DOCS_HELP = ("also write docs/images/study_*.png, docs/study_<name>.md and the README block between "
-             "the study's markers")
+# Publishing (``--docs``): docs/images/study_*.png, docs/study_<name>.md and the study's block in
+# docs/results.md
+RESULTS_PAGE = Path("docs") / "results.md"
+DOCS_HELP = ("also write docs/images/study_*.png, docs/study_<name>.md and the study's block in "
+             "docs/results.md (between its BEGIN/END study markers)")
 
 
 def add_docs_arguments(parser):
-    """``--docs`` (and ``--docs-root``, where docs/ and README.md are) for a study's CLI."""
+    """``--docs`` (and ``--docs-root``, the folder holding docs/) for a study's CLI."""
     parser.add_argument("--docs", action="store_true", help=DOCS_HELP)
     parser.add_argument("--docs-root", default=str(ROOT),
-                        help="folder holding README.md and docs/ (default: the repository root)")
+                        help="folder holding docs/ (docs/results.md with the studies' markers, docs/images/, "
+                             "docs/study_<name>.md); default: the repository root")
 
 
-def publish_run(args, res: dict, readme_table, script, argv, docs: dict):
+def publish_run(args, res: dict, block_table, script, argv, docs: dict):
     """A study's ``--docs`` step after its run: :func:`publish_docs` of the run ``res`` (its
-    ``markdown`` and ``meta``) with ``readme_table(res)``, the command rebuilt from ``script`` and
+    ``markdown`` and ``meta``) with ``block_table(res)``, the command rebuilt from ``script`` and
     ``argv``, and the study's ``docs`` dict (name, title, charts); nothing without ``--docs``."""
     if not args.docs:
         return None
-    pub = publish_docs(out=args.out, summary_md=res["markdown"], meta=res["meta"], readme_table=readme_table(res),
+    pub = publish_docs(out=args.out, summary_md=res["markdown"], meta=res["meta"], block_table=block_table(res),
                        command=command_line(script, argv), docs_root=args.docs_root, **docs)
     n = len(pub["images"])
-    print(f"published {pub['doc']}, {n} chart{'s' if n != 1 else ''} and the README block")
+    print(f"published {pub['doc']}, {n} chart{'s' if n != 1 else ''} and the block in {pub['results']}")
     return pub
 
 
 def command_line(script, argv=None) -> str:
-    """The command that ran a study, as ``python studies/x.py ARGS`` (``argv``: the arguments,
-    default ``sys.argv[1:]``; the script path relative to the repository when it is inside)."""
+    """The command that ran a study, as ``python -m studies.<name> ARGS`` (``script``: the study's
+    file, e.g. its ``__file__`` or ``sys.argv[0]``; ``argv``: the arguments, default
+    ``sys.argv[1:]``). A script outside the repository is given as ``python PATH ARGS``."""
     script = Path(script).resolve()
-    try:
-        rel = script.relative_to(ROOT).as_posix()
-    except ValueError:
-        rel = str(script)
     args = sys.argv[1:] if argv is None else list(argv)
-    return shlex.join(["python", rel, *map(str, args)])
+    try:
+        rel = script.relative_to(ROOT)
+    except ValueError:
+        return shlex.join(["python", str(script), *map(str, args)])
+    return shlex.join(["python", "-m", ".".join(rel.with_suffix("").parts), *map(str, args)])
 
 
-def readme_markers(name: str) -> tuple[str, str]:
+def block_markers(name: str) -> tuple[str, str]:
+    """The study's BEGIN / END markers in docs/results.md."""
     return f"<!-- BEGIN study:{name} -->", f"<!-- END study:{name} -->"
 
 
-def replace_block(text: str, name: str, block: str) -> str:
+def replace_block(text: str, name: str, block: str, where: str = str(RESULTS_PAGE)) -> str:
     """``text`` with what lies between the study's two markers replaced by ``block`` (the markers
     and everything outside them unchanged). A marker that is missing, repeated or out of order is a
-    ``ValueError`` naming it."""
-    begin, end = readme_markers(name)
+    ``ValueError`` naming it (and ``where``, the file the text comes from)."""
+    begin, end = block_markers(name)
     for m in (begin, end):
         n = text.count(m)
         if n != 1:
-            raise ValueError(f"README marker {m!r} " + ("not found" if n == 0 else f"found {n} times")
+            raise ValueError(f"{where}: marker {m!r} " + ("not found" if n == 0 else f"found {n} times")
                              + f": add the pair {begin!r} ... {end!r} where the study's block goes")
     i = text.index(begin) + len(begin)
     j = text.index(end)
     if j < i:
-        raise ValueError(f"README marker {end!r} comes before {begin!r}")
+        raise ValueError(f"{where}: marker {end!r} comes before {begin!r}")
     return text[:i] + "\n" + block.strip("\n") + "\n" + text[j:]
 
 
@@ -419,43 +435,45 @@ def _run_line(meta: dict) -> tuple[str, str]:
 
 
 def publish_docs(name: str, title: str, out, summary_md: str, meta: dict, charts: dict,
-                 readme_table: str, command: str | None = None, docs_root=None,
-                 readme_charts=None) -> dict:
+                 block_table: str, command: str | None = None, docs_root=None,
+                 block_charts=None) -> dict:
     """Publish one study's run (its ``--docs``).
 
-    ``name``: the study's key (README markers ``<!-- BEGIN study:<name> -->`` /
-    ``<!-- END study:<name> -->``, report ``docs/study_<name>.md``); ``out``: the folder the run
-    wrote its charts to; ``charts``: {file in ``out``: name under ``docs/images/``}, in display
-    order; ``readme_charts``: the subset (of those names) shown in the README (default: all);
-    ``summary_md``: the study's full markdown summary; ``meta``: its meta (``wall_seconds``,
-    ``machine``); ``readme_table``: the compact markdown of key numbers for the README block;
-    ``command``: the command line (default: rebuilt from ``sys.argv``); ``docs_root``: folder
-    holding ``README.md`` and ``docs/`` (default: the repository root).
+    ``name``: the study's key (markers ``<!-- BEGIN study:<name> -->`` /
+    ``<!-- END study:<name> -->`` in ``docs/results.md``, report ``docs/study_<name>.md``);
+    ``out``: the folder the run wrote its charts to; ``charts``: {file in ``out``: name under
+    ``docs/images/``}, in display order; ``block_charts``: the subset (of those names) shown in
+    the results page's block (default: all); ``summary_md``: the study's full markdown summary;
+    ``meta``: its meta (``wall_seconds``, ``machine``); ``block_table``: the compact markdown of
+    key numbers for the block; ``command``: the command line (default: rebuilt from
+    ``sys.argv``); ``docs_root``: folder holding ``docs/`` (default: the repository root).
 
-    Everything is checked (charts present, README markers present once each) before anything is
-    written, so a failure leaves the docs as they were. Returns the paths written and the block."""
+    The block's links are relative to ``docs/`` (``images/<chart>``, ``study_<name>.md``).
+    Everything is checked (charts present, ``docs/results.md`` present with the study's markers
+    once each) before anything is written, so a failure leaves the docs as they were. Returns
+    the paths written (``images``, ``doc``, ``results``) and the ``block``."""
     root = Path(docs_root) if docs_root is not None else ROOT
     if meta.get("preset") == "smoke" and root.resolve() == ROOT.resolve():
-        raise ValueError(f"study {name}: a --smoke run would overwrite the repository's docs and README "
-                         "block; give --docs-root another folder")
+        raise ValueError(f"study {name}: a --smoke run would overwrite the repository's docs (docs/results.md "
+                         "block, docs/study_*.md); give --docs-root another folder")
     out = Path(out)
     command = command or command_line(sys.argv[0])
-    readme = root / "README.md"
+    results = root / RESULTS_PAGE
     missing = [str(out / s) for s in charts if not (out / s).is_file()]
     if missing:
         raise FileNotFoundError(f"study {name}: chart(s) not written by this run: {', '.join(missing)}")
-    if not readme.is_file():
-        raise FileNotFoundError(f"no README.md in {root}")
-    with open(readme, encoding="utf-8", newline="") as f:
+    if not results.is_file():
+        raise FileNotFoundError(f"no {RESULTS_PAGE.as_posix()} in {root}")
+    with open(results, encoding="utf-8", newline="") as f:
         text = f.read()
     long_run, short_run = _run_line(meta)
-    shown = [d for d in charts.values() if readme_charts is None or d in readme_charts]
+    shown = [d for d in charts.values() if block_charts is None or d in block_charts]
     block = "\n".join([f"**{title}** · `{command}` ({short_run})", "",
-                       *[f"![{Path(d).stem}](docs/images/{d})" for d in shown], "",
-                       readme_table.strip("\n"), "",
+                       *[f"![{Path(d).stem}](images/{d})" for d in shown], "",
+                       block_table.strip("\n"), "",
                        f"Generated by `--docs`; the full report with every table: "
-                       f"[docs/study_{name}.md](docs/study_{name}.md)."])
-    new_text = replace_block(text, name, block)
+                       f"[study_{name}.md](study_{name}.md)."])
+    new_text = replace_block(text, name, block, where=str(results))
     images = root / "docs" / "images"
     images.mkdir(parents=True, exist_ok=True)
     written = []
@@ -470,6 +488,6 @@ def publish_docs(name: str, title: str, out, summary_md: str, meta: dict, charts
                               *[f"![{Path(d).stem}](images/{d})\n" for d in charts.values()],
                               summary_md.strip("\n"), ""]), encoding="utf-8")
     if new_text != text:
-        with open(readme, "w", encoding="utf-8", newline="") as f:
+        with open(results, "w", encoding="utf-8", newline="") as f:
             f.write(new_text)
-    return dict(images=written, doc=doc, readme=readme, block=block)
+    return dict(images=written, doc=doc, results=results, block=block)

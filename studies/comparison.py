@@ -21,30 +21,25 @@ method="CIE 2000")``) at one exposure per scene and material: the 99th percentil
 render's luminance on the object is mapped to Y = 1 (L* = 100). Statistics on the object's fully
 covered pixels: mean, 99th percentile; also by the view angle theta_o (where the error is).
 
-    python studies/comparison.py --out results/comparison_full --docs  # full size; README + docs
-    python studies/comparison.py --out results/comparison --smoke
-    python studies/comparison.py --preset moderate --out results/comparison     # 96 px, ~1 min
+    python -m studies.comparison --out results/comparison_full --docs  # full size, published to docs/
+    python -m studies.comparison --out results/comparison --smoke
+    python -m studies.comparison --preset moderate --out results/comparison     # 96 px, ~1 min
 
 ``--docs`` also copies the charts to ``docs/images/study_comparison_{colinear,envmap}.png``,
-writes ``docs/study_comparison.md`` and the README block between
+writes ``docs/study_comparison.md`` and its block in ``docs/results.md`` between
 ``<!-- BEGIN study:comparison -->`` and ``<!-- END study:comparison -->``
 (:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from studies import common as C  # noqa: E402
-from studies import fits as F  # noqa: E402
+from studies import common as C
+from studies import fits as F
 
 PRESETS = {
     "smoke": dict(resolution=20, env_spp=16, colinear_spp=4, materials=["paper"], env="studio"),
@@ -85,7 +80,7 @@ def laplacian_energy(img, mask) -> float:
 
 def run(preset="full", out="results/comparison", materials=None, resolution=None, env=None,
         env_spp=None, colinear_spp=None, tol=0.05, allow_fit=True, allow_direct=False,
-        fit_timeout=900.0, geometry="sphere", charts=True, quiet=False) -> dict:
+        geometry="sphere", charts=True, quiet=False) -> dict:
     cfg = dict(PRESETS[preset])
     for k, v in dict(materials=materials, resolution=resolution, env=env, env_spp=env_spp,
                      colinear_spp=colinear_spp).items():
@@ -100,8 +95,7 @@ def run(preset="full", out="results/comparison", materials=None, resolution=None
     for mname in cfg["materials"]:
         reps = {"measured": C.material_spec("measured", C.measured(mname), "light"),
                 "projected": C.material_spec("projected", C.projected(mname), "light")}
-        model, info = F.rational_model(mname, tol, allow_fit=allow_fit, allow_direct=allow_direct,
-                                       timeout=fit_timeout)
+        model, info = F.rational_model(mname, tol, allow_fit=allow_fit, allow_direct=allow_direct)
         fit_info[mname] = dict(info, **(F.model_summary(model) if model is not None else {}))
         if model is not None:
             reps["rational"] = C.material_spec("rational", model, "light")
@@ -189,9 +183,10 @@ def summary_markdown(rows, meta) -> str:
     return "\n".join(L)
 
 
-def readme_table(res) -> str:
-    """The README's compact table of a run (``run``'s result): per material and light, mean / p99
-    ΔE2000 of 3-D ↔ 2-D and 3-D ↔ rational, the noise floor, and 3-D ↔ 2-D by view angle."""
+def block_table(res) -> str:
+    """The compact table of a run (``run``'s result) for its block in docs/results.md: per
+    material and light, mean / p99 ΔE2000 of 3-D ↔ 2-D and 3-D ↔ rational, the noise floor, and
+    3-D ↔ 2-D by view angle."""
     rows, meta = res["rows"], res["meta"]
     cfg = meta["config"]
     bins = list(zip(THETA_BINS[:-1], THETA_BINS[1:]))
@@ -259,7 +254,7 @@ def plot(images, materials, lname, path):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m studies.comparison", description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/comparison")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--smoke", action="store_true")
@@ -272,14 +267,13 @@ def main(argv=None):
     p.add_argument("--no-fit", action="store_true", help="use only cached/shipped fits, never run the fitter")
     p.add_argument("--direct-fallback", action="store_true",
                    help="if the project's fitter is unavailable, fit with studies.fits.direct_fit (labelled)")
-    p.add_argument("--fit-timeout", type=float, default=900.0)
     C.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.materials, a.resolution, a.env, a.env_spp,
-              a.colinear_spp, a.tol, not a.no_fit, a.direct_fallback, a.fit_timeout)
+              a.colinear_spp, a.tol, not a.no_fit, a.direct_fallback)
     print(res["markdown"])
     print(f"wrote {a.out}/comparison.csv, .json, .md, comparison_*.png ({res['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, res, readme_table, __file__, argv, DOCS)
+    C.publish_run(a, res, block_table, __file__, argv, DOCS)
     return res
 
 

@@ -14,39 +14,37 @@ Samplers are discovered from ``warp_rbrdf.scene.SAMPLERS``: the four of the firs
 (uniform, cosine, light, mis) and any inverse-CDF sampler added since; a sampler that a material
 type does not support is recorded as skipped.
 
-Presets: ``full`` (default; with ``--docs`` it makes the README's block): 64×64 px, spp = 1, 2, 4, ..., 1024, 3 seeds,
-reference 8192 spp, sphere and bunny under rooitou (tiny sun), studio and a colinear light, ibiza
-and paper (12 scenes; about 30 minutes on 2 cores); ``moderate``: 48 px, spp ≤ 512, 2 seeds,
-reference 4096 spp, the same scenes; ``smoke``: 12 px, spp ≤ 8, one seed, sphere under rooitou
-and colinear, ibiza (CI).
+Presets: ``full`` (default; with ``--docs`` it makes the block in docs/results.md): 64×64 px,
+spp = 1, 2, 4, ..., 1024, 3 seeds, reference 8192 spp, sphere and bunny under rooitou (tiny sun),
+studio and a colinear light, ibiza and paper (12 scenes; about 30 minutes on 2 cores);
+``moderate``: 48 px, spp ≤ 512, 2 seeds, reference 4096 spp, the same scenes; ``smoke``: 12 px,
+spp ≤ 8, one seed, sphere under rooitou and colinear, ibiza, rational inverse CDFs with
+:data:`studies.common.SMALL_CDF_PIECES` (CI).
 
-    python studies/convergence.py --out results/convergence --docs     # full size; README + docs
-    python studies/convergence.py --out results/convergence --smoke    # tiny
-    python studies/convergence.py --preset moderate --out results/convergence_moderate
+    python -m studies.convergence --out results/convergence --docs     # full size, published to docs/
+    python -m studies.convergence --out results/convergence --smoke    # tiny
+    python -m studies.convergence --preset moderate --out results/convergence_moderate
 
 ``--docs`` also copies the charts to ``docs/images/study_convergence_*.png``, writes
-``docs/study_convergence.md`` and the README block between ``<!-- BEGIN study:convergence -->``
-and ``<!-- END study:convergence -->`` (:func:`studies.common.publish_docs`).
+``docs/study_convergence.md`` and its block in ``docs/results.md`` between
+``<!-- BEGIN study:convergence -->`` and ``<!-- END study:convergence -->``
+(:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from studies import common as C  # noqa: E402
+from studies import common as C
 
 PRESETS = {
     # resolution, spp list max, seeds, reference spp
+    # cdf_pieces: pieces layout options of the rational inverse CDFs (absent: the layout's defaults)
     "smoke": dict(resolution=12, max_spp=8, seeds=1, ref_spp=256, geometries=["sphere"],
-                  lights=["rooitou", "colinear"], materials=["ibiza"]),
+                  lights=["rooitou", "colinear"], materials=["ibiza"], cdf_pieces=C.SMALL_CDF_PIECES),
     "moderate": dict(resolution=48, max_spp=512, seeds=2, ref_spp=4096,
                      geometries=["sphere", "bunny"], lights=["rooitou", "studio", "colinear"],
                      materials=["ibiza", "paper"]),
@@ -61,11 +59,11 @@ DOCS = dict(name="convergence", title="Convergence",
             charts={"convergence_rmse_time.png": "study_convergence_rmse_time.png",
                     "convergence_rmse_spp.png": "study_convergence_rmse_spp.png",
                     "convergence_efficiency.png": "study_convergence_efficiency.png"},
-            readme_charts=("study_convergence_rmse_time.png", "study_convergence_efficiency.png"))
-#: Columns of the README's compact table: relative RMSE of these samplers, efficiency vs MIS of
+            block_charts=("study_convergence_rmse_time.png", "study_convergence_efficiency.png"))
+#: Columns of the results page's compact table: relative RMSE of these samplers, efficiency vs MIS of
 #: the last ones.
-README_SAMPLERS = ("cosine", "light", "mis", "tabulated", "rational-derivative", "mis-tabulated", "mis-rational")
-README_EFFICIENCY = ("light", "mis-tabulated", "mis-rational")
+BLOCK_SAMPLERS = ("cosine", "light", "mis", "tabulated", "rational-derivative", "mis-tabulated", "mis-rational")
+BLOCK_EFFICIENCY = ("light", "mis-tabulated", "mis-rational")
 _SHORT = {"rational-derivative": "rational-deriv.", "mis-tabulated": "mis-tab.", "mis-rational": "mis-rat."}
 
 
@@ -85,6 +83,8 @@ def run(preset="full", out="results/convergence", samplers=None, resolution=None
                      geometries=geometries, lights=lights, materials=materials).items():
         if v is not None:
             cfg[k] = v
+    C.CDF_TIME_LIMIT_S = None          # the inverse-CDF samplers' fits: fit_cdf's default limit
+    C.CDF_PIECES_KW = cfg.get("cdf_pieces")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     all_s = C.all_samplers()
@@ -208,22 +208,23 @@ def summary_markdown(summary, refs, meta) -> str:
     return "\n".join(lines)
 
 
-def readme_table(res) -> str:
-    """The README's compact table of a run (``run``'s result): per scene, relative RMSE at the top
-    spp of :data:`README_SAMPLERS` and efficiency vs MIS of :data:`README_EFFICIENCY`."""
+def block_table(res) -> str:
+    """The compact table of a run (``run``'s result) for its block in docs/results.md: per scene,
+    relative RMSE at the top spp of :data:`BLOCK_SAMPLERS` and efficiency vs MIS of
+    :data:`BLOCK_EFFICIENCY`."""
     summary, refs, meta = res["summary"], res["references"], res["meta"]
     cfg = meta["config"]
     top = max((s["spp"] for s in summary), default=cfg["max_spp"])
-    header = ["scene", "material", *(s.replace("derivative", "deriv.") for s in README_SAMPLERS),
-              "eff./MIS: " + " / ".join(_SHORT.get(s, s) for s in README_EFFICIENCY)]
+    header = ["scene", "material", *(s.replace("derivative", "deriv.") for s in BLOCK_SAMPLERS),
+              "eff./MIS: " + " / ".join(_SHORT.get(s, s) for s in BLOCK_EFFICIENCY)]
     body = []
     for ref in refs:
         key = (ref["geometry"], ref["light"], ref["material"])
         d = {s["sampler"]: s for s in summary if (s["geometry"], s["light"], s["material"]) == key}
         body.append([f"{ref['geometry']} / {ref['light']}", ref["material"]]
-                    + [d[s]["rel_rmse"] if s in d else float("nan") for s in README_SAMPLERS]
+                    + [d[s]["rel_rmse"] if s in d else float("nan") for s in BLOCK_SAMPLERS]
                     + [" / ".join(C._fmt(d[s]["eff_vs_mis"] if s in d else float("nan"))
-                                  for s in README_EFFICIENCY)])
+                                  for s in BLOCK_EFFICIENCY)])
     return (C.md_table(body, header)
             + f"\n(relative RMSE at {top} spp, median of {cfg['seeds']} seeds, on the object's fully covered "
               f"pixels at {cfg['resolution']}×{cfg['resolution']} px; reference: {meta['reference']}; "
@@ -291,7 +292,7 @@ def plot(rows, refs, summary, out: Path):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m studies.convergence", description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/convergence")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--smoke", action="store_true", help="tiny size (same as --preset smoke)")
@@ -311,7 +312,7 @@ def main(argv=None):
     print(res["markdown"])
     print(f"wrote {a.out}/convergence.csv, convergence.json, convergence.md, convergence_*.png "
           f"({res['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, res, readme_table, __file__, argv, DOCS)
+    C.publish_run(a, res, block_table, __file__, argv, DOCS)
     return res
 
 

@@ -27,33 +27,34 @@ seeds. It is what an RMSE against the converged image would be without bias; hea
 estimators (rare fireflies) are *under*-estimated at low spp, so the numbers are lower bounds for
 the failing samplers.
 
-    python studies/failure_map.py --out results/failure_map_full --docs   # full size; README + docs
-    python studies/failure_map.py --out results/failure_map --smoke
-    python studies/failure_map.py --preset moderate --out results/failure_map   # 48 px, ~1.5 min
+    python -m studies.failure_map --out results/failure_map_full --docs   # full size, published to docs/
+    python -m studies.failure_map --out results/failure_map --smoke
+    python -m studies.failure_map --preset moderate --out results/failure_map   # 48 px, ~1.5 min
 
 ``--docs`` also copies the chart to ``docs/images/study_failure_map.png``, writes
-``docs/study_failure_map.md`` and the README block between ``<!-- BEGIN study:failure_map -->``
-and ``<!-- END study:failure_map -->`` (:func:`studies.common.publish_docs`).
+``docs/study_failure_map.md`` and its block in ``docs/results.md`` between
+``<!-- BEGIN study:failure_map -->`` and ``<!-- END study:failure_map -->``
+(:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from functools import lru_cache
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
+from studies import common as C
 
-from studies import common as C  # noqa: E402
-
-PRESETS = {   # cdf_time_limit: bound (s) on each material's rational inverse-CDF fit
-    "smoke": dict(resolution=16, spp=16, seeds=1, fit_stride=9, fit_max_degree=4, cdf_time_limit=5.0),
-    "test": dict(resolution=24, spp=32, seeds=2, fit_stride=9, fit_max_degree=4, cdf_time_limit=20.0),
+#: cdf_time_limit: bound (s) on each material's rational inverse-CDF fit (global layout only);
+#: cdf_pieces: options of the pieces layout (absent: its defaults; the small presets use
+#: :data:`studies.common.SMALL_CDF_PIECES`).
+PRESETS = {
+    "smoke": dict(resolution=16, spp=16, seeds=1, fit_stride=9, fit_max_degree=4, cdf_time_limit=5.0,
+                  cdf_pieces=C.SMALL_CDF_PIECES),
+    "test": dict(resolution=24, spp=32, seeds=2, fit_stride=9, fit_max_degree=4, cdf_time_limit=20.0,
+                 cdf_pieces=C.SMALL_CDF_PIECES),
     "moderate": dict(resolution=48, spp=64, seeds=3, fit_stride=3, fit_max_degree=8, cdf_time_limit=300.0),
     "full": dict(resolution=96, spp=256, seeds=4, fit_stride=2, fit_max_degree=10, cdf_time_limit=300.0),
 }
@@ -178,8 +179,8 @@ def fit_channel(proj, tol, abs_floor, stride, max_degree, channel=1, theta_d_max
 
 # --------------------------------------------------------------------------------------------
 def mirror_cdf(mirror) -> dict:
-    """Fit (tables + rational inverse CDFs, under ``C.CDF_TIME_LIMIT_S``) of the mirror lobe,
-    cached for the samplers; returns its outcome."""
+    """Fit (tables + rational inverse CDFs, with ``C.CDF_TIME_LIMIT_S`` and ``C.CDF_PIECES_KW``) of
+    the mirror lobe, cached for the samplers; returns its outcome."""
     t0 = time.perf_counter()
     fit = C.cdf_for(C.material_spec("measured", mirror, sampler="rational"), rational=True)
     fi = fit.fit_info
@@ -187,7 +188,7 @@ def mirror_cdf(mirror) -> dict:
                 fit_seconds=fi.get("time_s"), time_limit_s=fi.get("time_limit_s"),
                 time_limit_reached=bool(fi.get("time_limit_reached")),
                 theta=fi.get("theta", {}).get("n_coefficients"), phi=fi.get("phi", {}).get("n_coefficients"),
-                layout=fi.get("layout", fit.layout),
+                layout=fi.get("layout", fit.layout), n_u=fi.get("n_u"), n_u_tried=fi.get("n_u_tried"),
                 verified_rows=fi.get("verified_rows"), n_rows=fi.get("n_rows"))
 
 
@@ -195,6 +196,7 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
         cases=("mirror", "grazing", "sun", "low_albedo", "fit", "mirror_cdf")) -> dict:
     cfg = dict(PRESETS[preset])
     C.CDF_TIME_LIMIT_S = cfg["cdf_time_limit"]
+    C.CDF_PIECES_KW = cfg.get("cdf_pieces")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     samplers = list(samplers or C.all_samplers())
@@ -269,7 +271,7 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
 
 def _sampler_findings(rows, other, meta) -> list[str]:
     """The sampler table and the projection / mirror-CDF lines (the summary's first part, and the
-    README block)."""
+    results page's block)."""
     cfg = meta["config"]
     s = meta["samplers"]
     L = []
@@ -292,15 +294,19 @@ def _sampler_findings(rows, other, meta) -> list[str]:
     if "mirror_cdf" in other:
         m = other["mirror_cdf"]
         lim = "" if m.get("time_limit_s") is None else f", time limit {m['time_limit_s']:g} s"
+        if m.get("n_u"):
+            tried = m.get("n_u_tried") or {}
+            lim += f", {m['n_u']} phi pieces" + (f" (of {'/'.join(map(str, tried))} tried)" if len(tried) > 1 else "")
         L.append(f"\nRational inverse CDFs of the mirror lobe ({m['layout']} layout{lim}): "
                  + (f"FALLBACK to the tabulated sampler ({m['reason']})" if m["fallback"] else m["reason"])
                  + f", {m['fit_seconds']:.1f} s.\n")
     return L
 
 
-def readme_table(res) -> str:
-    """The README's compact block of a run (``run``'s result): the relative standard error per case
-    and sampler, and the projection and mirror inverse-CDF findings (the fits: docs only)."""
+def block_table(res) -> str:
+    """The compact block of a run (``run``'s result) for docs/results.md: the relative standard
+    error per case and sampler, and the projection and mirror inverse-CDF findings (the fits:
+    study_failure_map.md only)."""
     meta = res["meta"]
     cfg = meta["config"]
     return (f"Relative standard error of the pixel estimate at {cfg['spp']} spp ({cfg['resolution']} px, "
@@ -359,7 +365,7 @@ def plot(rows, samplers, path, spp):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m studies.failure_map", description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/failure_map")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--smoke", action="store_true")
@@ -369,7 +375,7 @@ def main(argv=None):
     r = run("smoke" if a.smoke else a.preset, a.out, a.samplers)
     print(r["markdown"])
     print(f"wrote {a.out}/failure_map.csv, .json, .md, failure_map.png ({r['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, r, readme_table, __file__, argv, DOCS)
+    C.publish_run(a, r, block_table, __file__, argv, DOCS)
     return r
 
 

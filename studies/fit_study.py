@@ -2,8 +2,9 @@
 evaluation cost.
 
 For each material and tolerance a rational fit is obtained through :mod:`studies.fits` (the
-project's fitter ``rbrdf-fit brdf`` when it exists; with ``--direct-fallback`` a labelled
-stand-in built on :class:`fit.rational.fitter.IntervalRationalFitter`). Then:
+project's fitter, :func:`fit.rational.brdf_fit.fit_brdf` with ``rbrdf-fit brdf``'s defaults, in
+this process and without a time limit; with ``--direct-fallback`` a labelled stand-in built on
+:class:`fit.rational.fitter.IntervalRationalFitter`). Then:
 
 * coefficients (total over R, G, B), fit seconds, whether every channel met its intervals;
 * render error: a sphere under the environment map (sampler "light", same seed for every
@@ -14,30 +15,25 @@ stand-in built on :class:`fit.rational.fitter.IntervalRationalFitter`). Then:
   on ``n_eval`` random direction pairs, median of 5, one CPU thread) for the 3-D table, the
   2-D table and each fit; and the render seconds of the sphere.
 
-    python studies/fit_study.py --out results/fit_study_full --docs      # full size; README + docs
-    python studies/fit_study.py --out results/fit_study --smoke
-    python studies/fit_study.py --preset moderate --materials paper satin ibiza gold napoli iris \\
+    python -m studies.fit_study --out results/fit_study_full --docs      # full size, published to docs/
+    python -m studies.fit_study --out results/fit_study --smoke
+    python -m studies.fit_study --preset moderate --materials paper satin ibiza gold napoli iris \\
         --out results/fit_study                                             # 64 px, 20/10/5 %
 
 ``--docs`` also copies the chart to ``docs/images/study_fit.png``, writes ``docs/study_fit.md``
-and the README block between ``<!-- BEGIN study:fit -->`` and ``<!-- END study:fit -->``
-(:func:`studies.common.publish_docs`).
+and its block in ``docs/results.md`` between ``<!-- BEGIN study:fit -->`` and
+``<!-- END study:fit -->`` (:func:`studies.common.publish_docs`).
 """
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from studies import common as C  # noqa: E402
-from studies import fits as F  # noqa: E402
+from studies import common as C
+from studies import fits as F
 
 PRESETS = {
     "smoke": dict(materials=["paper"], tols=[0.2], resolution=16, spp=8, n_eval=1 << 14, stride=9,
@@ -86,7 +82,7 @@ def eval_ns(renderer, wi, wo, reps: int = 5) -> float:
 
 
 def run(preset="full", out="results/fit_study", materials=None, tols=None, env="studio", resolution=None,
-        spp=None, allow_fit=True, allow_direct=False, fit_timeout=1800.0, charts=True, quiet=False) -> dict:
+        spp=None, allow_fit=True, allow_direct=False, charts=True, quiet=False) -> dict:
     cfg = dict(PRESETS[preset])
     for k, v in dict(materials=materials, tols=tols, resolution=resolution, spp=spp).items():
         if v is not None:
@@ -122,7 +118,7 @@ def run(preset="full", out="results/fit_study", materials=None, tols=None, env="
         bar.update(1)
         for tol in cfg["tols"]:
             bar.set_postfix_str(f"{mname} tol {tol:g}")
-            model, info = _model(mname, tol, allow_fit, allow_direct, fit_timeout, fit_dir, cfg)
+            model, info = _model(mname, tol, allow_fit, allow_direct, fit_dir, cfg)
             row = dict(material=mname, tol=tol, source=info.get("source"), fit_seconds=info.get("fit_seconds"),
                        error=info.get("error", ""))
             if model is not None:
@@ -153,11 +149,11 @@ def run(preset="full", out="results/fit_study", materials=None, tols=None, env="
     return dict(rows=rows, tables=base_rows, meta=meta, markdown=md)
 
 
-def _model(mname, tol, allow_fit, allow_direct, timeout, fit_dir, cfg):
-    # --allow-infeasible: where no fit meets the tolerance the best one found is still rendered
+def _model(mname, tol, allow_fit, allow_direct, fit_dir, cfg):
+    # allow_infeasible: where no fit meets the tolerance the best one found is still rendered
     # and reported as "no" (the fitter flags it), so the study shows what a tolerance costs
     # where it cannot be met instead of a gap.
-    return F.rational_model(mname, tol, allow_fit=allow_fit, allow_direct=allow_direct, timeout=timeout,
+    return F.rational_model(mname, tol, allow_fit=allow_fit, allow_direct=allow_direct,
                             fit_dir=fit_dir, direct_stride=cfg["stride"], direct_max_degree=cfg["max_degree"],
                             allow_infeasible=True)
 
@@ -206,10 +202,10 @@ def summary_markdown(rows, base_rows, meta) -> str:
     return "\n".join(L)
 
 
-def readme_table(res) -> str:
-    """The README's compact table of a run (``run``'s result): per material, at each tolerance,
-    coefficients, mean ΔE2000 vs the 3-D table and ns per evaluation; the tables' cost and the
-    2-D table's ΔE and the noise for scale."""
+def block_table(res) -> str:
+    """The compact table of a run (``run``'s result) for its block in docs/results.md: per
+    material, at each tolerance, coefficients, mean ΔE2000 vs the 3-D table and ns per evaluation;
+    the tables' cost and the 2-D table's ΔE and the noise for scale."""
     rows, base_rows, meta = res["rows"], res["tables"], res["meta"]
     cfg = meta["config"]
     tols = list(cfg["tols"])
@@ -274,7 +270,7 @@ def plot(rows, base_rows, path):
 
 
 def main(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="python -m studies.fit_study", description=__doc__.split("\n")[0])
     p.add_argument("--out", default="results/fit_study")
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--smoke", action="store_true")
@@ -286,14 +282,13 @@ def main(argv=None):
     p.add_argument("--no-fit", action="store_true", help="only cached/shipped fits")
     p.add_argument("--direct-fallback", action="store_true",
                    help="if the project's fitter is unavailable, use studies.fits.direct_fit (labelled)")
-    p.add_argument("--fit-timeout", type=float, default=1800.0)
     C.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.materials, a.tols, a.env, a.resolution, a.spp,
-              not a.no_fit, a.direct_fallback, a.fit_timeout)
+              not a.no_fit, a.direct_fallback)
     print(res["markdown"])
     print(f"wrote {a.out}/fit_study.csv, .json, .md, fit_study.png ({res['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, res, readme_table, __file__, argv, DOCS)
+    C.publish_run(a, res, block_table, __file__, argv, DOCS)
     return res
 
 

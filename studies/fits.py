@@ -2,14 +2,24 @@
 
 Order of preference (the first that works):
 
-1. ``results/fits/<material>_tol<t>.json`` made earlier by this module;
+1. ``results/fits/<material>_tol<t>_cli.json`` made earlier by this module;
 2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t``;
-3. the project's fitter: ``rbrdf-fit brdf FILE --tol t --out X.json`` (``fit.rational.brdf_fit``; run in a
-   subprocess with a time limit, so a slow fit cannot hang a study);
+3. the project's fitter, called in this process: :func:`fit.rational.brdf_fit.fit_brdf` on the
+   measured file with the options ``rbrdf-fit brdf`` passes by default (:data:`FIT_OPTIONS`),
+   saved with :func:`fit.rational.coefficient_file.save`: the same fit and file as
+   ``rbrdf-fit brdf FILE --tol t --out X.json``. Its source is labelled ``"cli"`` and its cache
+   file ends in ``_cli.json``, as when the studies ran that command, so fits cached by earlier
+   runs are reused. A fit has no time limit (the studies used to run the command in a child
+   process with a timeout, and their ``--fit-timeout`` options are gone): it runs to its end,
+   and the fit study reports its seconds;
 4. only with ``allow_direct=True`` (the fit study's ``--direct-fallback``): a stand-in made here
    with :class:`fit.rational.fitter.IntervalRationalFitter` on the median projection (one function per
    channel over (sqrt theta_h, theta_d), theta_d <= 80 deg, intervals ``y +- max(t |y|, floor)``).
    It is labelled ``source = "direct"`` everywhere it is reported; it is not the shipped fitter.
+
+A fit whose guaranteed core misses the tolerance (flagged by the fitter) is written to the cache
+like any other but refused, with :meth:`fit.rational.brdf_fit.BRDFFit.summary` as the reason,
+unless the caller allows it (``allow_infeasible``).
 
 Returns ``(model, info)``; ``model`` is ``None`` (and ``info["error"]`` says why) when nothing
 works.
@@ -17,9 +27,6 @@ works.
 from __future__ import annotations
 
 import json
-import re
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -29,20 +36,21 @@ from studies import common as C
 
 FIT_DIR = C.ROOT / "results" / "fits"
 
+#: The options ``rbrdf-fit brdf`` passes to :func:`fit.rational.brdf_fit.fit_brdf` by default
+#: (``fit/cli/brdf.py``: --intervals, --core-theta-d, --band-intervals, --theta-h, --value,
+#: --max-degree, --max-den-degree, --floor-frac), as fit_brdf's keyword arguments.
+FIT_OPTIONS = dict(intervals="tol", core_theta_d_deg="auto", band_intervals="tol+spread",
+                   theta_h_transform="sqrt", value_transform="log", max_degree=12, max_den_degree=6,
+                   floor_frac=1.0)
+
 
 def brdf_fit_available() -> tuple[bool, str]:
-    """Whether ``fit.rational.brdf_fit`` imports and the CLI has a ``brdf`` command."""
+    """Whether the project's fitter (``fit.rational.brdf_fit``) imports, and how it is called."""
     try:
         import fit.rational.brdf_fit  # noqa: F401
     except Exception as e:  # noqa: BLE001
         return False, f"fit.rational.brdf_fit not importable ({type(e).__name__}: {e})"
-    from fit import cli
-
-    parser = cli.build_parser()
-    choices = next(a.choices for a in parser._actions if getattr(a, "choices", None))
-    if "brdf" not in choices:
-        return False, "rbrdf-fit has no 'brdf' command"
-    return True, "fit.rational.brdf_fit + rbrdf-fit brdf"
+    return True, "fit.rational.brdf_fit.fit_brdf with rbrdf-fit brdf's defaults"
 
 
 def _tag(tol: float) -> str:
@@ -50,18 +58,20 @@ def _tag(tol: float) -> str:
 
 
 def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, allow_direct: bool = False,
-                   timeout: float = 900.0, fit_dir: Path | None = None, extra_args=(),
+                   fit_dir: Path | None = None, fit_options: dict | None = None,
                    direct_stride: int = 3, direct_max_degree: int = 8, allow_infeasible: bool = False):
-    """``(model, info)``: the rational fit of ``material`` at relative tolerance ``tol``, from the
-    first of: a cached ``rbrdf-fit brdf`` file in ``fit_dir``, a cached direct fit (with
-    ``allow_direct``), a shipped file of that tolerance, a new ``rbrdf-fit brdf`` run (with
-    ``allow_fit``), a new direct fit (with ``allow_direct``). ``(None, info)`` with
-    ``info["error"]`` when none is available.
+    """``(model, info)``: the rational fit of ``material`` (a :data:`studies.common.MATERIALS` key
+    or a file path) at relative tolerance ``tol``, from the first of: a cached fitter file in
+    ``fit_dir``, a cached direct fit (with ``allow_direct``), a shipped file of that tolerance, a
+    new :func:`fit.rational.brdf_fit.fit_brdf` (with ``allow_fit``; :data:`FIT_OPTIONS` updated
+    with ``fit_options``; no time limit), a new direct fit (with ``allow_direct``). ``(None,
+    info)`` with ``info["error"]`` when none is available.
 
     ``allow_infeasible``: also accept a fit whose guaranteed core misses the tolerance (the
-    fitter's flagged best effort; ``--allow-infeasible``). Without it such a fit, cached or new,
-    is refused with the fitter's own summary as the reason, so a study never renders a fit it
-    believes guaranteed when it is not."""
+    fitter's flagged best effort; ``rbrdf-fit brdf --allow-infeasible``). Without it such a fit,
+    cached or new, is refused (a new one is still cached, as the command wrote its file) with
+    the fitter's summary line as the reason, so a study never renders a fit it believes
+    guaranteed when it is not."""
     from fit.rational.coefficient_file import load, save
 
     fit_dir = Path(fit_dir or FIT_DIR)
@@ -91,23 +101,17 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
         ok, why = brdf_fit_available()
         if ok:
             out = fit_dir / f"{stem}_tol{_tag(tol)}_cli.json"
-            cmd = [sys.executable, "-c", "import sys; from fit.cli import main; sys.exit(main())", "brdf",
-                   str(C.data_path(C.MATERIALS[material]) if material in C.MATERIALS else material),
-                   "--tol", str(tol), "--out", str(out), *extra_args,
-                   *(("--allow-infeasible",) if allow_infeasible else ())]
-            t0 = time.perf_counter()
             try:
-                r = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=C.ROOT)
-                dt = time.perf_counter() - t0
-                if r.returncode == 0 and out.exists():
-                    m = load(out)
-                    # fit_seconds: the fitter's own time as the file records it (the same
-                    # number a cached run reports); wall_seconds adds process start-up.
-                    return m, dict(info, source="cli", file=str(out),
-                                   fit_seconds=m.fit_info.get("time_s", dt), wall_seconds=dt)
-                errors.append(f"rbrdf-fit brdf exit {r.returncode}: {_fit_failure(r.stdout, r.stderr)}")
-            except subprocess.TimeoutExpired:
-                errors.append(f"rbrdf-fit brdf timed out after {timeout:.0f} s")
+                fit = fit_material(material, tol, **(fit_options or {}))
+            except Exception as e:  # noqa: BLE001 - an unreadable file, a fit that cannot start
+                errors.append(f"fit_brdf failed: {type(e).__name__}: {e}")
+            else:
+                save(fit.model, out)
+                if fit.valid or allow_infeasible:
+                    # fit_seconds: the fitter's own time, as the file records it (the same
+                    # number a cached run reports)
+                    return fit.model, dict(info, source="cli", file=str(out), fit_seconds=fit.time_s)
+                errors.append(f"fit flagged ({out.name}): {fit.summary()}")
         else:
             errors.append(why)
     if allow_direct:
@@ -122,6 +126,17 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
             save(m, out)
             return m, dict(info, source="direct", file=str(out), fit_seconds=m.fit_info["time_s"])
     return None, dict(info, source=None, error="; ".join(errors) or "no fit available")
+
+
+def fit_material(material: str, tol: float, **options):
+    """:func:`fit.rational.brdf_fit.fit_brdf` of a material (a :data:`studies.common.MATERIALS`
+    key or a file path) at ``tol`` with :data:`FIT_OPTIONS` (updated with ``options``): the
+    :class:`fit.rational.brdf_fit.BRDFFit` that ``rbrdf-fit brdf FILE --tol TOL`` makes."""
+    from fit.formats import load_measured
+    from fit.rational.brdf_fit import fit_brdf
+
+    path = C.data_path(C.MATERIALS[material]) if material in C.MATERIALS else Path(material)
+    return fit_brdf(load_measured(path), tol=tol, source_file=path.name, **dict(FIT_OPTIONS, **options))
 
 
 def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_max_deg: float = 80.0,
@@ -157,15 +172,6 @@ def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_m
                                    "abs_floor_rel": abs_floor_rel, "theta_d_max_deg": theta_d_max_deg},
         function_info=infos, domain_policy={"outside": "clamp", "below_horizon": "zero",
                                             "theta_d_max_deg": theta_d_max_deg})
-
-
-def _fit_failure(stdout: str, stderr: str) -> str:
-    """Why ``rbrdf-fit brdf`` failed, in one line: its ``total ...`` summary line when it printed
-    one (e.g. "total 735 coefficients, 21.4 s, NOT guaranteed ..."), else the end of stderr."""
-    total = [ln.strip() for ln in (stdout or "").splitlines() if ln.startswith("total ")]
-    if total:
-        return re.sub(r"; wrote \S+$", "", total[-1])
-    return (stderr or stdout or "").strip()[-300:]
 
 
 def model_summary(model) -> dict:

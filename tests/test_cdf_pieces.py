@@ -7,16 +7,21 @@ import copy
 
 import numpy as np
 import pytest
-
+from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs
 from conftest import RGL_MATERIALS, data_file
+
+from fit.analytic import lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
 from fit.sampling.cdf_file import fit_cdf, load, verify
-from fit.sampling.pieces import _piece, build_pieces, rq_eval, sample_pieces, verify_pieces
+from fit.sampling.pieces import (
+    _piece,
+    build_pieces,
+    rq_eval,
+    sample_pieces,
+    verify_pieces,
+)
 from fit.sampling.table import tabulate
-
-from analytic import lambert
-from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs
 
 THETA_V = [0.0, np.radians(45), np.radians(85)]
 

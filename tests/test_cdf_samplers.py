@@ -6,14 +6,20 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
+from chi2 import (
+    assert_unbiased,
+    chi2_pvalue,
+    edges,
+    histogram,
+    map_cell_probs,
+    table_cell_probs,
+)
 from conftest import RGL_MATERIALS, data_file
+
+from fit.analytic import lambert
 from fit.formats.angles import spherical_to_direction
 from fit.sampling.cdf_file import fit_cdf, verify
 from fit.sampling.table import tabulate
-
-from analytic import lambert
-from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs, table_cell_probs
 
 THETA_V = [0.0, np.radians(45), np.radians(85)]
 
@@ -72,8 +78,8 @@ def test_broken_fits_trigger_fallback(lambert_fit):
     verify(bad2)
     assert bad2.fallback and not bad2.verification["phi"]["q_certified"]
     # the renderer falls back explicitly (printed) to the tabulated sampler
-    from warp_rbrdf import testing as T
     from warp_rbrdf import registry
+    from warp_rbrdf import testing as T
     from warp_rbrdf.materials.build import build_material_data
 
     spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler="rational")

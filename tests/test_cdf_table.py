@@ -2,14 +2,13 @@
 zero-mass rows."""
 import numpy as np
 import pytest
+from chi2 import chi2_pvalue, edges, histogram, table_cell_probs
 
+from fit.analytic import glossy_lobe, lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
 from fit.projection.albedo import directional_albedo
 from fit.sampling.table import tabulate
-
-from analytic import glossy_lobe, lambert
-from chi2 import chi2_pvalue, edges, histogram, table_cell_probs
 
 THETA_V = [0.0, np.radians(45), np.radians(85)]
 

@@ -5,11 +5,10 @@ import sys
 import numpy as np
 import pytest
 
+from fit.analytic import glossy_lobe, lambert
 from fit.cli import main
 from fit.formats.measured import MeasuredBRDF, ProjectedBRDF
 from fit.formats.merl import write_merl
-
-from analytic import glossy_lobe, lambert
 
 
 @pytest.fixture(scope="module")

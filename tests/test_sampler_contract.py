@@ -24,10 +24,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-from analytic import glossy_lobe, lambert
-from chi2 import angles, assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs, pdf_cell_probs
+from chi2 import (
+    angles,
+    assert_unbiased,
+    chi2_pvalue,
+    edges,
+    histogram,
+    map_cell_probs,
+    pdf_cell_probs,
+)
 from conftest import RGL_MATERIALS, data_file
+
+from fit.analytic import glossy_lobe, lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.measured import MeasuredBRDF
 from fit.sampling.cdf_file import fit_cdf

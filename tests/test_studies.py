@@ -2,7 +2,12 @@
 regression (or an improvement that changes the map) is noticed.
 
 The failure-map pins run at a small fixed size ("test" preset: 24x24 px, 32 spp, 2 seeds); the
-margins are several times the seed-to-seed spread seen at that size.
+margins are several times the seed-to-seed spread seen at that size. Its run (the module fixture
+``failure_map``) is also what the publishing test publishes.
+
+The compact tables of the results page are checked on fixed numbers against literal text; the
+smoke runs' tables are read back as numbers (3 significant digits) and compared with the run's
+values.
 """
 from __future__ import annotations
 
@@ -10,14 +15,16 @@ import csv
 import json
 import math
 import re
-import shutil
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from conftest import data_file
 
-import colour  # noqa: E402,F401  (the studies measure ΔE2000 with colour-science)
+import colour  # noqa: E402,F401  (the studies measure ΔE2000 with colour-science: the studies extra)
+
+NAN = float("nan")
 
 
 @pytest.fixture(scope="module")
@@ -49,12 +56,69 @@ def test_delta_e2000_matches_colour_and_is_zero_for_equal_images():
 
 
 def test_sampler_discovery_includes_base_samplers():
+    """Every sampler the studies discover is one a scene accepts (as a material's ``sampler``),
+    once each, as many as the registry's strategies; the base ones come first, in the studies'
+    display order, and are exactly those whose BSDF sample needs no inverse-CDF table."""
     from studies import common as C
     from warp_rbrdf import registry
+    from warp_rbrdf.errors import SceneError
+    from warp_rbrdf.scene import parse_scene
+
+    def scene_sampler(name):
+        text = (f'[materials.m]\ntype = "lambert"\nsampler = "{name}"\n'
+                '[[shapes]]\ntype = "sphere"\nmaterial = "m"\n')
+        return parse_scene(text).materials["m"].sampler
 
     s = C.all_samplers()
     assert s[:4] == ("uniform", "cosine", "light", "mis")
-    assert set(s) == set(registry.STRATEGY_NAMES) and set(s[:4]) == set(registry.BASE_STRATEGIES)
+    assert len(s) == len(set(s)) == len(registry.STRATEGIES)
+    assert [scene_sampler(x) for x in s] == list(s)
+    with pytest.raises(SceneError, match="nosuch"):
+        scene_sampler("nosuch")
+    for x in s:
+        needs_table = registry.technique(registry.strategy(x).technique).needs_table
+        assert needs_table == (x not in ("uniform", "cosine", "light", "mis")), x
+
+
+def test_table_number_format():
+    """The studies' number format (3 significant digits, exponent outside [1e-3, 1e5), whole
+    numbers from 100, "–" for NaN) and markdown table, on fixed values."""
+    from studies import common as C
+
+    got = [C._fmt(x) for x in (0.0828, 0.063, 7.15, 9.12e-4, 0.001, 99.94, 146.4, 1246.0, 123456.0,
+                               0.0, -0.5, NAN, float("inf"), 42, "x")]
+    assert got == ["0.0828", "0.063", "7.15", "9.12e-04", "0.001", "99.9", "146", "1246", "1.23e+05",
+                   "0", "-0.5", "–", "–", "42", "x"]
+    assert C.md_table([["a", 1.5, NAN], ["b", 2, 1e-5]], ["x", "y", "z"]) == (
+        "| x | y | z |\n| --- | --- | --- |\n| a | 1.5 | – |\n| b | 2 | 1.00e-05 |\n")
+
+
+def _cells(line: str) -> list[str]:
+    """The cells of a markdown table row."""
+    assert line.startswith("| ") and line.endswith(" |"), line
+    return [c.strip() for c in line[2:-2].split(" | ")]
+
+
+def _num(cell: str, value: float):
+    """A table cell read back as a number equals ``value`` to its 3 significant digits."""
+    if not math.isfinite(value):
+        assert cell == "–"
+    else:
+        assert float(cell) == pytest.approx(value, rel=5e-3, abs=1e-12), (cell, value)
+
+
+def _png_size(path) -> tuple[int, int]:
+    """(height, width) of a PNG decoded as an RGB(A) image."""
+    import matplotlib.image as mpimg
+
+    img = mpimg.imread(str(path))
+    assert img.ndim == 3 and img.shape[2] in (3, 4) and np.isfinite(img).all()
+    return img.shape[:2]
+
+
+def _csv(path) -> list[dict]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
 
 
 # --------------------------------------------------------------------------------------------
@@ -63,18 +127,34 @@ def test_convergence_smoke(tmp_path, rgl_data):
     from studies import common as C
     from studies import convergence
 
-    # the base samplers plus the table-based inverse-CDF ones when the renderer has them (the
-    # rational ones fit inverse CDFs per material first: too slow for a smoke test)
-    want = [s for s in C.all_samplers() if s in C.BASE_SAMPLERS or "tabulated" in s]
-    r = convergence.run("smoke", tmp_path, samplers=want, quiet=True)
-    rows = list(csv.DictReader(open(tmp_path / "convergence.csv")))
+    # every sampler (the smoke preset fits ibiza's rational inverse CDFs with the small pieces
+    # options: about 1 s)
+    want = list(C.all_samplers())
+    r = convergence.run("smoke", tmp_path, quiet=True)
+    assert r["meta"]["samplers"] == want and r["meta"]["config"]["cdf_pieces"] == C.SMALL_CDF_PIECES
+    rows = _csv(tmp_path / "convergence.csv")
     samplers = {x["sampler"] for x in rows}
     assert samplers == set(want) - {s["sampler"] for s in r["meta"]["skipped"]}
     assert {"uniform", "cosine", "light", "mis"} <= samplers
-    assert all(math.isfinite(float(x["rmse"])) and float(x["seconds"]) > 0 for x in rows)
-    for f in ("convergence.json", "convergence.md", "convergence_rmse_spp.png", "convergence_rmse_time.png",
-              "convergence_efficiency.png"):
-        assert (tmp_path / f).stat().st_size > 0
+    # 2 scenes (sphere under rooitou and colinear, ibiza) x spp 1, 2, 4, 8 x 1 seed per sampler
+    assert len(rows) == 2 * 4 * len(samplers)
+    assert {(x["light"], x["material"], x["spp"]) for x in rows} == \
+        {(l, "ibiza", p) for l in ("rooitou", "colinear") for p in ("1", "2", "4", "8")}
+    assert all(math.isfinite(float(x[k])) for x in rows for k in ("rmse", "rel_rmse", "seconds"))
+    assert all(float(x["seconds"]) > 0 and x["finite"] == "True" for x in rows)
+    refs = _csv(tmp_path / "references.csv")
+    assert [(x["geometry"], x["light"]) for x in refs] == [("sphere", "rooitou"), ("sphere", "colinear")]
+    assert all(math.isfinite(float(x["floor_rel_rmse"])) and int(x["mask_pixels"]) > 0 for x in refs)
+    data = json.loads((tmp_path / "convergence.json").read_text())
+    assert set(data) == {"meta", "references", "rows", "summary"} and len(data["rows"]) == len(rows)
+    assert {(x["sampler"], x["light"]) for x in data["summary"]} == {(s, l) for s in samplers
+                                                                  for l in ("rooitou", "colinear")}
+    assert all(math.isfinite(x["rel_rmse"]) and x["spp"] == 8 for x in data["summary"])
+    assert (tmp_path / "convergence.md").read_text() == r["markdown"]
+    # 2 scenes: one row of 2 panels (3 x 2.4 in each at 60 dpi); efficiency bars 6 x 3.2 in at 72 dpi
+    assert _png_size(tmp_path / "convergence_rmse_spp.png") == (144, 360)
+    assert _png_size(tmp_path / "convergence_rmse_time.png") == (144, 360)
+    assert _png_size(tmp_path / "convergence_efficiency.png") == (230, 432)
     # more samples, less error (MIS under the sun, 1 -> 8 spp)
     e = {int(x["spp"]): float(x["rel_rmse"]) for x in rows
          if x["sampler"] == "mis" and x["light"] == "rooitou"}
@@ -84,20 +164,41 @@ def test_convergence_smoke(tmp_path, rgl_data):
            if x["light"] == "colinear" and x["spp"] == "8" and x["sampler"] in C.BASE_SAMPLERS}
     assert max(col.values()) == pytest.approx(min(col.values()), rel=1e-6)
     assert "| scene |" in r["markdown"]
-    # --docs: the charts it publishes are the ones the run wrote; the README table has one row per
-    # scene, the MIS column is the summary's value and samplers not run read "–"
-    assert all((tmp_path / f).stat().st_size > 0 for f in convergence.DOCS["charts"])
-    t = convergence.readme_table(r).splitlines()
+    # --docs: the charts it publishes are the ones the run wrote; the block's table has one row
+    # per scene with the summary's values, and samplers not run read "–"
+    assert set(convergence.DOCS["charts"]) <= {p.name for p in tmp_path.glob("*.png")}
+    t = convergence.block_table(r).splitlines()
     assert t[0].startswith("| scene | material | cosine | light | mis | tabulated | rational-deriv. |")
-    body = [x for x in t[2:] if x.startswith("| ")]
-    assert len(body) == len(r["references"]) == 2
-    mis = [s for s in r["summary"] if s["sampler"] == "mis" and s["light"] == "rooitou"][0]
-    row = [x for x in body if x.startswith("| sphere / rooitou | ibiza |")][0].split(" | ")
-    assert row[4] == C._fmt(mis["rel_rmse"])
-    assert row[6] == "–"          # rational-derivative was not run
-    assert row[7] == C._fmt([s for s in r["summary"] if s["sampler"] == "mis-tabulated"
-                             and s["light"] == "rooitou"][0]["rel_rmse"])
+    body = {tuple(_cells(x)[:2]): _cells(x) for x in t[2:] if x.startswith("| ")}
+    assert set(body) == {("sphere / rooitou", "ibiza"), ("sphere / colinear", "ibiza")}
+    summary = {s["sampler"]: s for s in r["summary"] if s["light"] == "rooitou"}
+    row = body[("sphere / rooitou", "ibiza")]
+    for col, s in enumerate(convergence.BLOCK_SAMPLERS, start=2):
+        _num(row[col], summary[s]["rel_rmse"] if s in summary else NAN)
     assert "at 8 spp" in t[-1]
+
+
+def test_convergence_block_table_on_fixed_values():
+    from studies import convergence
+
+    sc = dict(geometry="sphere", light="rooitou", material="ibiza", spp=1024)
+    summary = [dict(sc, sampler=s, rel_rmse=v, eff_vs_mis=e) for s, v, e in (
+        ("cosine", 7.15, 3.1e-4), ("light", 0.129, 0.699), ("mis", 0.0828, 1.0), ("tabulated", 5.92, 1.2e-3),
+        ("mis-tabulated", 0.063, 1.78), ("mis-rational", 0.0629, 1.7804))]
+    res = dict(summary=summary, references=[dict(geometry="sphere", light="rooitou", material="ibiza"),
+                                            dict(geometry="bunny", light="colinear", material="paper")],
+               meta=dict(config=dict(seeds=3, resolution=64, max_spp=1024),
+                         reference="sampler 'mis' at 8192 spp, seed 1000003"))
+    assert convergence.block_table(res).splitlines() == [
+        "| scene | material | cosine | light | mis | tabulated | rational-deriv. | mis-tabulated | mis-rational "
+        "| eff./MIS: light / mis-tab. / mis-rat. |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |",
+        "| sphere / rooitou | ibiza | 7.15 | 0.129 | 0.0828 | 5.92 | – | 0.063 | 0.0629 | 0.699 / 1.78 / 1.78 |",
+        "| bunny / colinear | paper | – | – | – | – | – | – | – | – / – / – |",
+        "",
+        "(relative RMSE at 1024 spp, median of 3 seeds, on the object's fully covered pixels at 64×64 px; "
+        "reference: sampler 'mis' at 8192 spp, seed 1000003; efficiency 1/(rel. MSE × render seconds) "
+        "relative to MIS, > 1: better than MIS; –: sampler not run.)"]
 
 
 def test_comparison_smoke(tmp_path, rgl_data):
@@ -105,20 +206,58 @@ def test_comparison_smoke(tmp_path, rgl_data):
     from studies import comparison
 
     r = comparison.run("smoke", tmp_path, allow_fit=False, quiet=True)
-    assert len(r["rows"]) == 2
+    assert [(x["material"], x["light"]) for x in r["rows"]] == [("paper", "colinear"), ("paper", "envmap")]
     for row in r["rows"]:
         assert 0 <= row["de_meas_proj_mean"] < 20 and row["de_meas_proj_p99"] >= row["de_meas_proj_mean"]
-    assert (tmp_path / "comparison_colinear.png").stat().st_size > 0
-    assert (tmp_path / "comparison_envmap.png").stat().st_size > 0
+        assert math.isfinite(row["noise_de_mean"]) and row["exposure"] > 0
+    # one row of 3 renders + 2 ΔE maps (1.6 in each) and 2 in high at 72 dpi
+    assert _png_size(tmp_path / "comparison_colinear.png") == (144, 576)
+    assert _png_size(tmp_path / "comparison_envmap.png") == (144, 576)
+    assert set(comparison.DOCS["charts"]) <= {p.name for p in tmp_path.glob("*.png")}
     data = json.loads((tmp_path / "comparison.json").read_text())
-    assert data["meta"]["config"]["materials"] == ["paper"]
-    assert all((tmp_path / f).stat().st_size > 0 for f in comparison.DOCS["charts"])
-    t = comparison.readme_table(r).splitlines()
-    row = r["rows"][0]
-    rat = (f"{C._fmt(row['de_meas_rati_mean'])} / {C._fmt(row['de_meas_rati_p99'])}"
-           if "de_meas_rati_mean" in row else "–")     # a cached or shipped fit, if any
-    assert t[2].startswith(f"| paper | {row['light']} | {C._fmt(row['de_meas_proj_mean'])} / "
-                           f"{C._fmt(row['de_meas_proj_p99'])} | {rat} | {C._fmt(row['noise_de_mean'])} |")
+    assert set(data) == {"meta", "rows"} and data["meta"]["config"]["materials"] == ["paper"]
+    assert [x["de_meas_proj_mean"] for x in data["rows"]] == [x["de_meas_proj_mean"] for x in r["rows"]]
+    rows = _csv(tmp_path / "comparison.csv")
+    assert len(rows) == 2 and all(math.isfinite(float(x["de_meas_proj_p99"])) for x in rows)
+    with np.load(tmp_path / "paper_envmap.npz") as z:
+        assert z["measured"].shape == z["projected"].shape == (20, 20, 3) and z["mask"].any()
+        assert np.isfinite(z["measured"]).all()
+    # the block's table: the run's values to 3 digits; "–" without a fit (none made here; a
+    # cached or shipped fit, if any, is used)
+    t = comparison.block_table(r).splitlines()
+    for line, row in zip(t[2:4], r["rows"]):
+        c = _cells(line)
+        assert c[:2] == ["paper", row["light"]]
+        for cell, tag in ((c[2], "meas_proj"), (c[3], "meas_rati")):
+            if f"de_{tag}_mean" not in row:
+                assert cell == "–"
+                continue
+            mean, p99 = cell.split(" / ")
+            _num(mean, row[f"de_{tag}_mean"])
+            _num(p99, row[f"de_{tag}_p99"])
+        _num(c[4], row["noise_de_mean"])
+
+
+def test_comparison_block_table_on_fixed_values():
+    from studies import comparison
+
+    bins = ("theta0_30", "theta30_60", "theta60_75", "theta75_90")
+    rows = [dict(material="paper", light="colinear", de_meas_proj_mean=0.366, de_meas_proj_p99=5.85,
+                 de_meas_rati_mean=1.55, de_meas_rati_p99=8.42, noise_de_mean=0.122,
+                 **{f"de_meas_proj_{b}": v for b, v in zip(bins, (0.0855, 0.101, 0.334, 3.83))}),
+            dict(material="paper", light="envmap", de_meas_proj_mean=0.476, de_meas_proj_p99=2.87,
+                 noise_de_mean=0.219, **{f"de_meas_proj_{b}": v for b, v in zip(bins, (0.492, 0.362, 0.593, NAN))})]
+    res = dict(rows=rows, meta=dict(config=dict(resolution=256, colinear_spp=64, env="studio", env_spp=1024),
+                                    tol=0.05, fits={"paper": {"n_coefficients": 135}, "gold": {}}))
+    assert comparison.block_table(res).splitlines() == [
+        "| material | light | 3-D ↔ 2-D | 3-D ↔ rational | noise floor | 3-D ↔ 2-D by θo 0–30°/30–60°/60–75°/75–90° |",
+        "| --- | --- | --- | --- | --- | --- |",
+        "| paper | colinear | 0.366 / 5.85 | 1.55 / 8.42 | 0.122 | 0.0855/0.101/0.334/3.83 |",
+        "| paper | envmap | 0.476 / 2.87 | – | 0.219 | 0.492/0.362/0.593/– |",
+        "",
+        "(mean / 99th percentile ΔE2000 on the object's fully covered pixels; sphere 256 px; colinear light "
+        "64 spp; `studio` map with 1024 importance-sampled lights per pixel; rational: fits at tolerance "
+        "0.05, coefficients: paper 135; gold none.)"]
 
 
 def test_view_angle_is_measured_to_each_pixels_ray_not_the_camera_axis():
@@ -164,36 +303,139 @@ def test_fit_study_smoke(tmp_path, rgl_data):
     import fit.rational.fitter  # noqa: F401
     from studies import fit_study
 
+    from fit.rational.coefficient_file import load
+
     r = fit_study.run("smoke", tmp_path, allow_direct=True, quiet=True)
     row = r["rows"][0]
-    assert row["n_coefficients"] > 0
+    # the project's fitter, called in-process, its file cached in the smoke run's own folder
+    assert row["source"] == "cli" and r["meta"]["fitter"][0]
+    cached = load(tmp_path / "fits" / "paper_white_rgb_tol0p2_cli.json")
+    assert row["n_coefficients"] == cached.n_coefficients > 0
+    assert row["fit_seconds"] == pytest.approx(cached.fit_info["time_s"])
     assert math.isfinite(row["de_vs_measured_mean"]) and math.isfinite(row["de_vs_projected_mean"])
     assert row["eval_ns"] > 0
     t = r["tables"][0]
     assert t["measured_eval_ns"] > 0 and t["projected_eval_ns"] > 0
-    assert (tmp_path / "fit_study.md").read_text().count("|") > 10
-    assert all((tmp_path / f).stat().st_size > 0 for f in fit_study.DOCS["charts"])
-    t = fit_study.readme_table(r).splitlines()
+    md = (tmp_path / "fit_study.md").read_text()
+    assert md == r["markdown"] and "| paper | 0.2 | cli |" in md
+    assert f"| {row['n_coefficients']} ({row['coefficients_rgb']}) |" in md
+    rows = _csv(tmp_path / "fit_study.csv")
+    assert [(x["material"], x["tol"], x["source"]) for x in rows] == [("paper", "0.2", "cli")]
+    assert all(math.isfinite(float(rows[0][k])) for k in ("de_vs_measured_mean", "eval_ns", "render_seconds"))
+    data = json.loads((tmp_path / "fit_study.json").read_text())
+    assert set(data) == {"meta", "rows", "tables"} and data["tables"][0]["material"] == "paper"
+    assert (tmp_path / "paper_tol0.2.npy").is_file() and np.load(tmp_path / "paper_tol0.2.npy").shape == (16, 16, 3)
+    assert _png_size(tmp_path / "fit_study.png") == (216, 720)       # 10 x 3 in at 72 dpi
+    assert set(fit_study.DOCS["charts"]) <= {p.name for p in tmp_path.glob("*.png")}
+    t = fit_study.block_table(r).splitlines()
     assert t[0].startswith("| material | coefficients at 20 % | mean ΔE vs 3-D | ns / eval |")
-    assert t[2].startswith(f"| paper | {row['n_coefficients']} | {row['de_vs_measured_mean']:.2f} | ")
+    c = _cells(t[2])
+    assert c[:2] == ["paper", str(row["n_coefficients"])]
+    assert float(c[2]) == pytest.approx(row["de_vs_measured_mean"], abs=0.005)
+    _num(c[3], row["eval_ns"])
+    assert c[4] == fit_study.guarantee(row)
+
+
+def test_fit_study_block_table_on_fixed_values():
+    from studies import fit_study
+
+    def fit(tol, n, de, ns, feasible=True, core=True):
+        return dict(material="paper", tol=tol, n_coefficients=n, de_vs_measured_mean=de, eval_ns=ns,
+                    feasible=feasible, core_guaranteed=core)
+
+    res = dict(rows=[fit(0.2, 54, 2.104, 86.9), fit(0.1, 78, 1.04, 89.54), fit(0.02, 735, 0.549, 154.2, False, False),
+                     dict(material="paper", tol=0.05)],
+               tables=[dict(material="paper", projected_eval_ns=71.4, measured_eval_ns=166.6,
+                            de_proj_vs_meas_mean=0.461, noise_de_mean=0.2249)],
+               meta=dict(config=dict(tols=[0.2, 0.1, 0.05, 0.02], resolution=128, spp=1024), env="studio",
+                         fitter=(True, "the fitter")))
+    t = fit_study.block_table(res).splitlines()
+    assert t[:3] == [
+        "| material | coefficients at 20 / 10 / 5 / 2 % | mean ΔE vs 3-D | ns / eval | in tol. | "
+        "ns / eval 2-D / 3-D table | ΔE 2-D vs 3-D / noise |",
+        "| --- | --- | --- | --- | --- | --- | --- |",
+        "| paper | 54 / 78 / – / 735 | 2.10 / 1.04 / – / 0.55 | 86.9 / 89.5 / – / 154 | yes / yes / – / no "
+        "| 71 / 167 | 0.46 / 0.22 |"]
+    assert t[4].startswith("(sphere under `studio`, 128 px, sampler `light` at 1024 spp,") and \
+        t[4].endswith("–: no fit. Fitter: the fitter.)")
+
+
+def _piece(d, valid, h=(0.0, 90.0)):
+    """A stand-in for a fitted piece (what BRDFFit's guarantee reads)."""
+    return SimpleNamespace(theta_d_range_deg=d, theta_h_range_deg=h, valid=valid)
+
+
+def _brdf_fit(pieces, n=735, seconds=21.43, model=None):
+    from fit.rational.brdf_fit import BRDFFit
+
+    return BRDFFit(model=model or SimpleNamespace(n_coefficients=n), pieces=pieces, time_s=seconds)
 
 
 def test_fit_study_reports_what_each_fit_guarantees():
     """The fit study's "in tol." column tells a fully met fit (yes) from a guaranteed core with a
-    flagged grazing band (core) and from a flagged best effort (no), and a failed fitter run is
-    reported by its summary line, not by the tail of its table."""
+    flagged grazing band (core) and from a flagged best effort (no); the fitter's one-line summary
+    (what ``rbrdf-fit brdf`` prints last, and what a study reports for a refused fit) says the same."""
     from studies import fit_study
-    from studies import fits as F
 
     assert fit_study.guarantee(dict(feasible=True, core_guaranteed=True)) == "yes"
     assert fit_study.guarantee(dict(feasible=False, core_guaranteed=True)) == "core"
     assert fit_study.guarantee(dict(feasible=False, core_guaranteed=False)) == "no"
-    out = ("paper_white_rgb: tol 0.02\n0-40 h5-90  tol  B  (12,6)  119  2.08%\n"
-           "total 735 coefficients, 21.4 s, NOT guaranteed (best fit found, flagged infeasible); "
-           "grazing band met; wrote /tmp/x.json\n")
-    assert F._fit_failure(out, "") == ("total 735 coefficients, 21.4 s, NOT guaranteed (best fit found, "
-                                       "flagged infeasible); grazing band met")
-    assert F._fit_failure("", "error: no such file") == "error: no such file"
+    band = _piece((60.0, 78.5), True)
+    assert _brdf_fit([_piece((0.0, 60.0), True), band], 189, 3.58).summary() == \
+        "total 189 coefficients, 3.6 s, guaranteed on theta_d <= 60 deg; grazing band met"
+    assert _brdf_fit([_piece((0.0, 40.0), True, (0.0, 5.0)), _piece((0.0, 40.0), True, (5.0, 90.0)),
+                      _piece((40.0, 78.5), False)]).summary() == \
+        ("total 735 coefficients, 21.4 s, guaranteed on theta_d <= 40 deg (split at theta_h = 5 deg); "
+         "grazing band best effort (NOT within its intervals, flagged)")
+    assert _brdf_fit([_piece((0.0, 40.0), False), band]).summary() == \
+        "total 735 coefficients, 21.4 s, NOT guaranteed (best fit found, flagged infeasible); grazing band met"
+    assert _brdf_fit([_piece((0.0, 78.5), True)], 54, 1.0).summary() == \
+        "total 54 coefficients, 1.0 s, guaranteed on theta_d <= 78.5 deg"
+
+
+def test_study_fits_use_the_cli_defaults():
+    """The studies fit with the options ``rbrdf-fit brdf FILE --tol T --out X`` passes to fit_brdf."""
+    from fit.cli import build_parser
+    from studies import fits as F
+
+    a = build_parser().parse_args(["brdf", "x.binary", "--out", "x.json"])
+    assert F.FIT_OPTIONS == dict(intervals=a.intervals, core_theta_d_deg=a.core_theta_d,
+                                 band_intervals=a.band_intervals, theta_h_transform=a.theta_h,
+                                 value_transform=a.value, max_degree=a.max_degree,
+                                 max_den_degree=a.max_den_degree, floor_frac=a.floor_frac)
+
+
+def test_rational_model_caches_a_new_fit_and_refuses_a_flagged_one(tmp_path, monkeypatch):
+    """A new fit (the fitter stubbed out: the shipped paper model as its result) is saved in the
+    cache either way; a flagged one is refused with the fitter's summary line unless the caller
+    allows best efforts, and a valid one is returned with the fitter's seconds."""
+    from fit.rational.coefficient_file import load
+    from studies import fits as F
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    m = load(sorted(PACKAGE_DATA.glob("paper_white*.json"))[0])
+    outcome = {"valid": False}
+    calls = []
+
+    def fake_fit(material, tol, **options):
+        calls.append((material, tol, options))
+        return _brdf_fit([_piece((0.0, 60.0), outcome["valid"]), _piece((60.0, 78.5), True)], seconds=2.5, model=m)
+
+    monkeypatch.setattr(F, "fit_material", fake_fit)
+    none, info = F.rational_model("paper", 0.3, fit_dir=tmp_path / "a")
+    cached = tmp_path / "a" / "paper_white_rgb_tol0p3_cli.json"
+    assert none is None and info["source"] is None
+    assert info["error"] == (f"fit flagged (paper_white_rgb_tol0p3_cli.json): total {m.n_coefficients} "
+                             "coefficients, 2.5 s, NOT guaranteed (best fit found, flagged infeasible); "
+                             "grazing band met")
+    assert cached.is_file() and load(cached).n_coefficients == m.n_coefficients
+    got, info = F.rational_model("paper", 0.3, fit_dir=tmp_path / "a", allow_infeasible=True)
+    assert got is not None and info["source"] == "cli (cached)" and len(calls) == 1
+    outcome["valid"] = True
+    got, info = F.rational_model("paper", 0.3, fit_dir=tmp_path / "b", fit_options={"max_degree": 8})
+    assert got is m and info["source"] == "cli" and info["fit_seconds"] == 2.5
+    assert calls[-1] == ("paper", 0.3, {"max_degree": 8})
+    assert (tmp_path / "b" / "paper_white_rgb_tol0p3_cli.json").is_file()
 
 
 def test_model_summary_core_guarantee_follows_the_fitters_record(tmp_path):
@@ -300,11 +542,70 @@ def test_failure_fits(failure_map):
     assert o["fit_paper_x0.02"]["relative_share"] < 0.5 * o["fit_paper"]["relative_share"]
 
 
+CASES = ["mirror lobe / studio", "mirror lobe / sun", "ibiza plane / view 80°", "ibiza plane / view 10°",
+         "paper sphere / sun", "paper sphere / studio", "paper×0.02 sphere / studio"]
+
+
 def test_failure_map_outputs(failure_map):
     out = failure_map["out"]
-    assert (out / "failure_map.png").stat().st_size > 0
+    samplers = ("uniform", "cosine", "light", "mis")
+    # 4 samplers x 7 cases: (1.2 x 4 + 2.6) x (0.42 x 7 + 1) in at 80 dpi
+    assert _png_size(out / "failure_map.png") == (315, 592)
     md = (out / "failure_map.md").read_text()
-    assert "mirror lobe / sun" in md and "| case |" in md
+    assert md == failure_map["markdown"] and "| case | uniform | cosine | light | mis |" in md
+    rows = _csv(out / "failure_map.csv")
+    assert [x["case"] for x in rows] == CASES
+    assert all(math.isfinite(float(x[f"{s}_rel_err"])) and float(x[f"{s}_rel_err"]) > 0
+               and int(x[f"{s}_nonfinite"]) == 0 for x in rows for s in samplers)
+    data = json.loads((out / "failure_map.json").read_text())
+    assert set(data) == {"meta", "samplers", "other"} and data["meta"]["preset"] == "test"
+    assert set(data["other"]) == {"mirror_cdf", "projection_de_grazing_plane", "projection_de_normal_plane",
+                                  "fit_paper", "fit_mirror", "fit_mirror_floor_0.1%_of_peak", "fit_paper_x0.02"}
+    for k, v in data["other"].items():
+        if k.startswith("projection_de_"):
+            assert all(math.isfinite(v[q]) for q in ("de_mean", "de_p99", "noise_de_mean")), k
+        if k.startswith("fit_"):
+            assert v["n_coefficients"] > 0 and math.isfinite(v["max_rel_err"]), k
+    for line in md.splitlines():          # the sampler table: the run's values to 3 digits
+        if line.startswith("| ") and _cells(line)[0] in CASES:
+            c = _cells(line)
+            r = failure_map["rows"][c[0]]
+            for cell, s in zip(c[1:], samplers):
+                _num(cell, r[f"{s}_rel_err"])
+
+
+def test_failure_map_block_table_on_fixed_values():
+    from studies import failure_map as fm
+
+    rows = [dict(case="paper sphere / sun", uniform_rel_err=9.0, cosine_rel_err=7.452, light_rel_err=0.0576,
+                 mis_rel_err=0.05624),
+            dict(case="mirror lobe / sun", uniform_rel_err=5.4, cosine_rel_err=NAN, light_rel_err=2.27,
+                 mis_rel_err=2.02, mis_nonfinite=3)]
+    other = dict(projection_de_grazing_plane=dict(de_mean=13.391, de_p99=20.54, noise_de_mean=1.76),
+                 projection_de_normal_plane=dict(de_mean=3.7, de_p99=6.8, noise_de_mean=0.99),
+                 mirror_cdf=dict(layout="pieces", fallback=False, fit_seconds=22.71, n_u=64,
+                                 n_u_tried={16: 16, 32: 19, 64: 25},
+                                 reason="rational on 25/32 view rows; the other 7 rows are sampled with the table"),
+                 fit_paper=dict(n_coefficients=20))
+    meta = dict(config=dict(spp=256, resolution=96, seeds=4), samplers=["uniform", "cosine", "light", "mis"],
+                mirror_exponent=5000)
+    assert fm.block_table(dict(samplers=rows, other=other, meta=meta)).splitlines() == [
+        "Relative standard error of the pixel estimate at 256 spp (96 px, independent samples, median of 4 seeds; "
+        "> 1: the noise exceeds the signal; mirror lobe: Blinn-Phong n = 5000 as a MERL file):",
+        "",
+        "| case | uniform | cosine | light | mis |",
+        "| --- | --- | --- | --- | --- |",
+        "| paper sphere / sun | 9 | 7.45 | 0.0576 | 0.0562 |",
+        "| mirror lobe / sun | 5.4 | – | 2.27 | 2.02 (3 NaN px) |",
+        "",
+        "\"NaN px\": pixels of the object with a non-finite value or variance, summed over the seeds (a sampler "
+        "bug); the error is measured on the finite pixels.",
+        "",
+        "Projection (2-D vs 3-D, ibiza, studio map, sampler light, 256 spp): mean ΔE2000 13.39 (p99 20.54) at a "
+        "view 80° from the normal vs 3.70 (p99 6.80) at 10°; same-representation noise 1.76 / 0.99.",
+        "",
+        "Rational inverse CDFs of the mirror lobe (pieces layout, 64 phi pieces (of 16/32/64 tried)): rational "
+        "on 25/32 view rows; the other 7 rows are sampled with the table, 22.7 s."]
 
 
 # --------------------------------------------------------------------------------------------
@@ -319,10 +620,6 @@ def test_convergence_moderate(tmp_path, rgl_data):
 def test_model_summary_of_nested_piecewise_model():
     """Coefficient counts per channel of a theta_d-piecewise model whose first piece is split
     again in theta_h (as fitted for cc_iris_purple_gem)."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parent))
     from test_warp_rational import piecewise_model
 
     from studies import fits as F
@@ -336,10 +633,13 @@ def test_model_summary_of_nested_piecewise_model():
 def test_failure_mirror_cdf_is_bounded_and_explicit(failure_map):
     """The near-mirror lobe's rational inverse CDFs (pieces layout, the default): built without
     reaching a time limit (the rows layout verified 5/32 rows in 20 s, the global one ran 169 s
-    unbounded; the pieces take ~10-25 s, reported in the study, not limited here); every row is
-    rational or sent to the table with its reason, and the summary says which (never silently)."""
+    unbounded; the pieces take ~10-30 s with the default phi-piece search and re-measurement,
+    about 1 s with the small presets' single count of 16, reported in the study, not limited
+    here); every row is rational or sent to the table with its reason, and the summary says which
+    (never silently)."""
     m = failure_map["other"]["mirror_cdf"]
     assert m["layout"] == "pieces" and m["n_rows"] == 32 and "time limit" not in m["reason"]
+    assert m["n_u"] == 16 and list(m["n_u_tried"]) == [16]                # the "test" preset's search
     assert 0 < m["verified_rows"] < m["n_rows"]              # the sharp lobe: some rows on the table
     assert m["fallback"] or (f"{m['verified_rows']}/{m['n_rows']} view rows" in m["reason"]
                              or f"all {m['n_rows']} view rows" in m["reason"])
@@ -360,51 +660,61 @@ def test_studies_share_one_cdf_table_per_material(rgl_data):
 
 
 # --------------------------------------------------------------------------------------------
-# Publishing (--docs): docs/images, docs/study_<name>.md and the README block between markers
+# Publishing (--docs): docs/images, docs/study_<name>.md and the study's block in docs/results.md
 STUDY_DOCS = {"convergence": "convergence", "comparison": "comparison", "fit": "fit_study",
-              "failure_map": "failure_map"}   # README marker name -> module
+              "failure_map": "failure_map"}   # block marker name -> module
 
 
 def _docs_root(tmp_path):
-    """A folder holding a copy of the repository's README.md (with the studies' markers), each
-    study's block marked with a sentinel line so that its replacement can be checked."""
+    """A folder holding a copy of the repository's docs/results.md (with the studies' markers),
+    each study's block marked with a sentinel line so that its replacement can be checked."""
     from studies import common as C
 
     root = tmp_path / "root"
-    root.mkdir()
-    shutil.copyfile(C.ROOT / "README.md", root / "README.md")
-    text = (root / "README.md").read_text(encoding="utf-8")
+    (root / "docs").mkdir(parents=True)
+    text = (C.ROOT / "docs" / "results.md").read_text(encoding="utf-8")
     for name in STUDY_DOCS:
-        end = C.readme_markers(name)[1]
+        end = C.block_markers(name)[1]
         text = text.replace(end, f"OLD-BLOCK-{name}\n{end}")
-    (root / "README.md").write_text(text, encoding="utf-8")
+    (root / "docs" / "results.md").write_text(text, encoding="utf-8")
     return root
+
+
+def _results(root) -> str:
+    return (root / "docs" / "results.md").read_text(encoding="utf-8")
 
 
 def _split(text, name):
     """(text up to and including the BEGIN marker, the block, text from the END marker on)."""
     from studies import common as C
 
-    begin, end = C.readme_markers(name)
+    begin, end = C.block_markers(name)
     i, j = text.index(begin) + len(begin), text.index(end)
     return text[:i], text[i:j], text[j:]
 
 
-def test_readme_has_one_marker_pair_per_study():
+def test_results_page_has_one_marker_pair_per_study():
+    """docs/results.md holds each study's block once, with links relative to docs/ to charts that
+    exist; the README holds none."""
     import importlib
 
     from studies import common as C
 
-    text = (C.ROOT / "README.md").read_text(encoding="utf-8")
+    text = (C.ROOT / "docs" / "results.md").read_text(encoding="utf-8")
     for name, module in STUDY_DOCS.items():
-        begin, end = C.readme_markers(name)
+        begin, end = C.block_markers(name)
         assert text.count(begin) == 1 and text.count(end) == 1 and text.index(begin) < text.index(end)
+        block = _split(text, name)[1]
         docs = importlib.import_module(f"studies.{module}").DOCS
         assert docs["name"] == name
         assert all(d.startswith("study_") and d.endswith(".png") for d in docs["charts"].values())
-        for d in docs.get("readme_charts") or docs["charts"].values():   # the README links them
-            assert d in docs["charts"].values() and f"docs/images/{d}" in _split(text, name)[1]
+        for d in docs.get("block_charts") or docs["charts"].values():   # the block links them
+            assert d in docs["charts"].values() and f"](images/{d})" in block
+            assert (C.ROOT / "docs" / "images" / d).is_file()
+        assert "docs/images/" not in block and f"[study_{name}.md](study_{name}.md)" in block
+        assert (C.ROOT / "docs" / f"study_{name}.md").is_file()
     assert "--docs" in text
+    assert "<!-- BEGIN study:" not in (C.ROOT / "README.md").read_text(encoding="utf-8")
 
 
 def test_publish_docs_replaces_only_the_block_and_is_idempotent(tmp_path):
@@ -415,44 +725,50 @@ def test_publish_docs_replaces_only_the_block_and_is_idempotent(tmp_path):
     out.mkdir()
     (out / "a.png").write_bytes(b"\x89PNG first chart")
     (out / "b.png").write_bytes(b"\x89PNG second chart")
-    before = (root / "README.md").read_text(encoding="utf-8")
+    before = _results(root)
     meta = {"wall_seconds": 12.3, "machine": {"cpus": 2, "platform": "TestOS-1", "python": "3.x",
                                               "time": "2000-01-02 03:04:05"}}
     kw = dict(name="fit", title="Fit study", out=out, meta=meta,
               summary_md="Full summary.\n\n| a | b |\n| --- | --- |\n| 1 | 2 |\n",
               charts={"a.png": "study_fit.png", "b.png": "study_fit_extra.png"},
-              readme_table="| k | v |\n| --- | --- |\n| paper | 42 |\n",
-              command="python studies/fit_study.py --smoke --docs", docs_root=root,
-              readme_charts=("study_fit.png",))
+              block_table="| k | v |\n| --- | --- |\n| paper | 42 |\n",
+              command="python -m studies.fit_study --smoke --docs", docs_root=root,
+              block_charts=("study_fit.png",))
     pub = C.publish_docs(**kw)
-    after = (root / "README.md").read_text(encoding="utf-8")
+    assert pub["results"] == root / "docs" / "results.md" and pub["doc"] == root / "docs" / "study_fit.md"
+    after = _results(root)
     b0, _, e0 = _split(before, "fit")
     b1, block, e1 = _split(after, "fit")
     assert (b1, e1) == (b0, e0)                         # everything outside the block unchanged
     assert block == "\n" + pub["block"] + "\n"
-    lines = pub["block"].splitlines()
-    assert lines[0] == "**Fit study** · `python studies/fit_study.py --smoke --docs` (12 s on 2 CPUs, 2000-01-02)"
-    assert "![study_fit](docs/images/study_fit.png)" in lines
-    assert "study_fit_extra" not in pub["block"]         # not among readme_charts
-    assert "| paper | 42 |" in lines and "[docs/study_fit.md](docs/study_fit.md)" in lines[-1]
+    assert pub["block"].splitlines() == [
+        "**Fit study** · `python -m studies.fit_study --smoke --docs` (12 s on 2 CPUs, 2000-01-02)",
+        "",
+        "![study_fit](images/study_fit.png)",             # not study_fit_extra: not among block_charts
+        "",
+        "| k | v |", "| --- | --- |", "| paper | 42 |",
+        "",
+        "Generated by `--docs`; the full report with every table: [study_fit.md](study_fit.md)."]
     assert "OLD-BLOCK-fit" in before and "OLD-BLOCK-fit" not in after   # the old block is gone
     assert "OLD-BLOCK-comparison" in after
+    assert not (root / "README.md").exists()
     assert (root / "docs/images/study_fit.png").read_bytes() == b"\x89PNG first chart"
     assert (root / "docs/images/study_fit_extra.png").read_bytes() == b"\x89PNG second chart"
     doc = (root / "docs/study_fit.md").read_text(encoding="utf-8")
     assert doc.startswith("# Fit study\n")
-    assert "Command: `python studies/fit_study.py --smoke --docs`" in doc
+    assert "Command: `python -m studies.fit_study --smoke --docs`" in doc
     assert "Wall time: 12 s" in doc and "2 CPUs, TestOS-1, Python 3.x" in doc
     assert "![study_fit](images/study_fit.png)" in doc and "![study_fit_extra](images/study_fit_extra.png)" in doc
     assert doc.rstrip().endswith("| 1 | 2 |")
     # again: the same bytes (idempotent)
     C.publish_docs(**kw)
-    assert (root / "README.md").read_text(encoding="utf-8") == after
+    assert _results(root) == after
     assert (root / "docs/study_fit.md").read_text(encoding="utf-8") == doc
     # another study's block is replaced independently of the first
-    C.publish_docs(**dict(kw, name="failure_map", charts={"a.png": "study_failure_map.png"}, readme_charts=None))
-    final = (root / "README.md").read_text(encoding="utf-8")
+    C.publish_docs(**dict(kw, name="failure_map", charts={"a.png": "study_failure_map.png"}, block_charts=None))
+    final = _results(root)
     assert _split(final, "fit")[1] == block and final.count("| paper | 42 |") == 2
+    assert "![study_failure_map](images/study_failure_map.png)" in _split(final, "failure_map")[1]
 
 
 def test_publish_docs_without_markers_raises_and_writes_nothing(tmp_path):
@@ -462,24 +778,34 @@ def test_publish_docs_without_markers_raises_and_writes_nothing(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "a.png").write_bytes(b"png")
-    text = (root / "README.md").read_text(encoding="utf-8")
+    results = root / "docs" / "results.md"
+    text = results.read_text(encoding="utf-8")
     kw = dict(name="fit", title="t", out=out, summary_md="s", meta={}, charts={"a.png": "study_fit.png"},
-              readme_table="| x |", command="python x.py", docs_root=root)
-    for marker in C.readme_markers("fit"):
-        (root / "README.md").write_text(text.replace(marker, ""), encoding="utf-8")
-        with pytest.raises(ValueError, match=re.escape(marker)):
+              block_table="| x |", command="python x.py", docs_root=root)
+
+    def nothing_written():
+        return sorted(p.name for p in (root / "docs").iterdir()) == ["results.md"]
+
+    for marker in C.block_markers("fit"):
+        results.write_text(text.replace(marker, ""), encoding="utf-8")
+        with pytest.raises(ValueError, match=re.escape(marker)) as e:
             C.publish_docs(**kw)
+        assert "results.md" in str(e.value)
+        assert nothing_written()                          # checked before anything is written
     with pytest.raises(ValueError, match=re.escape("<!-- BEGIN study:nosuch -->")):
         C.replace_block(text, "nosuch", "x")
-    assert not (root / "docs").exists()                   # checked before anything is written
-    (root / "README.md").write_text(text, encoding="utf-8")
+    results.write_text(text, encoding="utf-8")
     with pytest.raises(FileNotFoundError, match="missing.png"):
         C.publish_docs(**dict(kw, charts={"missing.png": "study_fit.png"}))
-    assert not (root / "docs").exists()
-    readme = (C.ROOT / "README.md").read_bytes()
+    assert nothing_written() and results.read_text(encoding="utf-8") == text
+    results.unlink()
+    with pytest.raises(FileNotFoundError, match=re.escape("no docs/results.md in")):
+        C.publish_docs(**kw)
+    assert not any((root / "docs").iterdir())
+    page = (C.ROOT / "docs" / "results.md").read_bytes()
     with pytest.raises(ValueError, match="--smoke run would overwrite"):  # the repository's own docs
         C.publish_docs(**dict(kw, meta={"preset": "smoke"}, docs_root=None))
-    assert (C.ROOT / "README.md").read_bytes() == readme
+    assert (C.ROOT / "docs" / "results.md").read_bytes() == page
 
 
 def test_command_line_and_docs_option(capsys):
@@ -488,39 +814,67 @@ def test_command_line_and_docs_option(capsys):
     from studies import common as C
 
     assert C.command_line(C.ROOT / "studies" / "convergence.py", ["--out", "a b", "--docs"]) \
-        == "python studies/convergence.py --out 'a b' --docs"
+        == "python -m studies.convergence --out 'a b' --docs"
+    assert C.command_line("/elsewhere/x.py", ["--smoke"]) == "python /elsewhere/x.py --smoke"
     for module in STUDY_DOCS.values():
         with pytest.raises(SystemExit):
             importlib.import_module(f"studies.{module}").main(["--help"])
-        assert "--docs " in capsys.readouterr().out
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: python -m studies.{module} ")
+        assert "--docs " in out and "docs/results.md" in out and "--fit-timeout" not in out
 
 
-def test_failure_map_smoke_publishes_docs(tmp_path, rgl_data):
-    """A real smoke run through the CLI with --docs into a copy of the README."""
+def test_failure_map_cli_publishes_docs(failure_map, tmp_path, monkeypatch):
+    """The failure map's CLI with --docs into a copy of docs/results.md, publishing the module
+    fixture's run (``run`` replaced by it: the study is not run a second time)."""
     from studies import common as C
     from studies import failure_map as fm
 
+    samplers = ["uniform", "cosine", "light", "mis"]
+    calls = []
+
+    def fake_run(preset, out, samplers):
+        calls.append((preset, out, samplers))
+        return failure_map
+
+    monkeypatch.setattr(fm, "run", fake_run)
     root = _docs_root(tmp_path)
-    before = (root / "README.md").read_text(encoding="utf-8")
-    out = tmp_path / "out"
-    argv = ["--smoke", "--out", str(out), "--samplers", "uniform", "cosine", "light", "mis",
-            "--docs", "--docs-root", str(root)]
-    r = fm.main(argv)
+    before = _results(root)
+    out = failure_map["out"]
+    argv = ["--preset", "test", "--out", str(out), "--samplers", *samplers, "--docs", "--docs-root", str(root)]
+    assert fm.main(argv) is failure_map
+    assert calls == [("test", str(out), samplers)]
     cmd = C.command_line(fm.__file__, argv)
-    assert cmd.startswith("python studies/failure_map.py --smoke --out ")
+    assert cmd.startswith("python -m studies.failure_map --preset test --out ")
     assert (root / "docs/images/study_failure_map.png").read_bytes() == (out / "failure_map.png").read_bytes()
     doc = (root / "docs/study_failure_map.md").read_text(encoding="utf-8")
     assert f"Command: `{cmd}`" in doc
     assert (out / "failure_map.md").read_text(encoding="utf-8").strip() in doc
-    after = (root / "README.md").read_text(encoding="utf-8")
+    after = _results(root)
     b0, _, e0 = _split(before, "failure_map")
     b1, block, e1 = _split(after, "failure_map")
     assert (b1, e1) == (b0, e0)
     assert f"**Failure map** · `{cmd}` (" in block
-    assert "![study_failure_map](docs/images/study_failure_map.png)" in block
+    assert "![study_failure_map](images/study_failure_map.png)" in block
+    assert "[study_failure_map.md](study_failure_map.md)" in block
     assert "| case | uniform | cosine | light | mis |" in block
-    sun = r["samplers"][[x["case"] for x in r["samplers"]].index("paper sphere / sun")]
-    assert f"| paper sphere / sun | {C._fmt(sun['uniform_rel_err'])} | {C._fmt(sun['cosine_rel_err'])} |" in block
+    sun = next(_cells(x) for x in block.splitlines() if x.startswith("| paper sphere / sun |"))
+    for cell, s in zip(sun[1:], samplers):
+        _num(cell, failure_map["rows"]["paper sphere / sun"][f"{s}_rel_err"])
     assert "Rational inverse CDFs of the mirror lobe" in block and "| mirror_floor" not in block  # fits: docs only
     assert "| mirror_floor" in doc
     assert "OLD-BLOCK-failure_map" in before and "OLD-BLOCK-failure_map" not in after
+
+
+@pytest.mark.slow
+def test_failure_map_smoke_cli_end_to_end(tmp_path, rgl_data):
+    """A real smoke run through the CLI with --docs (the fast test above publishes the fixture's run)."""
+    from studies import failure_map as fm
+
+    root = _docs_root(tmp_path)
+    out = tmp_path / "out"
+    r = fm.main(["--smoke", "--out", str(out), "--samplers", "uniform", "mis", "--docs", "--docs-root", str(root)])
+    assert r["meta"]["preset"] == "smoke" and [x["case"] for x in r["samplers"]] == CASES
+    block = _split(_results(root), "failure_map")[1]
+    assert "**Failure map** · `python -m studies.failure_map --smoke --out " in block
+    assert (root / "docs/images/study_failure_map.png").read_bytes() == (out / "failure_map.png").read_bytes()

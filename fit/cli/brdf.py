@@ -51,16 +51,7 @@ def _cmd_brdf(args) -> int:
                   f"{r.n_coefficients:7d}{100 * e['max_rel_error']:8.2f}%{100 * e['rms_rel_error']:8.2f}%"
                   f"{100 * e['inside_fraction']:7.1f}%"
                   f"{'yes' if r.certificate and r.certificate.certified else 'NO':>5s}{r.time_s:8.2f}")
-    core_rng = fit.pieces[0].theta_d_range_deg
-    status = (f"guaranteed on theta_d <= {core_rng[1]:g} deg"
-              + (f" (split at theta_h = {fit.pieces[0].theta_h_range_deg[1]:g} deg)"
-                 if tuple(fit.pieces[0].theta_h_range_deg) != (0.0, 90.0) else "") if fit.valid
-              else "NOT guaranteed (best fit found, flagged infeasible)")
-    band = fit.band_pieces
-    if band:
-        status += ("; grazing band met" if band[0].valid
-                   else "; grazing band best effort (NOT within its intervals, flagged)")
-    print(f"total {fit.n_coefficients} coefficients, {fit.time_s:.1f} s, {status}; wrote {out}")
+    print(f"{fit.summary()}; wrote {out}")
     return 0 if fit.valid or args.allow_infeasible else 1
 
 

@@ -128,6 +128,24 @@ class BRDFFit:
     def n_coefficients(self) -> int:
         return self.model.n_coefficients
 
+    def summary(self) -> str:
+        """One line: the coefficient count, the fit's seconds and what it guarantees, e.g.
+        "total 189 coefficients, 3.6 s, guaranteed on theta_d <= 60 deg; grazing band met" or
+        "total 735 coefficients, 21.4 s, NOT guaranteed (best fit found, flagged infeasible)"
+        (the last line ``rbrdf-fit brdf`` prints, before "; wrote FILE")."""
+        core = self.pieces[0]
+        if self.valid:
+            status = f"guaranteed on theta_d <= {core.theta_d_range_deg[1]:g} deg"
+            if tuple(core.theta_h_range_deg) != (0.0, 90.0):
+                status += f" (split at theta_h = {core.theta_h_range_deg[1]:g} deg)"
+        else:
+            status = "NOT guaranteed (best fit found, flagged infeasible)"
+        band = self.band_pieces
+        if band:
+            status += ("; grazing band met" if band[0].valid
+                       else "; grazing band best effort (NOT within its intervals, flagged)")
+        return f"total {self.n_coefficients} coefficients, {self.time_s:.1f} s, {status}"
+
 
 def project_for_fit(brdf, grazing_cutoff_deg: float = GRAZING_CUTOFF_DEG) -> ProjectedBRDF:
     """Median projection with the grazing cut-off on max(theta_i, theta_o)."""

@@ -1,12 +1,19 @@
-"""Analytic BRDFs used to build exact-layout MERL files in the tests (1/sr, RGB)."""
+"""Analytic reference BRDFs, in 1/sr, RGB: used to build exact-layout MERL files
+(``fit.formats.measured.MeasuredBRDF.from_function`` + ``fit.formats.merl.write_merl``) and in the
+tests and benchmarks.
+
+Each factory returns ``f(wi, wo) -> (..., 3)`` for unit direction arrays ``(..., 3)`` in the local
+frame (z = normal). Pure NumPy.
+"""
 from __future__ import annotations
 
 import numpy as np
 
-from fit.formats.angles import directions_to_half_diff
+from .formats.angles import directions_to_half_diff
 
 
 def lambert(albedo=(0.8, 0.5, 0.2)):
+    """Lambertian BRDF ``albedo / pi`` (constant, RGB)."""
     a = np.asarray(albedo, float) / np.pi
 
     def f(wi, wo):
