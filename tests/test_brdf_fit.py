@@ -1,11 +1,10 @@
 """BRDF fit: analytic glossy lobe in exact MERL layout, CLI, optional RGL material."""
 import json
-import os
 
 import numpy as np
 import pytest
 
-from conftest import RGL_MATERIALS, data_file
+from conftest import data_file
 from fit.analytic import glossy_lobe
 from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import write_merl

@@ -162,19 +162,24 @@ def test_pieces_variance_gate(satin):
     assert "sampled with the table" in gated.reason
 
 
-def test_pieces_phi_count_is_the_fewest_that_keeps_rows_within_the_gate(satin):
+@pytest.mark.parametrize("gate_samples,gate_recheck", [
+    (4096, None),                                            # the rule, on a small gate
+    pytest.param(32768, 8, marks=pytest.mark.slow),          # the default gate (20 s)
+])
+def test_pieces_phi_count_is_the_fewest_that_keeps_rows_within_the_gate(satin, gate_samples, gate_recheck):
     """n_u candidates: the first count whose rows all pass the gate ends the search; else the
     count with the most rational rows, the smallest on ties (checked against each count built
-    alone). Satin passes the default gate with the fewest pieces."""
+    alone with the same gate). Satin passes the default gate with the fewest pieces."""
     from fit.sampling.variance_gate import _fit_pieces_once, fit_pieces
 
     b, fit = satin
     assert fit.maps.n_u == 16 and fit.fit_info["n_u_tried"] == {16: fit.table.n_v}
     ratios = np.array([i["variance"]["ratio"] for i in fit.fit_info["rows"]])
     lim = float(np.sort(ratios)[-3])          # strict enough that 16 pieces leave rows behind
-    alone = {nu: _fit_pieces_once(fit.table, b.evaluate, 64, nu, lim, 32768, 8)[1]["verified_rows"]
+    alone = {nu: _fit_pieces_once(fit.table, b.evaluate, 64, nu, lim, gate_samples, gate_recheck)[1]["verified_rows"]
              for nu in (16, 32, 64)}
-    pm, info = fit_pieces(fit.table, b.evaluate, n_u=(64, 16, 32), max_variance_ratio=lim)
+    pm, info = fit_pieces(fit.table, b.evaluate, n_u=(64, 16, 32), max_variance_ratio=lim,
+                          gate_samples=gate_samples, gate_recheck=gate_recheck)
     assert alone[16] < fit.table.n_v
     expect, tried = None, {}
     for nu in (16, 32, 64):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warp_rbrdf import SceneError, load_scene, parse_scene
+from warp_rbrdf import SceneError, load_scene
 from warp_rbrdf.paths import resolve_path
 
 GOOD = """

@@ -202,7 +202,6 @@ def test_convergence_block_table_on_fixed_values():
 
 
 def test_comparison_smoke(tmp_path, rgl_data):
-    from studies import common as C
     from studies import comparison
 
     r = comparison.run("smoke", tmp_path, allow_fit=False, quiet=True)

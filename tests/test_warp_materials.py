@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.formats.grid import phi_d_centres, theta_d_centres, theta_h_centres

@@ -1,7 +1,6 @@
 """Regression: MIS with the tabulated BRDF sampler produced NaN pixels when the tabulated pdf
 near theta_l = 0 (it grows like 1/sin theta) overflowed float32 in the power heuristic."""
 import numpy as np
-import pytest
 
 from conftest import data_file
 

@@ -49,9 +49,26 @@ from ..formats.grid import N_PHI_D
 from ..formats.measured import ProjectedBRDF
 from ..projection.albedo import directional_albedo
 from ..projection.project import project
-from .brdf_model import CHANNELS, GRAZING_CUTOFF_DEG, THETA_D_MAX_DEG, brdf_model, split_core
-from .fitter import FitResult, IntervalRationalFitter, intervals_from_spread, intervals_from_tolerance
-from .model import Variable, apply_input_transform, apply_value_transform, invert_value_transform
+from .brdf_model import (
+    CHANNELS,
+    GRAZING_CUTOFF_DEG,
+    THETA_D_MAX_DEG,
+    brdf_model,
+    split_core,
+)
+from .coefficient_file import save as save_model
+from .fitter import (
+    FitResult,
+    IntervalRationalFitter,
+    intervals_from_spread,
+    intervals_from_tolerance,
+)
+from .model import (
+    Variable,
+    apply_input_transform,
+    apply_value_transform,
+    invert_value_transform,
+)
 
 INTERVALS = ("tol", "tol+spread")
 
@@ -123,6 +140,11 @@ class BRDFFit:
     @property
     def all_valid(self) -> bool:
         return all(p.valid for p in self.pieces)
+
+    def save(self, path) -> None:
+        """Write :attr:`model` as an ``rbrdf-rational`` coefficient file
+        (:func:`fit.rational.coefficient_file.save`)."""
+        save_model(self.model, path)
 
     @property
     def n_coefficients(self) -> int:
