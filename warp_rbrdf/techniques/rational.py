@@ -77,8 +77,8 @@ def rq_knots(pw: wp.array(dtype=float), b: int, x: float) -> wp.vec2:
 def pieces_sample(pw: wp.array(dtype=float), off: int, n_v: int, n_mu: int, n_u: int, v: int,
                   va: wp.vec3, mu: float, tau: float) -> wp.vec4:
     """(wi, alpha): the direction of (theta_l, phi_l) of fit.sampling.pieces.sample_pieces in the
-    view frame ``va`` (:func:`view_frame`) and alpha, on rational row ``v`` (:func:`sample`
-    sends table rows to the table). Piece of mu: floor(mu n_mu), no search; sin and cos of
+    view frame ``va`` (:func:`view_frame`) and alpha, on rational row ``v`` (the caller sends
+    table rows to the table). Piece of mu: floor(mu n_mu), no search; sin and cos of
     theta_l computed once (end pieces: from y = sin^2 theta_l, no sin/cos at all). Theta pieces:
     4 floats each (:func:`rq_piece`); phi maps: knots (:func:`rq_knots`, see
     :func:`.cdf_data.pack_pieces`)."""
@@ -121,18 +121,6 @@ def maps_to_direction(q: wp.vec3, va: wp.vec3) -> wp.vec4:
     """(wi, alpha) from (theta_l, phi_l, alpha) of a generated global-layout sampler."""
     wl = local_dir(q[0], q[1], va)
     return wp.vec4(wl[0], wl[1], wl[2], q[2])
-
-
-@wp.func
-def pieces_row_sample(mats: Materials, m: int, va: wp.vec3, xi: wp.vec2) -> wp.vec4:
-    """Pieces layout: (wi, alpha) on a verified row; alpha = -1 on a table row."""
-    b = m * N_CDF_INFO
-    n_v = mats.cdf_info[b + CDF_N_V]
-    v = tab_row(va[0], n_v)
-    if mats.cdf_row_ok[mats.cdf_info[b + CDF_OFF_ROWS] + v] == 0:
-        return wp.vec4(0.0, 0.0, 0.0, -1.0)
-    return pieces_sample(mats.cdf_pw, mats.cdf_info[b + CDF_MAPS], n_v, mats.cdf_info[b + CDF_N_MU],
-                         mats.cdf_info[b + CDF_N_U], v, va, xi[0], xi[1])
 
 
 # --------------------------------------------------------------------------------------------
@@ -283,13 +271,16 @@ def kernel_functions(global_fits=()):
         b = m * N_CDF_INFO
         va = view_frame(wo)
         layout = mats.cdf_info[b + CDF_LAYOUT]
-        q = wp.vec4(0.0, 0.0, 0.0, -1.0)
         if layout == LAYOUT_PIECES:
-            q = pieces_row_sample(mats, m, va, xi)
+            n_v = mats.cdf_info[b + CDF_N_V]
+            v = tab_row(va[0], n_v)
+            if mats.cdf_row_ok[mats.cdf_info[b + CDF_OFF_ROWS] + v] != 0:   # else: a table row
+                return pieces_sample(mats.cdf_pw, mats.cdf_info[b + CDF_MAPS], n_v, mats.cdf_info[b + CDF_N_MU],
+                                     mats.cdf_info[b + CDF_N_U], v, va, xi[0], xi[1])
         elif layout == LAYOUT_GLOBAL:
             q = wp.static(global_sample)(mats.cdf_info[b + CDF_MAPS], va, xi)
-        if q[3] >= 0.0:
-            return q
+            if q[3] >= 0.0:
+                return q
         return tabulated.table_sample(mats, m, va, xi)
 
     return rational_sample, tabulated.pdf
