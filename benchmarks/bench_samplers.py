@@ -1,7 +1,7 @@
 """Benchmark of the BRDF samplers (issue 6).
 
 1. Samples per second of each sampler alone in Warp (a kernel that only samples: tabulated
-   binary search vs generated rational inverse CDFs vs cosine), on the Warp CPU device unless
+   binary search vs the rational inverse CDFs vs cosine), on the Warp CPU device unless
    --device says otherwise, for view directions in two orders: "coherent" (sorted by theta_v,
    as consecutive samples of a render tile see nearby view angles) and "random" (every
    sample another view row: worst case for the per-row coefficient reads and the branch
@@ -14,7 +14,7 @@
 Usage: python -m benchmarks.bench_samplers [--n 1000000] [--materials a,b] [--cdf-dir DIR]
        [--layout pieces|global] [--max-variance-ratio R | none] [--n-u 16,32,64]
 (``--layout``: how the rational inverse CDFs are built here, default the fitter's default
-"pieces" (fit.sampling.pieces, 2-20 s per material, mostly the variance gate).)
+"pieces" (fit.sampling.pieces, 2-21 s per material, mostly the variance gate).)
 (``--max-variance-ratio none`` builds without the variance gate, so every verified row is
 rational: the speed of the rational rows themselves.)
 (``--cdf-dir``: rbrdf-cdf files named MATERIAL.json from `rbrdf-fit cdf`.)

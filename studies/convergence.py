@@ -10,9 +10,9 @@ render uses, so its noise is independent of every render it is compared with. It
 noise (the "floor": the mean over the mask of the per-pixel sample variance / ref_spp, an upper
 bound for the stratified pattern) is reported; RMSE values near the floor mean "converged".
 
-Samplers are discovered from ``warp_rbrdf.scene.SAMPLERS``: the four of the first renderer
-(uniform, cosine, light, mis) and any inverse-CDF sampler added since; a sampler that a material
-type does not support is recorded as skipped.
+Samplers come from the registry (``warp_rbrdf.registry.STRATEGY_NAMES``): the four base ones
+(uniform, cosine, light, mis) first, then the inverse-CDF ones; a sampler that a material type
+does not support is recorded as skipped.
 
 Presets: ``full`` (default; with ``--docs`` it makes the block in docs/results.md): 64×64 px,
 spp = 1, 2, 4, ..., 1024, 3 seeds, reference 8192 spp, sphere and bunny under rooitou (tiny sun),

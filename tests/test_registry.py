@@ -13,7 +13,7 @@ from fit.projection.project import project
 from warp_rbrdf import registry
 from warp_rbrdf.scene import FORMAT_DOC, MaterialSpec, parse_scene
 
-MATERIAL_API = ("load", "kernel_eval", "scale")
+MATERIAL_API = ("load", "kernel_eval")
 TECHNIQUE_API = ("kernel_functions", "numpy_sample", "numpy_pdf")
 
 

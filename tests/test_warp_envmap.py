@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import data_file
-from warp_rbrdf import lights
+from warp_rbrdf import lights, transforms
 from warp_rbrdf import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.runtime import init_warp
@@ -62,7 +62,7 @@ def test_pdf_cells_sum_to_one_exactly():
 
 @pytest.mark.parametrize("rotated", [False, True])
 def test_warp_pdf_integrates_to_one_and_matches_numpy(rotated):
-    rot = lights.transforms_rotation(37.0, (0.2, 1.0, 0.1)) if rotated else None
+    rot = transforms.rotation(37.0, (0.2, 1.0, 0.1))[:3, :3] if rotated else None
     env = _env(spot_map(), rot)
     H, W = env.pdf.shape
     # the density is constant on each cell: evaluate at cell centres, weight by exact solid angle

@@ -1,7 +1,7 @@
 """``rbrdf`` command line: render scenes with the Warp renderer.
 
     rbrdf render [SCENE.toml] [--spp N] [--seed S] [--out image.exr] [--device cpu|cuda]
-                 [--threads T] [--exposure EV] [--no-progress]
+                 [--threads T] [--exposure EV] [--resolution W H] [--no-progress]
     rbrdf scene-format        # print the scene-file reference
 
 Without a scene, renders the embedded default (sphere on a plane under a procedural sky).
@@ -13,7 +13,10 @@ import os
 import sys
 from pathlib import Path
 
+from . import registry
+from .defaults import default_scene
 from .errors import RenderError
+from .scene import FORMAT_DOC, load_scene
 
 DESCRIPTION = """Warp renderer of the warp-rbrdf toolkit (Rational BRDF, Pacanowski et al. 2012).
 'render' writes a linear float EXR and a tone-mapped sRGB PNG (exposure in its name and
@@ -23,8 +26,6 @@ reported separately), samples per second and threads. 'scene-format' prints the 
 
 def _registry_help() -> str:
     """The material types and samplers a scene can name (from :mod:`warp_rbrdf.registry`)."""
-    from . import registry
-
     return ("material types: " + ", ".join(registry.MATERIAL_NAMES) + "\n"
             "samplers (per material, [materials.NAME] sampler): " + ", ".join(registry.STRATEGY_NAMES)
             + "\n'rbrdf scene-format' explains every key.")
@@ -37,7 +38,8 @@ def _parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="render a TOML scene (or the embedded default)",
                        description="Render a scene. Relative paths in the scene resolve against "
                                    "its folder; ${RBRDF_DATA}/... and data:... against $RBRDF_DATA "
-                                   "(default ../shared/data next to the checkout).",
+                                   "(from a source checkout, default ../shared/data next to it; "
+                                   "installed, no default).",
                        epilog=_registry_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     r.add_argument("scene", nargs="?", help="scene file (.toml); omitted: the embedded default scene")
     r.add_argument("--spp", type=int, help="camera samples per pixel (default: the scene's integrator.spp)")
@@ -56,15 +58,12 @@ def _parser() -> argparse.ArgumentParser:
 
 def cmd_render(a) -> int:
     from .image_io import png_path_for, write_exr, write_png
-    from .renderer import Renderer
-    from .scene import load_scene
+    from .renderer import Renderer  # imports Warp: only when rendering
 
     if a.scene:
         scene = load_scene(a.scene)
         name = Path(a.scene).stem
     else:
-        from .defaults import default_scene
-
         scene = default_scene()
         name = "default"
     if a.resolution:
@@ -107,8 +106,6 @@ def main(argv=None) -> int:
         return 2
     try:
         if a.command == "scene-format":
-            from .scene import FORMAT_DOC
-
             print(FORMAT_DOC)
             return 0
         return cmd_render(a)

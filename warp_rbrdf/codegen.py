@@ -15,6 +15,8 @@ import sys
 import threading
 from pathlib import Path
 
+from .runtime import init_warp
+
 _lock = threading.Lock()
 
 
@@ -38,8 +40,6 @@ def tree_sum(terms) -> str:
 
 def generated_dir() -> Path:
     """Folder of the generated modules: inside Warp's kernel cache (see :func:`runtime.init_warp`)."""
-    from .runtime import init_warp
-
     return Path(init_warp().config.kernel_cache_dir) / "rbrdf_generated"
 
 

@@ -377,10 +377,3 @@ def env_eval_kernel(env: EnvMap, dirs: wp.array(dtype=wp.vec3), out: wp.array(dt
 def env_sample_kernel(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4)):
     i = wp.tid()
     out[i] = env_sample(env, xi[i])
-
-
-def transforms_rotation(angle_deg, axis) -> np.ndarray:
-    """3x3 rotation matrix (helper for tests and the Python API)."""
-    from .transforms import rotation
-
-    return rotation(angle_deg, axis)[:3, :3]

@@ -136,25 +136,25 @@ STRATEGY_NAMES = tuple(s.name for s in STRATEGIES)
 TECHNIQUE_NAMES = tuple(t.name for t in TECHNIQUES)
 
 
+def _find(entries, what: str, **key):
+    (field_, value), = key.items()
+    for e in entries:
+        if getattr(e, field_) == value:
+            return e
+    raise KeyError(f"unknown {what} {value!r}; expected one of "
+                   f"{', '.join(str(getattr(e, field_)) for e in entries)}")
+
+
 def material(name: str) -> MaterialKind:
-    for m in MATERIALS:
-        if m.name == name:
-            return m
-    raise KeyError(f"unknown material type {name!r}; expected one of {', '.join(MATERIAL_NAMES)}")
+    return _find(MATERIALS, "material type", name=name)
 
 
 def technique(name: str) -> Technique:
-    for t in TECHNIQUES:
-        if t.name == name:
-            return t
-    raise KeyError(f"unknown sampling technique {name!r}; expected one of {', '.join(TECHNIQUE_NAMES)}")
+    return _find(TECHNIQUES, "sampling technique", name=name)
 
 
 def strategy(name: str) -> Strategy:
-    for s in STRATEGIES:
-        if s.name == name:
-            return s
-    raise KeyError(f"unknown sampler {name!r}; expected one of {', '.join(STRATEGY_NAMES)}")
+    return _find(STRATEGIES, "sampler", name=name)
 
 
 def combine_code(s: Strategy) -> int:
@@ -169,8 +169,7 @@ def strategies_using(*techniques: str) -> tuple:
     return tuple(s.name for s in STRATEGIES if s.technique in techniques)
 
 
-#: Strategies that need no inverse-CDF data (``integrator.sampler``, the scene-wide default,
-#: is one of these; a material may name any strategy).
+#: Strategies that need no inverse-CDF data (the studies' base samplers).
 BASE_STRATEGIES = tuple(s.name for s in STRATEGIES if not technique(s.technique).needs_table)
 #: Strategies whose BSDF sample needs the material's inverse-CDF table (and maybe a fit).
 TABLE_STRATEGIES = strategies_using(*(t.name for t in TECHNIQUES if t.needs_table))
@@ -179,8 +178,8 @@ RATIONAL_STRATEGIES = strategies_using(*(t.name for t in TECHNIQUES if t.needs_f
 
 
 def material_by_code(code: int) -> MaterialKind:
-    return next(m for m in MATERIALS if m.code == int(code))
+    return _find(MATERIALS, "material code", code=int(code))
 
 
 def technique_by_code(code: int) -> Technique:
-    return next(t for t in TECHNIQUES if t.code == int(code))
+    return _find(TECHNIQUES, "technique code", code=int(code))

@@ -15,11 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import camera, geometry, integrator, lights, registry, sample_patterns
+from .defaults import default_scene
 from .errors import RenderError, SceneError
 from .materials.build import build_material_data
 from .materials.data import make_materials_struct
 from .runtime import get_device, init_warp
-from .scene import Scene
+from .scene import Scene, load_scene
 
 
 @dataclass
@@ -266,12 +267,8 @@ def render(scene, spp: int | None = None, seed: int | None = None, device: str =
     """Render ``scene`` (a :class:`~warp_rbrdf.scene.Scene`, a TOML path, or None for the
     embedded default) and return the linear (H, W, 3) float32 image."""
     if scene is None:
-        from .defaults import default_scene
-
         scene = default_scene()
     elif not isinstance(scene, Scene):
-        from .scene import load_scene
-
         scene = load_scene(scene)
     return Renderer(scene, device=device).render(spp=spp, seed=seed, threads=threads, progress=progress)
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import (CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec)
+from .scene import CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec
 
 
 def top_down_camera(resolution=16, height=1.0, fov=40.0) -> CameraSpec:

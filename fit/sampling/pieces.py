@@ -31,7 +31,7 @@ its second measurement, rational rows per count 16 / 32 / 64): paper_white, sati
 colodur_napoli_4f 32/32 rows at 16; vch_golden_yellow 24 / 32; cc_ibiza_sunset 13 / 32;
 cc_iris_purple_gem 11 / 23 / 32. Fewer phi pieces also sample faster when every sample has
 another view row (the phi maps are then read at random; vch: 1.62x / 1.65x the table's rate with
-32 pieces, 1.56x / 1.57x with 64, two runs each of ``benchmarks/bench_samplers.py --materials
+32 pieces, 1.56x / 1.57x with 64, two runs each of ``python -m benchmarks.bench_samplers --materials
 vch_golden_yellow_rgb --n-u N``). The Warp sampler stores the phi maps as knots (value, slope;
 :func:`pieces_phi_knots`): 2 floats per piece instead of 4.
 

@@ -4,8 +4,9 @@
 Every kind module has:
 
 * ``load(spec, scene_file, key) -> LoadedMaterial``: read the material's file(s) into NumPy
-  data and a NumPy ``evaluate(wi, wo) -> (..., 3)`` (rho in 1/sr, ``scale`` applied); errors
-  are one-line :class:`~warp_rbrdf.errors.SceneError` naming the scene file and key;
+  data, a NumPy ``evaluate(wi, wo) -> (..., 3)`` (rho in 1/sr, ``scale`` applied), the RGB
+  multiplier the kernel applies and the table it needs (:class:`.data.LoadedMaterial`);
+  errors are one-line :class:`~warp_rbrdf.errors.SceneError` naming the scene file and key;
 * ``kernel_eval(loaded_list) -> wp.func (mats: Materials, m: int, wi: vec3, wo: vec3) -> vec3``:
   the Warp evaluation for the scene's materials of that kind (``loaded_list`` in the order of
   their ``Materials.offset`` where that is an index; most kinds return one fixed function).

@@ -27,10 +27,9 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
         spec = scene.materials[name]
         key = f"materials.{name}"
         kd = registry.material(spec.type)
-        impl = kd.impl()
-        lm = impl.load(spec, scene.path, key)
+        lm = kd.impl().load(spec, scene.path, key)
         kind[i] = kd.code
-        scale[i] = impl.scale(spec)
+        scale[i] = lm.scale
         if lm.table is not None:
             offset[i] = tables.add(lm.table)
         else:   # kinds without a table index their own functions

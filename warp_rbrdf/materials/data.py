@@ -62,11 +62,13 @@ class LoadedMaterial:
     ``data``: the NumPy object read from the file (a :class:`fit.formats.measured.MeasuredBRDF`,
     ``ProjectedBRDF``, ``RationalModel``; None for Lambert); ``evaluate(wi, wo) -> (..., 3)``: rho
     in 1/sr with ``scale`` applied (NumPy reference of the kernel, used to tabulate the sampling
-    CDFs); ``table``: RGB entries the kind puts into ``Materials.tables`` (None: none)."""
+    CDFs); ``scale``: the RGB multiplier the kernel applies (``Materials.scale``); ``table``: RGB
+    entries the kind puts into ``Materials.tables`` (None: none)."""
 
     spec: object
     data: object
     evaluate: object
+    scale: tuple = (1.0, 1.0, 1.0)
     table: np.ndarray | None = None
 
 

@@ -15,12 +15,7 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
         above = (wi[..., 2:3] > 0) & (wo[..., 2:3] > 0)
         return np.broadcast_to(rho, np.broadcast_shapes(wi.shape, wo.shape)[:-1] + (3,)) * above
 
-    return LoadedMaterial(spec, None, evaluate)
-
-
-def scale(spec):
-    """The RGB multiplier the kernel applies (``Materials.scale``): the albedo."""
-    return spec.albedo
+    return LoadedMaterial(spec, None, evaluate, scale=spec.albedo)
 
 
 @wp.func

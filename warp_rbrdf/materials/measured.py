@@ -5,11 +5,19 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
+
 from fit.formats import load_measured
 
 from ..errors import SceneError
 from .data import LoadedMaterial, Materials
-from .frame import N_PD, N_TD, half_diff, merl_phi_d_index, merl_theta_d_index, merl_theta_h_index
+from .frame import (
+    N_PD,
+    N_TD,
+    half_diff,
+    merl_phi_d_index,
+    merl_theta_d_index,
+    merl_theta_h_index,
+)
 
 
 def read(spec, scene_file, key):
@@ -29,11 +37,7 @@ def scaled(evaluate, scale):
 
 def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     b = read(spec, scene_file, key)
-    return LoadedMaterial(spec, b, scaled(b.evaluate, spec.scale), table=b.values)
-
-
-def scale(spec):
-    return spec.scale
+    return LoadedMaterial(spec, b, scaled(b.evaluate, spec.scale), scale=spec.scale, table=b.values)
 
 
 @wp.func

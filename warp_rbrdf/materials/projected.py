@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
+
 from fit.formats.measured import ProjectedBRDF
 from fit.projection.project import project
 
@@ -24,12 +25,8 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
             raise SceneError(scene_file, f"{key}.file", f"cannot read projected BRDF ({e})") from None
     else:
         p = project(measured.read(spec, scene_file, key), statistic=spec.statistic)
-    return LoadedMaterial(spec, p, measured.scaled(p.evaluate, spec.scale),
+    return LoadedMaterial(spec, p, measured.scaled(p.evaluate, spec.scale), scale=spec.scale,
                           table=np.nan_to_num(p.value, nan=0.0))
-
-
-def scale(spec):
-    return spec.scale
 
 
 @wp.func

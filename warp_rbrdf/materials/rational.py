@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import warp as wp
+
 from fit.rational.coefficient_file import load as load_coefficients
 
 from ..codegen import lit as _lit
@@ -37,11 +38,7 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
         except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line
             raise SceneError(scene_file, f"{key}.file", f"cannot read coefficient file ({e})") from None
     check_model(model, scene_file, key)
-    return LoadedMaterial(spec, model, scaled(model.evaluate, spec.scale))
-
-
-def scale(spec):
-    return spec.scale
+    return LoadedMaterial(spec, model, scaled(model.evaluate, spec.scale), scale=spec.scale)
 
 
 def check_model(model, file="<scene>", key="materials"):

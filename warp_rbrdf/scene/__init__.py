@@ -3,8 +3,20 @@ the scene-file reference (:mod:`.format_doc`). Errors raise
 :class:`~warp_rbrdf.errors.SceneError` naming the file, the key and what was expected."""
 from .format_doc import FORMAT_DOC
 from .parse import load_scene, parse_scene, scene_from_dict
-from .specs import (ENV_TYPES, LIGHT_TYPES, MATERIAL_TYPES, PATTERNS, SAMPLERS, SHAPE_TYPES,
-                    CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec)
+from .specs import (
+                    ENV_TYPES,
+                    LIGHT_TYPES,
+                    MATERIAL_TYPES,
+                    PATTERNS,
+                    SAMPLERS,
+                    SHAPE_TYPES,
+                    CameraSpec,
+                    IntegratorSpec,
+                    LightSpec,
+                    MaterialSpec,
+                    Scene,
+                    ShapeSpec,
+)
 
 __all__ = ["FORMAT_DOC", "load_scene", "parse_scene", "scene_from_dict", "Scene", "CameraSpec",
            "IntegratorSpec", "MaterialSpec", "ShapeSpec", "LightSpec", "MATERIAL_TYPES", "SAMPLERS",

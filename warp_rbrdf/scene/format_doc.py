@@ -54,8 +54,9 @@ _TAIL = """\
   sun_azimuth = 135.0       sky: degrees, 0 = -Z, 90 = +X (the lat-long u convention)
   resolution = [512, 256]   sky: size of the tabulated map
 
-Paths: "${RBRDF_DATA}/x" or "data:x" resolve through $RBRDF_DATA (default ../shared/data next
-to the project); "pkg:x" is warp_rbrdf/data/x; other relative paths are relative to the scene.
+Paths: "${RBRDF_DATA}/x" or "data:x" resolve through $RBRDF_DATA (run from a source checkout:
+default ../shared/data next to it; installed: no default, set it); "pkg:x" is
+warp_rbrdf/data/x; other relative paths are relative to the scene.
 """
 
 

@@ -10,9 +10,20 @@ import numpy as np
 
 from .. import registry
 from ..errors import SceneError
-from .specs import (LIGHT_TYPES, MATERIAL_TYPES, PATTERNS, SAMPLERS, SHAPE_TYPES,
-                    STATISTICS, CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene,
-                    ShapeSpec)
+from .specs import (
+    LIGHT_TYPES,
+    MATERIAL_TYPES,
+    PATTERNS,
+    SAMPLERS,
+    SHAPE_TYPES,
+    STATISTICS,
+    CameraSpec,
+    IntegratorSpec,
+    LightSpec,
+    MaterialSpec,
+    Scene,
+    ShapeSpec,
+)
 from .toml_table import MISSING, Table, show
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
 from fit.sampling.cdf_file import fit_cdf
 from fit.sampling.cdf_file import load as load_cdf
 from fit.sampling.pieces import PieceMaps, pieces_phi_knots
@@ -20,9 +21,23 @@ from fit.sampling.table import tabulate
 
 from .. import registry
 from ..errors import SceneError
-from ..materials.data import (CDF_LAYOUT, CDF_MAPS, CDF_N_MU, CDF_N_P, CDF_N_T, CDF_N_U, CDF_N_V,
-                              CDF_OFF_P, CDF_OFF_ROWS, CDF_OFF_T, LAYOUT_GLOBAL, LAYOUT_NONE,
-                              LAYOUT_PIECES, N_CDF_INFO, Pool)
+from ..materials.data import (
+    CDF_LAYOUT,
+    CDF_MAPS,
+    CDF_N_MU,
+    CDF_N_P,
+    CDF_N_T,
+    CDF_N_U,
+    CDF_N_V,
+    CDF_OFF_P,
+    CDF_OFF_ROWS,
+    CDF_OFF_T,
+    LAYOUT_GLOBAL,
+    LAYOUT_NONE,
+    LAYOUT_PIECES,
+    N_CDF_INFO,
+    Pool,
+)
 
 
 def _read_cdf(spec, scene_file, key):

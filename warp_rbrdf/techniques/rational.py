@@ -26,8 +26,18 @@ import warp as wp
 
 from ..codegen import lit as _lit
 from ..codegen import load_generated, tree_sum
-from ..materials.data import (CDF_LAYOUT, CDF_MAPS, CDF_N_MU, CDF_N_U, CDF_N_V, CDF_OFF_ROWS,
-                              LAYOUT_GLOBAL, LAYOUT_PIECES, N_CDF_INFO, Materials)
+from ..materials.data import (
+    CDF_LAYOUT,
+    CDF_MAPS,
+    CDF_N_MU,
+    CDF_N_U,
+    CDF_N_V,
+    CDF_OFF_ROWS,
+    LAYOUT_GLOBAL,
+    LAYOUT_PIECES,
+    N_CDF_INFO,
+    Materials,
+)
 from . import tabulated
 from .tabulated import local_dir, tab_row, view_frame
 

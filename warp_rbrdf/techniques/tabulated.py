@@ -11,8 +11,15 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from ..materials.data import (CDF_N_P, CDF_N_T, CDF_N_V, CDF_OFF_P, CDF_OFF_T, N_CDF_INFO,
-                              Materials)
+from ..materials.data import (
+    CDF_N_P,
+    CDF_N_T,
+    CDF_N_V,
+    CDF_OFF_P,
+    CDF_OFF_T,
+    N_CDF_INFO,
+    Materials,
+)
 
 
 @wp.func
@@ -35,32 +42,36 @@ def tab_row(theta_v: float, n_v: int) -> int:
 
 
 @wp.func
+def _invert_cells(cdf: wp.array(dtype=float), start: int, n: int, x: float) -> wp.vec3:
+    """Inverse of the piecewise-linear CDF cdf[start .. start + n] at x: (cell index, position
+    in the cell in [0, 1] (1/2 in a cell of no mass), the cell's mass)."""
+    j = wp.clamp(_count_le(cdf, start, n, x) - 1, 0, n - 1)
+    c0 = cdf[start + j]
+    m = cdf[start + j + 1] - c0
+    frac = 0.5
+    if m > 0.0:
+        frac = wp.clamp((x - c0) / m, 0.0, 1.0)
+    return wp.vec3(float(j), frac, m)
+
+
+@wp.func
 def tab_sample(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
                n_v: int, n_t: int, n_p: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
     """(theta_l, phi_l, pdf) exactly as fit.sampling.table.CDFTable.sample (binary search)."""
     v = tab_row(theta_v, n_v)
-    st = off_t + v * (n_t + 1)
-    j = wp.clamp(_count_le(cdf_t, st, n_t, mu) - 1, 0, n_t - 1)
-    c0 = cdf_t[st + j]
-    m_t = cdf_t[st + j + 1] - c0
+    ct = _invert_cells(cdf_t, off_t + v * (n_t + 1), n_t, mu)
+    j = int(ct[0])
+    m_t = ct[2]
     dt = wp.HALF_PI / float(n_t)
-    frac = 0.5
-    if m_t > 0.0:
-        frac = wp.clamp((mu - c0) / m_t, 0.0, 1.0)
-    theta_l = (float(j) + frac) * dt
+    theta_l = (float(j) + ct[1]) * dt
     s = 1.0
     if tau < 0.5:
         s = -1.0
     u = wp.abs(2.0 * tau - 1.0)
-    sp = off_p + (v * n_t + j) * (n_p + 1)
-    k = wp.clamp(_count_le(cdf_p, sp, n_p, u) - 1, 0, n_p - 1)
-    q0 = cdf_p[sp + k]
-    m_p = cdf_p[sp + k + 1] - q0
+    cp = _invert_cells(cdf_p, off_p + (v * n_t + j) * (n_p + 1), n_p, u)
+    m_p = cp[2]
     dp = wp.pi / float(n_p)
-    fp = 0.5
-    if m_p > 0.0:
-        fp = wp.clamp((u - q0) / m_p, 0.0, 1.0)
-    phi_l = s * (float(k) + fp) * dp
+    phi_l = s * (cp[0] + cp[1]) * dp
     pdf = (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
     return wp.vec3(theta_l, phi_l, pdf)
 
