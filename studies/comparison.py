@@ -28,7 +28,7 @@ covered pixels: mean, 99th percentile; also by the view angle theta_o (where the
 ``--docs`` also copies the charts to ``docs/images/study_comparison_{colinear,envmap}.png``,
 writes ``docs/study_comparison.md`` and its block in ``docs/results.md`` between
 ``<!-- BEGIN study:comparison -->`` and ``<!-- END study:comparison -->``
-(:func:`studies.common.publish_docs`).
+(:func:`studies.publish.publish_docs`).
 """
 from __future__ import annotations
 
@@ -39,6 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from studies import common as C
+from studies import metrics as M
+from studies import publish as P
 from studies import fits as F
 
 PRESETS = {
@@ -111,19 +113,19 @@ def run(preset="full", out="results/comparison", materials=None, resolution=None
                     mask = C.object_mask(base, r)
                     noise, _ = C.timed_render(r, spp, NOISE_SEED)
             theta = view_angles(base, r)     # every representation: same geometry and camera
-            expo = C.exposure_for(imgs["measured"], mask)
+            expo = M.exposure_for(imgs["measured"], mask)
             images[(mname, lname)] = dict(imgs=imgs, exposure=expo, mask=mask, de={})
             row = dict(material=mname, light=lname, env=light, spp=spp, exposure=expo,
                        **{f"seconds_{k}": v for k, v in secs.items()})
-            de_noise = C.delta_e2000(noise, imgs["measured"], expo)
-            row.update({f"noise_de_{k}": v for k, v in C.de_stats(de_noise, mask).items()})
+            de_noise = M.delta_e2000(noise, imgs["measured"], expo)
+            row.update({f"noise_de_{k}": v for k, v in M.de_stats(de_noise, mask).items()})
             for a, b in PAIRS:
                 if a not in imgs or b not in imgs:
                     continue
-                de = C.delta_e2000(imgs[b], imgs[a], expo)
+                de = M.delta_e2000(imgs[b], imgs[a], expo)
                 images[(mname, lname)]["de"][(a, b)] = de
                 tag = f"{a[:4]}_{b[:4]}"
-                row.update({f"de_{tag}_{k}": v for k, v in C.de_stats(de, mask).items()})
+                row.update({f"de_{tag}_{k}": v for k, v in M.de_stats(de, mask).items()})
                 for lo, hi in zip(THETA_BINS[:-1], THETA_BINS[1:]):
                     sel = mask & (theta >= lo) & (theta < hi)
                     row[f"de_{tag}_theta{int(lo)}_{int(hi)}"] = float(de[sel].mean()) if sel.any() else float("nan")
@@ -136,9 +138,9 @@ def run(preset="full", out="results/comparison", materials=None, resolution=None
             bar.update(1)
     bar.close()
     meta = dict(preset=preset, config=cfg, tol=tol, geometry=geometry, seed=SEED, noise_seed=NOISE_SEED,
-                fits=fit_info, machine=C.machine_info(), wall_seconds=time.perf_counter() - t_start)
-    C.write_csv(out / "comparison.csv", rows)
-    C.write_json(out / "comparison.json", dict(meta=meta, rows=rows))
+                fits=fit_info, machine=P.machine_info(), wall_seconds=time.perf_counter() - t_start)
+    P.write_csv(out / "comparison.csv", rows)
+    P.write_json(out / "comparison.json", dict(meta=meta, rows=rows))
     md = summary_markdown(rows, meta)
     (out / "comparison.md").write_text(md)
     if charts:
@@ -167,11 +169,11 @@ def summary_markdown(rows, meta) -> str:
         if has_rat:
             line += [r.get("de_meas_rati_mean", float("nan")), r.get("de_meas_rati_p99", float("nan")),
                      r.get("de_proj_rati_mean", float("nan"))]
-        bins = "/".join(C._fmt(r[f"de_meas_proj_theta{int(a)}_{int(b)}"])
+        bins = "/".join(P._fmt(r[f"de_meas_proj_theta{int(a)}_{int(b)}"])
                         for a, b in zip(THETA_BINS[:-1], THETA_BINS[1:]))
         line += [r["noise_de_mean"], bins, r["lap_measured"] / r["lap_projected"]]
         body.append(line)
-    L.append(C.md_table(body, hdr))
+    L.append(P.md_table(body, hdr))
     L.append("\n\"detail 3-D / 2-D\": mean |Laplacian| of log luminance of the 3-D render over that of the "
              "2-D render (> 1: the 3-D table shows more pixel-scale structure: φd detail, noise or "
              "acquisition artefacts that the projection removes).\n")
@@ -193,16 +195,16 @@ def block_table(res) -> str:
 
     def pair(r, tag):
         m, q = r.get(f"de_{tag}_mean"), r.get(f"de_{tag}_p99")
-        return "–" if m is None else f"{C._fmt(m)} / {C._fmt(q)}"
+        return "–" if m is None else f"{P._fmt(m)} / {P._fmt(q)}"
 
     body = [[r["material"], r["light"], pair(r, "meas_proj"), pair(r, "meas_rati"), r["noise_de_mean"],
-             "/".join(C._fmt(r[f"de_meas_proj_theta{int(a)}_{int(b)}"]) for a, b in bins)] for r in rows]
+             "/".join(P._fmt(r[f"de_meas_proj_theta{int(a)}_{int(b)}"]) for a, b in bins)] for r in rows]
     hdr = ["material", "light", "3-D ↔ 2-D", "3-D ↔ rational", "noise floor",
            "3-D ↔ 2-D by θo " + "/".join(f"{int(a)}–{int(b)}°" for a, b in bins)]
     fits = meta.get("fits", {})
     coef = "; ".join(f"{m} {f['n_coefficients']}" if f.get("n_coefficients") else f"{m} none"
                      for m, f in fits.items())
-    return (C.md_table(body, hdr)
+    return (P.md_table(body, hdr)
             + f"\n(mean / 99th percentile ΔE2000 on the object's fully covered pixels; sphere "
               f"{cfg['resolution']} px; colinear light {cfg['colinear_spp']} spp; `{cfg['env']}` map with "
               f"{cfg['env_spp']} importance-sampled lights per pixel; rational: fits at tolerance "
@@ -267,13 +269,13 @@ def main(argv=None):
     p.add_argument("--no-fit", action="store_true", help="use only cached/shipped fits, never run the fitter")
     p.add_argument("--direct-fallback", action="store_true",
                    help="if the project's fitter is unavailable, fit with studies.fits.direct_fit (labelled)")
-    C.add_docs_arguments(p)
+    P.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.materials, a.resolution, a.env, a.env_spp,
               a.colinear_spp, a.tol, not a.no_fit, a.direct_fallback)
     print(res["markdown"])
     print(f"wrote {a.out}/comparison.csv, .json, .md, comparison_*.png ({res['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, res, block_table, __file__, argv, DOCS)
+    P.publish_run(a, res, block_table, __file__, argv, DOCS)
     return res
 
 

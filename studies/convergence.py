@@ -28,7 +28,7 @@ spp ≤ 8, one seed, sphere under rooitou and colinear, ibiza, rational inverse 
 ``--docs`` also copies the charts to ``docs/images/study_convergence_*.png``, writes
 ``docs/study_convergence.md`` and its block in ``docs/results.md`` between
 ``<!-- BEGIN study:convergence -->`` and ``<!-- END study:convergence -->``
-(:func:`studies.common.publish_docs`).
+(:func:`studies.publish.publish_docs`).
 """
 from __future__ import annotations
 
@@ -39,6 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from studies import common as C
+from studies import metrics as M
+from studies import publish as P
 
 PRESETS = {
     # resolution, spp list max, seeds, reference spp
@@ -120,7 +122,7 @@ def run(preset="full", out="results/convergence", samplers=None, resolution=None
             for spp in spps:
                 for seed in seed_list:
                     img, sec = C.timed_render(rs, spp, seed, threads)
-                    e = C.rmse(img, ref, mask)
+                    e = M.rmse(img, ref, mask)
                     rows.append(dict(geometry=g, light=l, material=mname, sampler=s, spp=spp, seed=seed,
                                      seconds=sec, rmse=e, rel_rmse=e / mean_ref,
                                      rel_mse=(e / mean_ref) ** 2, compile_seconds=csec,
@@ -133,10 +135,10 @@ def run(preset="full", out="results/convergence", samplers=None, resolution=None
                 metric="RMSE over fully covered object pixels (all 3 channels), relative = RMSE / mean "
                        "reference radiance on those pixels; time = render wall seconds, "
                        f"threads = {threads or 'all'} cores",
-                machine=C.machine_info(), wall_seconds=time.perf_counter() - t_start, skipped=skipped)
-    C.write_csv(out / "convergence.csv", rows)
-    C.write_csv(out / "references.csv", refs)
-    C.write_json(out / "convergence.json", dict(meta=meta, references=refs, rows=rows, summary=summary))
+                machine=P.machine_info(), wall_seconds=time.perf_counter() - t_start, skipped=skipped)
+    P.write_csv(out / "convergence.csv", rows)
+    P.write_csv(out / "references.csv", refs)
+    P.write_json(out / "convergence.json", dict(meta=meta, references=refs, rows=rows, summary=summary))
     md = summary_markdown(summary, refs, meta)
     (out / "convergence.md").write_text(md)
     if charts:
@@ -195,7 +197,7 @@ def summary_markdown(summary, refs, meta) -> str:
         rows.append([f"{ref['geometry']} / {ref['light']}", ref["material"], ref["floor_rel_rmse"]]
                     + [d[s]["rel_rmse"] if s in d else float("nan") for s in samplers]
                     + [d[s]["eff_vs_mis"] if s in d else float("nan") for s in samplers if s != "mis"])
-    lines.append(C.md_table(rows, header))
+    lines.append(P.md_table(rows, header))
     # seconds per sample, medians over all configs
     sec = {}
     for s in summary:
@@ -223,9 +225,9 @@ def block_table(res) -> str:
         d = {s["sampler"]: s for s in summary if (s["geometry"], s["light"], s["material"]) == key}
         body.append([f"{ref['geometry']} / {ref['light']}", ref["material"]]
                     + [d[s]["rel_rmse"] if s in d else float("nan") for s in BLOCK_SAMPLERS]
-                    + [" / ".join(C._fmt(d[s]["eff_vs_mis"] if s in d else float("nan"))
+                    + [" / ".join(P._fmt(d[s]["eff_vs_mis"] if s in d else float("nan"))
                                   for s in BLOCK_EFFICIENCY)])
-    return (C.md_table(body, header)
+    return (P.md_table(body, header)
             + f"\n(relative RMSE at {top} spp, median of {cfg['seeds']} seeds, on the object's fully covered "
               f"pixels at {cfg['resolution']}×{cfg['resolution']} px; reference: {meta['reference']}; "
               f"efficiency 1/(rel. MSE × render seconds) relative to MIS, > 1: better than MIS; "
@@ -305,14 +307,14 @@ def main(argv=None):
     p.add_argument("--lights", nargs="*")
     p.add_argument("--materials", nargs="*")
     p.add_argument("--threads", type=int)
-    C.add_docs_arguments(p)
+    P.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.samplers, a.resolution, a.max_spp, a.seeds,
               a.ref_spp, a.geometries, a.lights, a.materials, a.threads)
     print(res["markdown"])
     print(f"wrote {a.out}/convergence.csv, convergence.json, convergence.md, convergence_*.png "
           f"({res['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, res, block_table, __file__, argv, DOCS)
+    P.publish_run(a, res, block_table, __file__, argv, DOCS)
     return res
 
 

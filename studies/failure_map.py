@@ -34,7 +34,7 @@ the failing samplers.
 ``--docs`` also copies the chart to ``docs/images/study_failure_map.png``, writes
 ``docs/study_failure_map.md`` and its block in ``docs/results.md`` between
 ``<!-- BEGIN study:failure_map -->`` and ``<!-- END study:failure_map -->``
-(:func:`studies.common.publish_docs`).
+(:func:`studies.publish.publish_docs`).
 """
 from __future__ import annotations
 
@@ -46,6 +46,8 @@ from pathlib import Path
 import numpy as np
 
 from studies import common as C
+from studies import metrics as M
+from studies import publish as P
 
 #: cdf_time_limit: bound (s) on each material's rational inverse-CDF fit (global layout only);
 #: cdf_pieces: options of the pieces layout (absent: its defaults; the small presets use
@@ -139,9 +141,9 @@ def projection_error(geometry, light, material_key, resolution, spp, data=None) 
     r2, _ = C.renderer(C.with_material(base, C.material_spec("projected", m2, "light")))
     b = r2.render(spp=spp, seed=5)
     n = r3.render(spp=spp, seed=6)
-    expo = C.exposure_for(a, mask)
-    d = C.de_stats(C.delta_e2000(b, a, expo), mask)
-    dn = C.de_stats(C.delta_e2000(n, a, expo), mask)
+    expo = M.exposure_for(a, mask)
+    d = M.de_stats(M.delta_e2000(b, a, expo), mask)
+    dn = M.de_stats(M.delta_e2000(n, a, expo), mask)
     return dict(de_mean=d["mean"], de_p99=d["p99"], noise_de_mean=dn["mean"])
 
 
@@ -259,9 +261,9 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
     meta = dict(preset=preset, config=cfg, samplers=samplers, mirror_exponent=MIRROR_EXPONENT,
                 metric="relative standard error sqrt(mean(var)/spp)/mean over fully covered pixels, "
                        "pattern independent, median over seeds",
-                machine=C.machine_info(), wall_seconds=time.perf_counter() - t_start)
-    C.write_csv(out / "failure_map.csv", noise_rows)
-    C.write_json(out / "failure_map.json", dict(meta=meta, samplers=noise_rows, other=other))
+                machine=P.machine_info(), wall_seconds=time.perf_counter() - t_start)
+    P.write_csv(out / "failure_map.csv", noise_rows)
+    P.write_json(out / "failure_map.json", dict(meta=meta, samplers=noise_rows, other=other))
     md = summary_markdown(noise_rows, other, meta)
     (out / "failure_map.md").write_text(md)
     if charts and noise_rows:
@@ -279,9 +281,9 @@ def _sampler_findings(rows, other, meta) -> list[str]:
     def cell(r, x):
         v = r.get(f"{x}_rel_err", float("nan"))
         n = r.get(f"{x}_nonfinite", 0)
-        return f"{C._fmt(v)} ({n} NaN px)" if n else v
+        return f"{P._fmt(v)} ({n} NaN px)" if n else v
 
-    L.append(C.md_table([[r["case"]] + [cell(r, x) for x in s] for r in rows], ["case"] + list(s)))
+    L.append(P.md_table([[r["case"]] + [cell(r, x) for x in s] for r in rows], ["case"] + list(s)))
     if any(r.get(f"{x}_nonfinite", 0) for r in rows for x in s):
         L.append("\n\"NaN px\": pixels of the object with a non-finite value or variance, summed over the "
                  "seeds (a sampler bug); the error is measured on the finite pixels.\n")
@@ -327,7 +329,7 @@ def summary_markdown(rows, other, meta) -> str:
         L.append(f"\nRational fits of one channel (G) of the 2-D projection, θd ≤ 80°, one "
                  f"cluster in {fits[0][1]['stride']} along each axis, degrees ≤ {fits[0][1]['max_degree']} "
                  f"(fit.rational.fitter.IntervalRationalFitter):\n")
-        L.append(C.md_table([[k[4:], v["tol"], f"{v['abs_floor']:.3g}", v["n_coefficients"],
+        L.append(P.md_table([[k[4:], v["tol"], f"{v['abs_floor']:.3g}", v["n_coefficients"],
                               "yes" if v["feasible"] else "NO", f"{100 * v['relative_share']:.0f} %",
                               v["max_rel_err_relative"], v["max_rel_err"], v["max_value"]]
                              for k, v in fits],
@@ -370,12 +372,12 @@ def main(argv=None):
     p.add_argument("--preset", choices=sorted(PRESETS), default="full")
     p.add_argument("--smoke", action="store_true")
     p.add_argument("--samplers", nargs="*")
-    C.add_docs_arguments(p)
+    P.add_docs_arguments(p)
     a = p.parse_args(argv)
     r = run("smoke" if a.smoke else a.preset, a.out, a.samplers)
     print(r["markdown"])
     print(f"wrote {a.out}/failure_map.csv, .json, .md, failure_map.png ({r['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, r, block_table, __file__, argv, DOCS)
+    P.publish_run(a, r, block_table, __file__, argv, DOCS)
     return r
 
 

@@ -22,7 +22,7 @@ this process and without a time limit; with ``--direct-fallback`` a labelled sta
 
 ``--docs`` also copies the chart to ``docs/images/study_fit.png``, writes ``docs/study_fit.md``
 and its block in ``docs/results.md`` between ``<!-- BEGIN study:fit -->`` and
-``<!-- END study:fit -->`` (:func:`studies.common.publish_docs`).
+``<!-- END study:fit -->`` (:func:`studies.publish.publish_docs`).
 """
 from __future__ import annotations
 
@@ -33,6 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from studies import common as C
+from studies import metrics as M
+from studies import publish as P
 from studies import fits as F
 
 PRESETS = {
@@ -109,9 +111,9 @@ def run(preset="full", out="results/fit_study", materials=None, tols=None, env="
             if rep == "measured":
                 mask = C.object_mask(base, r)
                 noise, _ = C.timed_render(r, cfg["spp"], SEED + 1)
-        expo = C.exposure_for(imgs["measured"], mask)
-        de_pm = C.de_stats(C.delta_e2000(imgs["projected"], imgs["measured"], expo), mask)
-        de_noise = C.de_stats(C.delta_e2000(noise, imgs["measured"], expo), mask)
+        expo = M.exposure_for(imgs["measured"], mask)
+        de_pm = M.de_stats(M.delta_e2000(imgs["projected"], imgs["measured"], expo), mask)
+        de_noise = M.de_stats(M.delta_e2000(noise, imgs["measured"], expo), mask)
         base_rows.append(dict(material=mname, exposure=expo, de_proj_vs_meas_mean=de_pm["mean"],
                               de_proj_vs_meas_p99=de_pm["p99"], noise_de_mean=de_noise["mean"],
                               **{f"{k}_{q}": v for k, d in cost.items() for q, v in d.items()}))
@@ -131,17 +133,17 @@ def run(preset="full", out="results/fit_study", materials=None, tols=None, env="
                 img, sec = C.timed_render(r, cfg["spp"], SEED)
                 row.update(compile_seconds=csec, render_seconds=sec, eval_ns=eval_ns(r, wi, wo))
                 for ref in ("measured", "projected"):
-                    d = C.de_stats(C.delta_e2000(img, imgs[ref], expo), mask)
+                    d = M.de_stats(M.delta_e2000(img, imgs[ref], expo), mask)
                     row.update({f"de_vs_{ref}_{k}": v for k, v in d.items()})
                 np.save(out / f"{mname}_tol{tol:g}.npy", img)
             rows.append(row)
             bar.update(1)
     bar.close()
     meta = dict(preset=preset, config=cfg, env=env, seed=SEED, fitter=avail,
-                machine=C.machine_info(), wall_seconds=time.perf_counter() - t_start)
-    C.write_csv(out / "fit_study.csv", rows)
-    C.write_csv(out / "fit_study_tables.csv", base_rows)
-    C.write_json(out / "fit_study.json", dict(meta=meta, rows=rows, tables=base_rows))
+                machine=P.machine_info(), wall_seconds=time.perf_counter() - t_start)
+    P.write_csv(out / "fit_study.csv", rows)
+    P.write_csv(out / "fit_study_tables.csv", base_rows)
+    P.write_json(out / "fit_study.json", dict(meta=meta, rows=rows, tables=base_rows))
     md = summary_markdown(rows, base_rows, meta)
     (out / "fit_study.md").write_text(md)
     if charts and any("n_coefficients" in r for r in rows):
@@ -198,7 +200,7 @@ def summary_markdown(rows, base_rows, meta) -> str:
                          "%.2f / %.2f" % (r["de_vs_measured_mean"], r["de_vs_measured_p99"]),
                          "%.2f / %.2f" % (r["de_vs_projected_mean"], r["de_vs_projected_p99"]),
                          r["eval_ns"], r["render_seconds"]])
-    L.append(C.md_table(body, hdr))
+    L.append(P.md_table(body, hdr))
     return "\n".join(L)
 
 
@@ -217,13 +219,13 @@ def block_table(res) -> str:
 
     body = [[b["material"], per_tol(b["material"], lambda r: str(r["n_coefficients"])),
              per_tol(b["material"], lambda r: f"{r['de_vs_measured_mean']:.2f}"),
-             per_tol(b["material"], lambda r: C._fmt(float(r["eval_ns"]))),
+             per_tol(b["material"], lambda r: P._fmt(float(r["eval_ns"]))),
              per_tol(b["material"], guarantee),
              f"{b['projected_eval_ns']:.0f} / {b['measured_eval_ns']:.0f}",
              f"{b['de_proj_vs_meas_mean']:.2f} / {b['noise_de_mean']:.2f}"] for b in base_rows]
     hdr = ["material", f"coefficients at {tl}", "mean ΔE vs 3-D", "ns / eval", "in tol.",
            "ns / eval 2-D / 3-D table", "ΔE 2-D vs 3-D / noise"]
-    return (C.md_table(body, hdr)
+    return (P.md_table(body, hdr)
             + f"\n(sphere under `{meta['env']}`, {cfg['resolution']} px, sampler `light` at {cfg['spp']} spp, same "
               f"seed for every representation; mean ΔE2000 of the rational render against the 3-D table's on the "
               f"object's fully covered pixels; ns per RGB evaluation in the Warp kernel, one thread; "
@@ -282,13 +284,13 @@ def main(argv=None):
     p.add_argument("--no-fit", action="store_true", help="only cached/shipped fits")
     p.add_argument("--direct-fallback", action="store_true",
                    help="if the project's fitter is unavailable, use studies.fits.direct_fit (labelled)")
-    C.add_docs_arguments(p)
+    P.add_docs_arguments(p)
     a = p.parse_args(argv)
     res = run("smoke" if a.smoke else a.preset, a.out, a.materials, a.tols, a.env, a.resolution, a.spp,
               not a.no_fit, a.direct_fallback)
     print(res["markdown"])
     print(f"wrote {a.out}/fit_study.csv, .json, .md, fit_study.png ({res['meta']['wall_seconds']:.0f} s)")
-    C.publish_run(a, res, block_table, __file__, argv, DOCS)
+    P.publish_run(a, res, block_table, __file__, argv, DOCS)
     return res
 
 

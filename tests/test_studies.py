@@ -23,6 +23,8 @@ import pytest
 from conftest import data_file
 
 import colour  # noqa: E402,F401  (the studies measure ΔE2000 with colour-science: the studies extra)
+from studies import metrics as M  # noqa: E402
+from studies import publish as P  # noqa: E402
 
 NAN = float("nan")
 
@@ -39,20 +41,19 @@ def rgl_data():
 # --------------------------------------------------------------------------------------------
 # Metrics
 def test_delta_e2000_matches_colour_and_is_zero_for_equal_images():
-    from studies import common as C
 
     rng = np.random.default_rng(0)
     a = rng.random((4, 5, 3))
     b = a * 1.1
-    de = C.delta_e2000(b, a)
+    de = M.delta_e2000(b, a)
     assert de.shape == (4, 5)
-    assert np.allclose(C.delta_e2000(a, a), 0.0)
+    assert np.allclose(M.delta_e2000(a, a), 0.0)
     cs = colour.RGB_COLOURSPACES["ITU-R BT.709"]
     lab = lambda x: colour.XYZ_to_Lab(colour.RGB_to_XYZ(x, cs, illuminant=cs.whitepoint,  # noqa: E731
                                                         chromatic_adaptation_transform=None), cs.whitepoint)
     assert np.allclose(de, colour.delta_E(lab(b), lab(a), method="CIE 2000"))
     # white maps to L* = 100
-    assert np.allclose(C.rgb_to_lab(np.ones(3)), [100, 0, 0], atol=1e-6)
+    assert np.allclose(M.rgb_to_lab(np.ones(3)), [100, 0, 0], atol=1e-6)
 
 
 def test_sampler_discovery_includes_base_samplers():
@@ -83,13 +84,12 @@ def test_sampler_discovery_includes_base_samplers():
 def test_table_number_format():
     """The studies' number format (3 significant digits, exponent outside [1e-3, 1e5), whole
     numbers from 100, "–" for NaN) and markdown table, on fixed values."""
-    from studies import common as C
 
-    got = [C._fmt(x) for x in (0.0828, 0.063, 7.15, 9.12e-4, 0.001, 99.94, 146.4, 1246.0, 123456.0,
+    got = [P._fmt(x) for x in (0.0828, 0.063, 7.15, 9.12e-4, 0.001, 99.94, 146.4, 1246.0, 123456.0,
                                0.0, -0.5, NAN, float("inf"), 42, "x")]
     assert got == ["0.0828", "0.063", "7.15", "9.12e-04", "0.001", "99.9", "146", "1246", "1.23e+05",
                    "0", "-0.5", "–", "–", "42", "x"]
-    assert C.md_table([["a", 1.5, NAN], ["b", 2, 1e-5]], ["x", "y", "z"]) == (
+    assert P.md_table([["a", 1.5, NAN], ["b", 2, 1e-5]], ["x", "y", "z"]) == (
         "| x | y | z |\n| --- | --- | --- |\n| a | 1.5 | – |\n| b | 2 | 1.00e-05 |\n")
 
 
@@ -673,7 +673,7 @@ def _docs_root(tmp_path):
     (root / "docs").mkdir(parents=True)
     text = (C.ROOT / "docs" / "results.md").read_text(encoding="utf-8")
     for name in STUDY_DOCS:
-        end = C.block_markers(name)[1]
+        end = P.block_markers(name)[1]
         text = text.replace(end, f"OLD-BLOCK-{name}\n{end}")
     (root / "docs" / "results.md").write_text(text, encoding="utf-8")
     return root
@@ -685,9 +685,8 @@ def _results(root) -> str:
 
 def _split(text, name):
     """(text up to and including the BEGIN marker, the block, text from the END marker on)."""
-    from studies import common as C
 
-    begin, end = C.block_markers(name)
+    begin, end = P.block_markers(name)
     i, j = text.index(begin) + len(begin), text.index(end)
     return text[:i], text[i:j], text[j:]
 
@@ -701,7 +700,7 @@ def test_results_page_has_one_marker_pair_per_study():
 
     text = (C.ROOT / "docs" / "results.md").read_text(encoding="utf-8")
     for name, module in STUDY_DOCS.items():
-        begin, end = C.block_markers(name)
+        begin, end = P.block_markers(name)
         assert text.count(begin) == 1 and text.count(end) == 1 and text.index(begin) < text.index(end)
         block = _split(text, name)[1]
         docs = importlib.import_module(f"studies.{module}").DOCS
@@ -717,7 +716,6 @@ def test_results_page_has_one_marker_pair_per_study():
 
 
 def test_publish_docs_replaces_only_the_block_and_is_idempotent(tmp_path):
-    from studies import common as C
 
     root = _docs_root(tmp_path)
     out = tmp_path / "out"
@@ -733,7 +731,7 @@ def test_publish_docs_replaces_only_the_block_and_is_idempotent(tmp_path):
               block_table="| k | v |\n| --- | --- |\n| paper | 42 |\n",
               command="python -m studies.fit_study --smoke --docs", docs_root=root,
               block_charts=("study_fit.png",))
-    pub = C.publish_docs(**kw)
+    pub = P.publish_docs(**kw)
     assert pub["results"] == root / "docs" / "results.md" and pub["doc"] == root / "docs" / "study_fit.md"
     after = _results(root)
     b0, _, e0 = _split(before, "fit")
@@ -760,11 +758,11 @@ def test_publish_docs_replaces_only_the_block_and_is_idempotent(tmp_path):
     assert "![study_fit](images/study_fit.png)" in doc and "![study_fit_extra](images/study_fit_extra.png)" in doc
     assert doc.rstrip().endswith("| 1 | 2 |")
     # again: the same bytes (idempotent)
-    C.publish_docs(**kw)
+    P.publish_docs(**kw)
     assert _results(root) == after
     assert (root / "docs/study_fit.md").read_text(encoding="utf-8") == doc
     # another study's block is replaced independently of the first
-    C.publish_docs(**dict(kw, name="failure_map", charts={"a.png": "study_failure_map.png"}, block_charts=None))
+    P.publish_docs(**dict(kw, name="failure_map", charts={"a.png": "study_failure_map.png"}, block_charts=None))
     final = _results(root)
     assert _split(final, "fit")[1] == block and final.count("| paper | 42 |") == 2
     assert "![study_failure_map](images/study_failure_map.png)" in _split(final, "failure_map")[1]
@@ -785,25 +783,25 @@ def test_publish_docs_without_markers_raises_and_writes_nothing(tmp_path):
     def nothing_written():
         return sorted(p.name for p in (root / "docs").iterdir()) == ["results.md"]
 
-    for marker in C.block_markers("fit"):
+    for marker in P.block_markers("fit"):
         results.write_text(text.replace(marker, ""), encoding="utf-8")
         with pytest.raises(ValueError, match=re.escape(marker)) as e:
-            C.publish_docs(**kw)
+            P.publish_docs(**kw)
         assert "results.md" in str(e.value)
         assert nothing_written()                          # checked before anything is written
     with pytest.raises(ValueError, match=re.escape("<!-- BEGIN study:nosuch -->")):
-        C.replace_block(text, "nosuch", "x")
+        P.replace_block(text, "nosuch", "x")
     results.write_text(text, encoding="utf-8")
     with pytest.raises(FileNotFoundError, match="missing.png"):
-        C.publish_docs(**dict(kw, charts={"missing.png": "study_fit.png"}))
+        P.publish_docs(**dict(kw, charts={"missing.png": "study_fit.png"}))
     assert nothing_written() and results.read_text(encoding="utf-8") == text
     results.unlink()
     with pytest.raises(FileNotFoundError, match=re.escape("no docs/results.md in")):
-        C.publish_docs(**kw)
+        P.publish_docs(**kw)
     assert not any((root / "docs").iterdir())
     page = (C.ROOT / "docs" / "results.md").read_bytes()
     with pytest.raises(ValueError, match="--smoke run would overwrite"):  # the repository's own docs
-        C.publish_docs(**dict(kw, meta={"preset": "smoke"}, docs_root=None))
+        P.publish_docs(**dict(kw, meta={"preset": "smoke"}, docs_root=None))
     assert (C.ROOT / "docs" / "results.md").read_bytes() == page
 
 
@@ -812,9 +810,9 @@ def test_command_line_and_docs_option(capsys):
 
     from studies import common as C
 
-    assert C.command_line(C.ROOT / "studies" / "convergence.py", ["--out", "a b", "--docs"]) \
+    assert P.command_line(C.ROOT / "studies" / "convergence.py", ["--out", "a b", "--docs"]) \
         == "python -m studies.convergence --out 'a b' --docs"
-    assert C.command_line("/elsewhere/x.py", ["--smoke"]) == "python /elsewhere/x.py --smoke"
+    assert P.command_line("/elsewhere/x.py", ["--smoke"]) == "python /elsewhere/x.py --smoke"
     for module in STUDY_DOCS.values():
         with pytest.raises(SystemExit):
             importlib.import_module(f"studies.{module}").main(["--help"])
@@ -826,7 +824,6 @@ def test_command_line_and_docs_option(capsys):
 def test_failure_map_cli_publishes_docs(failure_map, tmp_path, monkeypatch):
     """The failure map's CLI with --docs into a copy of docs/results.md, publishing the module
     fixture's run (``run`` replaced by it: the study is not run a second time)."""
-    from studies import common as C
     from studies import failure_map as fm
 
     samplers = ["uniform", "cosine", "light", "mis"]
@@ -843,7 +840,7 @@ def test_failure_map_cli_publishes_docs(failure_map, tmp_path, monkeypatch):
     argv = ["--preset", "test", "--out", str(out), "--samplers", *samplers, "--docs", "--docs-root", str(root)]
     assert fm.main(argv) is failure_map
     assert calls == [("test", str(out), samplers)]
-    cmd = C.command_line(fm.__file__, argv)
+    cmd = P.command_line(fm.__file__, argv)
     assert cmd.startswith("python -m studies.failure_map --preset test --out ")
     assert (root / "docs/images/study_failure_map.png").read_bytes() == (out / "failure_map.png").read_bytes()
     doc = (root / "docs/study_failure_map.md").read_text(encoding="utf-8")
