@@ -21,12 +21,6 @@ def edges(n_t: int, n_p: int):
     return np.linspace(0.0, np.pi / 2, n_t + 1), np.linspace(-np.pi, np.pi, n_p + 1)
 
 
-def angles(wi):
-    """(theta_l, phi_l) of local directions (N, 3)."""
-    wi = np.asarray(wi, float)
-    return np.arctan2(np.hypot(wi[:, 0], wi[:, 1]), wi[:, 2]), np.arctan2(wi[:, 1], wi[:, 0])
-
-
 def chi2_pvalue(counts, probs, n: int) -> float:
     """Pearson chi-square p-value of ``counts`` against ``n * probs`` (probabilities
     renormalised); cells expected below :data:`MIN_EXPECTED` are pooled into one. Samples in a

@@ -25,7 +25,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from chi2 import (
-    angles,
     assert_unbiased,
     chi2_pvalue,
     edges,
@@ -36,7 +35,7 @@ from chi2 import (
 from conftest import RGL_MATERIALS, data_file
 
 from fit.analytic import glossy_lobe, lambert
-from fit.formats.angles import spherical_to_direction
+from fit.formats.angles import direction_to_spherical, spherical_to_direction
 from fit.formats.measured import MeasuredBRDF
 from fit.sampling.cdf_file import fit_cdf
 from warp_rbrdf import registry
@@ -127,7 +126,7 @@ def test_chi2_against_own_density(request, strategy, which):
     for tv_deg in THETA_V_DEG:
         tv = np.radians(tv_deg)
         _, _, wi, w = case.draws(tech.name, tv, N_CHI2)
-        counts = histogram(*angles(wi[w > 0]), T_EDGES, P_EDGES)
+        counts = histogram(*direction_to_spherical(wi[w > 0]), T_EDGES, P_EDGES)
         probs = case.cell_probs(tech, tv)
         assert probs.sum() == pytest.approx(1.0, abs=2e-3), (strategy, tv_deg, probs.sum())
         assert chi2_pvalue(counts, probs, N_CHI2) > P_VALUE, (strategy, which, tv_deg)
@@ -183,7 +182,7 @@ def test_contract_on_rgl_materials(material):
         for tv_deg in THETA_V_DEG:
             tv = np.radians(tv_deg)
             xi, wo, wi, w = case.draws(tech.name, tv, N_CHI2)
-            counts = histogram(*angles(wi[w > 0]), T_EDGES, P_EDGES)
+            counts = histogram(*direction_to_spherical(wi[w > 0]), T_EDGES, P_EDGES)
             assert chi2_pvalue(counts, case.cell_probs(tech, tv), N_CHI2) > P_VALUE, (material, tech.name, tv_deg)
             # + 0.5 % of the value: the midpoint quadrature of the clear coats' near-normal mirror
             # peak on the nearest-bin table (heavy-tailed weights, resolution-limited quadrature)

@@ -24,6 +24,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from fit.formats.angles import direction_to_spherical, spherical_to_direction
+
 from ..codegen import lit as _lit
 from ..codegen import load_generated, tree_sum
 from ..materials.data import (
@@ -302,9 +304,9 @@ def kernel_functions(global_fits=()):
 def numpy_sample(cdf, wo, xi):
     """NumPy reference of the sampler: ``(wi (N, 3), weight (N,))`` from ``CDFFit.sample``
     (alpha on rational rows, 1/pdf of the table elsewhere)."""
-    tv, pv = tabulated.view_angles_numpy(wo)
+    tv, pv = direction_to_spherical(wo)
     tl, pl, alpha = cdf.sample(tv, xi[:, 0], xi[:, 1])
-    return tabulated.local_dir_numpy(tl, pl, pv), alpha
+    return spherical_to_direction(tl, pl + pv), alpha
 
 
 def numpy_pdf(cdf, wi, wo):

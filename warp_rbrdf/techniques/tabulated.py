@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from fit.formats.angles import direction_to_spherical, spherical_to_direction
+
 from ..materials.data import (
     CDF_N_P,
     CDF_N_T,
@@ -181,33 +183,18 @@ def kernel_functions(cdfs):
 # --------------------------------------------------------------------------------------------
 # NumPy references
 # --------------------------------------------------------------------------------------------
-def view_angles_numpy(wo):
-    """(theta_v, phi_v) of local view directions ``wo`` (..., 3); phi_v = 0 at the pole."""
-    wo = np.asarray(wo, float)
-    rxy = np.hypot(wo[..., 0], wo[..., 1])
-    return np.arctan2(rxy, wo[..., 2]), np.where(rxy > 1e-12, np.arctan2(wo[..., 1], wo[..., 0]), 0.0)
-
-
-def local_dir_numpy(theta_l, phi_l, phi_v):
-    """Directions at (theta_l, phi_l + phi_v), shape (..., 3)."""
-    st = np.sin(theta_l)
-    return np.stack([st * np.cos(phi_l + phi_v), st * np.sin(phi_l + phi_v), np.cos(theta_l)], -1)
-
-
 def numpy_sample(cdf, wo, xi):
     """NumPy reference of :func:`sample`: ``(wi (N, 3), weight (N,))``; ``cdf``: the material's
     CDFTable (or a CDFFit, whose ``table`` is used)."""
     table = getattr(cdf, "table", cdf)
-    tv, pv = view_angles_numpy(wo)
+    tv, pv = direction_to_spherical(wo)
     tl, pl, p = table.sample(tv, xi[:, 0], xi[:, 1])
-    return local_dir_numpy(tl, pl, pv), np.where(p > 0, 1.0 / np.where(p > 0, p, 1.0), 0.0)
+    return spherical_to_direction(tl, pl + pv), np.where(p > 0, 1.0 / np.where(p > 0, p, 1.0), 0.0)
 
 
 def numpy_pdf(cdf, wi, wo):
     """NumPy reference of :func:`pdf` (1/sr)."""
     table = getattr(cdf, "table", cdf)
-    tv, pv = view_angles_numpy(wo)
-    wi = np.asarray(wi, float)
-    tl = np.arctan2(np.hypot(wi[:, 0], wi[:, 1]), wi[:, 2])
-    pl = np.arctan2(wi[:, 1], wi[:, 0]) - pv
-    return np.where(wi[:, 2] > 0, table.pdf(tv, tl, pl), 0.0)
+    tv, pv = direction_to_spherical(wo)
+    tl, pl = direction_to_spherical(wi)
+    return np.where(np.asarray(wi)[:, 2] > 0, table.pdf(tv, tl, pl - pv), 0.0)
