@@ -7,7 +7,8 @@ For each material it prints the median (and min) over ``--repeats`` of
 
 * the file read (parse + table construction),
 * ``evaluate`` on ``--n`` random direction pairs in the upper hemisphere, as evaluations/s,
-* ``to_measured`` (resampling at the 90 x 90 x 180 MERL bin centres = 1.458 M evaluations),
+* ``to_measured`` (resampling at the bin centres of the full-circle MERL grid, 90 x 90 x 360
+  = 2.916 M evaluations: RGL files are not reciprocal, so phi_d is not folded),
 
 and the directional albedo (RGB) at theta_i = 0 and 60 deg. Targets: >= 1 M evaluations/s,
 resample in a few seconds at most. With ``--thumbnails DIR`` it also writes

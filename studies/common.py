@@ -60,9 +60,13 @@ def has_data(*rels) -> bool:
 
 
 def all_samplers() -> tuple:
-    """Every sampler of the renderer's registry (base ones first)."""
-    from warp_rbrdf.registry import STRATEGY_NAMES as names
+    """Every sampler of the renderer's registry that works with any material (base ones
+    first); the samplers of one kind's own tables (``rgl``, ``mis-rgl``: the RGL format's
+    warps, ``rgl`` materials only) are left to the studies of that kind (studies.fidelity)."""
+    from warp_rbrdf import registry
 
+    names = tuple(s.name for s in registry.STRATEGIES
+                  if registry.technique(s.technique).material is None)
     return tuple(s for s in BASE_SAMPLERS if s in names) + tuple(s for s in names if s not in BASE_SAMPLERS)
 
 

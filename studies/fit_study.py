@@ -114,7 +114,9 @@ def run(preset="full", out="results/fit_study", materials=None, tols=None, env="
         expo = M.exposure_for(imgs["measured"], mask)
         de_pm = M.de_stats(M.delta_e2000(imgs["projected"], imgs["measured"], expo), mask)
         de_noise = M.de_stats(M.delta_e2000(noise, imgs["measured"], expo), mask)
-        base_rows.append(dict(material=mname, exposure=expo, de_proj_vs_meas_mean=de_pm["mean"],
+        base_rows.append(dict(material=mname, exposure=expo,
+                              measured_bins=int(C.measured(mname).values[..., 0].size),
+                              de_proj_vs_meas_mean=de_pm["mean"],
                               de_proj_vs_meas_p99=de_pm["p99"], noise_de_mean=de_noise["mean"],
                               **{f"{k}_{q}": v for k, d in cost.items() for q, v in d.items()}))
         bar.update(1)
@@ -184,7 +186,10 @@ def summary_markdown(rows, base_rows, meta) -> str:
            "ΔE vs 2-D mean/p99", "ns / eval", "render s"]
     body = []
     for b in base_rows:
-        body.append([b["material"], "3-D table", "–", "1 458 000 × 3 values", "–", "–", "noise %.2f" % b["noise_de_mean"],
+        # 90 x 90 x 360 bins: RGL tables keep the full phi_d circle (rows of older runs, without
+        # the key, were 90 x 90 x 180)
+        n_bins = f"{b.get('measured_bins', 1_458_000):,}".replace(",", " ")
+        body.append([b["material"], "3-D table", "–", f"{n_bins} × 3 values", "–", "–", "noise %.2f" % b["noise_de_mean"],
                      "%.2f / %.2f" % (b["de_proj_vs_meas_mean"], b["de_proj_vs_meas_p99"]) + " (2-D vs 3-D)",
                      b["measured_eval_ns"], b["measured_render_seconds"]])
         body.append([b["material"], "2-D table", "–", "8 100 × 3 values", "–", "–", "–", "–",

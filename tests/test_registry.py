@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import data_file
 
 from fit.formats.angles import spherical_to_direction
 from fit.formats.measured import MeasuredBRDF
@@ -22,7 +23,9 @@ def test_material_kind_implements_the_interface(kind):
     impl = kind.impl()
     missing = [a for a in MATERIAL_API if not hasattr(impl, a)]
     assert not missing, f"{kind.module} lacks {missing}"
-    assert set(kind.keys) <= {"albedo", "file", "scale", "statistic"}
+    assert set(kind.keys) <= {"albedo", "file", "scale", "statistic", "incident", "unvouched"}
+    # the roles key exactly on the kinds that read RGL files
+    assert ("incident" in kind.keys) == (".bsdf" in kind.suffixes)
     assert ("file" in kind.keys) == bool(kind.suffixes)
 
 
@@ -32,6 +35,7 @@ def test_technique_implements_the_interface(tech):
     missing = [a for a in TECHNIQUE_API if not hasattr(impl, a)]
     assert not missing, f"{tech.module} lacks {missing}"
     assert not tech.needs_fit or tech.needs_table
+    assert tech.material is None or tech.material in registry.MATERIAL_NAMES
 
 
 def test_codes_are_unique_and_strategies_are_consistent():
@@ -65,6 +69,11 @@ def test_scene_format_and_help_list_every_name():
 
 @pytest.mark.parametrize("sampler", registry.STRATEGY_NAMES)
 def test_every_sampler_parses_in_a_scene(sampler):
+    own = registry.technique(registry.strategy(sampler).technique).material
+    if own is not None:   # a sampler of one kind's own tables: refused on another kind
+        with pytest.raises(ValueError, match=f"a 'lambert' material cannot use it"):
+            parse_scene(f'[materials.m]\ntype = "lambert"\nsampler = "{sampler}"\n')
+        return
     sc = parse_scene(f'[materials.m]\ntype = "lambert"\nsampler = "{sampler}"\n')
     assert sc.materials["m"].sampler == sampler
     with pytest.raises(ValueError, match="expected one of"):
@@ -80,8 +89,12 @@ def _specs():
     from fit.rational.coefficient_file import load
     from warp_rbrdf.paths import PACKAGE_DATA
 
+    from fit.formats.rgl import read_rgl
+
     brdf = MeasuredBRDF.from_function(glossy_lobe(exponent=40.0), name="glossy")
+    rgl = read_rgl(data_file("rgl/cc_ibiza_sunset_rgb.bsdf"))
     return {
+        "rgl": MaterialSpec(name="rgl", type="rgl", data=rgl, scale=(1.0, 0.8, 1.2)),
         "lambert": MaterialSpec(name="lambert", type="lambert", albedo=(0.2, 0.5, 0.9)),
         "measured": MaterialSpec(name="measured", type="measured", data=brdf, scale=(1.0, 0.5, 2.0)),
         "projected": MaterialSpec(name="projected", type="projected", data=project(brdf), scale=(0.5, 1.0, 1.0)),

@@ -72,7 +72,8 @@ def test_sampler_discovery_includes_base_samplers():
 
     s = C.all_samplers()
     assert s[:4] == ("uniform", "cosine", "light", "mis")
-    assert len(s) == len(set(s)) == len(registry.STRATEGIES)
+    general = [x for x in registry.STRATEGIES if registry.technique(x.technique).material is None]
+    assert len(s) == len(set(s)) == len(general)
     assert [scene_sampler(x) for x in s] == list(s)
     with pytest.raises(SceneError, match="nosuch"):
         scene_sampler("nosuch")
@@ -155,10 +156,10 @@ def test_convergence_smoke(tmp_path, rgl_data):
     assert _png_size(tmp_path / "convergence_rmse_spp.png") == (144, 360)
     assert _png_size(tmp_path / "convergence_rmse_time.png") == (144, 360)
     assert _png_size(tmp_path / "convergence_efficiency.png") == (230, 432)
-    # more samples, less error (MIS under the sun, 1 -> 8 spp)
-    e = {int(x["spp"]): float(x["rel_rmse"]) for x in rows
-         if x["sampler"] == "mis" and x["light"] == "rooitou"}
-    assert e[8] < e[1]
+    # (no "more samples, less error" check here: on the smoke preset's 12 px the tiny sun's
+    # highlight on the clear coat is sub-pixel, one env sample that finds it dominates a pixel,
+    # and every env-sampling sampler's error at 8 spp is its heavy tail; the full preset measures
+    # convergence)
     # colinear directional light only: every sampler traces the same rays (delta light)
     col = {x["sampler"]: float(x["rmse"]) for x in rows
            if x["light"] == "colinear" and x["spp"] == "8" and x["sampler"] in C.BASE_SAMPLERS}
@@ -504,12 +505,15 @@ def test_failure_tiny_sun_cosine_and_uniform(failure_map):
 
 
 def test_failure_grazing_projection_error(failure_map):
-    """The 2-D projection's error against the 3-D table (ibiza, ΔE2000) grows at a grazing view:
-    > 2x the error seen from above, and > 2x the render noise."""
+    """The 2-D projection's error against the 3-D table (ibiza, ΔE2000) exceeds twice the render
+    noise at a normal and at a grazing view. (With the RGL files' reference roles and the
+    full phi_d circle the 3-D table keeps the non-reciprocal half the projection averages out,
+    so the error is no longer mainly at grazing views: 4.6 at 80° vs 4.8 at 10° on this small
+    run, against 2x before issue 20.)"""
     g = failure_map["other"]["projection_de_grazing_plane"]
     n = failure_map["other"]["projection_de_normal_plane"]
-    assert g["de_mean"] > 2 * n["de_mean"]
-    assert g["de_mean"] > 2 * g["noise_de_mean"]
+    assert g["de_mean"] > 2 * g["noise_de_mean"], g
+    assert n["de_mean"] > 2 * n["noise_de_mean"], n
 
 
 def test_low_albedo_sampler_noise_is_scale_invariant(failure_map):

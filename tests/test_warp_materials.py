@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.formats.grid import phi_d_centres, theta_d_centres, theta_h_centres
@@ -104,3 +105,92 @@ def test_measured_material_renders_under_directional_light():
     wi, wo = frame @ to_light, frame @ to_eye
     ref = b.evaluate(wi, wo) * 2.0 * to_light[1]
     np.testing.assert_allclose(img.reshape(-1, 3), np.broadcast_to(ref, (16, 3)), rtol=1e-4)
+
+
+# ------------------------------------------------------------------------------------------
+# phi_d fold (issue 20, "roles"): Materials.param = 180 (MERL, folded) or 360 (full circle)
+# ------------------------------------------------------------------------------------------
+def synthetic_full_circle_brdf():
+    """A non-reciprocal table over the full phi_d circle (360 bins) whose every bin differs."""
+    def f(wi, wo):
+        base = 0.2 + 0.15 * wi[..., 2] ** 2 - 0.05 * wo[..., 0] + 0.03 * wi[..., 1] * wo[..., 2]
+        return np.stack([base, 1.5 * base, 0.5 + 0 * base], -1)
+    b = MeasuredBRDF.from_function(f, name="synthetic360", reciprocal=False)
+    rng = np.random.default_rng(2)
+    b.values = b.values * (1 + 0.3 * rng.random(b.values.shape))
+    return b
+
+
+def _rgl_file():
+    from conftest import data_file
+    return data_file("rgl/cc_ibiza_sunset_rgb.bsdf")   # a glossy film, reciprocal to 10-27 % only
+
+
+def _multi_scene(specs):
+    """One scene using every spec (a plane, then spheres), so the kernels see them together."""
+    from warp_rbrdf.scene import ShapeSpec
+
+    sc = T.plane_scene(specs[0], [T.constant_env(1.0)], resolution=4, spp=1)
+    for n, s in enumerate(specs[1:]):
+        sc.materials[s.name] = s
+        sc.shapes.append(ShapeSpec(type="sphere", material=s.name, center=(0.0, 0.0, -10.0 - 3 * n)))
+    return Renderer(sc)
+
+
+@pytest.fixture(scope="module")
+def fold_renderer():
+    """A MERL-like (folded, 180) table, a synthetic full-circle one and an RGL-derived one
+    (360) in one scene; the RGL file's own evaluation as the reference."""
+    from fit.formats.rgl import read_rgl
+
+    rgl = read_rgl(_rgl_file())
+    tables = {"merl": synthetic_brdf(), "full": synthetic_full_circle_brdf(), "rgl": rgl.to_measured()}
+    specs = [MaterialSpec(name=k, type="measured", data=b) for k, b in tables.items()]
+    return _multi_scene(specs), tables, rgl
+
+
+def test_measured_param_is_the_number_of_phi_d_bins(fold_renderer):
+    r, tables, _ = fold_renderer
+    md = r.material_data
+    assert [int(md.param[md.names.index(k)]) for k in ("merl", "full", "rgl")] == [180, 360, 360]
+    assert tables["merl"].reciprocal and not tables["full"].reciprocal and not tables["rgl"].reciprocal
+
+
+@pytest.mark.parametrize("name", ["merl", "full", "rgl"])
+def test_measured_lookup_matches_numpy_folded_and_full_circle(name, fold_renderer):
+    """The Warp lookup equals MeasuredBRDF.evaluate for a folded (MERL-like) and a full-circle
+    (RGL-derived) table in the same scene: exactly at bin centres over the whole circle, and
+    at random pairs except (rarely) at a bin boundary in float32."""
+    r, tables, _ = fold_renderer
+    b = tables[name]
+    wi, wo = bin_centre_pairs()
+    np.testing.assert_allclose(r.eval_material(name, wi, wo), b.evaluate(wi, wo), rtol=1e-5, atol=1e-7)
+    wi, wo = random_pairs(20000, seed=4)
+    for a, c in ((wi, wo), (wo, wi)):
+        same = np.all(np.isclose(r.eval_material(name, a, c), b.evaluate(a, c), rtol=1e-5, atol=1e-7), axis=1)
+        assert same.mean() > 0.995, same.mean()
+
+
+def test_rgl_measured_has_no_seam(fold_renderer):
+    """The seam of issue 20: for an RGL file the kernel's values at (light, view) and
+    (view, light) differ as the file's own evaluation does (a folded table gives both pairs
+    one value)."""
+    r, _, rgl = fold_renderer
+    rng = np.random.default_rng(8)
+    n = 3000
+    wl, wv = half_diff_to_directions(theta_h_centres()[rng.integers(0, 90, n)], rng.uniform(0, 2 * np.pi, n),
+                                     theta_d_centres()[rng.integers(0, 90, n)],
+                                     phi_d_centres(360)[rng.integers(0, 360, n)])
+    ok = (wl[:, 2] > 0.02) & (wv[:, 2] > 0.02)
+    wl, wv = wl[ok], wv[ok]
+    lv, vl = r.eval_material("rgl", wl, wv), r.eval_material("rgl", wv, wl)
+    src_lv, src_vl = rgl.evaluate(wl, wv), rgl.evaluate(wv, wl)
+    luma = np.array([0.2126, 0.7152, 0.0722])
+    y_src = np.stack([src_lv @ luma, src_vl @ luma])
+    differ = np.abs(y_src[0] - y_src[1]) > 0.1 * y_src.max(axis=0)
+    assert differ.mean() > 0.05, differ.mean()
+    # any phi_h (the table holds phi_h = 0; the file is isotropic to 1e-12), float32 table
+    np.testing.assert_allclose(lv, src_lv, rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(vl, src_vl, rtol=1e-5, atol=1e-7)
+    y = np.stack([lv @ luma, vl @ luma])
+    np.testing.assert_allclose((y[0] - y[1])[differ], (y_src[0] - y_src[1])[differ], rtol=1e-4)

@@ -40,7 +40,7 @@ class MaterialKind:
     suffixes: tuple = ()      # file types its ``file`` key accepts (empty: no file)
     module: str = ""          # implementation module
     keys: tuple = ()          # scene keys it reads besides type / sampler / cdf, among
-                              # albedo, file, scale, statistic (see scene-format)
+                              # albedo, file, scale, statistic, incident (see scene-format)
 
     def impl(self):
         return importlib.import_module(self.module)
@@ -57,6 +57,7 @@ class Technique:
     needs_table: bool = False  # needs the material's tabulated inverse CDFs
     needs_fit: bool = False    # needs verified rational inverse CDFs (else its strategy falls back)
     module: str = ""
+    material: str | None = None  # only for materials of this kind (its own data drive it)
 
     def impl(self):
         return importlib.import_module(self.module)
@@ -94,13 +95,17 @@ MATERIALS = (
     MaterialKind("lambert", 0, "albedo / pi", (), "warp_rbrdf.materials.lambert", ("albedo",)),
     MaterialKind("measured", 1, "3-D (theta_h, theta_d, phi_d) MERL-grid table, nearest bin "
                  "(MERL .binary, or RGL .bsdf resampled)", (".binary", ".bsdf"),
-                 "warp_rbrdf.materials.measured", ("file", "scale")),
+                 "warp_rbrdf.materials.measured", ("file", "scale", "incident")),
     MaterialKind("projected", 2, "2-D (theta_h, theta_d) median projection, nearest cluster "
                  "(.binary/.bsdf projected at load, or an .npz from `rbrdf-fit project`)",
                  (".binary", ".bsdf", ".npz"), "warp_rbrdf.materials.projected",
-                 ("file", "scale", "statistic")),
+                 ("file", "scale", "statistic", "incident")),
     MaterialKind("rational", 3, "rational fit P/Q from `rbrdf-fit brdf` (coefficient .json)",
-                 (".json",), "warp_rbrdf.materials.rational", ("file", "scale")),
+                 (".json",), "warp_rbrdf.materials.rational", ("file", "scale", "unvouched")),
+    MaterialKind("rgl", 4, "RGL-EPFL .bsdf evaluated exactly with the format's own "
+                 "interpolation (inverse VNDF warp, bilinear rgb, linear in theta_i); the "
+                 "reference representation", (".bsdf",), "warp_rbrdf.materials.rgl",
+                 ("file", "scale", "incident")),
 )
 
 TECHNIQUES = (
@@ -112,6 +117,9 @@ TECHNIQUES = (
     Technique("rational", 3, "rational inverse CDFs (pieces or global layout); weight alpha "
               "exact, pdf = the table's (approximate)", False, needs_table=True, needs_fit=True,
               module="warp_rbrdf.techniques.rational"),
+    Technique("rgl", 4, "the RGL format's own importance sampling: luminance warp, then VNDF "
+              "warp, exact pdf (rgl materials only)", True, module="warp_rbrdf.techniques.rgl",
+              material="rgl"),
 )
 
 STRATEGIES = (
@@ -129,6 +137,9 @@ STRATEGIES = (
              True, "tabulated"),
     Strategy("mis-rational", "environment sample + rational BSDF sample; MIS weights use the "
              "table's pdf (approximate, still unbiased)", True, "rational", fallback="mis-tabulated"),
+    Strategy("rgl", "the RGL format's own BSDF sample only (rgl materials)", False, "rgl"),
+    Strategy("mis-rgl", "environment sample + the RGL format's own BSDF sample, power "
+             "heuristic (rgl materials; Mitsuba 3's estimator)", True, "rgl"),
 )
 
 MATERIAL_NAMES = tuple(m.name for m in MATERIALS)
@@ -169,8 +180,10 @@ def strategies_using(*techniques: str) -> tuple:
     return tuple(s.name for s in STRATEGIES if s.technique in techniques)
 
 
-#: Strategies that need no inverse-CDF data (the studies' base samplers).
-BASE_STRATEGIES = tuple(s.name for s in STRATEGIES if not technique(s.technique).needs_table)
+#: Strategies that need no inverse-CDF data and work with every material (the studies' base
+#: samplers).
+BASE_STRATEGIES = tuple(s.name for s in STRATEGIES if not technique(s.technique).needs_table
+                        and technique(s.technique).material is None)
 #: Strategies whose BSDF sample needs the material's inverse-CDF table (and maybe a fit).
 TABLE_STRATEGIES = strategies_using(*(t.name for t in TECHNIQUES if t.needs_table))
 #: Strategies that need verified rational inverse CDFs (they have a ``fallback``).

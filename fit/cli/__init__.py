@@ -18,8 +18,10 @@ from . import brdf, cdf, measured
 DESCRIPTION = """\
 Fit measured isotropic BRDFs with rational functions (Rational BRDF, Pacanowski et al. 2012).
 
-Input files: MERL-MIT '.binary' (90x90x180 theta_h/theta_d/phi_d, RGB) and RGL-EPFL isotropic
-'.bsdf' (resampled onto the MERL grid). Angles are printed in degrees, BRDF values in 1/sr.
+Input files: MERL-MIT '.binary' (90x90x180 theta_h/theta_d/phi_d, RGB; phi_d folded by
+reciprocity) and RGL-EPFL isotropic '.bsdf' (resampled onto the MERL grid over the full phi_d
+circle, 90x90x360: the files are not reciprocal). Angles are printed in degrees, BRDF values
+in 1/sr.
 """
 
 

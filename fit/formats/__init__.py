@@ -20,13 +20,15 @@ from .rgl import read_rgl
 SUFFIXES = (".binary", ".bsdf")
 
 
-def load_measured(path) -> MeasuredBRDF:
-    """Read a measured BRDF as a :class:`MeasuredBRDF` on the MERL grid."""
+def load_measured(path, incident: str = "view") -> MeasuredBRDF:
+    """Read a measured BRDF as a :class:`MeasuredBRDF` on the MERL grid. ``incident``: the
+    roles of an RGL file's directions (:attr:`fit.formats.rgl.RGLBRDF.incident`; MERL files
+    are reciprocal and ignore it)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix == ".binary":
         return read_merl(path)
     if suffix == ".bsdf":
-        return read_rgl(path).to_measured()
+        return read_rgl(path, incident=incident).to_measured()
     raise BRDFFileError(path, f"unknown BRDF file type {suffix or '(no extension)'!r}; "
                               f"expected one of {', '.join(SUFFIXES)}")

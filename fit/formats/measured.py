@@ -1,9 +1,11 @@
 """In-memory measured BRDF types on the MERL (theta_h, theta_d, phi_d) grid and its projection.
 
 :class:`MeasuredBRDF` holds a BRDF tabulated on the MERL-MIT grid (:mod:`fit.formats.grid`:
-90 x 90 x 180 bins in theta_h, theta_d, phi_d); :class:`ProjectedBRDF` holds its projection onto
-the 90 x 90 (theta_h, theta_d) clusters (:mod:`fit.projection.project`) and its ``.npz``
-persistence; :func:`file_sha256` fingerprints source files.
+90 x 90 bins in theta_h, theta_d times 180 phi_d bins over [0, pi), folded by reciprocity, for
+MERL files, or 360 over [0, 2 pi), not folded, for data from a non-reciprocal source such as an
+RGL-EPFL file); :class:`ProjectedBRDF` holds its projection onto the 90 x 90 (theta_h, theta_d)
+clusters (:mod:`fit.projection.project`) and its ``.npz`` persistence; :func:`file_sha256`
+fingerprints source files.
 
 Values are RGB reflectance in 1/sr, *without* the cosine factor (conventions.md).
 """
@@ -17,8 +19,8 @@ import numpy as np
 
 from ..errors import BRDFFileError
 from .angles import directions_to_half_diff, half_diff_to_directions
-from .grid import (MERL_SHAPE, phi_d_centres, phi_d_index, theta_d_centres, theta_d_index, theta_h_centres,
-                   theta_h_index)
+from .grid import (N_PHI_D, PHI_D_BINS, grid_shape, n_phi_d_for, phi_d_centres, phi_d_index, theta_d_centres,
+                   theta_d_index, theta_h_centres, theta_h_index)
 
 
 def _above_horizon(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -29,12 +31,21 @@ def _above_horizon(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
 class MeasuredBRDF:
     """An isotropic RGB BRDF tabulated on the MERL (theta_h, theta_d, phi_d) grid.
 
+    The number of phi_d bins, ``n_phi_d = values.shape[2]``, says whether the table is
+    folded by reciprocity (:mod:`fit.formats.grid`):
+
+    * 180 (:attr:`reciprocal` True; MERL files, whose format defines the fold): phi_d in
+      [0, pi); (wi, wo) and (wo, wi) share a bin.
+    * 360 (:attr:`reciprocal` False; data resampled from a non-reciprocal source, e.g.
+      :meth:`fit.formats.rgl.RGLBRDF.to_measured`): phi_d in [0, 2 pi), no fold; (wi, wo) in
+      bin ``k``, (wo, wi) in bin ``(k + 180) % 360``.
+
     Attributes
     ----------
-    values : float64 array (90, 90, 180, 3)
+    values : float64 array (90, 90, n_phi_d, 3), n_phi_d = 180 or 360
         Reflectance in 1/sr, channel scales already applied. Entries where ``valid`` is
         False hold 0 and are never used by statistics.
-    valid : bool array (90, 90, 180, 3)
+    valid : bool array, same shape as ``values``
         True where the bin holds a measured sample (False: no sample / below horizon).
     name : str
         Material name (file stem by default).
@@ -54,9 +65,10 @@ class MeasuredBRDF:
     def __post_init__(self):
         self.values = np.asarray(self.values, dtype=np.float64)
         self.valid = np.asarray(self.valid, dtype=bool)
-        if self.values.shape != MERL_SHAPE + (3,):
-            raise BRDFFileError(self.source or None,
-                                f"values must have shape {MERL_SHAPE + (3,)}, got {self.values.shape}")
+        shapes = [grid_shape(n) + (3,) for n in PHI_D_BINS]
+        if self.values.shape not in shapes:
+            raise BRDFFileError(self.source or None, f"values must have shape {' or '.join(map(str, shapes))}, "
+                                                     f"got {self.values.shape}")
         if self.valid.shape != self.values.shape:
             raise BRDFFileError(self.source or None, "valid mask shape differs from values shape")
         self.values = np.where(self.valid, self.values, 0.0)
@@ -73,9 +85,20 @@ class MeasuredBRDF:
         return theta_d_centres()
 
     @property
+    def n_phi_d(self) -> int:
+        """Number of phi_d bins: 180 (folded by reciprocity) or 360 (full circle)."""
+        return int(self.values.shape[2])
+
+    @property
+    def reciprocal(self) -> bool:
+        """True when phi_d is folded into [0, pi) by reciprocity (180 bins, MERL files);
+        False for a full-circle table (360 bins, data from a non-reciprocal source)."""
+        return self.n_phi_d == N_PHI_D
+
+    @property
     def phi_d(self) -> np.ndarray:
-        """phi_d bin centres (radians, [0, pi)), shape (180,)."""
-        return phi_d_centres()
+        """phi_d bin centres (radians): shape (180,) in [0, pi) or (360,) in [0, 2 pi)."""
+        return phi_d_centres(self.n_phi_d)
 
     @property
     def valid_fraction(self) -> float:
@@ -85,18 +108,22 @@ class MeasuredBRDF:
     def lookup(self, theta_h, theta_d, phi_d) -> np.ndarray:
         """Nearest-bin values for Rusinkiewicz angles; shape ``broadcast(...) + (3,)``.
 
-        Bins without a sample return 0.
+        ``phi_d`` is folded into [0, pi) when the table is :attr:`reciprocal`, else wrapped into
+        [0, 2 pi). Bins without a sample return 0.
         """
         i = theta_h_index(theta_h)
         j = theta_d_index(theta_d)
-        k = phi_d_index(phi_d)
+        k = phi_d_index(phi_d, self.n_phi_d)
         i, j, k = np.broadcast_arrays(i, j, k)
         return self.values[i, j, k]
 
     def evaluate(self, wi, wo) -> np.ndarray:
         """rho(wi, wo) in 1/sr by nearest-bin lookup with the MERL conventions.
 
-        ``wi``, ``wo``: unit vectors ``(..., 3)`` in the local frame. Returns ``(..., 3)``;
+        ``wi`` (towards the light), ``wo`` (towards the viewer): unit vectors ``(..., 3)`` in the
+        local frame; phi_d is that of ``wi`` in the half-vector frame
+        (:func:`fit.formats.angles.directions_to_half_diff`), so on a full-circle table
+        ``evaluate(wi, wo)`` and ``evaluate(wo, wi)`` read different bins. Returns ``(..., 3)``;
         0 where either direction is at or below the tangent plane.
         """
         wi = np.asarray(wi, float)
@@ -106,18 +133,21 @@ class MeasuredBRDF:
         return np.where(_above_horizon(*np.broadcast_arrays(wi, wo))[..., None], out, 0.0)
 
     @classmethod
-    def from_function(cls, func, name: str = "analytic") -> "MeasuredBRDF":
-        """Tabulate ``func(wi, wo) -> (..., 3)`` at the bin centres.
+    def from_function(cls, func, name: str = "analytic", reciprocal: bool = True) -> "MeasuredBRDF":
+        """Tabulate ``func(wi_light, wo_view) -> (..., 3)`` at the bin centres (phi_h = 0).
 
-        Triplets whose light or view direction is at or below the horizon are marked invalid,
-        as in measured MERL files.
+        ``reciprocal=True`` (default): the MERL grid, 90 x 90 x 180 over phi_d in [0, pi)
+        (right only if ``func`` is reciprocal); ``False``: 90 x 90 x 360 over [0, 2 pi), no
+        fold. Triplets whose light or view direction is at or below the horizon are marked
+        invalid, as in measured MERL files.
         """
+        n = n_phi_d_for(reciprocal)
         th = theta_h_centres()[:, None, None]
         td = theta_d_centres()[None, :, None]
-        pd = phi_d_centres()[None, None, :]
+        pd = phi_d_centres(n)[None, None, :]
         wi, wo = half_diff_to_directions(th, 0.0, td, pd)
         vals = np.asarray(func(wi, wo), dtype=np.float64)
-        vals = np.broadcast_to(vals, MERL_SHAPE + (3,)).copy()
+        vals = np.broadcast_to(vals, grid_shape(n) + (3,)).copy()
         valid = np.broadcast_to(_above_horizon(wi, wo)[..., None], vals.shape).copy()
         return cls(values=vals, valid=valid, name=name)
 
@@ -126,7 +156,9 @@ class MeasuredBRDF:
 class ProjectedBRDF:
     """A BRDF projected onto the (theta_h, theta_d) plane: one statistic per cluster.
 
-    Each (theta_h, theta_d) cluster gathers the valid samples of its 180 phi_d bins.
+    Each (theta_h, theta_d) cluster gathers the valid samples of its ``n_phi_d`` phi_d bins:
+    180 for a table folded by reciprocity, 360 for a full-circle table (both orders of every
+    (light, view) pair, so the projection does not depend on the roles of the directions).
 
     Attributes
     ----------
@@ -138,13 +170,15 @@ class ProjectedBRDF:
     count : int (90, 90, 3)
         Number of valid samples in each cluster, per channel.
     n_below_horizon : int (90, 90)
-        Number of phi_d triplets of each cluster whose light or view direction is at or
-        below the tangent plane (computed from geometry at bin centres).
+        Number of phi_d triplets of each cluster (out of ``n_phi_d``) whose light or view
+        direction is at or below the tangent plane (computed from geometry at bin centres).
     statistic : str
         Which statistic ``value`` holds.
     grazing_cutoff_deg : float or None
         If set, samples with max(theta_i, theta_o) (or theta_d, see ``grazing_angle``)
         above this angle were dropped before the statistics.
+    n_phi_d : int
+        phi_d bins per cluster of the projected table: 180 (folded) or 360 (full circle).
     """
 
     value: np.ndarray
@@ -159,6 +193,7 @@ class ProjectedBRDF:
     name: str = "brdf"
     source: str = ""
     source_sha256: str = ""
+    n_phi_d: int = N_PHI_D
 
     @property
     def theta_h(self) -> np.ndarray:
@@ -194,7 +229,8 @@ class ProjectedBRDF:
 
     # Persistence ------------------------------------------------------------------------
     def save(self, path) -> None:
-        """Write an ``.npz`` with every array and the metadata (format ``rbrdf-projected/1``)."""
+        """Write an ``.npz`` with every array and the metadata (format ``rbrdf-projected/1``;
+        ``n_phi_d`` is stored too; files without it are read as 180)."""
         np.savez_compressed(
             path, format="rbrdf-projected", version=1,
             value=self.value, median=self.median, mean=self.mean, variance=self.variance,
@@ -203,7 +239,7 @@ class ProjectedBRDF:
             statistic=self.statistic,
             grazing_cutoff_deg=np.nan if self.grazing_cutoff_deg is None else self.grazing_cutoff_deg,
             grazing_angle=self.grazing_angle, name=self.name, source=self.source,
-            source_sha256=self.source_sha256,
+            source_sha256=self.source_sha256, n_phi_d=int(self.n_phi_d),
         )
 
     @classmethod
@@ -223,6 +259,7 @@ class ProjectedBRDF:
                     grazing_cutoff_deg=None if np.isnan(cut) else cut,
                     grazing_angle=str(z["grazing_angle"]), name=str(z["name"]),
                     source=str(z["source"]), source_sha256=str(z["source_sha256"]),
+                    n_phi_d=int(z["n_phi_d"]) if "n_phi_d" in z.files else N_PHI_D,
                 )
         except BRDFFileError:
             raise

@@ -5,6 +5,10 @@ Layout (Matusik et al. 2003, ``BRDFRead.cpp``): three little-endian int32 dimens
 phi_d varying fastest, then theta_d, then theta_h. Stored values are scaled: the BRDF in 1/sr
 is ``R * 1/1500``, ``G * 1.15/1500``, ``B * 1.66/1500``. Negative stored values mean "no
 sample" (below the horizon) and are never used.
+
+The format folds phi_d into [0, pi) by reciprocity (:mod:`fit.formats.grid`): the reader
+returns a reciprocal :class:`MeasuredBRDF` (180 phi_d bins), and the writer only accepts one;
+a full-circle table (360 bins, from a non-reciprocal source) has no MERL representation.
 """
 from __future__ import annotations
 
@@ -72,10 +76,13 @@ def read_merl(path) -> MeasuredBRDF:
 
 
 def write_merl(brdf: MeasuredBRDF, path) -> None:
-    """Write ``brdf`` in the exact MERL layout; invalid bins are stored as -1."""
+    """Write ``brdf`` in the exact MERL layout; invalid bins are stored as -1. Only tables
+    folded by reciprocity (180 phi_d bins) can be written."""
     values = np.asarray(brdf.values, float)
     if values.shape != MERL_SHAPE + (3,):
-        raise ValueError(f"values must have shape {MERL_SHAPE + (3,)}, got {values.shape}")
+        extra = (" (a full-circle table of non-reciprocal data: MERL files fold phi_d by "
+                 "reciprocity)" if values.shape[2:3] == (360,) else "")
+        raise ValueError(f"values must have shape {MERL_SHAPE + (3,)}, got {values.shape}{extra}")
     if not np.all(np.isfinite(values[brdf.valid])):
         raise ValueError("cannot write non-finite BRDF values")
     if np.any(values[brdf.valid] < 0):

@@ -11,25 +11,39 @@ Fields of an isotropic RGB material: ``description`` (u8 text), ``phi_i`` (1), `
 (1, n_theta, ny, nx), ``luminance`` (1, n_theta, n, n), ``rgb`` (1, n_theta, 3, n, n),
 ``jacobian`` (u8 flag) and ``valid`` (bit-packed u8 mask, not used by the evaluation).
 
-Evaluation (what :meth:`RGLBRDF.evaluate` computes), for wi (light) and wo (view) above the
-tangent plane:
+Roles of the two directions. The tensors are indexed by an *incident* direction ``wt`` (the
+``theta_i`` axis) and tabulate the other direction ``wx`` through the VNDF warp. The reference
+implementations look the tables up with the direction towards the **viewer** as ``wt``:
+Mitsuba 3's ``measured`` plugin passes its ``si.wi`` (in radiance transport, the direction
+towards the camera) and returns ``eval = value`` as ``f * cos(theta_wo)`` with ``wo`` the light;
+pbrt-v4's ``MeasuredBxDF::f(wo, wi)`` maps its ``wo`` (towards the camera) and divides by
+``|cos theta_wi|`` (the light). :class:`RGLBRDF` therefore defaults to ``incident="view"``;
+``incident="light"`` swaps the roles (the gonio-photometer's physical illumination direction;
+the films are not reciprocal, so the two differ by up to a factor 0.34-1.66 at grazing views).
+docs/formats.md records the evidence.
 
-1. ``wm = normalize(wi + wo)``; ``u_wi = (sqrt(2 theta_i / pi), (phi_i + pi) / 2pi)`` and
-   ``u_wm = (sqrt(2 theta_m / pi), frac((phi_m - phi_i + pi) / 2pi))``.
-2. The VNDF warp of the incidence ``theta_i`` (a marginal/conditional warp built from the
+Evaluation (what :meth:`RGLBRDF.reference_eval` computes) for ``wt`` (the tensors' incident
+direction) and ``wx`` (the other one), both above the tangent plane:
+
+1. ``wm = normalize(wt + wx)``; ``u_wt = (sqrt(2 theta_t / pi), (phi_t + pi) / 2pi)`` and
+   ``u_wm = (sqrt(2 theta_m / pi), frac((phi_m - phi_t + pi) / 2pi))``.
+2. The VNDF warp of the incidence ``theta_t`` (a marginal/conditional warp built from the
    ``vndf`` table, with its CDFs linearly interpolated between the two nearest ``theta_i``
    slices) is inverted at ``u_wm``: this gives the 2-D coordinate ``s`` in [0, 1]^2 of the
    ``rgb`` table. (The ``luminance`` warp is only used for importance sampling; the reference
    evaluation does not invert it, nor does this one.)
-3. ``rgb`` is interpolated bilinearly at ``s`` and linearly in ``theta_i``.
-4. If the ``jacobian`` flag is set, the value is multiplied by ``ndf(u_wm) / (4 sigma(u_wi))``
+3. ``rgb`` is interpolated bilinearly at ``s`` and linearly in ``theta_t``.
+4. If the ``jacobian`` flag is set, the value is multiplied by ``ndf(u_wm) / (4 sigma(u_wt))``
    (bilinear look-ups of the raw tables). The result is the reference's ``eval``:
-   ``f_r(wi, wo) * cos(theta_o)``.
-5. rho = that value divided by ``cos(theta_o)`` (our convention: the BRDF *without* cosine).
+   ``f_r * cos(theta_x)``.
+5. rho = that value divided by ``cos(theta_x)`` (our convention: the BRDF *without* cosine);
+   :meth:`RGLBRDF.evaluate` takes (light, view) and assigns ``wt``/``wx`` by ``incident``.
 
 Negative ``rgb`` entries (measurement noise, down to about -0.04) are clamped to 0 when the
-file is read (conventions.md); the reference instead clamps after interpolation. Both give
-non-negative values; they differ only next to clamped entries.
+file is read (conventions.md). The reference loader (powitacq) clamps after interpolation;
+Mitsuba 3's ``measured`` plugin does not clamp at all (its eval goes negative on 7 of the 20
+shared files, down to -1.6 on chm_mint), so the parity tests give it clamped copies
+(:func:`warp_rbrdf.mitsuba_reference.clamped_copy`).
 
 Incidence beyond the last measured angle: these files store a last ``theta_i`` slice at
 90 deg whose ``rgb`` is a copy of the previous (last measured) slice, e.g. 78.5 deg
@@ -46,7 +60,7 @@ import numpy as np
 
 from ..errors import BRDFFileError
 from .angles import HALF_PI, half_diff_to_directions
-from .grid import MERL_SHAPE, phi_d_centres, theta_d_centres, theta_h_centres
+from .grid import FULL_SHAPE, N_PHI_D_FULL, phi_d_centres, theta_d_centres, theta_h_centres
 from .measured import MeasuredBRDF, file_sha256
 from .rgl_interpolants import Bilinear, RGBTable, VNDFWarp, interval
 from .tensor_file import read_tensor_file
@@ -79,9 +93,17 @@ class RGLBRDF:
     n_negative_clamped : int  number of ``rgb`` entries that were negative in the file.
     valid_bits : uint8 array or None  the raw bit-packed ``valid`` field (not used here).
     fields : dict  every :class:`TensorField` of the file.
+    incident : str  which direction of :meth:`evaluate` is the tensors' incident one:
+        ``"view"`` (default, the reference implementations' roles) or ``"light"``.
     """
 
-    def __init__(self, fields: dict, path=None, name: str | None = None, sha256: str = ""):
+    INCIDENT_ROLES = ("view", "light")
+
+    def __init__(self, fields: dict, path=None, name: str | None = None, sha256: str = "",
+                 incident: str = "view"):
+        if incident not in self.INCIDENT_ROLES:
+            raise ValueError(f"incident must be one of {self.INCIDENT_ROLES}, got {incident!r}")
+        self.incident = incident
         self.fields = fields
         self.source = str(path) if path is not None else ""
         self.name = name or (Path(path).stem if path is not None else "rgl")
@@ -181,6 +203,10 @@ class RGLBRDF:
         return (f"RGLBRDF({self.name!r}, {self.description!r}, theta_i={self.theta_i.size}, "
                 f"rgb={self.rgb.shape[2]}x{self.rgb.shape[3]}, vndf={self._vndf.ny}x{self._vndf.nx})")
 
+    def _roles(self, wi, wo):
+        """(tensor incident direction, other direction) of a (light, view) pair."""
+        return (wo, wi) if self.incident == "view" else (wi, wo)
+
     def _eval_flat(self, wi, wo, cosine: bool):
         n = wi.shape[0]
         out = np.zeros((n, 3))
@@ -190,6 +216,7 @@ class RGLBRDF:
         return out
 
     def _eval_chunk(self, wi, wo, cosine):
+        # wi: the tensors' incident direction (wt), wo: the other one (wx)
         zi, zo = wi[:, 2], wo[:, 2]
         finite = np.isfinite(wi).all(axis=1) & np.isfinite(wo).all(axis=1)
         above = (zi > 0.0) & (zo > 0.0) & finite
@@ -239,18 +266,21 @@ class RGLBRDF:
         """rho(wi, wo) in 1/sr (RGB, without the cosine): the reference value / cos(theta_o).
 
         ``wi`` (towards the light) and ``wo`` (towards the viewer) are unit vectors
-        ``(..., 3)`` in the local frame (z = normal), broadcastable. Returns ``(..., 3)``;
+        ``(..., 3)`` in the local frame (z = normal), broadcastable; :attr:`incident` says
+        which of them is the tensors' incident direction. Returns ``(..., 3)``;
         0 where either direction is at or below the tangent plane (NaN for non-finite
         input). Directions must be unit vectors. Beyond
         :attr:`theta_i_max` the ``rgb`` interpolation is clamped (see the module docstring).
         """
         wi, wo, shape = self._prepare(wi, wo)
-        return self._eval_flat(wi, wo, cosine=False).reshape(shape[:-1] + (3,))
+        wt, wx = self._roles(wi, wo)
+        return self._eval_flat(wt, wx, cosine=False).reshape(shape[:-1] + (3,))
 
-    def evaluate_cosine(self, wi, wo) -> np.ndarray:
-        """The reference ``eval``: f_r(wi, wo) * cos(theta_o), RGB, shape ``(..., 3)``."""
-        wi, wo, shape = self._prepare(wi, wo)
-        return self._eval_flat(wi, wo, cosine=True).reshape(shape[:-1] + (3,))
+    def reference_eval(self, wt, wx) -> np.ndarray:
+        """The reference ``eval`` with the tensors' incident direction ``wt`` first:
+        ``f_r * cos(theta_x)``, RGB, shape ``(..., 3)`` (Mitsuba 3: ``eval(si.wi=wt, wo=wx)``)."""
+        wt, wx, shape = self._prepare(wt, wx)
+        return self._eval_flat(wt, wx, cosine=True).reshape(shape[:-1] + (3,))
 
     # -- warped coordinates ---------------------------------------------------------------
     def vndf_sample(self, sx, sy, theta_i):
@@ -266,7 +296,8 @@ class RGLBRDF:
         return ux.reshape(shape), uy.reshape(shape), pdf.reshape(shape)
 
     def vndf_invert(self, wi, wo):
-        """Warped ``rgb``-table coordinates ``(sx, sy)`` of direction pairs (inverse VNDF warp)."""
+        """Warped ``rgb``-table coordinates ``(sx, sy)`` of direction pairs (inverse VNDF warp);
+        ``wi`` is the tensors' incident direction (``wt``), ``wo`` the other one."""
         wi, wo, shape = self._prepare(wi, wo)
         m = wi + wo
         m /= np.linalg.norm(m, axis=1, keepdims=True)
@@ -280,7 +311,7 @@ class RGLBRDF:
 
     def normalization(self, wi, wo) -> np.ndarray:
         """The reference's factor ``ndf(u_wm) / (4 sigma(u_wi))`` (1 if the jacobian flag is
-        off); shape ``(...)``."""
+        off) with ``wi`` the tensors' incident direction; shape ``(...)``."""
         wi, wo, shape = self._prepare(wi, wo)
         if not self.jacobian:
             return np.ones(shape[:-1])
@@ -296,7 +327,13 @@ class RGLBRDF:
 
     # -- MERL grid ------------------------------------------------------------------------
     def to_measured(self, horizon_margin_deg: float = 1.0):
-        """Resample at the MERL (theta_h, theta_d, phi_d) bin centres (phi_h = 0).
+        """Resample at the bin centres of the full-circle MERL grid (phi_h = 0): a
+        :class:`MeasuredBRDF` of 90 x 90 x 360 bins, phi_d in [0, 2 pi), **not** folded by
+        reciprocity (:mod:`fit.formats.grid`). The files are not reciprocal (10-27 % on the
+        glossy films), so (light, view) and (view, light) keep their own bins, ``k`` and
+        ``(k + 180) % 360``, each ``evaluate(light, view)`` with this object's :attr:`incident`
+        roles; the table's ``evaluate`` reproduces :meth:`evaluate` at the bin centres.
+        2.9 M evaluations.
 
         Bins whose light or view direction is at or below the horizon are invalid (value 0),
         and so are bins within ``horizon_margin_deg`` of it: there the stored f*cos(theta_o)
@@ -306,31 +343,33 @@ class RGLBRDF:
         """
         th = theta_h_centres()[:, None, None]
         td = theta_d_centres()[None, :, None]
-        pd = phi_d_centres()[None, None, :]
-        wi, wo = half_diff_to_directions(th, 0.0, td, pd)
+        pd = phi_d_centres(N_PHI_D_FULL)[None, None, :]
+        wi, wo = half_diff_to_directions(th, 0.0, td, pd)   # wi: the light, wo: the view
         vals = self.evaluate(wi, wo)
         c_min = max(np.sin(np.radians(horizon_margin_deg)), 0.0)
         above = (wi[..., 2] > c_min) & (wo[..., 2] > c_min)
-        valid = np.broadcast_to(above[..., None],
-                                MERL_SHAPE + (3,)).copy()
+        valid = np.broadcast_to(above[..., None], FULL_SHAPE + (3,)).copy()
         m = MeasuredBRDF(values=vals, valid=valid, name=self.name, source=self.source,
                          source_sha256=self.source_sha256)
         m.metadata.update({
             "description": self.description,
-            "format": "rgl-epfl tensor_file (RGB), resampled at MERL bin centres",
+            "format": "rgl-epfl tensor_file (RGB), resampled at MERL bin centres over the full "
+                      "phi_d circle",
+            "phi_d": "[0, 2 pi), 360 bins, not folded (the file is not reciprocal)",
             "theta_i_max_deg": float(np.degrees(self.theta_i_max)),
             "rgb_resolution": [int(self.rgb.shape[2]), int(self.rgb.shape[3])],
             "n_theta_i": int(self.theta_i.size),
             "negative_values_clamped": self.n_negative_clamped,
             "horizon_margin_deg": float(horizon_margin_deg),
+            "incident": self.incident,
         })
         return m
 
 
-def read_rgl(path) -> RGLBRDF:
+def read_rgl(path, incident: str = "view") -> RGLBRDF:
     """Read an isotropic RGB RGL-EPFL ``.bsdf`` file; one-line :class:`BRDFFileError` on
     any problem (bad magic, truncation, unknown dtype, missing fields, spectral-only or
-    anisotropic files, inconsistent shapes)."""
+    anisotropic files, inconsistent shapes). ``incident``: :attr:`RGLBRDF.incident`."""
     path = Path(path)
     fields = read_tensor_file(path)
-    return RGLBRDF(fields, path=path, sha256=file_sha256(path))
+    return RGLBRDF(fields, path=path, sha256=file_sha256(path), incident=incident)

@@ -36,6 +36,11 @@ Domain and grazing policy (stored in the coefficient file's ``domain_policy`` an
   Bernstein certificate) holds on the core; the band's status (met or best effort, with its
   measured maximum interval ratio) is recorded per piece and never reported as guaranteed
   when it is not.
+* What a fit vouches for is recorded per piece and channel: each function's ``valid`` (its
+  data inside their intervals and Q > 0 certified) and ``measured_range`` (min and max of the
+  clusters of its piece). A function that is not valid is *flagged*: its output is clamped to
+  that range (step 7 of :mod:`fit.rational.coefficient_file`), and the renderer shows the
+  projected table there instead (:mod:`warp_rbrdf.materials.rational`).
 """
 from __future__ import annotations
 
@@ -45,7 +50,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..formats.colour import LUMINANCE
-from ..formats.grid import N_PHI_D
 from ..formats.measured import ProjectedBRDF
 from ..projection.albedo import directional_albedo
 from ..projection.project import project
@@ -203,9 +207,9 @@ def channel_data(p: ProjectedBRDF, c: int, tol: float, intervals: str = "tol+spr
     from a uniform white sky by at most ``tol * A_Y``.
 
     ``partial_min_fraction``: clusters that kept fewer than this fraction of their
-    above-horizon phi_d samples (180 minus ``n_below_horizon``) after the grazing cut-off hold
-    the median of a biased subset; their intervals are widened to at least
-    ``[y / partial_factor, y * partial_factor]``.
+    above-horizon phi_d samples (``p.n_phi_d``, 180 or 360, minus ``n_below_horizon``) after
+    the grazing cut-off hold the median of a biased subset; their intervals are widened to at
+    least ``[y / partial_factor, y * partial_factor]``.
     """
     th, td = np.meshgrid(p.theta_h, p.theta_d, indexing="ij")
     v = p.value[..., c]
@@ -228,7 +232,7 @@ def channel_data(p: ProjectedBRDF, c: int, tol: float, intervals: str = "tol+spr
     else:
         raise ValueError(f"intervals must be one of {INTERVALS}")
     if partial_min_fraction is not None:
-        avail = (N_PHI_D - p.n_below_horizon)[ok]
+        avail = (p.n_phi_d - p.n_below_horizon)[ok]
         partial = p.count[..., c][ok] < partial_min_fraction * avail
         lo = np.where(partial, np.minimum(lo, y / partial_factor), lo)
         hi = np.where(partial, np.maximum(hi, y * partial_factor), hi)
@@ -384,7 +388,10 @@ def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: f
     ``max_rel_error``/``rms_rel_error``: |fit - y| / y over clusters with tol*y >= abs_floor
     (where the relative tolerance applies); ``max_interval_ratio``: max over clusters of
     |fit - y| / (distance from y to the interval's bound on the side of fit) (<= 1: every
-    cluster inside its interval); ``inside``: fraction of clusters inside.
+    cluster inside its interval); ``inside``: fraction of clusters inside;
+    ``measured_range``: [min, max] of the clusters' values (the measured data of the piece,
+    in 1/sr): where the fit is flagged its output is clamped to it
+    (:func:`fit.rational.model.flagged`).
     """
     f = np.maximum(invert_value_transform(r.function(U), value_transform, offset), 0.0)
     e = np.abs(f - d.y)
@@ -398,4 +405,5 @@ def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: f
     return {"max_rel_error": float(rel.max()) if rel.size else 0.0,
             "rms_rel_error": float(np.sqrt(np.mean(rel ** 2))) if rel.size else 0.0,
             "max_interval_ratio": float(np.max(ratio)),
-            "inside_fraction": float(inside.mean()), "n_points": int(d.y.size)}
+            "inside_fraction": float(inside.mean()), "n_points": int(d.y.size),
+            "measured_range": [float(d.y.min()), float(d.y.max())]}

@@ -31,7 +31,10 @@ A UTF-8 JSON object. Keys (all required unless marked optional)::
          "num_degrees": [...], "den_degrees": [...],      # informative (max exponent per var)
          "n_coefficients": n,
          "feasible": true,                   # every data point inside its interval
+         "valid": true,                      # feasible and Q > 0 certified (optional: the
+                                             # fitter's verdict; false = the function is FLAGGED)
          "max_rel_error": 0.049, "rms_rel_error": 0.02, "max_abs_excess": 0.0,
+         "measured_range": [0.01, 5.2],      # optional: min, max of the data it was fitted to
          "q_certificate": {"certified": true, "lower_bound": 0.3, "method": "..."}}
       ],
       "domain_policy": {"outside": "clamp", "below_horizon": "zero",
@@ -52,6 +55,19 @@ Evaluating one output (e.g. a BRDF channel at Rusinkiewicz angles theta_h, theta
     6. clamp:      rho = min(max(y, min), max)   (min = 0 for BRDFs: never negative; max, when
                    given, bounds the function where no data constrain it; with "log" the
                    exponent is clipped at log(max + offset) first)
+    7. flagged:    if the function is flagged and records "measured_range" [lo, hi]:
+                   rho = min(max(rho, lo), hi)
+
+A function is **flagged** (not within its stated bound) when its ``valid`` is false, or, in
+records without ``valid``, when ``feasible`` or ``q_certificate.certified`` is false
+(:func:`fit.rational.model.flagged`): some data point lies outside its interval, Q > 0 is not
+certified, or the degree search stopped at its limit without meeting the intervals. Its
+``measured_range`` is the min and max of the data points (projected clusters, values below 0
+counted as 0) of its own box -- the piece it belongs to -- so a flagged function never leaves
+the range of what was measured there. Files written before ``measured_range`` was recorded
+read as before and have no step 7 (the renderer computes the range from the source file,
+:mod:`warp_rbrdf.materials.rational`). Both keys are optional and ignored by older readers: the
+version numbers are unchanged.
 
 For a BRDF the variables are exactly ``theta_h`` then ``theta_d`` (radians, Rusinkiewicz 1998,
 as in conventions.md) and rho is in 1/sr without the cosine; rho = 0 when the light or view
@@ -69,7 +85,7 @@ Same keys, except that ``functions`` is replaced by::
                  ...]
 
 Evaluation: clamp every input onto the top-level ``variables`` domains, pick the piece ``k``
-with ``e_k <= x <= e_k+1`` (the lower piece at a shared edge), then apply steps 1-6 with that
+with ``e_k <= x <= e_k+1`` (the lower piece at a shared edge), then apply steps 1-7 with that
 piece's variables and functions. A piece may itself hold ``"split"`` and ``"pieces"`` instead
 of ``"functions"`` (e.g. a theta_d core split at a theta_h edge into a specular-peak piece and
 the rest), evaluated the same way, recursively. Readers of version 1 reject version 2 files (they would

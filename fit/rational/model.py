@@ -6,7 +6,11 @@ value transforms and domain policy, evaluated at physical inputs.
 * value transforms: ``"linear"`` (y = R(u)) or ``"log"`` (y = exp(R(u)) - offset), with the
   clamps ``value_min`` / ``value_max``;
 * :class:`RationalModel`: one rational function per output on one box;
-* :class:`PiecewiseRationalModel`: rational models on consecutive intervals of one variable.
+* :class:`PiecewiseRationalModel`: rational models on consecutive intervals of one variable;
+* :func:`flagged`: whether a function's record (``function_info``) says that its fit is not
+  within its intervals; such a function's output is clamped to the ``measured_range`` its
+  record holds (the measured data of its piece, step 7 of the recipe in
+  :mod:`fit.rational.coefficient_file`).
 
 For BRDFs the variables are ``theta_h`` then ``theta_d`` (radians) and the outputs R, G, B in
 1/sr; :meth:`~RationalModel.evaluate_brdf` and :meth:`~RationalModel.evaluate` (directions,
@@ -52,6 +56,33 @@ def invert_value_transform(r, transform: str, offset: float = 0.0):
     if transform == "log":
         return np.exp(r) - offset
     raise ValueError(f"unknown value transform {transform!r}")
+
+
+def flagged(info: dict) -> bool:
+    """True when a function's record says its fit is NOT within its intervals: ``valid`` is
+    False (some data point outside its interval, Q > 0 not certified, or a search stopped at
+    its degree or time limit), or, in records without ``valid``, ``feasible`` is False or the
+    Q certificate failed. A function with no record (a model built by hand) is not flagged:
+    nothing is claimed for it, and nothing is known against it."""
+    if not info:
+        return False
+    if "valid" in info:
+        return not bool(info["valid"])
+    cert = info.get("q_certificate")
+    if isinstance(cert, dict) and cert.get("certified") is False:
+        return True
+    return info.get("feasible") is False
+
+
+def measured_range(info: dict):
+    """``(lo, hi)``: the recorded range of the measured data a function was fitted to (its
+    piece's clusters), or None when the record has none (files written before it was
+    recorded)."""
+    r = (info or {}).get("measured_range")
+    if r is None:
+        return None
+    lo, hi = (float(v) for v in r)
+    return lo, hi
 
 
 @dataclass
@@ -151,6 +182,24 @@ class RationalModel(_BRDFEvaluation):
             cols.append(apply_input_transform(xv, var.transform))
         return np.stack(cols, axis=-1)
 
+    @property
+    def flagged(self) -> tuple:
+        """Per output: the function's record says it is not within its intervals (:func:`flagged`)."""
+        return tuple(flagged(i) for i in self.function_info)
+
+    def output_clamps(self) -> list:
+        """Per output: ``(lo, hi)`` of step 7 (a flagged function with a recorded measured
+        range), else None."""
+        return [measured_range(i) if flagged(i) else None for i in self.function_info]
+
+    def leaves(self, x) -> list:
+        """``[(model, selection, x_clamped)]``: the single-box model that evaluates each input of
+        ``x`` ``(..., n_vars)`` (here: this one, everywhere), and the inputs clamped onto its box."""
+        x = np.asarray(x, dtype=np.float64)
+        lo = np.array([v.domain[0] for v in self.variables])
+        hi = np.array([v.domain[1] for v in self.variables])
+        return [(self, np.ones(x.shape[:-1], bool), np.clip(x, lo, hi))]
+
     def __call__(self, x) -> np.ndarray:
         u = self.rf_inputs(x)
         vals = []
@@ -164,6 +213,9 @@ class RationalModel(_BRDFEvaluation):
             out = np.maximum(out, self.value_min)
         if self.value_max is not None:
             out = np.minimum(out, self.value_max)
+        for c, rng in enumerate(self.output_clamps()):   # step 7: flagged -> measured range
+            if rng is not None:
+                out[..., c] = np.clip(out[..., c], rng[0], rng[1])
         return out
 
     # Persistence ---------------------------------------------------------------------------
@@ -253,6 +305,21 @@ class PiecewiseRationalModel(_BRDFEvaluation):
         """Index of the piece that evaluates each value of the split variable (clamped)."""
         inner = np.asarray(self.edges[1:-1])
         return np.searchsorted(inner, np.asarray(x_split, float), side="left")
+
+    def leaves(self, x) -> list:
+        """``[(model, selection, x_clamped)]``: for every single-box piece (recursively), the
+        inputs of ``x`` ``(..., n_vars)`` it evaluates (the selection :meth:`__call__` makes)
+        and the inputs clamped onto its box."""
+        x = np.asarray(x, dtype=np.float64)
+        lo = np.array([v.domain[0] for v in self.variables])
+        hi = np.array([v.domain[1] for v in self.variables])
+        xc = np.clip(x, lo, hi)
+        k = self.piece_index(xc[..., self._axis])
+        out = []
+        for i, piece in enumerate(self.pieces):
+            for leaf, sel, xl in piece.leaves(xc):
+                out.append((leaf, sel & (k == i), xl))
+        return out
 
     def __call__(self, x) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)

@@ -20,7 +20,9 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
     combine = np.zeros(n, np.int32)
     scale = np.ones((n, 3), np.float32)
     offset = np.zeros(n, np.int32)
+    param = np.zeros(n, np.int32)
     tables = Pool(width=3)
+    rgl_f, rgl_i = Pool(), Pool(dtype=np.int32)
     loaded, strategies, cdfs = [], [], []
     index_of_kind: dict = {}
     for i, name in enumerate(names):
@@ -28,9 +30,18 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
         key = f"materials.{name}"
         kd = registry.material(spec.type)
         lm = kd.impl().load(spec, scene.path, key)
+        for note in lm.notes:
+            log(f"material {name!r}: {note}")
         kind[i] = kd.code
         scale[i] = lm.scale
-        if lm.table is not None:
+        param[i] = lm.param
+        if lm.fallback_table is not None:   # e.g. rational: the projected table where flagged
+            param[i] = tables.add(lm.fallback_table)
+        if lm.rgl is not None:   # floats, then the header with its offsets made absolute
+            floats, header = lm.rgl
+            base = rgl_f.add(floats)
+            offset[i] = rgl_i.add(header(base))
+        elif lm.table is not None:
             offset[i] = tables.add(lm.table)
         else:   # kinds without a table index their own functions
             offset[i] = index_of_kind.get(kd.code, 0)
@@ -43,7 +54,7 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
         cdfs.append(cdf)
     md = MaterialData(names=names, kind=kind, technique=technique, combine=combine, scale=scale,
                       offset=offset, tables=tables.array(), loaded=loaded, strategies=strategies,
-                      cdf=cdfs)
+                      cdf=cdfs, param=param, rgl_f=rgl_f.array(), rgl_i=rgl_i.array())
     for k, v in cdf_data.pack(cdfs).items():
         setattr(md, k, v)
     return md

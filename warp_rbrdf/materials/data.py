@@ -7,8 +7,13 @@ One entry per material used by a shape (index ``m``):
 * ``technique[m]``: :attr:`warp_rbrdf.registry.Technique.code` of its BSDF sample, and
   ``combine[m]``: how its samples are combined (``registry.COMBINE_*``);
 * ``scale[m]``: RGB multiplier (the Lambert albedo, or the ``scale`` of a table / fit);
-* ``offset[m]``: where the material's table starts in ``tables`` (in RGB entries), or the index
-  of its generated function (rational);
+* ``offset[m]``: where the material's table starts in ``tables`` (in RGB entries), the index
+  of its generated function (rational), or the start of its header in ``rgl_i`` (rgl);
+* ``param[m]``: one integer option of the material's kind (measured: the number of phi_d bins
+  of its table, 180 when folded by reciprocity, 360 over the full circle; rational with a
+  fallback table: where that table starts in ``tables``; 0 otherwise);
+* ``rgl_f`` / ``rgl_i``: the tables (float32) and headers (:data:`N_RGL_INFO` ints per
+  material, fields ``RGL_*`` of :mod:`warp_rbrdf.materials.rgl`) of the ``rgl`` materials;
 * ``tables``: every material table of the scene, concatenated (RGB, 1/sr);
 * the inverse-CDF data of the materials whose technique needs it: ``cdf_t`` (theta CDFs),
   ``cdf_p`` (phi CDFs), ``cdf_pw`` (rational pieces), ``cdf_row_ok`` (1: the row has a verified
@@ -47,7 +52,10 @@ class Materials:
     combine: wp.array(dtype=int)
     scale: wp.array(dtype=wp.vec3)
     offset: wp.array(dtype=int)
+    param: wp.array(dtype=int)
     tables: wp.array(dtype=wp.vec3)
+    rgl_f: wp.array(dtype=float)
+    rgl_i: wp.array(dtype=int)
     cdf_t: wp.array(dtype=float)
     cdf_p: wp.array(dtype=float)
     cdf_pw: wp.array(dtype=float)
@@ -60,16 +68,25 @@ class LoadedMaterial:
     """One material as its kind module loaded it.
 
     ``data``: the NumPy object read from the file (a :class:`fit.formats.measured.MeasuredBRDF`,
-    ``ProjectedBRDF``, ``RationalModel``; None for Lambert); ``evaluate(wi, wo) -> (..., 3)``: rho
-    in 1/sr with ``scale`` applied (NumPy reference of the kernel, used to tabulate the sampling
-    CDFs); ``scale``: the RGB multiplier the kernel applies (``Materials.scale``); ``table``: RGB
-    entries the kind puts into ``Materials.tables`` (None: none)."""
+    ``ProjectedBRDF``, ``RationalModel``, ``RGLBRDF``; None for Lambert); ``evaluate(wi, wo) ->
+    (..., 3)``: rho in 1/sr with ``scale`` applied (NumPy reference of the kernel, used to
+    tabulate the sampling CDFs); ``scale``: the RGB multiplier the kernel applies
+    (``Materials.scale``); ``table``: RGB entries the kind puts into ``Materials.tables`` (None:
+    none); ``param``: ``Materials.param``; ``rgl``: ``(floats, header)`` the kind puts into
+    ``Materials.rgl_f`` / ``rgl_i`` (header offsets relative to the start of its floats);
+    ``fallback_table``: RGB entries put into ``Materials.tables`` besides the kind's own
+    indexing, their start in ``Materials.param`` (rational: the projected table where the fit
+    is flagged); ``notes``: lines the scene load logs, prefixed with the material's name."""
 
     spec: object
     data: object
     evaluate: object
     scale: tuple = (1.0, 1.0, 1.0)
     table: np.ndarray | None = None
+    param: int = 0
+    rgl: tuple | None = None
+    fallback_table: np.ndarray | None = None
+    notes: tuple = ()
 
 
 class Pool:
@@ -112,6 +129,9 @@ class MaterialData:
     cdf_row_ok: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
     cdf_info: np.ndarray = field(default_factory=lambda: np.zeros((1, N_CDF_INFO), np.int32))
     global_fits: list = field(default_factory=list)   # CDFFits of the global layout, by index
+    param: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
+    rgl_f: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    rgl_i: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
 
     def kinds_used(self) -> list:
         """Registry codes of the material kinds used, ascending."""
@@ -137,6 +157,9 @@ def make_materials_struct(md: MaterialData, device) -> Materials:
     s.combine = arr(md.combine, int, np.int32)
     s.scale = arr(md.scale, wp.vec3, np.float32)
     s.offset = arr(md.offset, int, np.int32)
+    s.param = arr(md.param, int, np.int32)
+    s.rgl_f = arr(md.rgl_f, float, np.float32)
+    s.rgl_i = arr(md.rgl_i, int, np.int32)
     s.tables = arr(np.asarray(md.tables).reshape(-1, 3), wp.vec3, np.float32)
     s.cdf_t = arr(md.cdf_t, float, np.float32)
     s.cdf_p = arr(md.cdf_p, float, np.float32)

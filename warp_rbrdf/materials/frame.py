@@ -2,14 +2,17 @@
 pair and the MERL grid's bins (:mod:`fit.formats.grid` is the NumPy definition).
 
 Bins: ``theta_h`` -> ``floor(90 sqrt(theta_h / (pi/2)))``, ``theta_d`` -> ``floor(90 theta_d /
-(pi/2))``, ``phi_d`` folded into [0, pi) by reciprocity -> ``floor(180 phi_d / pi)``, all
-clamped to the grid. Angles in radians.
+(pi/2))``, ``phi_d`` -> ``floor(180 phi_d / pi)`` (one-degree bins) after folding it into
+[0, pi) by reciprocity when the table has 180 phi_d bins (MERL files), or wrapping it into
+[0, 2 pi) when it has 360 (full circle, data from a non-reciprocal source such as an RGL-EPFL
+file; no fold); all clamped to the grid. Angles in radians.
 """
 from __future__ import annotations
 
 import warp as wp
 
-N_TH, N_TD, N_PD = 90, 90, 180
+N_TH, N_TD, N_PD = 90, 90, 180   # N_PD: phi_d bins of a table folded by reciprocity (MERL)
+N_PD_FULL = 360                   # phi_d bins of a full-circle table (no fold)
 
 
 @wp.func
@@ -54,10 +57,13 @@ def merl_theta_d_index(theta_d: float) -> int:
 
 
 @wp.func
-def merl_phi_d_index(phi_d: float) -> int:
+def merl_phi_d_index(phi_d: float, n_phi_d: int) -> int:
+    """Bin of ``phi_d`` in (-pi, pi] (:func:`half_diff`) on a table of ``n_phi_d`` phi_d bins:
+    180 folds phi_d into [0, pi) (reciprocity), 360 wraps it into [0, 2 pi) (no fold)."""
+    period = float(n_phi_d) / 180.0 * wp.pi
     p = phi_d
     if p < 0.0:
-        p = p + wp.pi
-    if p >= wp.pi:
-        p = p - wp.pi
-    return wp.clamp(int(wp.floor(p / wp.pi * 180.0)), 0, N_PD - 1)
+        p = p + period
+    if p >= period:
+        p = p - period
+    return wp.clamp(int(wp.floor(p / wp.pi * 180.0)), 0, n_phi_d - 1)

@@ -1,6 +1,11 @@
 """``measured``: the 3-D (theta_h, theta_d, phi_d) table of :class:`fit.formats.measured.MeasuredBRDF`
-(MERL ``.binary``, or an RGL ``.bsdf`` resampled onto the MERL grid), nearest bin exactly as the
-MERL format defines it (:mod:`.frame`); ``scale`` multiplies it."""
+(MERL ``.binary``, or an RGL ``.bsdf`` resampled onto the MERL grid), nearest bin exactly as
+:meth:`MeasuredBRDF.evaluate` (:mod:`.frame`); ``scale`` multiplies it.
+
+``Materials.param[m]`` is the table's number of phi_d bins: 180 for a MERL file (phi_d folded
+into [0, pi) by reciprocity, as the format defines), 360 for an RGL file (phi_d over [0, 2 pi),
+not folded: the files are not reciprocal, and folding would give half of the (light, view)
+pairs the value of (view, light), a visible seam). The kernel folds only when it is 180."""
 from __future__ import annotations
 
 import numpy as np
@@ -11,7 +16,6 @@ from fit.formats import load_measured
 from ..errors import SceneError
 from .data import LoadedMaterial, Materials
 from .frame import (
-    N_PD,
     N_TD,
     half_diff,
     merl_phi_d_index,
@@ -25,7 +29,7 @@ def read(spec, scene_file, key):
     if spec.data is not None:
         return spec.data
     try:
-        return load_measured(spec.file)
+        return load_measured(spec.file, incident=getattr(spec, "incident", "view"))
     except Exception as e:  # noqa: BLE001 - BRDFFileError and I/O errors, reported in one line
         raise SceneError(scene_file, f"{key}.file", f"cannot read measured BRDF ({e})") from None
 
@@ -37,7 +41,8 @@ def scaled(evaluate, scale):
 
 def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     b = read(spec, scene_file, key)
-    return LoadedMaterial(spec, b, scaled(b.evaluate, spec.scale), scale=spec.scale, table=b.values)
+    return LoadedMaterial(spec, b, scaled(b.evaluate, spec.scale), scale=spec.scale, table=b.values,
+                          param=b.n_phi_d)
 
 
 @wp.func
@@ -47,8 +52,9 @@ def measured_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     a = half_diff(wi, wo)
     i = merl_theta_h_index(a[0])
     j = merl_theta_d_index(a[1])
-    k = merl_phi_d_index(a[2])
-    v = mats.tables[mats.offset[m] + (i * N_TD + j) * N_PD + k]
+    n_pd = mats.param[m]   # 180: folded by reciprocity, 360: full circle
+    k = merl_phi_d_index(a[2], n_pd)
+    v = mats.tables[mats.offset[m] + (i * N_TD + j) * n_pd + k]
     return wp.cw_mul(v, mats.scale[m])
 
 

@@ -79,7 +79,13 @@ def _materials_section() -> str:
         "  albedo = 0.8              number or [r, g, b]",
         "  file = \"...\"              the material's file (types above); relative to the scene",
         "  statistic = \"median\"      projection of a 3-D file: median | mean | geometric | harmonic | rms",
-        "  scale = 1.0               number or [r, g, b] multiplier", ""]
+        "  scale = 1.0               number or [r, g, b] multiplier",
+        "  incident = \"view\"         RGL .bsdf files: which direction is the tensors' theta_i: view",
+        "                            (the reference implementations', Mitsuba 3 and pbrt-v4) | light",
+        "  unvouched = \"projected\"   rational: where the fit is flagged (not within its bound), the",
+        "                            measured projection of its source file (found next to the fit,",
+        "                            the scene or in $RBRDF_DATA) clamped to the region's measured",
+        "                            range | refuse: fail naming the material, file and region", ""]
     return "\n".join(lines) + "\n"
 
 

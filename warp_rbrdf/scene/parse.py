@@ -11,12 +11,14 @@ import numpy as np
 from .. import registry
 from ..errors import SceneError
 from .specs import (
+    INCIDENT_ROLES,
     LIGHT_TYPES,
     MATERIAL_TYPES,
     PATTERNS,
     SAMPLERS,
     SHAPE_TYPES,
     STATISTICS,
+    UNVOUCHED,
     CameraSpec,
     IntegratorSpec,
     LightSpec,
@@ -115,6 +117,14 @@ def scene_from_dict(data: dict, file="<scene>", base_dir: Path | None = None) ->
             spec.scale = m.vector("scale", 3, (1.0, 1.0, 1.0), allow_scalar=True, nonneg=True)
         if "statistic" in kind.keys:
             spec.statistic = m.string("statistic", "median", STATISTICS)
+        if "incident" in kind.keys:
+            spec.incident = m.string("incident", "view", INCIDENT_ROLES)
+        if "unvouched" in kind.keys:
+            spec.unvouched = m.string("unvouched", "projected", UNVOUCHED)
+        tech = registry.technique(registry.strategy(spec.sampler).technique)
+        if tech.material is not None and tech.material != mtype:
+            raise m.error("sampler", f"sampler {spec.sampler!r} draws from the {tech.material!r} "
+                                     f"material's own tables; a {mtype!r} material cannot use it")
         m.finish()
         sc.materials[name] = spec
     mats.used.update(mats.data)

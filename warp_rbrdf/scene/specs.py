@@ -18,6 +18,8 @@ SHAPE_TYPES = ("mesh", "sphere", "plane")
 LIGHT_TYPES = ("directional", "envmap", "constant", "sky")
 ENV_TYPES = ("envmap", "constant", "sky")
 STATISTICS = ("median", "mean", "geometric", "harmonic", "rms")
+INCIDENT_ROLES = ("view", "light")   # which direction is an RGL file's theta_i
+UNVOUCHED = ("projected", "refuse")   # rational: what a piece the fit does not vouch for becomes
 
 
 @dataclass
@@ -51,6 +53,8 @@ class MaterialSpec:
     file: Path | None = None
     statistic: str = "median"
     scale: tuple = (1.0, 1.0, 1.0)
+    incident: str = "view"    # RGL files: the tensors' incident direction (view | light)
+    unvouched: str = "projected"  # rational: flagged pieces -> the projected table | "refuse"
     data: Any = None          # in-memory table / rational function (Python API only)
     cdf: Any = None           # rbrdf-cdf file path or in-memory fit.sampling.cdf_file.CDFFit
 

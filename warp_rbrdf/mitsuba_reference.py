@@ -1,0 +1,341 @@
+"""Mitsuba 3 as the reference implementation of the RGL-EPFL ``.bsdf`` format and of a reference
+scene (issue 20, parity with the reference implementation).
+
+Mitsuba 3's ``measured`` plugin (``src/bsdfs/measured.cpp``) is the format authors' own code.
+This module wraps it, in the ``scalar_rgb`` variant (no LLVM or CUDA needed), for the parity
+tests (``tests/test_parity_mitsuba.py``) and the fidelity study:
+
+* :func:`eval`, :func:`pdf`, :func:`sample`: the plugin's BSDF interface at local directions,
+  with Mitsuba's roles: ``wt`` is ``si.wi`` (the direction the tensors are indexed by, their
+  ``theta_i``; in radiance transport the direction towards the **camera**), ``wx`` is ``wo``
+  (towards the light). ``eval`` returns ``f_r * cos(theta_wx)`` as Mitsuba does, i.e.
+  ``fit.formats.rgl.RGLBRDF.reference_eval(wt, wx)``; our renderer's
+  ``eval_material(name, wi_light=wx, wo_view=wt) * wx.z`` is the same number.
+* :func:`render_sphere`: the reference scene of Mitsuba's ``measured`` plugin documentation
+  (unit sphere at the origin, camera at (0, 0, 4) looking at the origin, +Y up, 30 deg vertical
+  field of view, an environment map at scale 1, hidden), rendered by Mitsuba's ``direct``
+  integrator with one emitter sample and one BSDF sample combined by the power heuristic and a
+  box pixel filter (pixel = plain mean of its samples, conventions.md);
+  :func:`sphere_scene` builds the **same** scene for our renderer (a :class:`Scene`), so that
+  tests and studies share one definition.
+
+Mitsuba is an optional dependency (``pip install warp-rbrdf[reference]``, pinned to the version
+the parity numbers were measured with); it is imported on first use and a missing install is
+a one-line :class:`ReferenceUnavailable`. :func:`available` says whether it can be used.
+
+Negative table entries. Some RGL files hold negative ``rgb`` entries (measurement noise; 7 of
+the 20 shared files, e.g. 5174 of 24576 entries down to -0.62 in ``chm_mint_rgb``, 1118 down to
+-0.04 in ``vch_golden_yellow_rgb``). Mitsuba does **not** clamp them: its ``Marginal2D``
+interpolant is plain bilinear, so ``eval`` (and the BSDF-sample weight) can be negative next to
+such entries, and a render can receive negative contributions. Our reader clamps the entries to
+0 at load (conventions.md). To compare like with like, every function here gives Mitsuba, by
+default (``clamp_negative=True``), a copy of the file whose negative ``rgb`` entries are set to 0
+(:func:`clamped_copy`; the other fields, including ``luminance`` which drives sampling, are
+unchanged, so the sampling densities are those of the original file). With
+``clamp_negative=False`` Mitsuba reads the file as it is.
+
+Precision. Mitsuba computes in float32; :mod:`fit.formats.rgl` in float64. They agree to
+<= 6e-5 relative where a value is above 1e-2 of the sample's maximum and to <= 1.3e-5 of that
+maximum everywhere (all 20 shared files, grazing pairs included; ``tests/test_parity_mitsuba.py``
+states the measurements). A known quirk of Mitsuba 3.9.1's ``measured`` plugin: it leaves its
+member ``m_reduction`` uninitialized for isotropic files, so, depending on the heap at load
+time, it rotates ``si.wi`` and ``wo`` by pi about the normal when ``si.wi.y > 0`` before the
+lookup (observed: results identical, or differing by float32 rounding only, up to 3e-7
+absolute, and only where ``si.wi.y > 0``). The rotation is a symmetry of isotropic data; a
+garbage value of exactly 4 would instead mirror some pairs (never observed).
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from .errors import RenderError
+
+#: The Mitsuba variant used (CPU, no LLVM / CUDA needed).
+VARIANT = "scalar_rgb"
+#: The install command named by :class:`ReferenceUnavailable`.
+INSTALL_HINT = "pip install warp-rbrdf[reference]"
+
+#: The reference scene (Mitsuba's ``measured`` plugin documentation scene).
+CAMERA_ORIGIN = (0.0, 0.0, 4.0)
+CAMERA_TARGET = (0.0, 0.0, 0.0)
+CAMERA_UP = (0.0, 1.0, 0.0)
+FOV_Y_DEG = 30.0
+SPHERE_RADIUS = 1.0
+#: Icosphere subdivisions of our renderer's sphere (Mitsuba's is analytic): 40962 vertices,
+#: edges of about 1.1 deg; the chord error (<= 1e-4 of the radius) is far below a pixel of the
+#: 256^2 view (0.008 radius units) and the smooth normals are interpolated vertex normals.
+SPHERE_SUBDIVISIONS = 6
+
+
+class ReferenceUnavailable(RenderError):
+    """Mitsuba 3 (the reference implementation) is not installed."""
+
+
+# --------------------------------------------------------------------------------------------
+# Mitsuba
+@functools.lru_cache(maxsize=1)
+def _mi():
+    try:
+        import mitsuba as mi
+    except ImportError:
+        raise ReferenceUnavailable(f"Mitsuba 3 is not installed (the reference implementation): "
+                                   f"{INSTALL_HINT}") from None
+    try:
+        mi.set_variant(VARIANT)
+    except Exception as e:  # noqa: BLE001 - an install without the scalar RGB variant
+        raise ReferenceUnavailable(f"Mitsuba {getattr(mi, '__version__', '?')} has no variant "
+                                   f"{VARIANT!r} ({e}): {INSTALL_HINT}") from None
+    return mi
+
+
+def available() -> bool:
+    """True when Mitsuba 3 can be imported and its ``scalar_rgb`` variant set."""
+    try:
+        _mi()
+    except ReferenceUnavailable:
+        return False
+    return True
+
+
+def version() -> str:
+    """Mitsuba's version string."""
+    return _mi().__version__
+
+
+def _cache_dir() -> Path:
+    d = Path(os.environ.get("RBRDF_REFERENCE_CACHE",
+                            Path(tempfile.gettempdir()) / f"rbrdf-mitsuba-reference-{os.getuid()}"))
+    d.mkdir(parents=True, exist_ok=True)
+    return d
+
+
+def clamped_copy(path) -> Path:
+    """``path`` itself when its ``rgb`` field has no negative entry, else a copy (in a cache
+    folder under the system temp dir, or ``$RBRDF_REFERENCE_CACHE``) whose negative ``rgb``
+    entries are 0, as our reader clamps them; every other field is copied unchanged (same
+    dtypes). The copy is named by the source's SHA-256, so it is written once."""
+    from fit.formats.tensor_file import read_tensor_file, write_tensor_file
+
+    path = Path(path)
+    fields = read_tensor_file(path)
+    if "rgb" not in fields or not np.any(np.asarray(fields["rgb"].data) < 0):
+        return path
+    sha = hashlib.sha256(path.read_bytes()).hexdigest()[:16]
+    out = _cache_dir() / f"{path.stem}.clamped-{sha}.bsdf"
+    if not out.exists():
+        arrays = {k: np.array(f.data) for k, f in fields.items()}
+        rgb = arrays["rgb"]
+        arrays["rgb"] = np.where(rgb < 0, np.zeros((), rgb.dtype), rgb)
+        tmp = out.with_suffix(f".tmp{os.getpid()}")
+        write_tensor_file(tmp, arrays)
+        os.replace(tmp, out)
+    return out
+
+
+def _file_for_mitsuba(path, clamp_negative: bool) -> str:
+    return str(clamped_copy(path) if clamp_negative else Path(path))
+
+
+@functools.lru_cache(maxsize=32)
+def _measured(filename: str):
+    return _mi().load_dict({"type": "measured", "filename": filename})
+
+
+def load_bsdf(path, clamp_negative: bool = True):
+    """Mitsuba's ``measured`` BSDF of an RGL ``.bsdf`` file (cached per file)."""
+    return _measured(_file_for_mitsuba(path, clamp_negative))
+
+
+def _directions(a, name):
+    a = np.asarray(a, np.float64)
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ValueError(f"{name} must have shape (N, 3), got {a.shape}")
+    return a
+
+
+def eval(path, wt, wx, clamp_negative: bool = True) -> np.ndarray:  # noqa: A001 - Mitsuba's name
+    """Mitsuba ``measured`` ``eval`` with ``si.wi = wt`` and ``wo = wx`` (local unit directions,
+    (N, 3), z = normal): ``f_r * cos(theta_wx)`` as (N, 3) float64 (Mitsuba computes in float32).
+    0 where either direction is at or below the tangent plane."""
+    mi = _mi()
+    wt, wx = _directions(wt, "wt"), _directions(wx, "wx")
+    bsdf = load_bsdf(path, clamp_negative)
+    ctx = mi.BSDFContext()
+    si = mi.SurfaceInteraction3f()
+    out = np.empty((len(wt), 3))
+    for k in range(len(wt)):   # the scalar variant takes one direction pair per call
+        si.wi = mi.Vector3f(wt[k])
+        v = bsdf.eval(ctx, si, mi.Vector3f(wx[k]))
+        out[k] = (v[0], v[1], v[2])
+    return out
+
+
+def pdf(path, wt, wx, clamp_negative: bool = True) -> np.ndarray:
+    """Mitsuba ``measured`` ``pdf`` (1/sr of ``wx``) of its BSDF sample at ``si.wi = wt``,
+    ``wo = wx``: luminance warp, then VNDF warp, then reflection about the micro-normal."""
+    mi = _mi()
+    wt, wx = _directions(wt, "wt"), _directions(wx, "wx")
+    bsdf = load_bsdf(path, clamp_negative)
+    ctx = mi.BSDFContext()
+    si = mi.SurfaceInteraction3f()
+    out = np.empty(len(wt))
+    for k in range(len(wt)):
+        si.wi = mi.Vector3f(wt[k])
+        out[k] = bsdf.pdf(ctx, si, mi.Vector3f(wx[k]))
+    return out
+
+
+def sample(path, wt, xi, clamp_negative: bool = True):
+    """Mitsuba ``measured`` ``sample`` at ``si.wi = wt`` (N, 3) with uniforms ``xi`` (N, 2)
+    passed as Mitsuba's ``sample2`` (the plugin swaps them: its luminance warp receives
+    ``(xi[:, 1], xi[:, 0])``). Returns ``(wx (N, 3), weight (N, 3), pdf (N,))``: the sampled
+    direction (towards the light), Mitsuba's sample weight ``f_r * cos(theta_wx) / pdf`` (0
+    where the sample is invalid) and the pdf in 1/sr of ``wx``."""
+    mi = _mi()
+    wt = _directions(wt, "wt")
+    xi = np.asarray(xi, np.float64)
+    if xi.shape != (len(wt), 2):
+        raise ValueError(f"xi must have shape ({len(wt)}, 2), got {xi.shape}")
+    bsdf = load_bsdf(path, clamp_negative)
+    ctx = mi.BSDFContext()
+    si = mi.SurfaceInteraction3f()
+    wx = np.zeros((len(wt), 3))
+    weight = np.zeros((len(wt), 3))
+    p = np.zeros(len(wt))
+    for k in range(len(wt)):
+        si.wi = mi.Vector3f(wt[k])
+        bs, w = bsdf.sample(ctx, si, 0.5, mi.Point2f(xi[k]))
+        wx[k] = (bs.wo[0], bs.wo[1], bs.wo[2])
+        weight[k] = (w[0], w[1], w[2])
+        p[k] = bs.pdf
+    return wx, weight, p
+
+
+# --------------------------------------------------------------------------------------------
+# The reference scene
+def _material_kind(material):
+    """('rgl', path) or ('lambert', (r, g, b)) from a .bsdf path or ('lambert', albedo)."""
+    if isinstance(material, (tuple, list)) and len(material) == 2 and material[0] == "lambert":
+        return "lambert", tuple(float(x) for x in np.broadcast_to(np.asarray(material[1], float), 3))
+    if isinstance(material, (str, os.PathLike)) and Path(material).suffix == ".bsdf":
+        return "rgl", Path(material)
+    raise ValueError(f"material must be an RGL .bsdf path or ('lambert', albedo), got {material!r}")
+
+
+def mitsuba_scene_dict(material, envmap, spp: int, resolution: int = 256,
+                       clamp_negative: bool = True) -> dict:
+    """The reference scene as a Mitsuba scene dictionary (see :func:`render_sphere`)."""
+    mi = _mi()
+    kind, m = _material_kind(material)
+    if kind == "lambert":
+        bsdf = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(m)}}
+    else:
+        bsdf = {"type": "measured", "filename": _file_for_mitsuba(m, clamp_negative)}
+    T = mi.ScalarTransform4f
+    return {
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 1,
+                       "hide_emitters": True},
+        "sensor": {
+            "type": "perspective", "fov": FOV_Y_DEG, "fov_axis": "y",
+            "to_world": T().look_at(origin=list(CAMERA_ORIGIN), target=list(CAMERA_TARGET),
+                                    up=list(CAMERA_UP)),
+            "film": {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
+                     "rfilter": {"type": "box"}, "pixel_format": "rgb",
+                     "component_format": "float32"},
+            "sampler": {"type": "independent", "sample_count": int(spp)},
+        },
+        "sphere": {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": SPHERE_RADIUS,
+                   "bsdf": bsdf},
+        "environment": {"type": "envmap", "filename": str(envmap), "scale": 1.0},
+    }
+
+
+def render_sphere(material, envmap, spp: int, resolution: int = 256, seed: int = 0,
+                  passes: int = 1, clamp_negative: bool = True, return_variance: bool = False):
+    """Render the reference scene with Mitsuba 3 (``scalar_rgb``, all cores).
+
+    Unit sphere at the origin; perspective camera at (0, 0, 4) looking at the origin, +Y up,
+    30 deg vertical field of view, ``resolution`` x ``resolution`` pixels, box filter (a pixel
+    is the plain mean of its samples), independent sampler; the ``envmap`` (lat-long file,
+    identity transform, scale 1) hidden from camera rays; Mitsuba's ``direct`` integrator with
+    ``emitter_samples = bsdf_samples = 1``: per camera sample one environment sample and one
+    BSDF sample, each with a shadow ray, combined by the power heuristic. ``material``: an RGL
+    ``.bsdf`` path (``measured`` plugin, with :func:`clamped_copy` unless ``clamp_negative`` is
+    False) or ``("lambert", albedo)`` (``diffuse`` plugin).
+
+    The ``spp`` samples are taken in ``passes`` renders of ``spp / passes`` samples with seeds
+    ``seed * passes + k``; the image is their mean. With ``return_variance=True`` (needs
+    ``passes >= 2``) also returns the variance of each pixel's mean estimated from the spread of
+    the passes, (H, W, 3). Returns (H, W, 3) float32 linear RGB, row 0 at the top.
+    """
+    mi = _mi()
+    spp, passes = int(spp), int(passes)
+    if passes < 1 or spp % passes:
+        raise ValueError(f"spp ({spp}) must be a positive multiple of passes ({passes})")
+    if return_variance and passes < 2:
+        raise ValueError("return_variance needs passes >= 2")
+    scene = mi.load_dict(mitsuba_scene_dict(material, envmap, spp // passes, resolution,
+                                            clamp_negative))
+    imgs = np.stack([np.array(mi.render(scene, spp=spp // passes, seed=int(seed) * passes + k),
+                              dtype=np.float64)[..., :3] for k in range(passes)])
+    img = imgs.mean(axis=0)
+    if return_variance:
+        var = imgs.var(axis=0, ddof=1) / passes
+        return img.astype(np.float32), var.astype(np.float32)
+    return img.astype(np.float32)
+
+
+def sphere_scene(material, envmap, spp: int, resolution: int = 256, seed: int = 0,
+                 incident: str = "view", pattern: str = "independent", tile_size: int = 16,
+                 subdivisions: int = SPHERE_SUBDIVISIONS):
+    """The reference scene of :func:`render_sphere` for **our** renderer, as a
+    :class:`warp_rbrdf.scene.Scene`: the same camera (``fov_axis = "y"``), unit sphere
+    (an icosphere with ``subdivisions`` and smooth normals), hidden environment map at scale 1
+    (identity rotation) and direct lighting (``max_depth = 1``). An RGL material is the ``rgl``
+    type (the file evaluated exactly, ``incident`` = the tensors' incident direction, default
+    the reference's "view") with the ``mis-rgl`` sampler (environment sample + the format's own
+    BSDF sample, power heuristic: Mitsuba's estimator); ``("lambert", albedo)`` is the
+    ``lambert`` type with ``mis`` (environment + cosine sample). ``pattern`` defaults to
+    independent samples as Mitsuba's sampler (so the per-pixel variance estimates the error of
+    the mean). The material is named ``"obj"``."""
+    from .scene import CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec
+
+    kind, m = _material_kind(material)
+    if kind == "lambert":
+        mat = MaterialSpec(name="obj", type="lambert", albedo=m, sampler="mis")
+    else:
+        mat = MaterialSpec(name="obj", type="rgl", file=m, sampler="mis-rgl", incident=incident)
+    cam = CameraSpec(origin=CAMERA_ORIGIN, target=CAMERA_TARGET, up=CAMERA_UP, fov=FOV_Y_DEG,
+                     fov_axis="y", resolution=(int(resolution), int(resolution)))
+    return Scene(camera=cam,
+                 integrator=IntegratorSpec(spp=int(spp), seed=int(seed), max_depth=1,
+                                           sampler=mat.sampler, pattern=pattern,
+                                           hide_environment=True, tile_size=int(tile_size)),
+                 materials={"obj": mat},
+                 shapes=[ShapeSpec(type="sphere", material="obj", center=(0.0, 0.0, 0.0),
+                                   radius=SPHERE_RADIUS, subdivisions=int(subdivisions))],
+                 lights=[LightSpec(type="envmap", file=Path(envmap), scale=1.0)],
+                 path="<mitsuba reference sphere>")
+
+
+def sphere_mask(resolution: int, margin: float = 1.0) -> np.ndarray:
+    """(H, W) bool: pixels whose whole footprint lies on the sphere's image, at least
+    ``margin`` pixels inside its silhouette (so partial coverage, where the analytic and the
+    tessellated sphere differ, is excluded)."""
+    n = int(resolution)
+    t = np.tan(np.radians(FOV_Y_DEG) / 2)
+    c = np.arange(n) + 0.5
+    x = (2 * c / n - 1) * t
+    X, Y = np.meshgrid(x, -x)
+    # angle of a pixel's ray from the optical axis vs the sphere's angular radius
+    ang = np.arctan(np.hypot(X, Y))
+    alpha = np.arcsin(SPHERE_RADIUS / np.linalg.norm(CAMERA_ORIGIN))
+    pix = np.arctan(2 * t / n)   # angular size of a pixel at the centre (an upper bound off it)
+    return ang < alpha - (margin + 0.75) * pix

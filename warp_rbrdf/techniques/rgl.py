@@ -1,0 +1,170 @@
+"""``rgl`` technique: the RGL-EPFL format's own importance sampling of an ``rgl`` material
+(Dupuy & Jakob 2018; Mitsuba 3's ``measured`` plugin): given the tensors' incident direction
+``wt`` (the view, the default roles), two uniforms are warped by the **luminance** warp (the
+luminance of the ``rgb`` tensor over its warped coordinates), then by the **VNDF** warp to a
+micro-normal ``wm`` (``theta_m = u_x^2 pi/2``, ``phi_m = phi_t + (2 u_y - 1) pi``) and
+reflected: ``wx = 2 (wm . wt) wm - wt``. Its density in 1/sr is exact:
+
+    pdf(wx) = p_vndf(u_m) p_lum(s) / (max(2 pi^2 u_x sin theta_m, 1e-6) * 4 (wt . wm))
+
+(the Jacobians of the (theta_m, phi_m) parametrization and of the reflection), the same as
+the reference's ``pdf``. Only for ``rgl`` materials whose view is the incident direction (the
+sample draws the light given the view); a scene with ``incident = "light"`` cannot use it
+(refused at load). Directions in the local frame (z = normal); ``wo`` the view, ``wi`` the light.
+"""
+from __future__ import annotations
+
+import numpy as np
+import warp as wp
+
+from fit.formats.rgl_interpolants import VNDFWarp, interval, patch
+
+from ..materials import rgl as R
+from ..materials.data import Materials
+from ..materials.rgl_tables import theta_interval, warp_eval, warp_invert, warp_sample
+from ..registry import material
+
+RGL_CODE = material("rgl").code
+MIN_JACOBIAN = 1.0e-6
+
+
+@wp.func
+def sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
+    if mats.kind[m] != wp.static(RGL_CODE) or wo[2] <= 0.0:
+        return wp.vec4(0.0)
+    h = mats.offset[m]
+    if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
+        return wp.vec4(0.0)
+    theta_t = R.elevation(wo)
+    phi_t = wp.atan2(wo[1], wo[0])
+    n = mats.rgl_i[h + R.RGL_N_THETA]
+    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
+    t0 = int(tw[0])
+    w1 = tw[1]
+    s = warp_sample(mats, mats.rgl_i[h + R.RGL_LUM_DATA], mats.rgl_i[h + R.RGL_LUM_COND],
+                    mats.rgl_i[h + R.RGL_LUM_MARG], mats.rgl_i[h + R.RGL_LUM_NY],
+                    mats.rgl_i[h + R.RGL_LUM_NX], n, t0, w1, xi[1], xi[0])
+    u = warp_sample(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
+                    mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
+                    mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, s[0], s[1])
+    theta_m = u[0] * u[0] * wp.HALF_PI
+    phi_m = (2.0 * u[1] - 1.0) * wp.pi + phi_t
+    st = wp.sin(theta_m)
+    wm = wp.vec3(wp.cos(phi_m) * st, wp.sin(phi_m) * st, wp.cos(theta_m))
+    c = wp.dot(wm, wo)
+    jac = wp.max(2.0 * wp.pi * wp.pi * u[0] * st, MIN_JACOBIAN) * 4.0 * c
+    pdf = u[2] * s[2] / jac
+    wi = wm * (2.0 * c) - wo
+    if c <= 0.0 or wi[2] <= 0.0 or not (pdf > 0.0) or pdf > 1.0e30:
+        return wp.vec4(0.0)
+    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf)
+
+
+@wp.func
+def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
+    if mats.kind[m] != wp.static(RGL_CODE) or wi[2] <= 0.0 or wo[2] <= 0.0:
+        return 0.0
+    h = mats.offset[m]
+    if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
+        return 0.0
+    sv = wi + wo
+    wm = sv / wp.length(sv)
+    theta_t = R.elevation(wo)
+    phi_t = wp.atan2(wo[1], wo[0])
+    umx = R.theta_to_u(R.elevation(wm))
+    umy = R.phi_to_u(wp.atan2(wm[1], wm[0]) - phi_t)
+    n = mats.rgl_i[h + R.RGL_N_THETA]
+    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
+    t0 = int(tw[0])
+    w1 = tw[1]
+    sw = warp_invert(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
+                     mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
+                     mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, umx, umy)
+    lum = warp_eval(mats, mats.rgl_i[h + R.RGL_LUM_DATA], mats.rgl_i[h + R.RGL_LUM_NY],
+                    mats.rgl_i[h + R.RGL_LUM_NX], n, t0, w1, sw[0], sw[1])
+    st = wp.sqrt(wm[0] * wm[0] + wm[1] * wm[1])
+    jac = wp.max(2.0 * wp.pi * wp.pi * umx * st, MIN_JACOBIAN) * 4.0 * wp.dot(wo, wm)
+    if jac <= 0.0:
+        return 0.0
+    return wp.max(sw[2] * lum / jac, 0.0)
+
+
+def kernel_functions(cdfs=()):
+    return sample, pdf
+
+
+# --------------------------------------------------------------------------------------------
+# NumPy references (float64), on the material's RGLBRDF (``cdf`` is the loaded material's data)
+# --------------------------------------------------------------------------------------------
+_LUMINANCE_WARPS: dict = {}
+
+
+def _luminance_warp(b) -> VNDFWarp:
+    """The luminance warp of an RGLBRDF (its VNDF warp is the reader's own), cached per object."""
+    key = id(b)
+    if key not in _LUMINANCE_WARPS or _LUMINANCE_WARPS[key][0] is not b:
+        lum = np.clip(np.asarray(b.fields["luminance"].data, np.float64)[0], 0.0, None)
+        _LUMINANCE_WARPS[key] = (b, VNDFWarp(lum, b.theta_i))
+    return _LUMINANCE_WARPS[key][1]
+
+
+def numpy_sample(b, wo, xi):
+    """NumPy reference of :func:`sample` for an :class:`fit.formats.rgl.RGLBRDF` ``b``:
+    ``(wi (N, 3), weight (N,))``, weight 0 where no sample."""
+    wo = np.asarray(wo, float)
+    xi = np.asarray(xi, float)
+    lum = _luminance_warp(b)
+    theta_t = np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2])
+    phi_t = np.arctan2(wo[:, 1], wo[:, 0])
+    t0, w1 = interval(b.theta_i, theta_t)
+    sx, sy, p_lum = lum.sample(xi[:, 1], xi[:, 0], t0, w1)
+    ux, uy, p_vndf = b._vndf.sample(sx, sy, t0, w1)
+    theta_m = ux * ux * np.pi / 2
+    phi_m = (2 * uy - 1) * np.pi + phi_t
+    st = np.sin(theta_m)
+    wm = np.stack([np.cos(phi_m) * st, np.sin(phi_m) * st, np.cos(theta_m)], -1)
+    c = np.sum(wm * wo, -1)
+    jac = np.maximum(2 * np.pi**2 * ux * st, MIN_JACOBIAN) * 4 * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = p_vndf * p_lum / jac
+    wi = 2 * c[:, None] * wm - wo
+    ok = (c > 0) & (wi[:, 2] > 0) & (p > 0) & (wo[:, 2] > 0)
+    return np.where(ok[:, None], wi, 0.0), np.where(ok, 1.0 / np.where(ok, p, 1.0), 0.0)
+
+
+def numpy_pdf(b, wi, wo):
+    """NumPy reference of :func:`pdf` (1/sr of the light ``wi`` given the view ``wo``)."""
+    wi = np.asarray(wi, float)
+    wo = np.asarray(wo, float)
+    lum = _luminance_warp(b)
+    wm = wi + wo
+    wm /= np.linalg.norm(wm, axis=-1, keepdims=True)
+    theta_t = np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2])
+    phi_t = np.arctan2(wo[:, 1], wo[:, 0])
+    theta_m = np.arctan2(np.hypot(wm[:, 0], wm[:, 1]), wm[:, 2])
+    umx = np.sqrt(theta_m * 2 / np.pi)
+    umy = (np.arctan2(wm[:, 1], wm[:, 0]) - phi_t + np.pi) / (2 * np.pi)
+    umy -= np.floor(umy)
+    t0, w1 = interval(b.theta_i, theta_t)
+    sx, sy, p_vndf = b._vndf.invert(umx, umy, t0, w1)
+    ix, fx = patch(sx, lum.nx)
+    iy, fy = patch(sy, lum.ny)
+    d0 = lum.data[t0]
+    d1 = lum.data[np.minimum(t0 + 1, lum.S - 1)]
+
+    def bil(d):
+        n = np.arange(len(d))
+        v00, v10 = d[n, iy, ix], d[n, iy, ix + 1]
+        v01, v11 = d[n, iy + 1, ix], d[n, iy + 1, ix + 1]
+        a = v00 + fx * (v10 - v00)
+        bb = v01 + fx * (v11 - v01)
+        return a + fy * (bb - a)
+
+    p_lum = bil(d0)
+    if lum.S > 1:
+        p_lum = p_lum + w1 * (bil(d1) - p_lum)
+    p_lum = p_lum * (lum.nx - 1) * (lum.ny - 1)
+    jac = np.maximum(2 * np.pi**2 * umx * np.hypot(wm[:, 0], wm[:, 1]), MIN_JACOBIAN) * 4 * np.sum(wo * wm, -1)
+    ok = (wi[:, 2] > 0) & (wo[:, 2] > 0) & (jac > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok, np.maximum(p_vndf * p_lum / np.where(ok, jac, 1.0), 0.0), 0.0)
