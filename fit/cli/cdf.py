@@ -13,7 +13,7 @@ def _load_or_fit(args, log=print):
     path = Path(args.file)
     if path.suffix.lower() == ".json":
         return load(path)
-    b = load_measured(path)
+    b = load_measured(path, incident=getattr(args, "incident", "view"))
     params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
     if getattr(args, "table_only", False):
         return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
@@ -28,6 +28,9 @@ def _add_table_args(p):
     p.add_argument("--n-t", type=int, default=64, help="theta_l cells (default 64)")
     p.add_argument("--n-p", type=int, default=64, help="|phi_l| cells (default 64)")
     p.add_argument("--eps", type=float, default=0.02, help="cosine mixture weight (default 0.02)")
+    p.add_argument("--incident", choices=("view", "light"), default="view",
+                   help="RGL .bsdf files: which direction is the tensors' theta_i (default: view, "
+                        "as Mitsuba 3 and pbrt-v4 read them; must match the scene's `incident`)")
     p.add_argument("--layout", choices=LAYOUTS, default="pieces",
                    help="pieces (default): monotone rational-quadratic pieces uniform in mu and u, "
                         "constant-time lookup, the fastest sampler; global: the paper's "

@@ -77,6 +77,14 @@ def _lerp_at(mats: Materials, i: int, stride: int, w1: float) -> float:
 
 
 @wp.func
+def _corners(mats: Materials, k: int, nx: int, stride: int, w1: float) -> wp.vec4:
+    """The four node values (x0 y0, x1 y0, x0 y1, x1 y1) of the cell whose first node is
+    ``rgl_f[k]`` in rows of ``nx``, each interpolated towards the next slice."""
+    return wp.vec4(_lerp_at(mats, k, stride, w1), _lerp_at(mats, k + 1, stride, w1),
+                   _lerp_at(mats, k + nx, stride, w1), _lerp_at(mats, k + nx + 1, stride, w1))
+
+
+@wp.func
 def warp_invert(mats: Materials, data: int, cond: int, marg: int, ny: int, nx: int, n_slices: int,
                 t0: int, w1: float, ux: float, uy: float) -> wp.vec3:
     """Inverse warp of (ux, uy): returns (sx, sy, pdf), pdf the density of the forward warp at
@@ -90,10 +98,7 @@ def warp_invert(mats: Materials, data: int, cond: int, marg: int, ny: int, nx: i
     if n_slices < 2:
         stride = 0
     k = t0 * plane + iy * nx + ix
-    v00 = _lerp_at(mats, data + k, stride, w1)
-    v10 = _lerp_at(mats, data + k + 1, stride, w1)
-    v01 = _lerp_at(mats, data + k + nx, stride, w1)
-    v11 = _lerp_at(mats, data + k + nx + 1, stride, w1)
+    v = _corners(mats, data + k, nx, stride, w1)
     cc0 = _lerp_at(mats, cond + k, stride, w1)
     cc1 = _lerp_at(mats, cond + k + nx, stride, w1)
     krow = t0 * plane + iy * nx + nx - 1
@@ -104,8 +109,8 @@ def warp_invert(mats: Materials, data: int, cond: int, marg: int, ny: int, nx: i
         mstride = 0
     m0 = _lerp_at(mats, marg + t0 * ny + iy, mstride, w1)
     gy = 1.0 - fy
-    c0 = gy * v00 + fy * v01
-    c1 = gy * v10 + fy * v11
+    c0 = gy * v[0] + fy * v[2]
+    c1 = gy * v[1] + fy * v[3]
     pdf = c0 + fx * (c1 - c0)
     rr = gy * r0 + fy * r1
     sx = 0.0
@@ -127,13 +132,9 @@ def warp_eval(mats: Materials, data: int, ny: int, nx: int, n_slices: int, t0: i
     stride = plane
     if n_slices < 2:
         stride = 0
-    k = data + t0 * plane + iy * nx + ix
-    v00 = _lerp_at(mats, k, stride, w1)
-    v10 = _lerp_at(mats, k + 1, stride, w1)
-    v01 = _lerp_at(mats, k + nx, stride, w1)
-    v11 = _lerp_at(mats, k + nx + 1, stride, w1)
-    a = v00 + fx * (v10 - v00)
-    b = v01 + fx * (v11 - v01)
+    v = _corners(mats, data + t0 * plane + iy * nx + ix, nx, stride, w1)
+    a = v[0] + fx * (v[1] - v[0])
+    b = v[2] + fx * (v[3] - v[2])
     return (a + fy * (b - a)) * float((nx - 1) * (ny - 1))
 
 
@@ -189,13 +190,9 @@ def warp_sample(mats: Materials, data: int, cond: int, marg: int, ny: int, nx: i
             hi = mid - 1
     col = lo
     sx = sx - (gy * _lerp_at(mats, cb + col, stride, w1) + fy * _lerp_at(mats, cb + nx + col, stride, w1))
-    k = data + t0 * plane + row * nx + col
-    v00 = _lerp_at(mats, k, stride, w1)
-    v10 = _lerp_at(mats, k + 1, stride, w1)
-    v01 = _lerp_at(mats, k + nx, stride, w1)
-    v11 = _lerp_at(mats, k + nx + 1, stride, w1)
-    c0 = gy * v00 + fy * v01
-    c1 = gy * v10 + fy * v11
+    v = _corners(mats, data + t0 * plane + row * nx + col, nx, stride, w1)
+    c0 = gy * v[0] + fy * v[2]
+    c1 = gy * v[1] + fy * v[3]
     fx = _solve_linear_density(c0, c1, sx)
     pdf = ((1.0 - fx) * c0 + fx * c1) * float((nx - 1) * (ny - 1))
     return wp.vec3((float(col) + fx) / float(nx - 1), (float(row) + fy) / float(ny - 1), pdf)
@@ -216,12 +213,8 @@ def rgb_eval(mats: Materials, off: int, ny: int, nx: int, n_slices: int, t0: int
         stride = 0
     out = wp.vec3(0.0)
     for c in range(3):
-        k = off + (t0 * 3 + c) * plane + iy * nx + ix
-        v00 = _lerp_at(mats, k, stride, w1)
-        v10 = _lerp_at(mats, k + 1, stride, w1)
-        v01 = _lerp_at(mats, k + nx, stride, w1)
-        v11 = _lerp_at(mats, k + nx + 1, stride, w1)
-        a = v00 + fx * (v10 - v00)
-        b = v01 + fx * (v11 - v01)
+        v = _corners(mats, off + (t0 * 3 + c) * plane + iy * nx + ix, nx, stride, w1)
+        a = v[0] + fx * (v[1] - v[0])
+        b = v[2] + fx * (v[3] - v[2])
         out[c] = a + fy * (b - a)
     return out

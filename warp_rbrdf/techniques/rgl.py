@@ -29,18 +29,25 @@ MIN_JACOBIAN = 1.0e-6
 
 
 @wp.func
+def _incidence(mats: Materials, h: int, wt: wp.vec3) -> wp.vec3:
+    """(t0, w1, phi_t) of the tensors' incident direction ``wt``: its theta_i slice interval
+    (``t0`` as a float) and azimuth."""
+    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], mats.rgl_i[h + R.RGL_N_THETA], R.elevation(wt))
+    return wp.vec3(tw[0], tw[1], wp.atan2(wt[1], wt[0]))
+
+
+@wp.func
 def sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
     if mats.kind[m] != wp.static(RGL_CODE) or wo[2] <= 0.0:
         return wp.vec4(0.0)
     h = mats.offset[m]
     if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
         return wp.vec4(0.0)
-    theta_t = R.elevation(wo)
-    phi_t = wp.atan2(wo[1], wo[0])
+    inc = _incidence(mats, h, wo)
+    t0 = int(inc[0])
+    w1 = inc[1]
+    phi_t = inc[2]
     n = mats.rgl_i[h + R.RGL_N_THETA]
-    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
-    t0 = int(tw[0])
-    w1 = tw[1]
     s = warp_sample(mats, mats.rgl_i[h + R.RGL_LUM_DATA], mats.rgl_i[h + R.RGL_LUM_COND],
                     mats.rgl_i[h + R.RGL_LUM_MARG], mats.rgl_i[h + R.RGL_LUM_NY],
                     mats.rgl_i[h + R.RGL_LUM_NX], n, t0, w1, xi[1], xi[0])
@@ -69,14 +76,12 @@ def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
         return 0.0
     sv = wi + wo
     wm = sv / wp.length(sv)
-    theta_t = R.elevation(wo)
-    phi_t = wp.atan2(wo[1], wo[0])
+    inc = _incidence(mats, h, wo)
+    t0 = int(inc[0])
+    w1 = inc[1]
     umx = R.theta_to_u(R.elevation(wm))
-    umy = R.phi_to_u(wp.atan2(wm[1], wm[0]) - phi_t)
+    umy = R.phi_to_u(wp.atan2(wm[1], wm[0]) - inc[2])
     n = mats.rgl_i[h + R.RGL_N_THETA]
-    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
-    t0 = int(tw[0])
-    w1 = tw[1]
     sw = warp_invert(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
                      mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
                      mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, umx, umy)
