@@ -91,3 +91,25 @@ def test_cdf_table_only_writes_a_flagged_table(lambert_file, tmp_path, capsys):
     fit = load(out)
     assert fit.fallback and "--table-only" in fit.reason and fit.maps is None
     assert fit.table is not None and fit.table_params["n_t"] == 16
+
+
+def test_cdf_of_an_rgl_file_records_its_roles_and_a_scene_checks_them(tmp_path, capsys):
+    """A table built from an RGL file depends on which direction is the tensors' theta_i: the
+    file records it and a scene whose material has the other roles refuses it in one line."""
+    from conftest import data_file
+
+    from fit.sampling.cdf_file import load
+    from warp_rbrdf.errors import SceneError
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import parse_scene
+
+    src = data_file("rgl/paper_white_rgb.bsdf")
+    out = tmp_path / "paper_cdf.json"
+    assert main(["cdf", str(src), "--table-only", "--incident", "light", "--n-v", "4", "--n-t", "8",
+                 "--n-p", "8", "--out", str(out)]) == 0
+    assert load(out).source["incident"] == "light"
+    text = (f'[materials.m]\ntype = "measured"\nfile = "{src}"\nsampler = "tabulated"\n'
+            f'cdf = "{out}"\nincident = "{{}}"\n[[shapes]]\ntype = "sphere"\nmaterial = "m"\n')
+    with pytest.raises(SceneError, match="built with incident = 'light', the material has 'view'"):
+        Renderer(parse_scene(text.format("view"), path=tmp_path / "s.toml"))
+    Renderer(parse_scene(text.format("light"), path=tmp_path / "s.toml"))   # same roles: accepted

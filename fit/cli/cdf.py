@@ -13,13 +13,17 @@ def _load_or_fit(args, log=print):
     path = Path(args.file)
     if path.suffix.lower() == ".json":
         return load(path)
-    b = load_measured(path, incident=getattr(args, "incident", "view"))
+    incident = getattr(args, "incident", "view")
+    b = load_measured(path, incident=incident)
     params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
+    source = file_source(path)
+    if path.suffix.lower() == ".bsdf":   # the tables depend on the roles of an RGL file
+        source["incident"] = incident
     if getattr(args, "table_only", False):
         return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
-                          source=file_source(path))
+                          source=source)
     return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log, layout=args.layout,
-                   refinements=args.refinements, source=file_source(path),
+                   refinements=args.refinements, source=source,
                    time_limit_s=None if args.time_limit <= 0 else args.time_limit)
 
 

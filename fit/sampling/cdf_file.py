@@ -290,6 +290,7 @@ def verify(fit: CDFFit) -> CDFFit:
 
 
 def file_source(path) -> dict:
-    """``{"file": name, "sha256": hex}`` of a source file, as recorded in CDF files."""
+    """``{"file": name, "sha256": hex}`` of a source file, as recorded in CDF files (from an RGL
+    file, ``rbrdf-fit cdf`` adds ``"incident"``: the roles its tables were built with)."""
     p = Path(path)
     return {"file": p.name, "sha256": file_sha256(p)}

@@ -59,6 +59,11 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
     if not tech.needs_table:
         return strat, None
     fitobj = _read_cdf(spec, scene_file, key)
+    made_with = (getattr(fitobj, "source", None) or {}).get("incident")
+    if made_with is not None and made_with != getattr(spec, "incident", "view"):
+        raise SceneError(scene_file, f"{key}.cdf", f"the CDF file was built with incident = "
+                                                   f"{made_with!r}, the material has "
+                                                   f"{getattr(spec, 'incident', 'view')!r}")
     if tech.needs_fit:
         if fitobj is None:
             log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
