@@ -109,6 +109,32 @@ def test_flagged_fit_never_leaves_its_measured_range_numpy(fitted):
     assert np.any(unclamped[..., 2] != got)                   # the clamp is active somewhere
 
 
+def test_valid_fit_is_clamped_to_its_vouched_range_and_unchanged_at_its_data(fitted):
+    """A valid function records the envelope of its data's intervals (``vouched_range``) and is
+    clamped to it: every value at a data point (the piece's projected clusters) is unchanged,
+    and nowhere, data-free clusters included, does it leave the envelope."""
+    from fit.rational.model import vouched_range
+
+    model = load_coefficients(fitted[0] / "spiky.json")
+    core = model.pieces[0]
+    assert not any(core.flagged)
+    p = project_for_fit(read_merl(fitted[0] / "spiky.binary"))
+    th, td = np.meshgrid(theta_h_centres(), theta_d_centres(), indexing="ij")
+    data = np.isfinite(p.value[..., 0]) & (td <= np.radians(BAND_DEG))
+    free = copy.deepcopy(core)
+    for i in free.function_info:
+        i.pop("vouched_range")
+    x = np.stack([th, td], -1)
+    clamped, raw = core(x), free(x)
+    np.testing.assert_array_equal(clamped[data], raw[data])
+    for c in range(3):
+        lo, hi = vouched_range(core.function_info[c])
+        assert lo >= 0 and hi >= np.nanmax(p.value[..., c][data]) and hi <= 1.5 * np.nanmax(p.value[..., c][data])
+        grid = np.stack(np.meshgrid(np.linspace(0, np.pi / 2, 200), np.linspace(0, np.radians(BAND_DEG), 120),
+                                    indexing="ij"), -1)
+        assert core(grid)[..., c].max() <= hi and core(grid)[..., c].min() >= lo
+
+
 @pytest.fixture(scope="module")
 def renderer(fitted):
     """One scene, one compile: the flagged fit from its file and the same coefficients vouched."""
@@ -264,6 +290,7 @@ def test_files_without_recorded_range_get_it_from_the_source(fitted, tmp_path):
     for piece in data["pieces"]:
         for f in piece["functions"]:
             f.pop("measured_range")
+            f.pop("vouched_range")   # files written before either was recorded
     (tmp_path / "old.json").write_text(json.dumps(data))
     shutil.copy(d / "spiky.binary", tmp_path / "spiky.binary")
     old = load_coefficients(tmp_path / "old.json")
@@ -273,8 +300,14 @@ def test_files_without_recorded_range_get_it_from_the_source(fitted, tmp_path):
     assert lm.data.pieces[1].function_info[2]["measured_range"] == \
         pytest.approx(new.pieces[1].function_info[2]["measured_range"], rel=1e-12)
     assert old.pieces[1].output_clamps() == [None, None, None]   # the caller's model is not changed
+    # the same as the new file without the valid functions' vouched ranges (not recomputed)
+    data = json.loads((d / "spiky.json").read_text())
+    for piece in data["pieces"]:
+        for f in piece["functions"]:
+            f.pop("vouched_range")
+    (tmp_path / "new.json").write_text(json.dumps(data))
     wi, wo = _pairs(3000, seed=11)
-    ref = rational.load(MaterialSpec(name="m", type="rational", file=d / "spiky.json")).evaluate(wi, wo)
+    ref = rational.load(MaterialSpec(name="m", type="rational", file=tmp_path / "new.json")).evaluate(wi, wo)
     np.testing.assert_array_equal(lm.evaluate(wi, wo), ref)
 
 

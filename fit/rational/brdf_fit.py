@@ -391,7 +391,9 @@ def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: f
     cluster inside its interval); ``inside``: fraction of clusters inside;
     ``measured_range``: [min, max] of the clusters' values (the measured data of the piece,
     in 1/sr): where the fit is flagged its output is clamped to it
-    (:func:`fit.rational.model.flagged`).
+    (:func:`fit.rational.model.flagged`); ``vouched_range``: [max(min lower bound, 0), max upper
+    bound] of the clusters' intervals: where the fit is valid its output is clamped to it, which
+    changes no value at a data point and bounds the fit in data-free clusters.
     """
     f = np.maximum(invert_value_transform(r.function(U), value_transform, offset), 0.0)
     e = np.abs(f - d.y)
@@ -406,4 +408,5 @@ def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: f
             "rms_rel_error": float(np.sqrt(np.mean(rel ** 2))) if rel.size else 0.0,
             "max_interval_ratio": float(np.max(ratio)),
             "inside_fraction": float(inside.mean()), "n_points": int(d.y.size),
-            "measured_range": [float(d.y.min()), float(d.y.max())]}
+            "measured_range": [float(d.y.min()), float(d.y.max())],
+            "vouched_range": [float(max(d.lower.min(), 0.0)), float(d.upper.max())]}

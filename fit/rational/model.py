@@ -85,6 +85,25 @@ def measured_range(info: dict):
     return lo, hi
 
 
+def vouched_range(info: dict):
+    """``(lo, hi)``: the envelope of the intervals of the data a function was fitted to (its
+    piece's clusters: the lowest lower bound, at least 0, and the highest upper bound), or None
+    when the record has none (fits written before it was recorded). A valid function is clamped
+    to it (step 7): no value at a data point changes (each lies inside its interval), and in the
+    piece's data-free clusters the fit cannot leave what its data vouch for."""
+    r = (info or {}).get("vouched_range")
+    if r is None:
+        return None
+    lo, hi = (float(v) for v in r)
+    return lo, hi
+
+
+def output_clamp(info: dict):
+    """Step 7 of one function: its ``measured_range`` when flagged, its ``vouched_range`` when
+    not (None when the record has neither)."""
+    return measured_range(info) if flagged(info) else vouched_range(info)
+
+
 @dataclass
 class Variable:
     name: str
@@ -188,9 +207,9 @@ class RationalModel(_BRDFEvaluation):
         return tuple(flagged(i) for i in self.function_info)
 
     def output_clamps(self) -> list:
-        """Per output: ``(lo, hi)`` of step 7 (a flagged function with a recorded measured
-        range), else None."""
-        return [measured_range(i) if flagged(i) else None for i in self.function_info]
+        """Per output: ``(lo, hi)`` of step 7 (:func:`output_clamp`: a flagged function's
+        measured range, a valid function's vouched range), else None."""
+        return [output_clamp(i) for i in self.function_info]
 
     def leaves(self, x) -> list:
         """``[(model, selection, x_clamped)]``: the single-box model that evaluates each input of
@@ -213,7 +232,7 @@ class RationalModel(_BRDFEvaluation):
             out = np.maximum(out, self.value_min)
         if self.value_max is not None:
             out = np.minimum(out, self.value_max)
-        for c, rng in enumerate(self.output_clamps()):   # step 7: flagged -> measured range
+        for c, rng in enumerate(self.output_clamps()):   # step 7: measured / vouched range
             if rng is not None:
                 out[..., c] = np.clip(out[..., c], rng[0], rng[1])
         return out

@@ -48,7 +48,7 @@ from fit.rational.brdf_model import (
     region_measured_range,
 )
 from fit.rational.coefficient_file import load as load_coefficients
-from fit.rational.model import flagged, measured_range
+from fit.rational.model import flagged, measured_range, output_clamp
 
 from ..codegen import lit as _lit
 from ..codegen import load_generated
@@ -273,7 +273,7 @@ def generate_function(model, name: str, table: bool = False) -> str:
 def _generate_single(model, name: str, table: bool = False) -> str:
     nv = len(model.variables)
     flags = [flagged(i) for i in model.function_info]
-    ranges = [measured_range(i) if fl else None for i, fl in zip(model.function_info, flags)]
+    ranges = [output_clamp(i) for i in model.function_info]
     from_table = [table and fl for fl in flags]
     kmax = [0] * nv
     for f, tb in zip(model.functions, from_table):
@@ -332,7 +332,7 @@ def _generate_single(model, name: str, table: bool = False) -> str:
                 L.append(f"    y{c} = wp.max(y{c}, {_lit(model.value_min)})")
             if vmax is not None:
                 L.append(f"    y{c} = wp.min(y{c}, {_lit(vmax)})")
-        if ranges[c] is not None:  # step 7: a flagged channel stays in its measured range
+        if ranges[c] is not None:  # step 7: flagged: its measured range; valid: its vouched one
             L.append(f"    y{c} = wp.clamp(y{c}, {_lit(ranges[c][0])}, {_lit(ranges[c][1])})")
         outs.append(f"float(y{c})")
     L.append(f"    return wp.vec3({', '.join(outs)})")
