@@ -260,6 +260,56 @@ def test_comparison_block_table_on_fixed_values():
         "0.05, coefficients: paper 135; gold none.)"]
 
 
+def test_fidelity_smoke(tmp_path):
+    """The fidelity study's smoke configuration (--quick: 2 materials with shipped 5 % fits, the
+    studio map, 32 px, 8 spp, no new fit): every representation paired with the rgl reference,
+    finite metrics and floors, the targets checked, its files and the block's table."""
+    from studies import fidelity
+    from warp_rbrdf import mitsuba_reference as MR
+
+    for m in fidelity.PRESETS["smoke"]["materials"]:
+        data_file(f"rgl/{m}_rgb.bsdf")
+    data_file("envmaps/studio_small_03_1k.hdr")
+    r = fidelity.run("smoke", tmp_path, quiet=True)
+    mitsuba = MR.available()
+    assert [(x["material"], x["map"]) for x in r["rows"]] == [("paper_white", "studio"), ("satin_rosaline", "studio")]
+    for row in r["rows"]:
+        c = row["compare"]
+        # both materials have a shipped 5 % fit: every representation is rendered
+        assert set(fidelity.REPS) <= set(c) and ("mitsuba" in c) == mitsuba
+        for k in fidelity.REPS:
+            x = c[k]
+            assert 0 <= x["de_mean"] <= x["de_p99"] < 60 and 0 < x["floor_mean"] < 60
+            assert all(0.5 < v < 2 for v in x["ratio"]) and x["rmse"] >= 0 and x["rim_pixels"] > 0
+            assert c[k + "-unpaired"]["floor_mean"] > 0
+        # pairing: the same rays and weights, so the paired floor is below the unpaired one
+        assert c["measured"]["floor_mean"] < c["measured-unpaired"]["floor_mean"]
+        assert 0 < row["rgl_floor"]["de_mean"] < 60 and row["exposure"] > 0
+        assert set(row["checks"]) >= {"measured", "rational", "mitsuba"}
+        met = c["measured"]["de_mean"] <= 0.5 and c["measured"]["de_p99"] <= 3
+        assert (row["checks"]["measured"] == "met") == met and row["checks"]["measured"] in ("met", "missed", "unresolved")
+        if mitsuba:
+            assert all(0.8 < v < 1.25 for v in c["mitsuba"]["ratio"]) and row["mitsuba_floor"]["de_mean"] > 0
+    assert {f["source"] for f in r["meta"]["fits"].values()} <= {"shipped", "cli (cached)"}
+    data = json.loads((tmp_path / "fidelity.json").read_text())
+    assert set(data) == {"meta", "summary", "rows"} and len(data["rows"]) == 2
+    assert data["rows"][0]["compare"]["measured"]["de_mean"] == r["rows"][0]["compare"]["measured"]["de_mean"]
+    assert set(data["summary"]) == {"measured", "rational", "mitsuba"}
+    assert (tmp_path / "fidelity.md").read_text() == r["markdown"] and "Targets" in r["markdown"]
+    with np.load(tmp_path / "paper_white_studio.npz") as z:
+        assert z["rgl"].shape == z["measured"].shape == (32, 32, 3) and z["mask"].any() and z["band"].any()
+    assert "fidelity_studio.png" in fidelity.DOCS["charts"] and _png_size(tmp_path / "fidelity_studio.png")[1] > 0
+    t = fidelity.block_table(r).splitlines()
+    assert t[0].startswith("| material | map | measured ↔ rgl | rational ↔ rgl | rim px |")
+    c = _cells(t[2])
+    row = r["rows"][0]["compare"]
+    assert c[:2] == ["paper_white", "studio"]
+    mean, p99, floor_mean, floor_p99 = re.fullmatch(r"(\S+) / (\S+) \((\S+) / (\S+)\)", c[2]).groups()
+    for cell, k in ((mean, "de_mean"), (p99, "de_p99"), (floor_mean, "floor_mean"), (floor_p99, "floor_p99")):
+        _num(cell, row["measured"][k])
+    assert c[4] == str(row["rational"]["rim_above"])
+
+
 def test_view_angle_is_measured_to_each_pixels_ray_not_the_camera_axis():
     """The comparison's theta_o bins: the angle between the shading normal and each pixel's own
     ray, checked against the analytic sphere (ray-sphere intersection with the same rays), and
@@ -665,7 +715,7 @@ def test_studies_share_one_cdf_table_per_material(rgl_data):
 # --------------------------------------------------------------------------------------------
 # Publishing (--docs): docs/images, docs/study_<name>.md and the study's block in docs/results.md
 STUDY_DOCS = {"convergence": "convergence", "comparison": "comparison", "fit": "fit_study",
-              "failure_map": "failure_map"}   # block marker name -> module
+              "failure_map": "failure_map", "fidelity": "fidelity"}   # block marker name -> module
 
 
 def _docs_root(tmp_path):
