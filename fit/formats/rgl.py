@@ -195,8 +195,24 @@ class RGLBRDF:
         self._ndf = Bilinear(ndf)
         self._sigma = Bilinear(sigma)
         self._vndf = VNDFWarp(vndf[0], theta, self._path)
+        self._luminance = None
         self._rgb = RGBTable(self.rgb)
         self._sigma_iso = bool(np.all(sigma == sigma[:1]))
+
+    # -- warps --------------------------------------------------------------------------------
+    @property
+    def vndf_warp(self) -> VNDFWarp:
+        """The VNDF warp (marginal/conditional CDFs of the ``vndf`` densities over theta_i)."""
+        return self._vndf
+
+    @property
+    def luminance_warp(self) -> VNDFWarp:
+        """The luminance warp (the ``luminance`` densities, negatives clamped to 0) on the
+        ``rgb`` grid: the first warp of the format's importance sampling. Built on first use."""
+        if self._luminance is None:
+            lum = np.clip(np.asarray(self.fields["luminance"].data, np.float64)[0], 0.0, None)
+            self._luminance = VNDFWarp(lum, self.theta_i, self._path)
+        return self._luminance
 
     # -- evaluation -----------------------------------------------------------------------
     def __repr__(self):

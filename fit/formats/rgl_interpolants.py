@@ -103,8 +103,9 @@ class VNDFWarp:
         self.table = tab.reshape(-1, 9)
         self.slice_stride = (ny - 1) * (nx - 1) if S > 1 else 0
 
-    def invert(self, ux, uy, t0, w1):
-        """Inverse warp of points (ux, uy) of the unit square; returns (sx, sy, pdf)."""
+    def _patch(self, ux, uy, t0, w1):
+        """The 9 patch values (``table``'s columns) at (ux, uy), lerped between slices, and
+        the fractional position (fx, fy) inside the patch."""
         ix, fx = patch(ux, self.nx)
         iy, fy = patch(uy, self.ny)
         k = (t0 * (self.ny - 1) + iy) * (self.nx - 1) + ix
@@ -112,6 +113,19 @@ class VNDFWarp:
         if self.slice_stride:
             g1 = np.take(self.table, k + self.slice_stride, axis=0)
             g += w1[:, None] * (g1 - g)
+        return g, fx, fy
+
+    def density(self, sx, sy, t0, w1):
+        """Normalized density of the warp at points (sx, sy) of the unit square (bilinear,
+        lerped slices): the reference ``Marginal2D::eval``."""
+        g, fx, fy = self._patch(sx, sy, t0, w1)
+        a = g[:, 0] + fx * (g[:, 1] - g[:, 0])
+        b = g[:, 2] + fx * (g[:, 3] - g[:, 2])
+        return (a + fy * (b - a)) * ((self.nx - 1) * (self.ny - 1))
+
+    def invert(self, ux, uy, t0, w1):
+        """Inverse warp of points (ux, uy) of the unit square; returns (sx, sy, pdf)."""
+        g, fx, fy = self._patch(ux, uy, t0, w1)
         v00, v10, v01, v11, cc0, cc1, r0, r1, m0 = g.T
         gy = 1.0 - fy
         c0 = gy * v00 + fy * v01

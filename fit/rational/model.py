@@ -74,15 +74,20 @@ def flagged(info: dict) -> bool:
     return info.get("feasible") is False
 
 
-def measured_range(info: dict):
-    """``(lo, hi)``: the recorded range of the measured data a function was fitted to (its
-    piece's clusters), or None when the record has none (files written before it was
-    recorded)."""
-    r = (info or {}).get("measured_range")
+def _recorded_range(info: dict, key: str):
+    """``(lo, hi)`` of a function record's ``key``, or None when the record has none."""
+    r = (info or {}).get(key)
     if r is None:
         return None
     lo, hi = (float(v) for v in r)
     return lo, hi
+
+
+def measured_range(info: dict):
+    """``(lo, hi)``: the recorded range of the measured data a function was fitted to (its
+    piece's clusters), or None when the record has none (files written before it was
+    recorded)."""
+    return _recorded_range(info, "measured_range")
 
 
 def vouched_range(info: dict):
@@ -91,11 +96,7 @@ def vouched_range(info: dict):
     when the record has none (fits written before it was recorded). A valid function is clamped
     to it (step 7): no value at a data point changes (each lies inside its interval), and in the
     piece's data-free clusters the fit cannot leave what its data vouch for."""
-    r = (info or {}).get("vouched_range")
-    if r is None:
-        return None
-    lo, hi = (float(v) for v in r)
-    return lo, hi
+    return _recorded_range(info, "vouched_range")
 
 
 def output_clamp(info: dict):

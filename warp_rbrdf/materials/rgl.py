@@ -53,22 +53,6 @@ _OFFSET_FIELDS = (RGL_THETA, RGL_VNDF_DATA, RGL_VNDF_COND, RGL_VNDF_MARG, RGL_LU
                   RGL_LUM_COND, RGL_LUM_MARG, RGL_RGB, RGL_NDF, RGL_SIGMA)
 
 
-def warp_arrays(density: np.ndarray):
-    """(data, cond, marg) of a warp over ``density`` (S, ny, nx) >= 0, normalized per slice in
-    index units: the reference ``Marginal2D`` construction (trapezoidal CDFs)."""
-    d = np.asarray(density, np.float64)
-    cond = np.zeros_like(d)
-    cond[:, :, 1:] = np.cumsum(0.5 * (d[:, :, 1:] + d[:, :, :-1]), axis=2)
-    rows = cond[:, :, -1]
-    marg = np.zeros(d.shape[:2])
-    marg[:, 1:] = np.cumsum(0.5 * (rows[:, 1:] + rows[:, :-1]), axis=1)
-    total = marg[:, -1]
-    if not np.all(np.isfinite(total) & (total > 0)):
-        raise ValueError("a warp slice has no positive finite mass")
-    norm = 1.0 / total
-    return d * norm[:, None, None], cond * norm[:, None, None], marg * norm[:, None]
-
-
 def pack(b) -> tuple:
     """``(floats, header)`` of an :class:`fit.formats.rgl.RGLBRDF`: the float32 tables and a
     function ``header(base) -> int32 (N_RGL_INFO,)`` with offsets relative to ``base``."""
@@ -82,24 +66,22 @@ def pack(b) -> tuple:
         parts.append(a)
         size += a.size
 
-    vndf = np.asarray(b.fields["vndf"].data, np.float64)[0]
-    lum = np.clip(np.asarray(b.fields["luminance"].data, np.float64)[0], 0.0, None)
+    vndf, lum = b.vndf_warp, b.luminance_warp    # normalized densities, conditional, marginal
     ndf = np.asarray(b.fields["ndf"].data, np.float64)
     sigma = np.asarray(b.fields["sigma"].data, np.float64)
     add(RGL_THETA, b.theta_i)
-    for (fd, fc, fm), dens in (((RGL_VNDF_DATA, RGL_VNDF_COND, RGL_VNDF_MARG), vndf),
-                               ((RGL_LUM_DATA, RGL_LUM_COND, RGL_LUM_MARG), lum)):
-        d, c, m = warp_arrays(dens)
-        add(fd, d)
-        add(fc, c)
-        add(fm, m)
+    for (fd, fc, fm), w in (((RGL_VNDF_DATA, RGL_VNDF_COND, RGL_VNDF_MARG), vndf),
+                            ((RGL_LUM_DATA, RGL_LUM_COND, RGL_LUM_MARG), lum)):
+        add(fd, w.data)
+        add(fc, w.cond)
+        add(fm, w.marg)
     add(RGL_RGB, b.rgb)
     add(RGL_NDF, ndf)
     add(RGL_SIGMA, sigma)
     head = np.zeros(N_RGL_INFO, np.int32)
     head[RGL_N_THETA] = b.theta_i.size
-    head[[RGL_VNDF_NY, RGL_VNDF_NX]] = vndf.shape[1:]
-    head[[RGL_LUM_NY, RGL_LUM_NX]] = lum.shape[1:]
+    head[[RGL_VNDF_NY, RGL_VNDF_NX]] = vndf.ny, vndf.nx
+    head[[RGL_LUM_NY, RGL_LUM_NX]] = lum.ny, lum.nx
     head[[RGL_NDF_NY, RGL_NDF_NX]] = ndf.shape
     head[[RGL_SIGMA_NY, RGL_SIGMA_NX]] = sigma.shape
     head[RGL_JACOBIAN] = int(b.jacobian)

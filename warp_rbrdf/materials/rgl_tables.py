@@ -50,13 +50,27 @@ def _cell(u: float, n: int) -> int:
 
 
 @wp.func
+def _frac(u: float, n: int, i: int) -> float:
+    """Position of ``u`` inside cell ``i`` of ``n`` nodes (0 at node i, 1 at node i + 1)."""
+    return u * float(n - 1) - float(i)
+
+
+@wp.func
+def _stride(size: int, n_slices: int) -> int:
+    """Floats from one theta_i slice to the next (0 with a single slice: no interpolation)."""
+    if n_slices < 2:
+        return 0
+    return size
+
+
+@wp.func
 def bilinear(mats: Materials, off: int, ny: int, nx: int, ux: float, uy: float) -> float:
     """Bilinear interpolant of the ``ny x nx`` table at ``rgl_f[off]`` at (ux, uy) in the unit
     square (x along the rows' columns)."""
     ix = _cell(ux, nx)
     iy = _cell(uy, ny)
-    fx = ux * float(nx - 1) - float(ix)
-    fy = uy * float(ny - 1) - float(iy)
+    fx = _frac(ux, nx, ix)
+    fy = _frac(uy, ny, iy)
     k = off + iy * nx + ix
     v00 = mats.rgl_f[k]
     v10 = mats.rgl_f[k + 1]
@@ -91,12 +105,10 @@ def warp_invert(mats: Materials, data: int, cond: int, marg: int, ny: int, nx: i
     (ux, uy) on the unit square."""
     ix = _cell(ux, nx)
     iy = _cell(uy, ny)
-    fx = ux * float(nx - 1) - float(ix)
-    fy = uy * float(ny - 1) - float(iy)
+    fx = _frac(ux, nx, ix)
+    fy = _frac(uy, ny, iy)
     plane = ny * nx
-    stride = plane
-    if n_slices < 2:
-        stride = 0
+    stride = _stride(plane, n_slices)
     k = t0 * plane + iy * nx + ix
     v = _corners(mats, data + k, nx, stride, w1)
     cc0 = _lerp_at(mats, cond + k, stride, w1)
@@ -104,9 +116,7 @@ def warp_invert(mats: Materials, data: int, cond: int, marg: int, ny: int, nx: i
     krow = t0 * plane + iy * nx + nx - 1
     r0 = _lerp_at(mats, cond + krow, stride, w1)
     r1 = _lerp_at(mats, cond + krow + nx, stride, w1)
-    mstride = ny
-    if n_slices < 2:
-        mstride = 0
+    mstride = _stride(ny, n_slices)
     m0 = _lerp_at(mats, marg + t0 * ny + iy, mstride, w1)
     gy = 1.0 - fy
     c0 = gy * v[0] + fy * v[2]
@@ -126,12 +136,10 @@ def warp_eval(mats: Materials, data: int, ny: int, nx: int, n_slices: int, t0: i
     """Normalized density of a warp at (sx, sy) of the unit square (bilinear, lerped slices)."""
     ix = _cell(sx, nx)
     iy = _cell(sy, ny)
-    fx = sx * float(nx - 1) - float(ix)
-    fy = sy * float(ny - 1) - float(iy)
+    fx = _frac(sx, nx, ix)
+    fy = _frac(sy, ny, iy)
     plane = ny * nx
-    stride = plane
-    if n_slices < 2:
-        stride = 0
+    stride = _stride(plane, n_slices)
     v = _corners(mats, data + t0 * plane + iy * nx + ix, nx, stride, w1)
     a = v[0] + fx * (v[1] - v[0])
     b = v[2] + fx * (v[3] - v[2])
@@ -155,11 +163,8 @@ def warp_sample(mats: Materials, data: int, cond: int, marg: int, ny: int, nx: i
     sx = wp.clamp(sx_in, eps, 1.0 - eps)
     sy = wp.clamp(sy_in, eps, 1.0 - eps)
     plane = ny * nx
-    stride = plane
-    mstride = ny
-    if n_slices < 2:
-        stride = 0
-        mstride = 0
+    stride = _stride(plane, n_slices)
+    mstride = _stride(ny, n_slices)
     # row: the last k in [0, ny-2] with marg(k) < sy (marg is non-decreasing, marg(0) = 0)
     mb = marg + t0 * ny
     lo = int(0)
@@ -205,12 +210,10 @@ def rgb_eval(mats: Materials, off: int, ny: int, nx: int, n_slices: int, t0: int
     linear between slices ``t0`` and ``t0 + 1``."""
     ix = _cell(sx, nx)
     iy = _cell(sy, ny)
-    fx = sx * float(nx - 1) - float(ix)
-    fy = sy * float(ny - 1) - float(iy)
+    fx = _frac(sx, nx, ix)
+    fy = _frac(sy, ny, iy)
     plane = ny * nx
-    stride = 3 * plane
-    if n_slices < 2:
-        stride = 0
+    stride = _stride(3 * plane, n_slices)
     out = wp.vec3(0.0)
     for c in range(3):
         v = _corners(mats, off + (t0 * 3 + c) * plane + iy * nx + ix, nx, stride, w1)

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from fit.formats.rgl_interpolants import VNDFWarp, interval, patch
+from fit.formats.rgl_interpolants import interval
 
 from ..materials import rgl as R
 from ..materials.data import Materials
@@ -101,29 +101,17 @@ def kernel_functions(cdfs=()):
 # --------------------------------------------------------------------------------------------
 # NumPy references (float64), on the material's RGLBRDF (``cdf`` is the loaded material's data)
 # --------------------------------------------------------------------------------------------
-_LUMINANCE_WARPS: dict = {}
-
-
-def _luminance_warp(b) -> VNDFWarp:
-    """The luminance warp of an RGLBRDF (its VNDF warp is the reader's own), cached per object."""
-    key = id(b)
-    if key not in _LUMINANCE_WARPS or _LUMINANCE_WARPS[key][0] is not b:
-        lum = np.clip(np.asarray(b.fields["luminance"].data, np.float64)[0], 0.0, None)
-        _LUMINANCE_WARPS[key] = (b, VNDFWarp(lum, b.theta_i))
-    return _LUMINANCE_WARPS[key][1]
-
-
 def numpy_sample(b, wo, xi):
     """NumPy reference of :func:`sample` for an :class:`fit.formats.rgl.RGLBRDF` ``b``:
     ``(wi (N, 3), weight (N,))``, weight 0 where no sample."""
     wo = np.asarray(wo, float)
     xi = np.asarray(xi, float)
-    lum = _luminance_warp(b)
+    lum = b.luminance_warp
     theta_t = np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2])
     phi_t = np.arctan2(wo[:, 1], wo[:, 0])
     t0, w1 = interval(b.theta_i, theta_t)
     sx, sy, p_lum = lum.sample(xi[:, 1], xi[:, 0], t0, w1)
-    ux, uy, p_vndf = b._vndf.sample(sx, sy, t0, w1)
+    ux, uy, p_vndf = b.vndf_warp.sample(sx, sy, t0, w1)
     theta_m = ux * ux * np.pi / 2
     phi_m = (2 * uy - 1) * np.pi + phi_t
     st = np.sin(theta_m)
@@ -141,7 +129,6 @@ def numpy_pdf(b, wi, wo):
     """NumPy reference of :func:`pdf` (1/sr of the light ``wi`` given the view ``wo``)."""
     wi = np.asarray(wi, float)
     wo = np.asarray(wo, float)
-    lum = _luminance_warp(b)
     wm = wi + wo
     wm /= np.linalg.norm(wm, axis=-1, keepdims=True)
     theta_t = np.arctan2(np.hypot(wo[:, 0], wo[:, 1]), wo[:, 2])
@@ -151,24 +138,8 @@ def numpy_pdf(b, wi, wo):
     umy = (np.arctan2(wm[:, 1], wm[:, 0]) - phi_t + np.pi) / (2 * np.pi)
     umy -= np.floor(umy)
     t0, w1 = interval(b.theta_i, theta_t)
-    sx, sy, p_vndf = b._vndf.invert(umx, umy, t0, w1)
-    ix, fx = patch(sx, lum.nx)
-    iy, fy = patch(sy, lum.ny)
-    d0 = lum.data[t0]
-    d1 = lum.data[np.minimum(t0 + 1, lum.S - 1)]
-
-    def bil(d):
-        n = np.arange(len(d))
-        v00, v10 = d[n, iy, ix], d[n, iy, ix + 1]
-        v01, v11 = d[n, iy + 1, ix], d[n, iy + 1, ix + 1]
-        a = v00 + fx * (v10 - v00)
-        bb = v01 + fx * (v11 - v01)
-        return a + fy * (bb - a)
-
-    p_lum = bil(d0)
-    if lum.S > 1:
-        p_lum = p_lum + w1 * (bil(d1) - p_lum)
-    p_lum = p_lum * (lum.nx - 1) * (lum.ny - 1)
+    sx, sy, p_vndf = b.vndf_warp.invert(umx, umy, t0, w1)
+    p_lum = b.luminance_warp.density(sx, sy, t0, w1)
     jac = np.maximum(2 * np.pi**2 * umx * np.hypot(wm[:, 0], wm[:, 1]), MIN_JACOBIAN) * 4 * np.sum(wo * wm, -1)
     ok = (wi[:, 2] > 0) & (wo[:, 2] > 0) & (jac > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
