@@ -27,11 +27,14 @@ THETA_V = [0.0, np.radians(45), np.radians(85)]
 
 
 @pytest.fixture(scope="module")
-def satin():
+def paint():
+    """colodur_napoli_4f, 8 view rows: every row rational with 16 phi pieces (each with the flat
+    end piece: its f cos(theta_l) stays finite at grazing light). satin_rosaline, the fixture
+    before the weighted tables, now keeps 6 of 8 rows (two over the gate either way)."""
     from fit.formats import load_measured
 
-    b = load_measured(data_file("rgl/satin_rosaline_rgb.bsdf"))
-    fit = fit_cdf(b.evaluate, name="satin", table_params=dict(n_v=8), layout="pieces")
+    b = load_measured(data_file("rgl/colodur_napoli_4f_rgb.bsdf"))
+    fit = fit_cdf(b.evaluate, name="paint", table_params=dict(n_v=8), layout="pieces")
     assert fit.layout == "pieces" and not fit.fallback, fit.reason
     return b, fit
 
@@ -64,11 +67,11 @@ def test_pieces_interpolate_the_table_and_are_monotone():
     assert v[0] == pm.phi[0, 3, 2, 0] and v[1] == pytest.approx(pm.phi[0, 3, 2, 0] + pm.phi[0, 3, 2, 1])
 
 
-def test_tampered_pieces_are_detected_and_their_rows_go_to_the_table(satin):
+def test_tampered_pieces_are_detected_and_their_rows_go_to_the_table(paint):
     """A folded piece (negative slope), a gap between pieces (not covering) and a pole
     (denominator through zero) each fail verification; verify() sends that row to the table
     and the sampler then uses the table's density there (alpha = 1 / pdf)."""
-    _, fit = satin
+    _, fit = paint
     cases = {}
     bad = copy.deepcopy(fit)
     bad.maps.theta[2, 10, 2] = -3.0          # a0 < 0: decreasing near the piece's start
@@ -132,12 +135,12 @@ def _direct_ratio(b, fit, v, n):
     return np.var(e_r) / np.var(e_t)
 
 
-def test_pieces_variance_gate(satin):
+def test_pieces_variance_gate(paint):
     """The gate's per-row ratio is the ratio of the two samplers' variances on the same
     (mu, tau); rows measured from limit / 1.25 to twice the limit are measured again on 8x the
     pairs and that decides (default limit and a limit at the median); rows above go to the
     table, with the reason."""
-    b, fit = satin
+    b, fit = paint
     infos = fit.fit_info["rows"]
     ratios = np.array([i["variance"]["ratio"] for i in infos])
     n = fit.fit_info["gate_samples"]
@@ -147,8 +150,8 @@ def test_pieces_variance_gate(satin):
     v = int(np.argmin(first))
     assert "variance_first" not in infos[v] and ratios[v] == pytest.approx(_direct_ratio(b, fit, v, n), rel=1e-9)
     lim = float(np.median(ratios))
-    gated = fit_cdf(b.evaluate, name="satin", table=fit.table, layout="pieces",
-                    pieces_kw=dict(max_variance_ratio=lim, n_u=fit.maps.n_u))
+    gated = fit_cdf(b.evaluate, name="paint", table=fit.table, layout="pieces",         # the same maps
+                    pieces_kw=dict(max_variance_ratio=lim, n_u=fit.maps.n_u, flat_end=fit.maps.flat_end))
     ginfo = gated.fit_info["rows"]
     again = [i for i, r in enumerate(first) if lim / 1.25 < r <= 2 * lim]
     assert again and [i for i, g in enumerate(ginfo) if "variance_first" in g] == again
@@ -162,17 +165,51 @@ def test_pieces_variance_gate(satin):
     assert "sampled with the table" in gated.reason
 
 
+def test_flat_end_pieces_are_tried_on_rows_over_the_gate(paint):
+    """A row over the gate with PCHIP's end slope is built again with slope 0 at mu = 1 in
+    y = sin^2(theta_l); it keeps that end only if it then passes (recorded per row and in the
+    file); its pieces differ from PCHIP's in the last theta piece only and still verify; the
+    flat end reaches theta_l = pi/2 with dy/dmu = 0."""
+    from fit.sampling.pieces import build_pieces
+    from fit.sampling.variance_gate import _fit_pieces_once
+
+    b, fit = paint
+    pm, info = fit.maps, fit.fit_info
+    lim = info["max_variance_ratio"]
+    assert pm.flat_end.any() and info["flat_end_rows"] == int(pm.flat_end.sum())
+    for v, r in enumerate(info["rows"]):
+        if pm.flat_end[v]:
+            assert r["ok"] and r["variance_pchip_end"]["ratio"] > lim >= r["variance"]["ratio"]
+        else:
+            assert "variance_pchip_end" not in r
+    plain = build_pieces(fit.table, pm.n_mu, pm.n_u)
+    f = pm.flat_end
+    np.testing.assert_array_equal(pm.theta[:, :-1], plain.theta[:, :-1])
+    np.testing.assert_array_equal(pm.theta[:, -1, :3], plain.theta[:, -1, :3])
+    np.testing.assert_array_equal(pm.theta[~f, -1], plain.theta[~f, -1])
+    assert np.all(plain.theta[f, -1, 3] > 0) and pm.theta[f, -1, 3].tolist() == [0.0] * int(f.sum())  # a1 = 0
+    assert verify_pieces(pm)["ok"]
+    t, _ = pm.row_theta_map(np.flatnonzero(f), np.ones(int(f.sum())))
+    np.testing.assert_allclose(t, np.pi / 2)
+    # no retry without a gate, and a gate nothing passes keeps every row on the table
+    pm0, info0 = _fit_pieces_once(fit.table, b.evaluate, 64, pm.n_u, None, 4096)
+    assert not pm0.flat_end.any()
+    pm1, info1 = _fit_pieces_once(fit.table, b.evaluate, 64, pm.n_u, 1e-6, 4096)
+    assert not pm1.row_ok.any() and not pm1.flat_end.any()
+    assert all("variance_pchip_end" in r for r in info1["rows"])
+
+
 @pytest.mark.parametrize("gate_samples,gate_recheck", [
     (4096, None),                                            # the rule, on a small gate
     pytest.param(32768, 8, marks=pytest.mark.slow),          # the default gate (20 s)
 ])
-def test_pieces_phi_count_is_the_fewest_that_keeps_rows_within_the_gate(satin, gate_samples, gate_recheck):
+def test_pieces_phi_count_is_the_fewest_that_keeps_rows_within_the_gate(paint, gate_samples, gate_recheck):
     """n_u candidates: the first count whose rows all pass the gate ends the search; else the
     count with the most rational rows, the smallest on ties (checked against each count built
-    alone with the same gate). Satin passes the default gate with the fewest pieces."""
+    alone with the same gate). The paint passes the default gate with the fewest pieces."""
     from fit.sampling.variance_gate import _fit_pieces_once, fit_pieces
 
-    b, fit = satin
+    b, fit = paint
     assert fit.maps.n_u == 16 and fit.fit_info["n_u_tried"] == {16: fit.table.n_v}
     ratios = np.array([i["variance"]["ratio"] for i in fit.fit_info["rows"]])
     lim = float(np.sort(ratios)[-3])          # strict enough that 16 pieces leave rows behind
@@ -192,13 +229,13 @@ def test_pieces_phi_count_is_the_fewest_that_keeps_rows_within_the_gate(satin, g
     assert int(pm.row_ok.sum()) == alone[expect]
 
 
-def test_warp_phi_knots_share_values_and_slopes(satin):
+def test_warp_phi_knots_share_values_and_slopes(paint):
     """The Warp array stores the phi maps as knots (value, slope): they reproduce every piece's
     ends; a verified row whose pieces do not share a knot cannot be packed (ValueError), a
     table row can."""
     from fit.sampling.pieces import pieces_phi_knots
 
-    _, fit = satin
+    _, fit = paint
     pm = fit.maps
     kn = pieces_phi_knots(pm)
     assert kn.shape == pm.phi.shape[:-2] + (pm.n_u + 1, 2)
@@ -214,16 +251,17 @@ def test_warp_phi_knots_share_values_and_slopes(satin):
     pieces_phi_knots(bad)
 
 
-def test_pieces_file_round_trip(satin, tmp_path):
+def test_pieces_file_round_trip(paint, tmp_path):
     """The file stores the table, n_mu, n_u and the row flags; loading rebuilds identical
     pieces and the same samples; a row flag list of the wrong length is an error."""
-    _, fit = satin
+    _, fit = paint
     fit = copy.deepcopy(fit)
     fit.maps.row_ok[3] = False
-    p = tmp_path / "satin_cdf.json"
+    p = tmp_path / "paint_cdf.json"
     fit.save(p)
     g = load(p)
     assert g.layout == "pieces" and g.maps.row_ok.tolist() == fit.maps.row_ok.tolist()
+    assert fit.maps.flat_end.any() and g.maps.flat_end.tolist() == fit.maps.flat_end.tolist()
     np.testing.assert_array_equal(g.maps.theta, fit.maps.theta)
     np.testing.assert_array_equal(g.maps.phi, fit.maps.phi)
     rng = np.random.default_rng(1)
@@ -260,16 +298,16 @@ def warp_rational_samples(brdf, fit, n: int = 4000):
     return r, tv, pv, xi, wi, w
 
 
-def test_pieces_warp_equals_numpy_and_renders_agree(satin):
+def test_pieces_warp_equals_numpy_and_renders_agree(paint):
     """The Warp sampler (constant-time pieces, table rows through the table) gives NumPy's
     directions and alphas; the standard estimator's weight 1 / pdf equals alpha; a render of
-    the satin plane under a constant sky with the pieces sampler agrees with the tabulated
+    the paint plane under a constant sky with the pieces sampler agrees with the tabulated
     sampler's within 4 sigma per channel of the image mean."""
     from warp_rbrdf import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 
-    b, fit = satin
+    b, fit = paint
     fit = copy.deepcopy(fit)
     fit.maps.row_ok[2] = False                # one table row: the Warp code must branch to it
     r, tv, pv, xi, wi, w = warp_rational_samples(b, fit)
@@ -292,12 +330,12 @@ def test_pieces_warp_equals_numpy_and_renders_agree(satin):
     assert np.all(np.abs(m1 - m2) < 4 * np.hypot(s1, s2)), means
 
 
-def test_pieces_inverse_maps_and_plot_cdf(satin, tmp_path):
+def test_pieces_inverse_maps_and_plot_cdf(paint, tmp_path):
     """inverse_theta / inverse_phi are the maps fit.sample uses on rational rows and NaN on
     table rows; plot-cdf draws the pieces layout (two PNGs)."""
     from fit.sampling.plots import plot_cdf
 
-    _, fit = satin
+    _, fit = paint
     fit = copy.deepcopy(fit)
     fit.maps.row_ok[2] = False                # one table row
     n_v = fit.table.n_v
@@ -313,6 +351,6 @@ def test_pieces_inverse_maps_and_plot_cdf(satin, tmp_path):
         tl, pl, _ = fit.sample(tv, mu, tau)
         np.testing.assert_allclose(th, tl, atol=1e-12)
         np.testing.assert_allclose(ph, np.abs(pl), atol=1e-12)
-    files = plot_cdf(fit, tmp_path, prefix="satin")
-    assert [f.name for f in files] == ["satin_theta.png", "satin_phi.png"]
+    files = plot_cdf(fit, tmp_path, prefix="paint")
+    assert [f.name for f in files] == ["paint_theta.png", "paint_phi.png"]
     assert all(f.stat().st_size > 10_000 for f in files)

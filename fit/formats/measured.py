@@ -53,6 +53,16 @@ class MeasuredBRDF:
         Path of the file it was read from ("" if built in memory).
     source_sha256 : str
         sha256 of the source file's bytes ("" if built in memory).
+    weighted, weighted_by : float64 array like ``values`` and ``"light"`` / ``"view"``, or None
+        A source that stores f * cos(theta_x) (an RGL file: x is the direction that is *not*
+        the tensors' incident one) can also give that smooth quantity at every bin centre
+        (``weighted``; bins whose centre dips below the horizon get its grazing value).
+        :meth:`evaluate` then returns ``weighted[bin] / cos(theta_x)`` with the pair's *own*
+        cosine, so rho * cos(theta_x) is the nearest bin's f cos exactly: no 1 / cos of a bin
+        centre near the horizon is multiplied by another direction's cosine (a line of
+        pixels 10-20 % too dark along each bright light's terminator otherwise), and no bin
+        straddling the horizon reads 0. ``values`` (rho at the centres) stays what the
+        projection and the fits use.
     """
 
     values: np.ndarray
@@ -61,6 +71,8 @@ class MeasuredBRDF:
     source: str = ""
     source_sha256: str = ""
     metadata: dict = field(default_factory=dict)
+    weighted: np.ndarray | None = None
+    weighted_by: str | None = None
 
     def __post_init__(self):
         self.values = np.asarray(self.values, dtype=np.float64)
@@ -72,6 +84,11 @@ class MeasuredBRDF:
         if self.valid.shape != self.values.shape:
             raise BRDFFileError(self.source or None, "valid mask shape differs from values shape")
         self.values = np.where(self.valid, self.values, 0.0)
+        if self.weighted is not None:
+            self.weighted = np.asarray(self.weighted, dtype=np.float64)
+            if self.weighted.shape != self.values.shape or self.weighted_by not in ("light", "view"):
+                raise BRDFFileError(self.source or None, "weighted table: shape of values and "
+                                                         "weighted_by 'light' or 'view' expected")
 
     # Bin-centre coordinates -------------------------------------------------------------
     @property
@@ -129,8 +146,21 @@ class MeasuredBRDF:
         wi = np.asarray(wi, float)
         wo = np.asarray(wo, float)
         th, _, td, pd = directions_to_half_diff(wi, wo)
-        out = self.lookup(th, td, pd)
-        return np.where(_above_horizon(*np.broadcast_arrays(wi, wo))[..., None], out, 0.0)
+        above = _above_horizon(*np.broadcast_arrays(wi, wo))[..., None]
+        if self.weighted is None:
+            return np.where(above, self.lookup(th, td, pd), 0.0)
+        i, j, k = np.broadcast_arrays(theta_h_index(th), theta_d_index(td), phi_d_index(pd, self.n_phi_d))
+        cos_x = np.broadcast_arrays(wi, wo)[0 if self.weighted_by == "light" else 1][..., 2:3]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(above, self.weighted[i, j, k] / np.where(above, cos_x, 1.0), 0.0)
+
+    @property
+    def kernel_table(self) -> tuple:
+        """``(table, divide_by)`` for the renderer: ``values`` and 0, or ``weighted`` and the
+        direction whose cosine divides it (1: the light, 2: the view)."""
+        if self.weighted is None:
+            return self.values, 0
+        return self.weighted, 1 if self.weighted_by == "light" else 2
 
     @classmethod
     def from_function(cls, func, name: str = "analytic", reciprocal: bool = True) -> "MeasuredBRDF":

@@ -351,11 +351,16 @@ class RGLBRDF:
         roles; the table's ``evaluate`` reproduces :meth:`evaluate` at the bin centres.
         2.9 M evaluations.
 
-        Bins whose light or view direction is at or below the horizon are invalid (value 0),
-        and so are bins within ``horizon_margin_deg`` of it: there the stored f*cos(theta_o)
-        is divided by a cosine below sin(margin) and the values explode (up to ~1e7 1/sr on
-        the glossy films at cos(theta_o) ~ 1e-5, against <= 31 in the file). Set 0 to keep
-        every above-horizon bin.
+        ``values`` (rho at the centres, what the projection and the fits use): bins whose light
+        or view direction is at or below the horizon are invalid (value 0), and so are bins
+        within ``horizon_margin_deg`` of it: there the stored f*cos(theta_x) is divided by a
+        cosine below sin(margin) and the values explode (up to ~1e7 1/sr on the glossy films at
+        cos ~ 1e-5, against <= 31 in the file). Set 0 to keep every above-horizon bin.
+
+        ``weighted`` (what :meth:`MeasuredBRDF.evaluate` and the renderer look up): the file's
+        own f*cos(theta_x) at every centre, divided at lookup by the pair's own cos(theta_x)
+        (:class:`MeasuredBRDF`), directions of a centre below the horizon lifted to
+        ``GRAZING_Z``; a further 2.9 M evaluations.
         """
         th = theta_h_centres()[:, None, None]
         td = theta_d_centres()[None, :, None]
@@ -365,8 +370,13 @@ class RGLBRDF:
         c_min = max(np.sin(np.radians(horizon_margin_deg)), 0.0)
         above = (wi[..., 2] > c_min) & (wo[..., 2] > c_min)
         valid = np.broadcast_to(above[..., None], FULL_SHAPE + (3,)).copy()
+        # f cos(theta_x) at every centre, directions lifted to GRAZING_Z where a centre dips
+        # below the horizon (a pair of that bin with both directions above reads its grazing value)
+        wt, wx = self._roles(_lift(wi), _lift(wo))
+        weighted = self.reference_eval(wt, wx)
         m = MeasuredBRDF(values=vals, valid=valid, name=self.name, source=self.source,
-                         source_sha256=self.source_sha256)
+                         source_sha256=self.source_sha256, weighted=weighted,
+                         weighted_by="light" if self.incident == "view" else "view")
         m.metadata.update({
             "description": self.description,
             "format": "rgl-epfl tensor_file (RGB), resampled at MERL bin centres over the full "
@@ -380,6 +390,23 @@ class RGLBRDF:
             "incident": self.incident,
         })
         return m
+
+
+#: Lowest cos(theta) a bin centre is lifted to for the weighted table (0.06 deg above the plane).
+GRAZING_Z = 1e-3
+
+
+def _lift(w):
+    """Unit directions with z raised to at least :data:`GRAZING_Z` (azimuth kept)."""
+    w = np.array(w, dtype=np.float64)
+    low = w[..., 2] < GRAZING_Z
+    if np.any(low):
+        r = np.hypot(w[..., 0], w[..., 1])
+        s = np.sqrt(1.0 - GRAZING_Z**2) / np.maximum(r, 1e-300)
+        w[low, 0] *= s[low]
+        w[low, 1] *= s[low]
+        w[low, 2] = GRAZING_Z
+    return w
 
 
 def read_rgl(path, incident: str = "view") -> RGLBRDF:

@@ -59,6 +59,13 @@ which a rational piece follows badly. The first and last theta pieces therefore 
 ``theta_l = asin(sqrt(y))``, ``dtheta/dmu = (dy/dmu) / (2 sqrt(y (1 - y)))``; alpha then uses
 ``dtheta/dmu sin(theta_l) = (dy/dmu) / (2 cos(theta_l))``. Measured on vch_golden_yellow (64 /
 32 pieces): the per-row variance ratio to the table has median 1.07 without this, 0.94 with it.
+The end knot's slope in y is PCHIP's, right for a density that vanishes like cos(theta_l) at the
+horizon. Where it does not (an RGL file's f cos(theta_l) stays finite at grazing light, and the
+weighted tables of :class:`fit.formats.measured.MeasuredBRDF` keep it), the table's inverse CDF
+reaches y = 1 with slope 0 and PCHIP's slope puts too little density near the horizon:
+satin_rosaline, 8 view rows, variance ratios 0.9-11.6 (6 rows over the gate). A row the gate
+rejects is therefore built again with slope 0 at that knot (``PieceMaps.flat_end``) and
+measured again; it keeps the flat end if that passes (satin_rosaline: 0.67-1.46).
 
 Rows whose pieces fail :func:`verify_pieces`, and rows the variance gate rejects, are sampled
 with the table (``PieceMaps.row_ok`` False).
@@ -88,6 +95,9 @@ class PieceMaps:
     ``phi``: (n_v, n_mu, n_u, 4) the same for |phi_l| (rad) on [0, pi], per theta piece.
     ``theta_knots``: (n_v, n_mu + 1) theta_l (rad) at the knots mu = k / n_mu.
     ``row_ok``: (n_v,) bool, False where the row is sampled with the table.
+    ``flat_end``: (n_v,) bool (None: all False), True where the last theta piece ends with
+    slope 0 in y = sin^2(theta_l) (the density in theta_l does not vanish at the horizon; see
+    the module docstring).
 
     Per row: :meth:`row_theta_map`, :meth:`row_phi_map`. The layout interface of
     :class:`fit.sampling.cdf_file.CDFFit` (``theta_map``, ``phi_map``, ``table_rows``,
@@ -102,6 +112,11 @@ class PieceMaps:
     theta_knots: np.ndarray
     row_ok: np.ndarray
     info: dict = field(default_factory=dict)
+    flat_end: np.ndarray | None = None
+
+    def __post_init__(self):
+        n_v = self.theta.shape[0]
+        self.flat_end = np.zeros(n_v, bool) if self.flat_end is None else np.asarray(self.flat_end, bool).copy()
 
     @property
     def n_mu(self) -> int:
@@ -169,7 +184,10 @@ class PieceMaps:
 
     def to_dict(self, name: str = "") -> dict:
         """The CDF file's ``pieces`` entry: the pieces are rebuilt from the table on load."""
-        return {"pieces": {"n_mu": self.n_mu, "n_u": self.n_u, "row_ok": [bool(x) for x in self.row_ok]}}
+        d = {"n_mu": self.n_mu, "n_u": self.n_u, "row_ok": [bool(x) for x in self.row_ok]}
+        if self.flat_end.any():       # absent in files written before it existed: all False
+            d["flat_end"] = [bool(x) for x in self.flat_end]
+        return {"pieces": d}
 
     @classmethod
     def from_dict(cls, pd: dict, table: CDFTable) -> "PieceMaps":
@@ -177,7 +195,10 @@ class PieceMaps:
         the row flags do not fit the table or a rational row's pieces fail verification."""
         if len(pd["row_ok"]) != table.n_v:
             raise ValueError(f"{len(pd['row_ok'])} row flags for {table.n_v} table rows")
-        pm = build_pieces(table, int(pd["n_mu"]), int(pd["n_u"]), row_ok=pd["row_ok"])
+        flat = pd.get("flat_end")
+        if flat is not None and len(flat) != table.n_v:
+            raise ValueError(f"{len(flat)} flat_end flags for {table.n_v} table rows")
+        pm = build_pieces(table, int(pd["n_mu"]), int(pd["n_u"]), row_ok=pd["row_ok"], flat_end=flat)
         bad = ~np.asarray(verify_pieces(pm)["rows"]) & pm.row_ok
         if bad.any():
             raise ValueError(f"pieces of rows {np.flatnonzero(bad).tolist()} fail verification")
@@ -234,20 +255,24 @@ def _pchip_slopes(y: np.ndarray) -> np.ndarray:
     return PchipInterpolator(t, y, axis=-1)(t, 1)
 
 
-def build_pieces(table: CDFTable, n_mu: int = 64, n_u: int = 32, row_ok=None) -> PieceMaps:
-    """The pieces of every row of ``table`` (``row_ok``: all True unless given)."""
+def build_pieces(table: CDFTable, n_mu: int = 64, n_u: int = 32, row_ok=None, flat_end=None) -> PieceMaps:
+    """The pieces of every row of ``table`` (``row_ok``: all True unless given; ``flat_end``:
+    rows whose last theta piece ends with slope 0 in y, all False unless given)."""
     if n_mu < 3 or n_u < 1:
         raise ValueError(f"need n_mu >= 3 and n_u >= 1 pieces, got {n_mu}, {n_u}")
     yt = _knots(table.cdf_theta, HALF_PI, n_mu)             # (n_v, n_mu + 1)
     theta = rq_pieces(yt, _pchip_slopes(yt))
     ys = np.sin(yt) ** 2
     ys[:, 0], ys[:, -1] = 0.0, 1.0
-    end = rq_pieces(ys, _pchip_slopes(ys))
+    ds = _pchip_slopes(ys)
+    flat = np.zeros(table.n_v, bool) if flat_end is None else np.asarray(flat_end, bool)
+    ds[flat, -1] = 0.0
+    end = rq_pieces(ys, ds)
     theta[:, 0], theta[:, -1] = end[:, 0], end[:, -1]
     yp = _knots(_mixed_phi_cdf(table, yt), np.pi, n_u)      # (n_v, n_mu, n_u + 1)
     phi = rq_pieces(yp, _pchip_slopes(yp))
     ok = np.ones(table.n_v, bool) if row_ok is None else np.asarray(row_ok, bool).copy()
-    return PieceMaps(theta=theta, phi=phi, theta_knots=yt, row_ok=ok)
+    return PieceMaps(theta=theta, phi=phi, theta_knots=yt, row_ok=ok, flat_end=flat)
 
 
 def _mixed_phi_cdf(table: CDFTable, knots: np.ndarray) -> np.ndarray:

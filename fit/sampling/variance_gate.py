@@ -51,7 +51,7 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
                n_u=PIECES_DEFAULTS["n_u"],
                max_variance_ratio: float | None = PIECES_DEFAULTS["max_variance_ratio"],
                gate_samples: int = PIECES_DEFAULTS["gate_samples"],
-               gate_recheck: int | None = PIECES_DEFAULTS["gate_recheck"], log=None):
+               gate_recheck: int | None = PIECES_DEFAULTS["gate_recheck"], flat_end=None, log=None):
     """Build, verify and gate the pieces of ``table``. ``evaluate(wi, wo) -> (N, 3)`` (the
     material tabulated) is needed for the variance gate (``max_variance_ratio`` None: no
     gate). A row whose ratio on ``gate_samples`` pairs lies between limit / 1.25 and twice the
@@ -63,12 +63,15 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
     (default 16, 32, 64): the fewest that keep every row within the gate, else the count with the most rational rows
     (the smallest on ties). Returns ``(PieceMaps, info)``; ``info["rows"]`` has per row
     ``ok``, ``reason`` and the gate's ``variance`` dict, ``info["n_u_tried"]`` the rational
-    rows per candidate tried."""
+    rows per candidate tried. ``flat_end``: (n_v,) bool, rows built with the flat end piece from
+    the start (default: none; a row over the gate is tried again with it, see
+    :func:`_fit_pieces_once`)."""
     log = log or (lambda s: None)
     t0 = time.perf_counter()
     best, tried = None, {}
     for nu in sorted(np.atleast_1d(n_u).astype(int).tolist()):
-        pm, info = _fit_pieces_once(table, evaluate, n_mu, nu, max_variance_ratio, gate_samples, gate_recheck)
+        pm, info = _fit_pieces_once(table, evaluate, n_mu, nu, max_variance_ratio, gate_samples, gate_recheck,
+                                    flat_end)
         tried[nu] = info["verified_rows"]
         if best is None or info["verified_rows"] > best[1]["verified_rows"]:
             best = (pm, info)
@@ -86,12 +89,27 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
     return pm, info
 
 
-def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_samples, gate_recheck=None):
-    """:func:`fit_pieces` for one phi piece count."""
-    pm = build_pieces(table, n_mu, n_u)
+def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_samples, gate_recheck=None,
+                     flat_end=None):
+    """:func:`fit_pieces` for one phi piece count. Rows over the gate are tried again with a
+    flat end piece (:attr:`fit.sampling.pieces.PieceMaps.flat_end`; rows already built with it
+    are not) and keep it if it passes."""
+    pm = build_pieces(table, n_mu, n_u, flat_end=flat_end)
     ver = verify_pieces(pm)
+
+    def gate(maps, v):
+        ungated = PieceMaps(maps.theta, maps.phi, maps.theta_knots, np.ones(table.n_v, bool))
+
+        def ratio(n):
+            return variance_ratio(table, lambda tv, m, t: sample_pieces(table, ungated, tv, m, t),
+                                  evaluate, v, n)
+        out = {"variance": ratio(gate_samples)}
+        if gate_recheck and max_variance_ratio / 1.25 < out["variance"]["ratio"] <= 2.0 * max_variance_ratio:
+            out["variance_first"] = out["variance"]
+            out["variance"] = ratio(gate_samples * gate_recheck)
+        return out
+
     rows = []
-    ungated = PieceMaps(pm.theta, pm.phi, pm.theta_knots, np.ones(table.n_v, bool))
     for v in range(table.n_v):
         r = {"ok": bool(ver["rows"][v])}
         if not r["ok"]:
@@ -99,20 +117,32 @@ def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_sample
         elif table.row_fallback[v]:
             r.update(ok=False, reason="table row without BRDF mass (cosine fallback row)")
         elif max_variance_ratio is not None and evaluate is not None:
-            def ratio(n):
-                return variance_ratio(table, lambda tv, m, t: sample_pieces(table, ungated, tv, m, t),
-                                      evaluate, v, n)
-            r["variance"] = ratio(gate_samples)
-            if gate_recheck and max_variance_ratio / 1.25 < r["variance"]["ratio"] <= 2.0 * max_variance_ratio:
-                r["variance_first"] = r["variance"]
-                r["variance"] = ratio(gate_samples * gate_recheck)
+            r.update(gate(pm, v))
             if not r["variance"]["ratio"] <= max_variance_ratio:
                 r.update(ok=False, reason=f"variance > {max_variance_ratio:g} x the table's")
         rows.append(r)
         pm.row_ok[v] = r["ok"]
+    retry = [v for v, r in enumerate(rows) if r.get("reason", "").startswith("variance") and not pm.flat_end[v]]
+    if retry:
+        flat = pm.flat_end.copy()
+        flat[retry] = True
+        alt = build_pieces(table, n_mu, n_u, flat_end=flat)
+        alt_rows = verify_pieces(alt)["rows"]
+        for v in retry:
+            if not alt_rows[v]:
+                continue
+            g = gate(alt, v)
+            rows[v]["variance_pchip_end"] = rows[v]["variance"]
+            if g["variance"]["ratio"] <= max_variance_ratio:
+                rows[v] = {"ok": True, "flat_end": True, **g, "variance_pchip_end": rows[v]["variance"]}
+                pm.flat_end[v] = True
+                pm.row_ok[v] = True
+        if pm.flat_end.any():        # the kept flat ends' coefficients (only their last theta piece differs)
+            pm.theta[pm.flat_end] = alt.theta[pm.flat_end]
     info = {"n_mu": n_mu, "n_u": n_u, "max_variance_ratio": max_variance_ratio,
             "gate_samples": gate_samples, "gate_recheck": gate_recheck,
             "verified_rows": int(pm.row_ok.sum()), "n_rows": table.n_v, "rows": rows,
+            "flat_end_rows": int(pm.flat_end.sum()),
             "verification": {k: ver[k] for k in ("ok", "failures")}}
     return pm, info
 

@@ -24,6 +24,12 @@ from .frame import (
 )
 
 
+#: ``Materials.param`` of a measured material: n_phi_d + PARAM_DIVIDE * divide_by, divide_by 0
+#: (the table holds rho), 1 (f cos(theta_light): divide by the light's cosine), 2 (the view's)
+#: (:attr:`fit.formats.measured.MeasuredBRDF.kernel_table`).
+PARAM_DIVIDE = 1000
+
+
 def read(spec, scene_file, key):
     """The :class:`MeasuredBRDF` of a spec (``spec.data`` when given in memory, else its file)."""
     if spec.data is not None:
@@ -41,8 +47,9 @@ def scaled(evaluate, scale):
 
 def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     b = read(spec, scene_file, key)
-    return LoadedMaterial(spec, b, scaled(b.evaluate, spec.scale), scale=spec.scale, table=b.values,
-                          param=b.n_phi_d)
+    table, divide_by = b.kernel_table
+    return LoadedMaterial(spec, b, scaled(b.evaluate, spec.scale), scale=spec.scale, table=table,
+                          param=b.n_phi_d + PARAM_DIVIDE * divide_by)
 
 
 @wp.func
@@ -52,9 +59,15 @@ def measured_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     a = half_diff(wi, wo)
     i = merl_theta_h_index(a[0])
     j = merl_theta_d_index(a[1])
-    n_pd = mats.param[m]   # 180: folded by reciprocity, 360: full circle
+    p = mats.param[m]
+    n_pd = p % PARAM_DIVIDE      # 180: folded by reciprocity, 360: full circle
+    divide_by = p // PARAM_DIVIDE
     k = merl_phi_d_index(a[2], n_pd)
     v = mats.tables[mats.offset[m] + (i * N_TD + j) * n_pd + k]
+    if divide_by == 1:           # the table holds f cos(theta_light) (RGL-derived, view incident)
+        v = v / wi[2]
+    elif divide_by == 2:         # f cos(theta_view) (RGL-derived, light incident)
+        v = v / wo[2]
     return wp.cw_mul(v, mats.scale[m])
 
 
