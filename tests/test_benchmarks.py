@@ -4,10 +4,13 @@ tested."""
 from __future__ import annotations
 
 import importlib
+import json
 
+import numpy as np
 import pytest
+from conftest import IN_CI, data_file
 
-BENCHMARKS = ("bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers")
+BENCHMARKS = ("bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers", "bench_vs_mitsuba")
 
 
 @pytest.mark.parametrize("name", BENCHMARKS)
@@ -18,3 +21,77 @@ def test_benchmark_help(name, capsys):
     assert e.value.code == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: ") and f"python -m benchmarks.{name}" in out
+
+
+# --------------------------------------------------------------------------------------------
+# bench_vs_mitsuba: its error estimate and time-to-target arithmetic, and a smoke run
+def test_seed_pair_rmse_and_time_to_target():
+    """The seed-pair estimate recovers a known per-pixel noise, and the time to the target is
+    exact for RMSE ~ N^-1/2 with time ~ N (interpolated between bracketing rungs, extrapolated
+    past the last, scaled down from a first rung already below it)."""
+    from benchmarks.bench_vs_mitsuba import (
+        Rung,
+        last_slope,
+        relative_rmse,
+        time_to_target,
+        time_to_target_slope,
+    )
+
+    rng = np.random.default_rng(5)
+    truth = rng.uniform(0.5, 1.5, (64, 64, 3))
+    mask = np.zeros((64, 64), bool)
+    mask[8:56, 8:56] = True
+    sigma = 0.05
+    e, mean = relative_rmse(truth + rng.normal(0, sigma, truth.shape), truth + rng.normal(0, sigma, truth.shape), mask)
+    assert abs(mean / truth[mask].mean() - 1) < 0.01
+    assert abs(e / (sigma / truth[mask].mean()) - 1) < 0.03
+
+    def rungs(spps, c=0.8, rate=1000.0, p=0.5):
+        return [Rung(n, n / rate, c * n ** -p, 1.0) for n in spps]
+
+    exact = (0.8 / 0.01) ** 2 / 1000.0          # N at 1 % over the rate
+    t, how = time_to_target(rungs([4, 16, 64]), 0.01)
+    assert how == "extrapolated" and np.isclose(t, exact)
+    t, how = time_to_target(rungs([1024, 4096, 16384]), 0.01)
+    assert how == "interpolated" and np.isclose(t, exact)
+    t, how = time_to_target(rungs([16384, 65536]), 0.01)
+    assert how == "measured" and np.isclose(t, exact)
+    assert np.isclose(last_slope(rungs([4, 16, 64])), -0.5)
+    # a steeper measured slope: the slope extrapolation follows it, N^-1/2 overstates the time
+    steep = rungs([4, 16, 64], p=0.75)
+    exact_steep = (0.8 / 0.01) ** (1 / 0.75) / 1000.0
+    assert np.isclose(time_to_target_slope(steep, 0.01), exact_steep)
+    assert time_to_target(steep, 0.01)[0] > exact_steep
+
+
+def test_bench_vs_mitsuba_smoke(tmp_path):
+    """A tiny run (Mitsuba's scalar variant, no system package): every number is there, and the
+    check against a converged Mitsuba reference says the seed-pair estimate is right for both
+    renderers and that our rgl render agrees with Mitsuba's (what the benchmark rests on)."""
+    from warp_rbrdf import mitsuba_reference as MR
+
+    if not MR.available():
+        if IN_CI:
+            pytest.fail("Mitsuba 3 is not installed (the test extra installs it)")
+        pytest.skip("Mitsuba 3 is not installed")
+    data_file("rgl/paper_white_rgb.bsdf")
+    data_file("envmaps/studio_small_03_1k.hdr")
+    from benchmarks import bench_vs_mitsuba as B
+
+    out = tmp_path / "b.json"
+    assert B.main(["--materials", "paper_white_rgb", "--maps", "studio", "--resolution", "48",
+                   "--spp", "4", "16", "--variant", MR.VARIANT, "--check", "1", "--check-spp", "512",
+                   "--json", str(out)]) == 0
+    res = json.loads(out.read_text())
+    (case,) = res["cases"]
+    assert case["best"] == "rgl:mis-rgl" and set(case["renderers"]) == {"rgl:mis-rgl", "mitsuba"}
+    for r in case["renderers"].values():
+        assert [x["spp"] for x in r["rungs"]] == [4, 16]
+        assert r["time_to_target_s"] > 0 and r["samples_per_s"] > 0 and r["how"] == "extrapolated"
+        assert r["rungs"][1]["rel_rmse"] < r["rungs"][0]["rel_rmse"]
+    assert np.isfinite(case["ratio"]) and case["ratio"] > 0
+    chk = case["check"]["renderers"]
+    for label in ("rgl:mis-rgl", "mitsuba"):
+        assert 0.8 < chk[label]["ratio"] < 1.25, (label, chk[label])   # estimate == error vs reference
+        assert abs(chk[label]["mean_z"]) < 5, (label, chk[label])       # same converged mean
+    assert res["summary"]["cases"] == 1 and np.isfinite(res["summary"]["median_rate_ratio"])

@@ -93,12 +93,14 @@ def _specs():
 
     brdf = MeasuredBRDF.from_function(glossy_lobe(exponent=40.0), name="glossy")
     rgl = read_rgl(data_file("rgl/cc_ibiza_sunset_rgb.bsdf"))
+    s = "mis"   # the evaluation contract needs no sampler data (the defaults tabulate at load)
     return {
-        "rgl": MaterialSpec(name="rgl", type="rgl", data=rgl, scale=(1.0, 0.8, 1.2)),
-        "lambert": MaterialSpec(name="lambert", type="lambert", albedo=(0.2, 0.5, 0.9)),
-        "measured": MaterialSpec(name="measured", type="measured", data=brdf, scale=(1.0, 0.5, 2.0)),
-        "projected": MaterialSpec(name="projected", type="projected", data=project(brdf), scale=(0.5, 1.0, 1.0)),
-        "rational": MaterialSpec(name="rational", type="rational",
+        "rgl": MaterialSpec(name="rgl", type="rgl", data=rgl, scale=(1.0, 0.8, 1.2), sampler=s),
+        "lambert": MaterialSpec(name="lambert", type="lambert", albedo=(0.2, 0.5, 0.9), sampler=s),
+        "measured": MaterialSpec(name="measured", type="measured", data=brdf, scale=(1.0, 0.5, 2.0), sampler=s),
+        "projected": MaterialSpec(name="projected", type="projected", data=project(brdf), scale=(0.5, 1.0, 1.0),
+                                  sampler=s),
+        "rational": MaterialSpec(name="rational", type="rational", sampler=s,
                                  data=load(PACKAGE_DATA / "satin_rosaline_rgb.json"), scale=(1.0, 1.0, 0.7)),
     }
 
@@ -133,3 +135,60 @@ def test_material_warp_equals_numpy(all_kinds, kind):
     # float32 angles: a few directions fall into the neighbouring table bin
     close = np.all(np.isclose(got, ref, rtol=1e-4, atol=1e-6), axis=1)
     assert close.mean() > 0.995, (kind, close.mean())
+
+
+# --------------------------------------------------------------------------------------------
+# Default strategy per material kind
+@pytest.mark.parametrize("kind", registry.MATERIALS, ids=lambda k: k.name)
+@pytest.mark.parametrize("cdf", [False, True])
+def test_default_strategy_is_the_kinds_own_sampling_in_mis(kind, cdf):
+    """Each kind's default is MIS (environment + BSDF sample) with a BSDF technique the kind can
+    use; never the cosine sample for a measured material (only Lambert's own density is the
+    cosine); a technique that needs verified rational inverse CDFs only with a cdf file; an
+    inverse-CDF technique only for kinds that tabulate (the ones with data to sample)."""
+    name = registry.default_strategy(kind.name, cdf)
+    s = registry.strategy(name)
+    t = registry.technique(s.technique)
+    assert s.mis and s.estimator == "pdf"
+    assert t.material in (None, kind.name)
+    assert (t.name == "cosine") == (kind.name == "lambert"), (kind.name, name)
+    assert not t.needs_fit or cdf
+    assert t.name != "uniform"
+
+
+def test_default_strategy_choices():
+    """The choices the registry documents (a change here is a change of the renderer's default)."""
+    d = registry.default_strategy
+    assert (d("lambert"), d("rgl"), d("measured"), d("projected"), d("rational")) == (
+        "mis", "mis-rgl", "mis-tabulated", "mis-tabulated", "mis-tabulated")
+    assert d("rational", cdf=True) == "mis-rational" and d("measured", cdf=True) == "mis-tabulated"
+    with pytest.raises(KeyError, match="unknown material type"):
+        d("velvet")
+
+
+def test_scene_default_sampler_per_kind(tmp_path):
+    """A scene that names no sampler gives each material its kind's default; [integrator]
+    sampler replaces the defaults, a material's own sampler replaces both; the Python API
+    (MaterialSpec without sampler) resolves the same default."""
+    cdf = tmp_path / "c.json"
+    cdf.write_text("{}")                        # only its presence matters to the parser
+    fit = tmp_path / "f.json"
+    fit.write_text("{}")
+    bsdf = data_file("rgl/cc_ibiza_sunset_rgb.bsdf")
+    body = (f'[materials.a]\ntype = "lambert"\n'
+            f'[materials.b]\ntype = "rgl"\nfile = "{bsdf}"\n'
+            f'[materials.c]\ntype = "measured"\nfile = "{bsdf}"\n'
+            f'[materials.d]\ntype = "rational"\nfile = "{fit}"\n'
+            f'[materials.e]\ntype = "rational"\nfile = "{fit}"\ncdf = "{cdf}"\n'
+            f'[materials.f]\ntype = "measured"\nfile = "{bsdf}"\nsampler = "light"\n')
+    sc = parse_scene(body)
+    got = {k: m.sampler for k, m in sc.materials.items()}
+    assert sc.integrator.sampler is None
+    assert got == {"a": "mis", "b": "mis-rgl", "c": "mis-tabulated", "d": "mis-tabulated",
+                   "e": "mis-rational", "f": "light"}
+    sc = parse_scene('[integrator]\nsampler = "cosine"\n' + body)
+    got = {k: m.sampler for k, m in sc.materials.items()}
+    assert set(got.values()) == {"cosine", "light"} and got["f"] == "light"
+    assert MaterialSpec(name="x", type="rgl").sampler == "mis-rgl"
+    assert MaterialSpec(name="x", type="rational", cdf=cdf).sampler == "mis-rational"
+    assert MaterialSpec(name="x", type="measured", sampler="mis").sampler == "mis"

@@ -2,7 +2,9 @@
 
 It needs no file outside the package, so ``rbrdf render`` works on a fresh clone. The sphere
 uses a rational BRDF shipped in ``warp_rbrdf/data/*.json`` when one exists; otherwise a Lambert
-fallback.
+fallback. No sampler is named, so every material uses its kind's default strategy
+(:func:`warp_rbrdf.registry.default_strategy`): the rational sphere ``mis-tabulated`` (its
+inverse-CDF table is tabulated from the fit at load), the floor ``mis``.
 """
 from __future__ import annotations
 
@@ -21,7 +23,6 @@ resolution = [256, 256]
 spp = 16
 seed = 0
 max_depth = 1
-sampler = "mis"
 
 [materials.sphere]
 {sphere_material}

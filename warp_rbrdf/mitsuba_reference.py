@@ -339,3 +339,94 @@ def sphere_mask(resolution: int, margin: float = 1.0) -> np.ndarray:
     alpha = np.arcsin(SPHERE_RADIUS / np.linalg.norm(CAMERA_ORIGIN))
     pix = np.arctan(2 * t / n)   # angular size of a pixel at the centre (an upper bound off it)
     return ang < alpha - (margin + 0.75) * pix
+
+
+# --------------------------------------------------------------------------------------------
+# Variants and timed renders (benchmarks/bench_vs_mitsuba.py)
+#: Mitsuba's LLVM variant (vectorized, JIT-compiled with LLVM; needs a system libLLVM).
+LLVM_VARIANT = "llvm_ad_rgb"
+#: Where :func:`find_libllvm` looks for the shared LLVM library Dr.Jit loads (Debian's
+#: ``libllvm19`` package first; ``DRJIT_LIBLLVM_PATH`` wins when set).
+LIBLLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM.so.19*", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",
+                      "/usr/lib/llvm-19/lib/libLLVM*.so*", "/usr/lib/aarch64-linux-gnu/libLLVM.so.19*",
+                      "/usr/lib/x86_64-linux-gnu/libLLVM-1[5-8].so", "/usr/lib/x86_64-linux-gnu/libLLVM.so.1[5-8]*")
+
+
+def find_libllvm() -> str | None:
+    """The shared LLVM library for Dr.Jit's LLVM backend: ``$DRJIT_LIBLLVM_PATH`` when set,
+    else the first existing match of :data:`LIBLLVM_CANDIDATES` (LLVM 19 preferred), else None."""
+    import glob
+
+    env = os.environ.get("DRJIT_LIBLLVM_PATH")
+    if env:
+        return env
+    for pattern in LIBLLVM_CANDIDATES:
+        hits = sorted(glob.glob(pattern))
+        if hits:
+            return hits[0]
+    return None
+
+
+def set_variant(variant: str = VARIANT) -> str:
+    """Select Mitsuba's ``variant`` for the functions of this module that build and render
+    scenes (:func:`timing_scene`, :func:`render_timed`, :func:`render_sphere`) and return it.
+
+    An ``llvm_*`` variant needs a shared libLLVM: when ``DRJIT_LIBLLVM_PATH`` is unset it is
+    set to :func:`find_libllvm`'s answer before the variant is selected. Raises
+    :class:`ReferenceUnavailable` when Mitsuba or the variant's backend cannot be used. The
+    cached ``measured`` plugins of :func:`load_bsdf` (``eval`` / ``pdf`` / ``sample``) are those
+    of the variant they were first loaded with: call ``set_variant(VARIANT)`` before using them
+    again."""
+    mi = _mi()
+    if variant.startswith("llvm"):
+        lib = find_libllvm()
+        if lib is None:
+            raise ReferenceUnavailable(f"Mitsuba's {variant!r} variant needs a shared libLLVM (Debian: "
+                                       f"apt-get install libllvm19) or DRJIT_LIBLLVM_PATH")
+        os.environ.setdefault("DRJIT_LIBLLVM_PATH", lib)
+    try:
+        mi.set_variant(variant)
+        if variant.startswith("llvm"):
+            import drjit as dr
+
+            if not dr.has_backend(dr.JitBackend.LLVM):
+                raise RuntimeError(f"Dr.Jit could not load LLVM from {os.environ['DRJIT_LIBLLVM_PATH']}")
+    except Exception as e:  # noqa: BLE001 - unknown variant, missing backend: one line
+        mi.set_variant(VARIANT)    # back to the variant this module's other functions expect
+        raise ReferenceUnavailable(f"Mitsuba variant {variant!r} is not usable: {e}") from None
+    return mi.variant()
+
+
+def set_thread_count(threads: int) -> None:
+    """Number of worker threads Mitsuba renders with (Dr.Jit's thread pool, used by every
+    variant's ``mi.render`` on the CPU)."""
+    import drjit as dr
+
+    _mi()
+    dr.set_thread_count(int(threads))
+
+
+def timing_scene(material, envmap, spp: int, resolution: int = 256, sampler: str = "multijitter",
+                 clamp_negative: bool = True):
+    """The reference scene of :func:`render_sphere` loaded in the **current** variant (see
+    :func:`set_variant`), with Mitsuba's ``sampler`` plugin (``independent``, ``stratified``,
+    ``multijitter``, ``orthogonal``, ``ldsampler``) drawing ``spp`` samples per pixel. The
+    loaded ``mi.Scene`` for :func:`render_timed`."""
+    mi = _mi()
+    d = mitsuba_scene_dict(material, envmap, spp, resolution, clamp_negative)
+    d["sensor"]["sampler"] = {"type": sampler, "sample_count": int(spp)}
+    return mi.load_dict(d)
+
+
+def render_timed(scene, spp: int, seed: int) -> tuple[np.ndarray, float]:
+    """One ``mi.render`` of a loaded scene at ``spp`` samples per pixel and ``seed``: the
+    (H, W, 3) float64 image (row 0 at the top) and the wall-clock seconds of the render call
+    including the transfer of the image to NumPy (which forces a JIT variant to finish; a JIT
+    variant compiles its kernel on the first render of a new ``spp`` / scene layout, so warm up
+    before timing)."""
+    import time
+
+    mi = _mi()
+    t0 = time.perf_counter()
+    img = np.array(mi.render(scene, spp=int(spp), seed=int(seed)), dtype=np.float64)[..., :3]
+    return img, time.perf_counter() - t0

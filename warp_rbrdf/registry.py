@@ -19,6 +19,14 @@ is imported only when a scene uses it (:meth:`MaterialKind.impl`, :meth:`Techniq
   one environment sample (``light``), one BSDF sample with a technique (``technique``), both
   combined by the power heuristic when both are drawn, and which strategy replaces it when a
   rational inverse CDF fails its verification (``fallback``).
+* A material kind's **default strategy** (:func:`default_strategy`: used when neither the
+  material nor ``[integrator]`` names a sampler) is its own importance sampling combined with
+  one environment sample by the power heuristic -- never the cosine sample for a measured
+  material: ``lambert`` ``mis`` (the cosine density is Lambert's own, exact), ``rgl``
+  ``mis-rgl`` (the format's own warps), ``measured`` and ``projected`` ``mis-tabulated`` (their
+  own table, built at load or read from ``cdf``), ``rational`` ``mis-rational`` with a ``cdf``
+  file (its verified rational inverse CDFs) and ``mis-tabulated`` without one (fitting rational
+  inverse CDFs at load takes minutes; tabulating takes seconds).
 
 Adding a material: one module with ``load`` and ``kernel_eval`` plus one :data:`MATERIALS`
 entry. Adding a technique: one module plus one :data:`TECHNIQUES` entry (and strategies that
@@ -41,6 +49,8 @@ class MaterialKind:
     module: str = ""          # implementation module
     keys: tuple = ()          # scene keys it reads besides type / sampler / cdf, among
                               # albedo, file, scale, statistic, incident (see scene-format)
+    default_sampler: str = "mis"            # strategy when neither material nor integrator names one
+    default_sampler_cdf: str | None = None  # the same when the material has a ``cdf`` (None: as without)
 
     def impl(self):
         return importlib.import_module(self.module)
@@ -92,20 +102,23 @@ COMBINE_LIGHT = 1    # environment sample only (the technique continues longer p
 COMBINE_MIS = 2      # both, power heuristic
 
 MATERIALS = (
-    MaterialKind("lambert", 0, "albedo / pi", (), "warp_rbrdf.materials.lambert", ("albedo",)),
+    MaterialKind("lambert", 0, "albedo / pi", (), "warp_rbrdf.materials.lambert", ("albedo",),
+                 default_sampler="mis"),
     MaterialKind("measured", 1, "3-D (theta_h, theta_d, phi_d) MERL-grid table, nearest bin "
                  "(MERL .binary, or RGL .bsdf resampled)", (".binary", ".bsdf"),
-                 "warp_rbrdf.materials.measured", ("file", "scale", "incident")),
+                 "warp_rbrdf.materials.measured", ("file", "scale", "incident"),
+                 default_sampler="mis-tabulated"),
     MaterialKind("projected", 2, "2-D (theta_h, theta_d) median projection, nearest cluster "
                  "(.binary/.bsdf projected at load, or an .npz from `rbrdf-fit project`)",
                  (".binary", ".bsdf", ".npz"), "warp_rbrdf.materials.projected",
-                 ("file", "scale", "statistic", "incident")),
+                 ("file", "scale", "statistic", "incident"), default_sampler="mis-tabulated"),
     MaterialKind("rational", 3, "rational fit P/Q from `rbrdf-fit brdf` (coefficient .json)",
-                 (".json",), "warp_rbrdf.materials.rational", ("file", "scale", "unvouched")),
+                 (".json",), "warp_rbrdf.materials.rational", ("file", "scale", "unvouched"),
+                 default_sampler="mis-tabulated", default_sampler_cdf="mis-rational"),
     MaterialKind("rgl", 4, "RGL-EPFL .bsdf evaluated exactly with the format's own "
                  "interpolation (inverse VNDF warp, bilinear rgb, linear in theta_i); the "
                  "reference representation", (".bsdf",), "warp_rbrdf.materials.rgl",
-                 ("file", "scale", "incident")),
+                 ("file", "scale", "incident"), default_sampler="mis-rgl"),
 )
 
 TECHNIQUES = (
@@ -166,6 +179,14 @@ def technique(name: str) -> Technique:
 
 def strategy(name: str) -> Strategy:
     return _find(STRATEGIES, "sampler", name=name)
+
+
+def default_strategy(kind: str, cdf: bool = False) -> str:
+    """Name of the strategy a material of kind ``kind`` uses when neither its table nor
+    ``[integrator]`` names a ``sampler``; ``cdf``: the material has an inverse-CDF file (or an
+    in-memory fit). See the module docstring for the choice."""
+    k = material(kind)
+    return (k.default_sampler_cdf or k.default_sampler) if cdf else k.default_sampler
 
 
 def combine_code(s: Strategy) -> int:

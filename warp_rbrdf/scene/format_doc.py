@@ -20,7 +20,8 @@ Scene file format (TOML). Every table and key is optional unless marked required
   spp = 16                  camera samples per pixel
   seed = 0                  same seed -> same image
   max_depth = 1             1 = direct lighting; >1 adds indirect bounces
-  sampler = "mis"           default per-material sampler (see [materials.NAME] sampler)
+  sampler = <per kind>      default sampler of every material (see [materials.NAME] sampler);
+                            unset: each material kind's own (listed under [materials.NAME])
   pattern = "stratified"    sample generator: stratified (correlated multi-jitter) | independent
   hide_environment = false  camera rays that miss all shapes return 0 instead of the environment
   tile_size = 32            image tiles (pixels per side) launched from the thread pool
@@ -66,9 +67,12 @@ def _materials_section() -> str:
     for k in registry.MATERIALS:
         suffixes = f" (file: {' '.join(k.suffixes)})" if k.suffixes else ""
         keys = f" keys: {', '.join(k.keys)}" if k.keys else ""
-        lines += textwrap.wrap(f"{k.name}: {k.summary}{suffixes};{keys}", 92,
+        cdf = f" ({k.default_sampler_cdf} with a cdf)" if k.default_sampler_cdf else ""
+        lines += textwrap.wrap(f"{k.name}: {k.summary}{suffixes};{keys}; default sampler "
+                               f"{k.default_sampler}{cdf}", 92, break_on_hyphens=False,
                                initial_indent=" " * 28, subsequent_indent=" " * 30)
-    lines += ["  sampler = <integrator.sampler>   one of:"]
+    lines += ["  sampler = <integrator.sampler, else the type's default sampler (above): its own",
+              "            importance sampling with one environment sample, power heuristic>   one of:"]
     for s in registry.STRATEGIES:
         fb = f" (fallback: {s.fallback})" if s.fallback else ""
         lines += textwrap.wrap(f"{s.name}: {s.summary}{fb}", 92,

@@ -99,12 +99,14 @@ def scene_from_dict(data: dict, file="<scene>", base_dir: Path | None = None) ->
     for name, mdata in mats.data.items():
         m = Table(mdata, file, f"materials.{name}", base_dir)
         mtype = m.string("type", None, MATERIAL_TYPES, required=True)
-        spec = MaterialSpec(name=name, type=mtype,
-                            sampler=m.string("sampler", sc.integrator.sampler, SAMPLERS))
+        cdf = None
         if m.has("cdf"):
-            spec.cdf = m.path("cdf", what="CDF file")
-            if spec.cdf.suffix.lower() != ".json":
-                raise m.error("cdf", f"expected an rbrdf-cdf .json file, got {spec.cdf.name!r}")
+            cdf = m.path("cdf", what="CDF file")
+            if cdf.suffix.lower() != ".json":
+                raise m.error("cdf", f"expected an rbrdf-cdf .json file, got {cdf.name!r}")
+        # the material's sampler, else the integrator's, else the kind's own default
+        spec = MaterialSpec(name=name, type=mtype, cdf=cdf,
+                            sampler=m.string("sampler", sc.integrator.sampler, SAMPLERS))
         kind = registry.material(mtype)
         if "albedo" in kind.keys:
             spec.albedo = m.vector("albedo", 3, (0.8, 0.8, 0.8), allow_scalar=True, nonneg=True)

@@ -37,7 +37,7 @@ class IntegratorSpec:
     spp: int = 16
     seed: int = 0
     max_depth: int = 1
-    sampler: str = "mis"
+    sampler: str | None = None   # every material's default; None: each kind's own (registry.default_strategy)
     pattern: str = "stratified"
     hide_environment: bool = False
     tile_size: int = 32
@@ -48,7 +48,7 @@ class IntegratorSpec:
 class MaterialSpec:
     name: str
     type: str
-    sampler: str = "mis"
+    sampler: str | None = None  # None: registry.default_strategy(type, cdf given), set at construction
     albedo: tuple = (0.8, 0.8, 0.8)
     file: Path | None = None
     statistic: str = "median"
@@ -57,6 +57,10 @@ class MaterialSpec:
     unvouched: str = "projected"  # rational: flagged pieces -> the projected table | "refuse"
     data: Any = None          # in-memory table / rational function (Python API only)
     cdf: Any = None           # rbrdf-cdf file path or in-memory fit.sampling.cdf_file.CDFFit
+
+    def __post_init__(self):
+        if self.sampler is None:
+            self.sampler = registry.default_strategy(self.type, self.cdf is not None)
 
 
 @dataclass
