@@ -12,6 +12,21 @@ The Embree reference casts, for the same number of samples, the same camera rays
 
 Prints a table and a JSON line. Times are wall-clock medians over ``--repeats`` renders after
 the kernels are compiled and warmed up.
+
+Further comparisons, each interleaved render by render (the machine is shared: medians of
+alternating runs, ratios measured side by side):
+
+* ``--scene reference``: Mitsuba's reference sphere scene (:mod:`warp_rbrdf.mitsuba_reference`:
+  unit sphere, camera at (0, 0, 4), 30 deg, hidden environment map, direct lighting with one
+  environment and one BSDF sample, power heuristic) with ``--material`` (an RGL file name of
+  the shared data, or ``lambert``) under ``--envmap``;
+* ``--icosphere``: the same scene with its spheres tessellated (``Renderer(...,
+  analytic_spheres=False)``) against the analytic spheres;
+* ``--mitsuba``: Mitsuba 3's samples/s on the reference scene (its ``direct`` integrator, all
+  cores), in a worker process, variant ``llvm_ad_rgb`` when a libLLVM is found (set
+  ``DRJIT_LIBLLVM_PATH``, or one under /usr/lib is used), else ``scalar_rgb``;
+* ``--bvh``: the BVH of the scene's triangles with Warp's constructors and leaf sizes
+  (1 thread, CPU time of the rendering thread).
 """
 from __future__ import annotations
 
@@ -75,6 +90,11 @@ def warp_rate(renderer, spp, threads, repeats):
         times.append(renderer.stats.render_seconds)
     n = renderer.stats.samples
     return n / statistics.median(times), statistics.median(times)
+
+
+def _timed(renderer, spp, threads, seed):
+    renderer.render(spp=spp, seed=seed, threads=threads)
+    return renderer.stats.render_seconds
 
 
 def embree_rays(renderer, spp, seed=0):
@@ -144,6 +164,141 @@ def embree_rate(renderer, spp, threads, repeats):
     rays = n + 2 * res[0][1]
     return n / t, t, rays / t
 
+DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
+
+
+def reference_scene(material, envmap, resolution, spp):
+    """Mitsuba's reference sphere scene for our renderer (``material``: an RGL file name of the
+    shared data or ``lambert``)."""
+    from warp_rbrdf import mitsuba_reference as MR
+
+    return MR.sphere_scene(_reference_material(material), DATA / "envmaps" / f"{envmap}.hdr", spp, resolution)
+
+
+def _reference_material(material):
+    if material == "lambert":
+        return ("lambert", (0.5, 0.5, 0.5))
+    return DATA / "rgl" / f"{material}.bsdf"
+
+
+def find_libllvm():
+    """``DRJIT_LIBLLVM_PATH`` if set, else the newest libLLVM under /usr/lib (or None)."""
+    if os.environ.get("DRJIT_LIBLLVM_PATH"):
+        return os.environ["DRJIT_LIBLLVM_PATH"]
+    import glob
+    import re
+
+    found = glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*")
+
+    def version(p):
+        return tuple(int(x) for x in re.findall(r"\d+", Path(p).name)) or (0,)
+
+    return max(found, key=version) if found else None
+
+
+def mitsuba_worker(argv):
+    """Worker process: ``--mitsuba-worker MATERIAL ENVMAP RESOLUTION SPP``; prints its variant,
+    then renders once per line read (the line is the seed) and prints the seconds."""
+    material, envmap, res, spp = argv[0], argv[1], int(argv[2]), int(argv[3])
+    llvm = find_libllvm()
+    if llvm:
+        os.environ["DRJIT_LIBLLVM_PATH"] = llvm
+    from warp_rbrdf import mitsuba_reference as MR
+
+    d = MR.mitsuba_scene_dict(_reference_material(material), DATA / "envmaps" / f"{envmap}.hdr", spp, res)
+    import drjit as dr
+    import mitsuba as mi
+
+    variant = "scalar_rgb"
+    if llvm:
+        try:
+            mi.set_variant("llvm_ad_rgb")
+            variant = "llvm_ad_rgb"
+        except Exception:  # noqa: BLE001 - no usable LLVM: the scalar variant
+            mi.set_variant("scalar_rgb")
+    else:
+        mi.set_variant("scalar_rgb")
+    d["sensor"]["to_world"] = mi.ScalarTransform4f().look_at(
+        origin=list(MR.CAMERA_ORIGIN), target=list(MR.CAMERA_TARGET), up=list(MR.CAMERA_UP))
+    scene = mi.load_dict(d)
+
+    def run(seed):
+        t0 = time.perf_counter()
+        img = mi.render(scene, spp=spp, seed=seed)
+        dr.eval(img)
+        dr.sync_thread()
+        return time.perf_counter() - t0
+
+    run(0)   # compile (llvm) and warm up
+    print(f"{variant} {mi.__version__}", flush=True)
+    for line in sys.stdin:
+        print(run(int(line) + 1), flush=True)
+
+
+class MitsubaProcess:
+    def __init__(self, material, envmap, res, spp):
+        import subprocess
+
+        self.p = subprocess.Popen([sys.executable, "-m", "benchmarks.bench_render", "--mitsuba-worker",
+                                   material, envmap, str(res), str(spp)], cwd=ROOT,
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        self.variant = self.p.stdout.readline().strip()
+        if not self.variant:
+            raise RuntimeError("the Mitsuba worker failed to start (is Mitsuba 3 installed?)")
+
+    def render(self, seed):
+        self.p.stdin.write(f"{seed}\n")
+        self.p.stdin.flush()
+        return float(self.p.stdout.readline())
+
+    def close(self):
+        self.p.stdin.close()
+        self.p.wait()
+
+
+def interleaved(runs, repeats, pause=0.5):
+    """Median seconds of each of ``runs`` (name -> callable(seed) -> seconds), run in turn with
+    ``pause`` seconds between runs (Dr.Jit's worker threads keep spinning for a while after a
+    Mitsuba render and would slow down the run after it)."""
+    times = {k: [] for k in runs}
+    for i in range(repeats):
+        for k, f in runs.items():
+            time.sleep(pause)
+            times[k].append(f(i))
+    return {k: statistics.median(v) for k, v in times.items()}, times
+
+
+def bvh_rates(scene, spp, repeats, configs=(("sah", 1), ("sah", 2), ("sah", 4), ("sah", 8),
+                                            ("median", 1), ("median", 4))):
+    """Samples/s (1 thread, CPU time of the rendering thread) of ``scene`` with its triangles'
+    BVH built by each (constructor, leaf size), interleaved; and each build's seconds."""
+    from warp_rbrdf import geometry
+    from warp_rbrdf.renderer import Renderer
+
+    r = Renderer(scene)
+    if r.mesh is None:
+        return {}
+    r.compile()
+    built = {}
+    for c, leaf in configs:
+        t0 = time.perf_counter()
+        built[(c, leaf)] = (geometry.make_warp_mesh(r.geometry, r.device, c, leaf), time.perf_counter() - t0)
+    sg = r.scene_geometry
+
+    def one(mesh):
+        def f(seed):
+            sg.mesh = r.wp.uint64(mesh.id)
+            t0 = time.thread_time()
+            r.render(spp=spp, seed=seed, threads=1)
+            return time.thread_time() - t0
+        return f
+
+    one(built[configs[0]][0])(99)
+    med, _ = interleaved({k: one(m) for k, (m, _) in built.items()}, repeats)
+    n = r.stats.samples
+    return {f"{c} leaf {leaf}": {"samples_per_s": n / med[(c, leaf)], "build_s": built[(c, leaf)][1]}
+            for c, leaf in configs}
+
 
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_render", description=__doc__,
@@ -154,19 +309,46 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--no-embree", action="store_true")
+    ap.add_argument("--material", default="cc_ibiza_sunset_rgb",
+                    help="--scene reference: an RGL file name of the shared data, or lambert")
+    ap.add_argument("--envmap", default="studio_small_03_1k", help="--scene reference: map name")
+    ap.add_argument("--icosphere", action="store_true",
+                    help="also time the scene with its spheres tessellated (interleaved)")
+    ap.add_argument("--mitsuba", action="store_true",
+                    help="also time Mitsuba 3 on the reference scene (interleaved)")
+    ap.add_argument("--bvh", action="store_true", help="compare BVH constructors and leaf sizes")
+    if argv is None:
+        argv = sys.argv[1:]
+    if argv and argv[0] == "--mitsuba-worker":
+        return mitsuba_worker(argv[1:])
     a = ap.parse_args(argv)
 
     from warp_rbrdf import load_scene
     from warp_rbrdf.renderer import Renderer
 
-    sc = load_scene(a.scene)
-    sc.camera.resolution = (a.resolution, a.resolution)
+    if a.scene == "reference":
+        sc = reference_scene(a.material, a.envmap, a.resolution, a.spp)
+    else:
+        sc = load_scene(a.scene)
+        sc.camera.resolution = (a.resolution, a.resolution)
+    if a.mitsuba and a.scene != "reference":
+        ap.error("--mitsuba needs --scene reference")
+    if a.bvh:
+        rates = bvh_rates(sc, a.spp, a.repeats)
+        for k, v in rates.items():
+            print(f"BVH {k:12s}: {v['samples_per_s'] / 1e6:7.3f} M samples/s (1 thread, CPU time), "
+                  f"build {v['build_s']:.2f} s")
+        print(json.dumps({"scene": str(a.scene), "bvh": rates}))
+        return 0
     r = Renderer(sc)
     compile_s = r.compile()
     out = {"scene": str(a.scene), "resolution": a.resolution, "spp": a.spp, "repeats": a.repeats,
            "cpu_count": os.cpu_count(), "setup_s": round(r.setup_seconds, 3), "compile_s": round(compile_s, 3),
-           "triangles": r.geometry.num_triangles, "warp": {}, "embree": {}}
-    print(f"scene {a.scene}: {a.resolution}x{a.resolution}, {a.spp} spp, {r.geometry.num_triangles} triangles")
+           "triangles": r.geometry.num_triangles, "spheres": r.geometry.num_spheres, "warp": {}, "embree": {}}
+    if a.scene == "reference":
+        out.update(material=a.material, envmap=a.envmap)
+    print(f"scene {a.scene}: {a.resolution}x{a.resolution}, {a.spp} spp, {r.geometry.num_triangles} triangles, "
+          f"{r.geometry.num_spheres} analytic spheres")
     print(f"setup {r.setup_seconds:.2f} s, compile {compile_s:.2f} s")
     for t in a.threads:
         rate, sec = warp_rate(r, a.spp, t, a.repeats)
@@ -180,6 +362,29 @@ def main(argv=None):
         out["machine_scaling"] = machine_scaling(max(a.threads))
         print(f"machine ceiling: a compute-only Warp kernel on {max(a.threads)} threads runs "
               f"{out['machine_scaling']:.2f}x faster than serially")
+    if a.icosphere or a.mitsuba:
+        t = max(a.threads)
+        runs = {"warp": lambda i: _timed(r, a.spp, t, i)}
+        if a.icosphere:
+            ri = Renderer(sc, analytic_spheres=False)
+            ri.compile()
+            ri.render(spp=a.spp, threads=t)
+            runs["warp icosphere"] = lambda i: _timed(ri, a.spp, t, i)
+            out["icosphere_triangles"] = ri.geometry.num_triangles
+        mp = None
+        if a.mitsuba:
+            mp = MitsubaProcess(a.material, a.envmap, a.resolution, a.spp)
+            runs[f"mitsuba {mp.variant}"] = mp.render
+        try:
+            med, allt = interleaved(runs, a.repeats)
+        finally:
+            if mp is not None:
+                mp.close()
+        n = r.stats.samples
+        out["interleaved"] = {k: {"samples_per_s": n / v, "seconds": v, "all_s": allt[k]} for k, v in med.items()}
+        print(f"interleaved, {t} threads, median of {a.repeats}:")
+        for k, v in med.items():
+            print(f"  {k:28s} {n / v / 1e6:7.3f} M samples/s  ({v:.3f} s)  warp ÷ this: {v / med['warp']:.2f}")
     if not a.no_embree:
         for t in a.threads:
             rate, sec, rays = embree_rate(r, a.spp, t, a.repeats)

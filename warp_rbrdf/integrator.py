@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from . import camera as C
+from . import geometry as G
 from . import lights as L
 from . import sample_patterns as P
 from .materials.data import Materials
@@ -95,7 +96,7 @@ def make_bsdf_eval(kinds):
     code, func = kinds[0]
     rest = make_bsdf_eval(kinds[1:])
 
-    @wp.func
+    @G.inline_func
     def bsdf_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
         if mats.kind[m] == wp.static(int(code)):
             return wp.static(func)(mats, m, wi, wo)
@@ -130,19 +131,19 @@ def make_bsdf_sampling(techniques):
     code, exact = int(code), bool(exact)
     rest_sample, rest_pdf, rest_mis_pdf = make_bsdf_sampling(techniques[1:])
 
-    @wp.func
+    @G.inline_func
     def bsdf_sample(mats: Materials, m: int, t: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
         if t == wp.static(code):
             return wp.static(sample)(mats, m, wo, xi)
         return wp.static(rest_sample)(mats, m, t, wo, xi)
 
-    @wp.func
+    @G.inline_func
     def bsdf_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3) -> float:
         if t == wp.static(code):
             return wp.static(pdf)(mats, m, wi, wo)
         return wp.static(rest_pdf)(mats, m, t, wi, wo)
 
-    @wp.func
+    @G.inline_func
     def bsdf_mis_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3, weight: float) -> float:
         if t == wp.static(code):
             if wp.static(exact):
@@ -164,16 +165,17 @@ class Kernels:
     pdf_bsdf: object
 
 
-def make_kernels(kinds, techniques) -> Kernels:
+def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = True) -> Kernels:
     """The scene's kernels: ``kinds`` as for :func:`make_bsdf_eval`, ``techniques`` as for
-    :func:`make_bsdf_sampling`."""
+    :func:`make_bsdf_sampling`; ``has_mesh`` / ``has_spheres``: whether the scene's
+    :class:`~warp_rbrdf.geometry.SceneGeometry` has triangles / analytic spheres (the ray
+    queries of :func:`warp_rbrdf.geometry.make_tracer` test only those)."""
+    closest_hit, any_hit = G.make_tracer(has_mesh, has_spheres)
     bsdf_eval = make_bsdf_eval(kinds)
     bsdf_sample, bsdf_pdf, bsdf_mis_pdf = make_bsdf_sampling(techniques)
 
-    @wp.func
-    def radiance_sample(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.array(dtype=wp.vec3),
-                        tri_mat: wp.array(dtype=int), tri_smooth: wp.array(dtype=int),
-                        cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
+    @G.inline_func
+    def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
                         pseed: wp.uint32, s: int, spp: int, pattern: int, max_depth: int,
                         hide_env: int, eps: float, px: int, py: int) -> wp.vec3:
         j = P.sample_2d(pattern, pseed, s, spp, 0)
@@ -185,8 +187,8 @@ def make_kernels(kinds, techniques) -> Kernels:
         prev_pdf = float(0.0)
         depth = int(0)
         while depth < max_depth:
-            q = wp.mesh_query_ray(mesh, o, d, 1.0e30)
-            if not q.result:
+            hit, t, ng, ns, m = closest_hit(geo, o, d)
+            if hit == 0:
                 if mode == 0:
                     if hide_env == 0:
                         Lsum = Lsum + L.env_eval(env, d)
@@ -196,29 +198,13 @@ def make_kernels(kinds, techniques) -> Kernels:
                     w = power_heuristic(prev_pdf, L.env_pdf(env, d))
                     Lsum = Lsum + wp.cw_mul(thr, L.env_eval(env, d)) * w
                 break
-            f = q.face
-            p = o + d * q.t
-            ng = q.normal
-            if wp.dot(ng, d) > 0.0:
-                ng = -ng
-            ns = ng
-            if tri_smooth[f] == 1:
-                i0 = indices[3 * f + 0]
-                i1 = indices[3 * f + 1]
-                i2 = indices[3 * f + 2]
-                nn = normals[i0] * q.u + normals[i1] * q.v + normals[i2] * (1.0 - q.u - q.v)
-                ln = wp.length(nn)
-                if ln > 1.0e-12:
-                    ns = nn / ln
-                    if wp.dot(ns, ng) < 0.0:
-                        ns = -ns
+            p = o + d * t
             wo_w = -d
             if wp.dot(ns, wo_w) <= 1.0e-6:
                 ns = ng
             T = onb_tangent(ns)
             B = onb_bitangent(ns)
             wo = wp.vec3(wp.dot(wo_w, T), wp.dot(wo_w, B), wp.dot(wo_w, ns))
-            m = tri_mat[f]
             comb = mats.combine[m]
             tech = mats.technique[m]
             org = p + ng * (eps * (1.0 + wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))))
@@ -231,7 +217,7 @@ def make_kernels(kinds, techniques) -> Kernels:
                     if wi[2] > 0.0:
                         fv = bsdf_eval(mats, m, wi, wo)
                         if max3(fv) > 0.0:
-                            if not wp.mesh_query_ray_anyhit(mesh, org, wl, 1.0e30):
+                            if not any_hit(geo, org, wl, 1.0e30):
                                 Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, dl.irradiance[li])) * wi[2]
 
             dim = 1 + 2 * depth
@@ -245,7 +231,7 @@ def make_kernels(kinds, techniques) -> Kernels:
                     if wi[2] > 0.0:
                         fv = bsdf_eval(mats, m, wi, wo)
                         if max3(fv) > 0.0:
-                            if not wp.mesh_query_ray_anyhit(mesh, org, wl, 1.0e30):
+                            if not any_hit(geo, org, wl, 1.0e30):
                                 w = 1.0
                                 if comb == COMBINE_MIS:
                                     w = power_heuristic(pl, bsdf_pdf(mats, m, tech, wi, wo))
@@ -278,7 +264,7 @@ def make_kernels(kinds, techniques) -> Kernels:
             prev_pdf = pb
             if last:
                 if mode != 3 and env.present == 1:
-                    if not wp.mesh_query_ray_anyhit(mesh, org, wiw, 1.0e30):
+                    if not any_hit(geo, org, wiw, 1.0e30):
                         w = 1.0
                         if mode == 2:
                             w = power_heuristic(pb, L.env_pdf(env, wiw))
@@ -289,10 +275,8 @@ def make_kernels(kinds, techniques) -> Kernels:
             depth = depth + 1
         return Lsum
 
-    @wp.kernel(module="unique")
-    def render_tile(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.array(dtype=wp.vec3),
-                    tri_mat: wp.array(dtype=int), tri_smooth: wp.array(dtype=int),
-                    cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
+    @wp.kernel(module="unique", enable_backward=False)
+    def render_tile(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
                     spp: int, seed: int, pattern: int, max_depth: int, hide_env: int, eps: float,
                     x0: int, y0: int, tile_w: int,
                     out_mean: wp.array(dtype=wp.vec3), out_sq: wp.array(dtype=wp.vec3)):
@@ -306,7 +290,7 @@ def make_kernels(kinds, techniques) -> Kernels:
         acc = wp.vec3(0.0)
         acc2 = wp.vec3(0.0)
         for s in range(spp):
-            v = radiance_sample(mesh, indices, normals, tri_mat, tri_smooth, cam, env, dl, mats,
+            v = radiance_sample(geo, cam, env, dl, mats,
                                 pseed, s, spp, pattern, max_depth, hide_env, eps, px, py)
             acc = acc + v
             acc2 = acc2 + wp.cw_mul(v, v)
@@ -314,21 +298,21 @@ def make_kernels(kinds, techniques) -> Kernels:
         out_mean[pix] = acc * inv
         out_sq[pix] = acc2 * inv
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", enable_backward=False)
     def eval_bsdf(mats: Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
                   out: wp.array(dtype=wp.vec3)):
         """Material ``m`` at local direction pairs (tests, studies)."""
         i = wp.tid()
         out[i] = bsdf_eval(mats, m, wi[i], wo[i])
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", enable_backward=False)
     def sample_bsdf(mats: Materials, m: int, t: int, wo: wp.array(dtype=wp.vec3),
                     xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4)):
         """Technique ``t`` of material ``m`` at (wo, xi) -> (wi, weight) (tests, benchmarks)."""
         i = wp.tid()
         out[i] = bsdf_sample(mats, m, t, wo[i], xi[i])
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", enable_backward=False)
     def pdf_bsdf(mats: Materials, m: int, t: int, wi: wp.array(dtype=wp.vec3),
                  wo: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
         """Density (1/sr) the MIS weights use for technique ``t`` of material ``m`` (tests)."""

@@ -45,12 +45,17 @@ class RenderStats:
 
 
 class Renderer:
-    """A scene built for one Warp device. ``render()`` can be called many times."""
+    """A scene built for one Warp device. ``render()`` can be called many times.
 
-    def __init__(self, scene: Scene, device: str = "cpu"):
+    ``analytic_spheres``: intersect ``sphere`` shapes analytically where their transform keeps
+    them spheres (default); False tessellates every sphere into its icosphere of
+    ``subdivisions`` (for comparisons; :mod:`warp_rbrdf.geometry`)."""
+
+    def __init__(self, scene: Scene, device: str = "cpu", analytic_spheres: bool = True):
         wp = init_warp()
         self.wp = wp
         self.scene = scene
+        self.analytic_spheres = bool(analytic_spheres)
         self.device = get_device(device)
         t0 = time.perf_counter()
         self._build()
@@ -60,28 +65,20 @@ class Renderer:
 
     # ------------------------------------------------------------------------------------------
     def _build(self):
-        wp, dev, sc = self.wp, self.device, self.scene
+        dev, sc = self.device, self.scene
         used = []
         for sh in sc.shapes:
             if sh.material not in used:
                 used.append(sh.material)
         self.material_data = build_material_data(sc, used)
         index = {n: i for i, n in enumerate(used)}
-        geom = geometry.build_geometry(sc, index)
+        geom = geometry.build_geometry(sc, index, analytic_spheres=self.analytic_spheres)
         self.geometry = geom
-        if geom.num_triangles == 0:  # a degenerate triangle far away: never hit
-            geom = geometry.Geometry(points=np.full((3, 3), 1e20, np.float32),
-                                     indices=np.arange(3, dtype=np.int32), normals=np.tile([0, 1, 0], (3, 1)).astype(np.float32),
-                                     material=np.zeros(1, np.int32), smooth=np.zeros(1, np.int32),
-                                     bbox_min=np.zeros(3), bbox_max=np.zeros(3))
-        self.mesh = geometry.make_warp_mesh(geom, dev)
-        self.indices = wp.array(geom.indices, dtype=int, device=dev)
-        self.normals = wp.array(geom.normals, dtype=wp.vec3, device=dev)
-        self.tri_mat = wp.array(geom.material, dtype=int, device=dev)
-        self.tri_smooth = wp.array(geom.smooth, dtype=int, device=dev)
+        self.mesh = geometry.make_warp_mesh(geom, dev)   # None: no triangle, no BVH
+        self.scene_geometry = geometry.make_geometry_struct(geom, self.mesh, dev)
         eps = sc.integrator.ray_epsilon
         if eps <= 0:
-            extent = max(self.geometry.diagonal, 1e-3) if self.geometry.num_triangles else 1.0
+            extent = 1.0 if geom.empty else max(geom.diagonal, 1e-3)
             eps = 1e-5 * extent
         self.ray_epsilon = float(eps)
 
@@ -115,7 +112,9 @@ class Renderer:
             t = registry.technique_by_code(c)
             sample, pdf = t.impl().kernel_functions(md.global_fits if t.needs_fit else ())
             techniques.append((c, sample, pdf, t.pdf_exact))
-        return integrator.make_kernels(kinds, techniques)
+        g = self.geometry
+        return integrator.make_kernels(kinds, techniques, has_mesh=g.num_triangles > 0,
+                                       has_spheres=g.num_spheres > 0)
 
     @property
     def kernels(self):
@@ -159,8 +158,7 @@ class Renderer:
         tile = it.tile_size if dev.is_cpu else max(W, H)
         tl = integrator.tiles(W, H, tile)
         k = self.kernels.render_tile
-        fixed = [self.mesh.id, self.indices, self.normals, self.tri_mat, self.tri_smooth,
-                 self.camera, self.env, self.directional, self.materials,
+        fixed = [self.scene_geometry, self.camera, self.env, self.directional, self.materials,
                  spp, seed, sample_patterns.PATTERN_CODES[it.pattern], it.max_depth,
                  1 if it.hide_environment else 0, self.ray_epsilon]
 

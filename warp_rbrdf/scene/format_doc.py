@@ -37,7 +37,8 @@ _TAIL = """\
   smooth_normals = true     mesh: interpolate vertex normals (false: flat facets)
   center = [0, 0, 0]        sphere / plane
   radius = 1.0              sphere
-  subdivisions = 5          sphere: icosphere level
+  subdivisions = 5          sphere: icosphere level, used only when the transform is not a
+                            similarity (then tessellated); otherwise the sphere is analytic
   size = [2, 2]             plane: extent along x and z; its normal is +Y before transform
   transform = { scale = 1, rotate = [angle_deg, ax, ay, az] (or a list of them),
                 translate = [x, y, z] }     or  transform = { matrix = [[4x4]] }
