@@ -1,5 +1,5 @@
 """Per-pixel geometry of the studies' camera rays, from n x n sub-pixel rays through the
-renderer's BVH and camera convention: object coverage (the fraction of rays that hit a shape:
+renderer's ray queries (warp_rbrdf.geometry) and camera convention: object coverage (the fraction of rays that hit a shape:
 the mask of the studies' error metrics) and the view angle theta_o (the comparison's bins)."""
 from __future__ import annotations
 
@@ -7,48 +7,48 @@ import numpy as np
 import warp as wp
 
 from warp_rbrdf import camera as C
+from warp_rbrdf import geometry as G
 
 
-@wp.kernel
-def _pixel_hits(mesh: wp.uint64, indices: wp.array(dtype=int), normals: wp.array(dtype=wp.vec3),
-                tri_smooth: wp.array(dtype=int), cam: C.Camera, n: int,
-                cover: wp.array(dtype=float), cos_view: wp.array(dtype=float)):
-    """Per pixel: the fraction of the n x n sub-pixel rays that hit (``cover``) and the mean
-    cosine between the shading normal and the ray back to the camera over those (``cos_view``;
-    -1 where none hits)."""
-    tid = wp.tid()
-    px = tid % cam.width
-    py = tid // cam.width
-    acc = float(0.0)
-    hits = int(0)
-    for i in range(n):
-        for j in range(n):
-            d = C.camera_ray(cam, float(px) + (float(i) + 0.5) / float(n), float(py) + (float(j) + 0.5) / float(n))
-            q = wp.mesh_query_ray(mesh, cam.origin, d, 1.0e30)
-            if q.result:
-                # the shading normal exactly as the integrator builds it
-                ng = q.normal
-                if wp.dot(ng, d) > 0.0:
-                    ng = -ng
-                ns = ng
-                f = q.face
-                if tri_smooth[f] == 1:
-                    nn = (normals[indices[3 * f + 0]] * q.u + normals[indices[3 * f + 1]] * q.v
-                          + normals[indices[3 * f + 2]] * (1.0 - q.u - q.v))
-                    ln = wp.length(nn)
-                    if ln > 1.0e-12:
-                        ns = nn / ln
-                        if wp.dot(ns, ng) < 0.0:
-                            ns = -ns
-                if wp.dot(ns, -d) <= 1.0e-6:
-                    ns = ng
-                acc = acc + wp.dot(ns, -d)
-                hits = hits + 1
-    cover[tid] = float(hits) / float(n * n)
-    if hits > 0:
-        cos_view[tid] = acc / float(hits)
-    else:
-        cos_view[tid] = -1.0
+_KERNELS = {}
+
+
+def _pixel_hits_kernel(has_mesh: bool, has_spheres: bool):
+    """The kernel below for a scene with (or without) triangles and analytic spheres."""
+    key = (bool(has_mesh), bool(has_spheres))
+    if key in _KERNELS:
+        return _KERNELS[key]
+    closest_hit, _ = G.make_tracer(*key)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def _pixel_hits(geo: G.SceneGeometry, cam: C.Camera, n: int,
+                    cover: wp.array(dtype=float), cos_view: wp.array(dtype=float)):
+        """Per pixel: the fraction of the n x n sub-pixel rays that hit (``cover``) and the mean
+        cosine between the shading normal and the ray back to the camera over those
+        (``cos_view``; -1 where none hits)."""
+        tid = wp.tid()
+        px = tid % cam.width
+        py = tid // cam.width
+        acc = float(0.0)
+        hits = int(0)
+        for i in range(n):
+            for j in range(n):
+                d = C.camera_ray(cam, float(px) + (float(i) + 0.5) / float(n), float(py) + (float(j) + 0.5) / float(n))
+                hit, t, ng, ns, m = closest_hit(geo, cam.origin, d)
+                if hit == 1:
+                    # the shading normal exactly as the integrator uses it
+                    if wp.dot(ns, -d) <= 1.0e-6:
+                        ns = ng
+                    acc = acc + wp.dot(ns, -d)
+                    hits = hits + 1
+        cover[tid] = float(hits) / float(n * n)
+        if hits > 0:
+            cos_view[tid] = acc / float(hits)
+        else:
+            cos_view[tid] = -1.0
+
+    _KERNELS[key] = _pixel_hits
+    return _pixel_hits
 
 
 def _pixel_hits_numpy(renderer, n: int):
@@ -56,9 +56,10 @@ def _pixel_hits_numpy(renderer, n: int):
     W, H = renderer.scene.camera.resolution
     cover = wp.zeros(W * H, dtype=float, device=renderer.device)
     cos_view = wp.zeros(W * H, dtype=float, device=renderer.device)
-    wp.launch(_pixel_hits, dim=W * H,
-              inputs=[renderer.mesh.id, renderer.indices, renderer.normals, renderer.tri_smooth,
-                      renderer.camera, n], outputs=[cover, cos_view], device=renderer.device)
+    g = renderer.geometry
+    wp.launch(_pixel_hits_kernel(g.num_triangles > 0, g.num_spheres > 0), dim=W * H,
+              inputs=[renderer.scene_geometry, renderer.camera, n], outputs=[cover, cos_view],
+              device=renderer.device)
     return cover.numpy().reshape(H, W), cos_view.numpy().reshape(H, W).astype(float)
 
 
