@@ -35,8 +35,9 @@ def test_white_furnace_plane(sampler, pattern):
 
 @pytest.mark.parametrize("sampler", ["mis", "light", "cosine"])
 def test_white_furnace_sphere(sampler):
-    """Tessellated sphere with interpolated normals: light lost where the shading hemisphere
-    dips below the facets is O(facet angle^2), < 0.1 % at subdivision 5."""
+    """White furnace on the (analytic) unit sphere: every sampler returns the environment's
+    radiance (the bound below also held for the former subdivision-5 icosphere, whose light loss
+    where the shading hemisphere dips below the facets is O(facet angle^2), < 0.1 %)."""
     L = 1.0
     sc = Scene(camera=CameraSpec(origin=(0, 0, 3.0), target=(0, 0, 0), fov=30, resolution=(16, 16)),
                integrator=IntegratorSpec(spp=16, hide_environment=True, tile_size=8),

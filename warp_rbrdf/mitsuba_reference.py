@@ -67,9 +67,9 @@ CAMERA_TARGET = (0.0, 0.0, 0.0)
 CAMERA_UP = (0.0, 1.0, 0.0)
 FOV_Y_DEG = 30.0
 SPHERE_RADIUS = 1.0
-#: Icosphere subdivisions of our renderer's sphere (Mitsuba's is analytic): 40962 vertices,
-#: edges of about 1.1 deg; the chord error (<= 1e-4 of the radius) is far below a pixel of the
-#: 256^2 view (0.008 radius units) and the smooth normals are interpolated vertex normals.
+#: Icosphere subdivisions of the sphere's mesh fallback. Our renderer intersects the sphere
+#: analytically, as Mitsuba does (``Renderer(..., analytic_spheres=False)`` renders this
+#: icosphere instead: 40962 vertices, edges of about 1.1 deg, chord error <= 1e-4 of the radius).
 SPHERE_SUBDIVISIONS = 6
 
 
@@ -297,7 +297,7 @@ def sphere_scene(material, envmap, spp: int, resolution: int = 256, seed: int = 
                  subdivisions: int = SPHERE_SUBDIVISIONS):
     """The reference scene of :func:`render_sphere` for **our** renderer, as a
     :class:`warp_rbrdf.scene.Scene`: the same camera (``fov_axis = "y"``), unit sphere
-    (an icosphere with ``subdivisions`` and smooth normals), hidden environment map at scale 1
+    (analytic; ``subdivisions`` only for the icosphere fallback), hidden environment map at scale 1
     (identity rotation) and direct lighting (``max_depth = 1``). An RGL material is the ``rgl``
     type (the file evaluated exactly, ``incident`` = the tensors' incident direction, default
     the reference's "view") with the ``mis-rgl`` sampler (environment sample + the format's own
