@@ -11,13 +11,13 @@ The public API below keeps ``import fit`` cheap: ``fit_brdf``, ``fit_cdf`` and `
 """
 from importlib import import_module
 
-from .errors import BRDFFileError, RbrdfError
+from .errors import BRDFFileError, FlagError, OutputError, RbrdfError
 from .formats import load_measured
 from .formats.measured import MeasuredBRDF, ProjectedBRDF
 from .projection.project import project
 from .rational.coefficient_file import load as load_coefficients
 
-__all__ = ["BRDFFileError", "RbrdfError", "MeasuredBRDF", "ProjectedBRDF", "load_measured", "project",
+__all__ = ["BRDFFileError", "FlagError", "OutputError", "RbrdfError", "MeasuredBRDF", "ProjectedBRDF", "load_measured", "project",
            "fit_brdf", "fit_cdf", "load_coefficients", "load_cdf"]
 __version__ = "0.1.0"
 

@@ -120,7 +120,7 @@ def test_json_errors(tmp_path):
     (tmp_path / "o.json").write_text('{"format": "other"}')
     with pytest.raises(BRDFFileError, match="not an rbrdf-rational"):
         load(tmp_path / "o.json")
-    with pytest.raises(BRDFFileError, match="no such file"):
+    with pytest.raises(BRDFFileError, match="file not found"):
         load(tmp_path / "missing.json")
 
 

@@ -1,19 +1,25 @@
 """``rbrdf-fit``: command line of the fitter.
 
 Sub-commands: ``info``, ``project``, ``plot`` (:mod:`fit.cli.measured`), ``brdf``
-(:mod:`fit.cli.brdf`), ``cdf`` and ``plot-cdf`` (:mod:`fit.cli.cdf`). Every sub-command prints
-errors about files as one line (``rbrdf-fit: error: FILE: problem``) and exits with status 2,
-without a traceback.
+(:mod:`fit.cli.brdf`), ``cdf`` and ``plot-cdf`` (:mod:`fit.cli.cdf`).
+
+Bad input (docs/robustness.md): every error is one line on stderr naming the file (and key),
+the flag or the output path -- ``rbrdf-fit: error: FILE: problem`` for the
+:class:`fit.errors.RbrdfError` hierarchy, ``rbrdf-fit brdf: error: argument --tol: ...`` for
+flags (:mod:`fit.cli.flags`) -- and the exit status is 2, without a traceback or warnings.
+Outputs are staged and renamed into place only when the whole run succeeds
+(:class:`fit.outputs.OutputSet`): a failing run leaves every existing file as it was.
 """
 from __future__ import annotations
 
-import argparse
 import sys
+import warnings
 
 import numpy as np
 
 from ..errors import RbrdfError
 from . import brdf, cdf, measured
+from .flags import OneLineParser
 
 DESCRIPTION = """\
 Fit measured isotropic BRDFs with rational functions (Rational BRDF, Pacanowski et al. 2012).
@@ -25,9 +31,11 @@ in 1/sr.
 """
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="rbrdf-fit", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+def build_parser() -> OneLineParser:
+    import argparse
+
+    parser = OneLineParser(prog="rbrdf-fit", description=DESCRIPTION,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     measured.register(sub)
     brdf.register(sub)
@@ -36,14 +44,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run ``rbrdf-fit`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status:
+    0 success, 1 a fit that misses its tolerance (nothing written), 2 bad input (one line on
+    stderr), 130 interrupted."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:          # --help (0) or a one-line flag error (2)
+        return e.code if isinstance(e.code, int) else 2
     np.set_printoptions(precision=4, suppress=True)
     try:
-        return int(args.func(args) or 0)
+        # NumPy and matplotlib warnings are not messages to the user: what matters is checked
+        # and reported in one line
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore")
+            return int(args.func(args) or 0)
     except RbrdfError as e:
         print(f"rbrdf-fit: error: {e}", file=sys.stderr)
         return 2
+    except MemoryError:
+        print("rbrdf-fit: error: out of memory (no output written); an input asks for more than "
+              "the limits of fit.limits foresee", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
-        print("rbrdf-fit: interrupted", file=sys.stderr)
+        print("rbrdf-fit: interrupted (no output written)", file=sys.stderr)
         return 130

@@ -2,21 +2,35 @@
 (:func:`fit.rational.brdf_fit.fit_brdf`), written as an ``rbrdf-rational`` coefficient file
 (:mod:`fit.rational.coefficient_file`), with a per-piece, per-channel summary table.
 
-Registered by :mod:`fit.cli` (it calls :func:`register` with its sub-parsers).
+Registered by :mod:`fit.cli` (it calls :func:`register` with its sub-parsers). The output is
+written only when the run succeeds: a fit that misses its tolerance exits with status 1 and
+writes nothing (an existing file stays as it was) unless ``--allow-infeasible`` is given.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import RbrdfError
+from ..errors import BRDFFileError, display_path, display_text
 from ..formats import load_measured
+from ..limits import (
+    MAX_FIT_DEGREE,
+    MAX_FIT_DEN_DEGREE,
+    MAX_FLOOR_FRAC,
+    MAX_TOLERANCE,
+    MIN_CORE_THETA_D_DEG,
+    MIN_TOLERANCE,
+)
+from ..outputs import OutputSet, check_output_file
 from ..rational.brdf_fit import INTERVALS, fit_brdf
+from ..rational.brdf_model import THETA_D_MAX_DEG
 from ..rational.coefficient_file import save
+from .flags import core_angle, integer, number
 
 
 def _cmd_brdf(args) -> int:
-    from tqdm import tqdm   # the progress bar, imported only when a fit runs
+    from tqdm import tqdm  # the progress bar, imported only when a fit runs
 
+    out = check_output_file(args.out, "--out", (".json",))
     b = load_measured(args.file)
     bar = tqdm(desc=f"fitting {b.name}", unit="LP", leave=False, disable=None)  # None: off when not a terminal
 
@@ -25,7 +39,7 @@ def _cmd_brdf(args) -> int:
                             f"{'ok' if event['feasible'] else 'no'}")
         bar.update(1)
 
-    core = args.core_theta_d if args.core_theta_d == "auto" else float(args.core_theta_d)
+    core = args.core_theta_d
     try:
         fit = fit_brdf(b, tol=args.tol, intervals=args.intervals, core_theta_d_deg=core,
                        band_intervals=args.band_intervals, theta_h_transform=args.theta_h,
@@ -33,12 +47,15 @@ def _cmd_brdf(args) -> int:
                        max_den_degree=args.max_den_degree, progress=progress,
                        source_file=Path(args.file).name)
     except ValueError as e:
-        raise RbrdfError(f"{args.file}: {e}") from None
+        raise BRDFFileError(args.file, str(e)) from None
     finally:
         bar.close()
-    out = Path(args.out)
-    save(fit.model, out)
-    print(f"{b.name}: tol {args.tol:g}, theta_h {args.theta_h}, value {args.value}, "
+    write = fit.valid or args.allow_infeasible
+    if write:
+        with OutputSet() as outputs:
+            save(fit.model, outputs.stage(out))
+            outputs.commit()
+    print(f"{display_text(b.name)}: tol {args.tol:g}, theta_h {args.theta_h}, value {args.value}, "
           f"floor {fit.model.fit_info['abs_floor'][0]:.3g} 1/sr")
     print(f"{'theta_d deg':16s}{'intervals':>11s}{'ch':>3s}{'degrees':>9s}{'coefs':>7s}{'max rel':>9s}"
           f"{'rms rel':>9s}{'inside':>8s}{'Q>0':>5s}{'time s':>8s}")
@@ -51,8 +68,12 @@ def _cmd_brdf(args) -> int:
                   f"{r.n_coefficients:7d}{100 * e['max_rel_error']:8.2f}%{100 * e['rms_rel_error']:8.2f}%"
                   f"{100 * e['inside_fraction']:7.1f}%"
                   f"{'yes' if r.certificate and r.certificate.certified else 'NO':>5s}{r.time_s:8.2f}")
-    print(f"{fit.summary()}; wrote {out}")
-    return 0 if fit.valid or args.allow_infeasible else 1
+    if write:
+        print(f"{fit.summary()}; wrote {display_path(out)}")
+        return 0
+    print(f"{fit.summary()}; the tolerance is not met: nothing written to {display_path(out)} "
+          "(--allow-infeasible writes the flagged fit)")
+    return 1
 
 
 def register(subparsers) -> None:
@@ -67,26 +88,32 @@ def register(subparsers) -> None:
                     "piecewise; see fit.rational.coefficient_file). Absolute floor: tol * A_Y / pi (A_Y = white-"
                     "sky luminance albedo).")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
-    p.add_argument("--tol", type=float, default=0.05, help="relative tolerance (default 0.05)")
-    p.add_argument("--out", required=True, help="output .json coefficient file")
+    p.add_argument("--tol", type=number(MIN_TOLERANCE, MAX_TOLERANCE), default=0.05,
+                   help=f"relative tolerance in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}] (default 0.05)")
+    p.add_argument("--out", required=True, help="output .json coefficient file (replaced only if the run succeeds)")
     p.add_argument("--intervals", choices=INTERVALS, default="tol",
                    help="interval policy of the guaranteed core: 'tol' (default) = y +- max(tol y, floor); "
                         "'tol+spread' also widens to the cluster's phi_d standard deviation")
     p.add_argument("--core-theta-d", dest="core_theta_d", default="auto", metavar="DEG|auto",
+                   type=core_angle(MIN_CORE_THETA_D_DEG, THETA_D_MAX_DEG),
                    help="theta_d (deg) up to which the tolerance is guaranteed; the grazing band above "
-                        "it, up to 78.5 deg, gets its own functions. 'auto' (default): the largest of "
-                        "60, 50, 40 that every channel meets; 78.5: one function per channel")
+                        "it, up to 78.5 deg, gets its own functions; in [5, 78.5]. 'auto' (default): the "
+                        "largest of 60, 50, 40 that every channel meets; 78.5: one function per channel")
     p.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default="tol+spread",
                    help="interval policy of the grazing band (default tol+spread)")
     p.add_argument("--theta-h", dest="theta_h", choices=("sqrt", "identity"), default="sqrt",
                    help="input transform of theta_h (default sqrt)")
     p.add_argument("--value", choices=("log", "linear"), default="log", help="value transform (default log)")
-    p.add_argument("--floor-frac", dest="floor_frac", type=float, default=1.0,
+    p.add_argument("--floor-frac", dest="floor_frac", type=number(0.0, MAX_FLOOR_FRAC), default=1.0,
                    help="absolute floor = FLOOR_FRAC * tol * A_Y / pi (A_Y: white-sky luminance albedo; "
-                        "default 1). Smaller keeps dark off-specular values relative (better colour on "
+                        f"default 1, at most {MAX_FLOOR_FRAC:g}). Smaller keeps dark off-specular values relative "
+                        "(better colour on "
                         "dark glossy materials) at the price of feasibility")
-    p.add_argument("--max-degree", type=int, default=12, help="largest numerator total degree (default 12)")
-    p.add_argument("--max-den-degree", type=int, default=6, help="largest denominator total degree (default 6)")
+    p.add_argument("--max-degree", type=integer(0, MAX_FIT_DEGREE), default=12,
+                   help=f"largest numerator total degree, 0-{MAX_FIT_DEGREE} (default 12)")
+    p.add_argument("--max-den-degree", type=integer(0, MAX_FIT_DEN_DEGREE), default=6,
+                   help=f"largest denominator total degree, 0-{MAX_FIT_DEN_DEGREE} (default 6)")
     p.add_argument("--allow-infeasible", action="store_true",
-                   help="exit 0 even when no fit meets the tolerance (the file is flagged)")
+                   help="write the file and exit 0 even when no fit meets the tolerance (the file is "
+                        "flagged); without it such a run writes nothing and exits 1")
     p.set_defaults(func=_cmd_brdf)

@@ -1,12 +1,47 @@
 """``rbrdf-fit cdf`` and ``rbrdf-fit plot-cdf``: importance-sampling tables and rational inverse
-CDFs (issue 6, :mod:`fit.sampling`). Registered by :mod:`fit.cli`."""
+CDFs (issue 6, :mod:`fit.sampling`). Registered by :mod:`fit.cli`.
+
+The table flags are bounded (:mod:`fit.limits`: rows, cells and the estimated memory are
+checked before anything is tabulated); outputs are written only when the run succeeds
+(:class:`fit.outputs.OutputSet`)."""
 from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import FlagError, display_path, display_text
 from ..formats import load_measured
-from ..sampling.cdf_file import LAYOUTS, TIME_LIMIT_S, file_source, fit_cdf, load, table_only
+from ..limits import (
+    MAX_CDF_PHI_CELLS,
+    MAX_CDF_ROWS,
+    MAX_CDF_THETA_CELLS,
+    MAX_REFINEMENTS,
+    MAX_TIME_LIMIT_S,
+)
+from ..outputs import OutputSet, check_output_dir, check_output_file
+from ..sampling.cdf_file import (
+    LAYOUTS,
+    TIME_LIMIT_S,
+    check_pieces_size,
+    file_source,
+    fit_cdf,
+    load,
+    table_only,
+)
 from ..sampling.plots import plot_cdf
+from ..sampling.table import check_table_size
+from ..sampling.variance_gate import PIECES_DEFAULTS
+from .flags import file_prefix, integer, number
+
+
+def _check_sizes(args) -> None:
+    """The table (and pieces) the flags ask for fit the limits: checked before the input is read."""
+    try:
+        check_table_size(args.n_v, args.n_t, args.n_p)
+        if args.layout == "pieces" and not getattr(args, "table_only", False):
+            check_pieces_size(args.n_v, args.n_t, args.n_p, int(PIECES_DEFAULTS["n_mu"]),
+                              int(max(PIECES_DEFAULTS["n_u"])))
+    except ValueError as e:
+        raise FlagError("--n-v/--n-t/--n-p", str(e)) from None
 
 
 def _load_or_fit(args, log=print):
@@ -28,10 +63,14 @@ def _load_or_fit(args, log=print):
 
 
 def _add_table_args(p):
-    p.add_argument("--n-v", type=int, default=32, help="theta_v rows (default 32)")
-    p.add_argument("--n-t", type=int, default=64, help="theta_l cells (default 64)")
-    p.add_argument("--n-p", type=int, default=64, help="|phi_l| cells (default 64)")
-    p.add_argument("--eps", type=float, default=0.02, help="cosine mixture weight (default 0.02)")
+    p.add_argument("--n-v", type=integer(2, MAX_CDF_ROWS), default=32,
+                   help=f"theta_v rows, 2-{MAX_CDF_ROWS} (default 32)")
+    p.add_argument("--n-t", type=integer(2, MAX_CDF_THETA_CELLS), default=64,
+                   help=f"theta_l cells, 2-{MAX_CDF_THETA_CELLS} (default 64)")
+    p.add_argument("--n-p", type=integer(2, MAX_CDF_PHI_CELLS), default=64,
+                   help=f"|phi_l| cells, 2-{MAX_CDF_PHI_CELLS} (default 64; n_v x n_t x n_p is bounded too)")
+    p.add_argument("--eps", type=number(0.0, 1.0, lo_open=True), default=0.02,
+                   help="cosine mixture weight in (0, 1] (default 0.02)")
     p.add_argument("--incident", choices=("view", "light"), default="view",
                    help="RGL .bsdf files: which direction is the tensors' theta_i (default: view, "
                         "as Mitsuba 3 and pbrt-v4 read them; must match the scene's `incident`)")
@@ -39,31 +78,41 @@ def _add_table_args(p):
                    help="pieces (default): monotone rational-quadratic pieces uniform in mu and u, "
                         "constant-time lookup, the fastest sampler; global: the paper's "
                         "bivariate/trivariate rational functions")
-    p.add_argument("--refinements", type=int, default=1, help="refit rounds when verification fails "
-                                                               "(global layout)")
+    p.add_argument("--refinements", type=integer(0, MAX_REFINEMENTS), default=1,
+                   help=f"refit rounds when verification fails (global layout; 0-{MAX_REFINEMENTS})")
     p.add_argument("--table-only", action="store_true", help="tabulate only, no rational fit")
-    p.add_argument("--time-limit", type=float, default=TIME_LIMIT_S, metavar="S",
+    p.add_argument("--time-limit", type=number(0.0, MAX_TIME_LIMIT_S), default=TIME_LIMIT_S, metavar="S",
                    help=f"bound on the rational fitting time in seconds (default {TIME_LIMIT_S:g}; 0: none); "
                         "what is not verified by then falls back to the tabulated sampler, with the reason")
 
 
 def _cmd_cdf(args) -> int:
+    out = check_output_file(args.out, "--out", (".json",))
+    _check_sizes(args)
     fit = _load_or_fit(args)
-    fit.save(args.out)
+    with OutputSet() as outputs:
+        fit.save(outputs.stage(out))
+        outputs.commit()
+    name = display_text(fit.name)
     if fit.fallback:
-        print(f"FALLBACK: {fit.name}: rational inverse CDFs not usable ({fit.reason}); "
+        print(f"FALLBACK: {name}: rational inverse CDFs not usable ({display_text(fit.reason)}); "
               f"renderers use the tabulated sampler")
     else:
-        print(f"{fit.name}: rational inverse CDFs verified ({fit.reason})")
-    print(f"wrote {args.out}")
+        print(f"{name}: rational inverse CDFs verified ({display_text(fit.reason)})")
+    print(f"wrote {display_path(out)}")
     return 0
 
 
 def _cmd_plot(args) -> int:
+    out = check_output_dir(args.out, "--out")
     args.table_only = args.table_only or Path(args.file).suffix.lower() != ".json"
+    _check_sizes(args)
     fit = _load_or_fit(args)
-    for f in plot_cdf(fit, args.out, prefix=args.prefix):
-        print(f"wrote {f}")
+    with OutputSet() as outputs:
+        plot_cdf(fit, out, prefix=args.prefix, outputs=outputs)
+        files = outputs.commit()
+    for f in files:
+        print(f"wrote {display_path(f)}")
     return 0
 
 
@@ -79,7 +128,7 @@ def register(sub) -> None:
                                    "and write a versioned rbrdf-cdf JSON (fallback flag and per-row "
                                    "reasons included).")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
-    p.add_argument("--out", required=True, help="output .json")
+    p.add_argument("--out", required=True, help="output .json (replaced only if the run succeeds)")
     _add_table_args(p)
     p.set_defaults(func=_cmd_cdf)
     p = sub.add_parser("plot-cdf", help="plot PDF_v / CDF^-1_v (tabulated, and rational if verified)",
@@ -88,6 +137,7 @@ def register(sub) -> None:
                                    "is a BRDF file (table only) or an rbrdf-cdf .json (with the fit).")
     p.add_argument("file")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--prefix", default="cdf")
+    p.add_argument("--prefix", default="cdf", type=file_prefix,
+                   help="file-name prefix of the PNG files (default cdf)")
     _add_table_args(p)
     p.set_defaults(func=_cmd_plot)

@@ -12,14 +12,14 @@ a full-circle table (360 bins, from a non-reciprocal source) has no MERL represe
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import BRDFFileError
+from ..inputs import check_regular_file, open_regular
 from .grid import MERL_SHAPE
-from .measured import MeasuredBRDF, file_sha256
+from .measured import MeasuredBRDF, check_values, file_sha256
 
 #: Multiplier from stored values to reflectance in 1/sr, per channel (R, G, B).
 MERL_SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
@@ -31,13 +31,15 @@ MERL_FILE_BYTES = _HEADER_BYTES + 3 * _N * 8
 def read_merl(path) -> MeasuredBRDF:
     """Read a MERL ``.binary`` file into a :class:`MeasuredBRDF`.
 
-    Raises :class:`BRDFFileError` naming the file for: unreadable path, wrong header
-    dimensions, truncated or oversized file, NaN or infinite values.
+    Raises :class:`BRDFFileError` naming the file for: unreadable path or not a regular file
+    (checked before opening: a named pipe never blocks), wrong header dimensions, truncated or
+    oversized file, NaN or infinite values, values above :data:`fit.limits.MAX_BRDF_VALUE`, a
+    channel without any valid (non-negative) sample.
     """
     path = Path(path)
+    size = check_regular_file(path, what="MERL file")
     try:
-        size = os.path.getsize(path)
-        with open(path, "rb") as f:
+        with open_regular(path, what="MERL file") as f:
             header = f.read(_HEADER_BYTES)
             if len(header) < _HEADER_BYTES:
                 raise BRDFFileError(path, f"truncated MERL file: {size} bytes, header needs {_HEADER_BYTES}")
@@ -52,8 +54,6 @@ def read_merl(path) -> MeasuredBRDF:
             raw = np.fromfile(f, dtype="<f8", count=3 * _N)
     except BRDFFileError:
         raise
-    except IsADirectoryError:
-        raise BRDFFileError(path, "is a directory, not a MERL file") from None
     except FileNotFoundError:
         raise BRDFFileError(path, "file not found") from None
     except OSError as e:
@@ -71,6 +71,7 @@ def read_merl(path) -> MeasuredBRDF:
     stored = np.moveaxis(stored, 0, -1)  # (90, 90, 180, 3)
     valid = stored >= 0.0
     values = np.where(valid, stored * MERL_SCALE, 0.0)
+    check_values(values, valid, path)
     return MeasuredBRDF(values=values, valid=valid, name=path.stem, source=str(path),
                         source_sha256=file_sha256(path))
 
@@ -88,6 +89,8 @@ def write_merl(brdf: MeasuredBRDF, path) -> None:
     if np.any(values[brdf.valid] < 0):
         raise ValueError("valid BRDF values must be >= 0 (negative means 'no sample' in MERL files)")
     stored = np.where(brdf.valid, values / MERL_SCALE, -1.0)
-    with open(path, "wb") as f:
+    from ..outputs import atomic_write
+
+    with atomic_write(path, "wb") as f:
         f.write(np.asarray(MERL_SHAPE, dtype="<i4").tobytes())
         f.write(np.ascontiguousarray(np.moveaxis(stored, -1, 0), dtype="<f8").tobytes())

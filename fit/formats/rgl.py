@@ -59,9 +59,22 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import BRDFFileError
+from ..limits import (
+    MAX_RGL_ELEMENTS,
+    MAX_RGL_FIELD_ABS,
+    MAX_RGL_TABLE_SIDE,
+    MAX_RGL_THETA_I,
+    MIN_RGL_SIGMA,
+)
 from .angles import HALF_PI, half_diff_to_directions
-from .grid import FULL_SHAPE, N_PHI_D_FULL, phi_d_centres, theta_d_centres, theta_h_centres
-from .measured import MeasuredBRDF, file_sha256
+from .grid import (
+    FULL_SHAPE,
+    N_PHI_D_FULL,
+    phi_d_centres,
+    theta_d_centres,
+    theta_h_centres,
+)
+from .measured import MeasuredBRDF, check_values, file_sha256
 from .rgl_interpolants import Bilinear, RGBTable, VNDFWarp, interval
 from .tensor_file import read_tensor_file
 
@@ -125,7 +138,28 @@ class RGLBRDF:
             a = np.asarray(f.data, np.float64)
         if not np.all(np.isfinite(a)):
             self._fail(f"field {name!r} contains NaN or infinite values")
+        if a.size and float(np.abs(a).max()) > MAX_RGL_FIELD_ABS:
+            self._fail(f"field {name!r} holds the absurd value {float(np.abs(a).max()):.4g} (magnitude "
+                       f"above {MAX_RGL_FIELD_ABS:g}, fit.limits.MAX_RGL_FIELD_ABS): corrupt file")
         return a
+
+    def _check_sizes(self):
+        """Bound the tables before any of them is converted or copied (fit.limits)."""
+        total = 0
+        for name in ("phi_i", "theta_i", "ndf", "sigma", "vndf", "luminance", "rgb"):
+            f = self.fields[name]
+            total += int(np.prod(f.shape, dtype=object)) if f.shape else 1
+            big = [int(s) for s in f.shape if int(s) > MAX_RGL_TABLE_SIDE]
+            if big:
+                self._fail(f"field {name!r} has shape {list(f.shape)}: a side of {big[0]} is above "
+                           f"the limit {MAX_RGL_TABLE_SIDE} (fit.limits.MAX_RGL_TABLE_SIDE)")
+        if total > MAX_RGL_ELEMENTS:
+            self._fail(f"the tables hold {total} values, above the limit {MAX_RGL_ELEMENTS} "
+                       "(fit.limits.MAX_RGL_ELEMENTS)")
+        n = int(np.prod(self.fields["theta_i"].shape, dtype=object))
+        if n > MAX_RGL_THETA_I:
+            self._fail(f"field 'theta_i' has {n} entries, above the limit {MAX_RGL_THETA_I} "
+                       "(fit.limits.MAX_RGL_THETA_I)")
 
     def _validate_and_build(self):
         f = self.fields
@@ -135,6 +169,7 @@ class RGLBRDF:
         missing = [k for k in REQUIRED_FIELDS if k not in f]
         if missing:
             self._fail(f"not a complete RGL BRDF file: missing field(s) {', '.join(missing)}")
+        self._check_sizes()
 
         phi_i = self._float_field("phi_i", 1)
         if phi_i.size > 1:
@@ -177,6 +212,10 @@ class RGLBRDF:
                        f"[1, {n}, {rgb.shape[3]}, {rgb.shape[4]}]")
         if np.any(vndf < 0) or np.any(ndf < 0) or np.any(sigma <= 0):
             self._fail("fields 'vndf'/'ndf' must be >= 0 and 'sigma' > 0")
+        if float(sigma.min()) < MIN_RGL_SIGMA:
+            self._fail(f"field 'sigma' holds {float(sigma.min()):.3g}, below {MIN_RGL_SIGMA:g} "
+                       "(fit.limits.MIN_RGL_SIGMA): the normalization would explode")
+        self._float_field("luminance", 4)
 
         self.theta_i = theta
         self.phi_i = phi_i
@@ -374,6 +413,12 @@ class RGLBRDF:
         # below the horizon (a pair of that bin with both directions above reads its grazing value)
         wt, wx = self._roles(_lift(wi), _lift(wo))
         weighted = self.reference_eval(wt, wx)
+        # the fields are bounded (fit.limits.MAX_RGL_FIELD_ABS, MIN_RGL_SIGMA), so the values are
+        # finite; they may still be large within horizon_margin_deg of the horizon (f cos / cos)
+        check_values(vals, valid, self._path, max_value=None)
+        if not np.all(np.isfinite(weighted)):
+            raise BRDFFileError(self._path, "the file's f cos(theta) is not finite at some bin centre: "
+                                            "corrupt tables")
         m = MeasuredBRDF(values=vals, valid=valid, name=self.name, source=self.source,
                          source_sha256=self.source_sha256, weighted=weighted,
                          weighted_by="light" if self.incident == "view" else "view")

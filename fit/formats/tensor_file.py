@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import BRDFFileError
+from ..inputs import read_bytes
+from ..limits import MAX_RGL_FILE_BYTES
 
 MAGIC = b"tensor_file\x00"
 #: dtype codes of the tensor_file format
@@ -34,8 +36,8 @@ _CODES = {np.dtype(v).str: k for k, v in DTYPES.items()}
 _CODES[np.dtype("u1").str] = 1
 _CODES[np.dtype("i1").str] = 2
 
-#: Files larger than this are refused (RGB RGL files are about 0.6-5 MB).
-MAX_FILE_BYTES = 256 << 20
+#: Files larger than this are refused (RGB RGL files are about 0.6-5 MB; fit.limits).
+MAX_FILE_BYTES = MAX_RGL_FILE_BYTES
 MAX_FIELDS = 4096
 MAX_NDIM = 16
 
@@ -134,18 +136,9 @@ def read_tensor_file(path) -> dict[str, TensorField]:
 
 
 def _read_bytes(path) -> bytes:
-    path = Path(path)
-    try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise BRDFFileError(path, f"file is {size} bytes; RGL RGB files this large "
-                                      f"(> {MAX_FILE_BYTES} bytes) are not supported")
-        with open(path, "rb") as f:
-            return f.read(MAX_FILE_BYTES + 1)
-    except BRDFFileError:
-        raise
-    except OSError as e:
-        raise BRDFFileError(path, f"cannot read file ({e.strerror or e})") from None
+    """The file's bytes: a regular file (never a pipe or device) of at most
+    :data:`MAX_FILE_BYTES`."""
+    return read_bytes(Path(path), MAX_FILE_BYTES, "RGL tensor file")
 
 
 def write_tensor_file(path, fields: dict) -> None:
@@ -177,5 +170,8 @@ def write_tensor_file(path, fields: dict) -> None:
         struct.pack_into("<HBQ", header, p, arr.ndim, code, off)
         p += 11 + 8 * arr.ndim
     out = bytes(header) + bytes((-len(header)) % 8) + b"".join(blobs)
-    Path(path).write_bytes(out)
+    from ..outputs import atomic_write
+
+    with atomic_write(Path(path), "wb") as f:
+        f.write(out)
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from ..formats.measured import ProjectedBRDF
+from ..outputs import save_figure
 
 GRAZING_DEG = 80.0
 _CHANNEL_COLOURS = ("tab:red", "tab:green", "tab:blue")
@@ -48,22 +49,21 @@ def _map_figure(plt, data: np.ndarray, p: ProjectedBRDF, title: str, label: str)
     return fig
 
 
-def plot_projection(p: ProjectedBRDF, out_dir) -> list[Path]:
-    """Write the three PNG files for ``p`` into ``out_dir``; returns their paths."""
+def plot_projection(p: ProjectedBRDF, out_dir, outputs=None) -> list[Path]:
+    """Write the three PNG files for ``p`` into ``out_dir``; returns their paths. ``outputs``:
+    an :class:`fit.outputs.OutputSet` to stage them in (the caller commits), else each is
+    written atomically at once."""
     plt = _pyplot()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     files = []
 
     fig = _map_figure(plt, p.mean, p, f"{p.name} cluster mean", "mean ρ (1/sr)")
     files.append(out / f"{p.name}_mean.png")
-    fig.savefig(files[-1], dpi=90)
-    plt.close(fig)
+    save_figure(fig, files[-1], outputs)
 
     fig = _map_figure(plt, p.normalized_variance, p, f"{p.name} variance/mean²", "normalized variance")
     files.append(out / f"{p.name}_variance.png")
-    fig.savefig(files[-1], dpi=90)
-    plt.close(fig)
+    save_figure(fig, files[-1], outputs)
 
     fig, (a0, a1) = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
     td = np.degrees(p.theta_d)
@@ -82,6 +82,5 @@ def plot_projection(p: ProjectedBRDF, out_dir) -> list[Path]:
     a0.axvspan(GRAZING_DEG, 90, color="0.85", label="θd ≥ 80° (grazing)")
     a0.text(GRAZING_DEG + 1, a0.get_ylim()[1], "grazing", va="top", fontsize=8)
     files.append(out / f"{p.name}_isolines.png")
-    fig.savefig(files[-1], dpi=90)
-    plt.close(fig)
+    save_figure(fig, files[-1], outputs)
     return files

@@ -154,6 +154,8 @@ class PositivityCertificate:
     lower_bound: float
     n_boxes: int
     max_depth: int
+    #: why a certificate failed: a point of the box where Q <= 0, or the subdivision limits
+    reason: str = ""
     method: str = ("Bernstein coefficients (exact rational conversion matrices, float64 with a rigorous "
                    "rounding-error bound) with midpoint subdivision")
 
@@ -187,8 +189,14 @@ def certify_positive(exponents, coefficients, max_depth: int = 12,
             lower = min(lower, float(a.min() - e))
             continue
         corners = [a[c] for c in itertools.product(*((0, s - 1) for s in a.shape))]
-        if min(corners) + e <= 0 or depth >= max_depth or n_boxes + len(stack) > max_boxes:
-            return PositivityCertificate(False, float("nan"), n_boxes, depth_seen)
+        if min(corners) + e <= 0:
+            return PositivityCertificate(False, float("nan"), n_boxes, depth_seen,
+                                         "Q <= 0 at a corner of a sub-box: the denominator has a zero "
+                                         "(a pole) or changes sign on the domain")
+        if depth >= max_depth or n_boxes + len(stack) > max_boxes:
+            return PositivityCertificate(False, float("nan"), n_boxes, depth_seen,
+                                         f"Q > 0 could not be proven within {max_depth} subdivision levels "
+                                         f"and {max_boxes} sub-boxes (Q comes too close to 0)")
         axis = depth % a.ndim
         left, right = de_casteljau_split(a, axis)
         e2 = e + (a.shape[axis] + 1) * eps * float(np.abs(a).max())

@@ -266,6 +266,7 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     is met with one function per channel, the cores are tried again split at
     ``theta_h = peak_split_deg`` into a specular-peak piece and the rest (None: never). ``progress(label, event)`` is called after every degree pair tried.
     """
+    _check_fit_args(tol, max_degree, max_den_degree, floor_frac, core_theta_d_deg, intervals, band_intervals)
     t0 = time.perf_counter()
     p = project_for_fit(brdf)
     name = name or p.name
@@ -289,7 +290,7 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     if core_theta_d_deg == "auto":
         cores = CORE_CANDIDATES_DEG
     else:
-        cores = (min(float(core_theta_d_deg), THETA_D_MAX_DEG),)
+        cores = (float(core_theta_d_deg),)
     attempts = [(core, None) for core in cores]
     if peak_split_deg:
         attempts += [(core, float(peak_split_deg)) for core in cores]
@@ -317,6 +318,38 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     model = brdf_model(p, name, pieces, dict(kw, value_max=value_max), intervals, band_intervals, total,
                        source_file)
     return BRDFFit(model, pieces, total)
+
+
+def _check_fit_args(tol, max_degree, max_den_degree, floor_frac, core, intervals, band_intervals) -> None:
+    """``ValueError`` for arguments outside the ranges of :mod:`fit.limits` (the command line
+    checks the same ranges on its flags): a non-finite or absurd tolerance, negative or huge
+    degrees, a core outside [MIN_CORE_THETA_D_DEG, THETA_D_MAX_DEG] deg."""
+    import math
+
+    from ..limits import (
+        MAX_FIT_DEGREE,
+        MAX_FIT_DEN_DEGREE,
+        MAX_FLOOR_FRAC,
+        MAX_TOLERANCE,
+        MIN_CORE_THETA_D_DEG,
+        MIN_TOLERANCE,
+    )
+
+    if not (isinstance(tol, (int, float)) and MIN_TOLERANCE <= tol <= MAX_TOLERANCE):
+        raise ValueError(f"tol must be in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}], got {tol!r}")
+    if not (isinstance(max_degree, (int, np.integer)) and 0 <= max_degree <= MAX_FIT_DEGREE):
+        raise ValueError(f"max_degree must be an integer in [0, {MAX_FIT_DEGREE}], got {max_degree!r}")
+    if not (isinstance(max_den_degree, (int, np.integer)) and 0 <= max_den_degree <= MAX_FIT_DEN_DEGREE):
+        raise ValueError(f"max_den_degree must be an integer in [0, {MAX_FIT_DEN_DEGREE}], got {max_den_degree!r}")
+    if not (isinstance(floor_frac, (int, float)) and 0.0 <= floor_frac <= MAX_FLOOR_FRAC):
+        raise ValueError(f"floor_frac must be in [0, {MAX_FLOOR_FRAC:g}], got {floor_frac!r}")
+    if core != "auto" and not (isinstance(core, (int, float)) and math.isfinite(core)
+                               and MIN_CORE_THETA_D_DEG <= core <= THETA_D_MAX_DEG):
+        raise ValueError(f"core_theta_d_deg must be 'auto' or in [{MIN_CORE_THETA_D_DEG:g}, {THETA_D_MAX_DEG:g}] "
+                         f"deg, got {core!r}")
+    for k, v in (("intervals", intervals), ("band_intervals", band_intervals)):
+        if v not in INTERVALS:
+            raise ValueError(f"{k} must be one of {INTERVALS}, got {v!r}")
 
 
 def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,
@@ -373,6 +406,10 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
                                         domain=rf_domain, progress=cb, start_degrees=start,
                                         best_effort=not stop_on_infeasible)
         r = fitter.fit(U, y=yt, lower=lo, upper=hi)
+        if r.function is None:
+            # the LP gave no solution at all (not even a least-violating one): nothing to write
+            raise ValueError(f"no rational function for channel {CHANNELS[c]} on {label} ({r.message}); "
+                             "a larger tolerance or degree may help")
         results[c], errors[c] = r, brdf_errors(r, U, d, value_transform, offset, tol)
         prev = r
         if stop_on_infeasible and not r.valid:

@@ -102,6 +102,13 @@ the whole box (``q_certificate``: proved by exact Bernstein coefficients), so P/
 by zero after clamping. The error guarantee (every fitted data point within ``tolerance``
 relative, or within ``abs_floor`` absolute where that is larger) holds for the data points
 inside the domain.
+
+Reading (:func:`load`, :func:`from_dict`) trusts nothing in the file: every value is checked for
+type, shape and range, the sizes are bounded (:mod:`fit.limits`: variables, exponents, terms,
+pieces, nesting, coefficients), a BRDF file must have the variables and outputs above, a
+``min`` >= 0 and ``"outside": "clamp"``, and Q > 0 of every function is proved again
+(:func:`recertify`) whatever its ``q_certificate`` says. Every problem is one
+:class:`fit.errors.BRDFFileError` line naming the file and the key (docs/robustness.md).
 """
 from __future__ import annotations
 
@@ -111,9 +118,31 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import jsonfields as F
 from ..errors import BRDFFileError
+from ..formats.angles import HALF_PI
+from ..inputs import read_json
+from ..limits import (
+    MAX_BERNSTEIN_COEFFICIENTS,
+    MAX_BRDF_VALUE,
+    MAX_CERTIFY_BOXES,
+    MAX_CERTIFY_WORK,
+    MAX_FILE_COEFFICIENTS,
+    MAX_PIECES,
+    MAX_RATIONAL_EXPONENT,
+    MAX_RATIONAL_TERMS,
+    MAX_RATIONAL_VARIABLES,
+    MAX_SPLIT_DEPTH,
+)
+from .bernstein import certify_positive
 from .function import RationalFunction
-from .model import PiecewiseRationalModel, RationalModel, Variable
+from .model import (
+    INPUT_TRANSFORMS,
+    VALUE_TRANSFORMS,
+    PiecewiseRationalModel,
+    RationalModel,
+    Variable,
+)
 
 FORMAT = "rbrdf-rational"
 VERSION = 1            # single rational function per output
@@ -199,107 +228,293 @@ def jsonable(obj):
 
 
 def save(model, path) -> None:
-    """Write ``model`` as an ``rbrdf-rational`` JSON file (version 1, or 2 if piecewise)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    """Write ``model`` as an ``rbrdf-rational`` JSON file (version 1, or 2 if piecewise),
+    through a temporary file renamed onto ``path`` when complete (an existing file is never
+    left half-written)."""
+    from ..outputs import atomic_write
+
     text = json.dumps(to_dict(model), indent=1, allow_nan=False)
-    path.write_text(text + "\n", encoding="utf-8")
+    with atomic_write(Path(path)) as f:
+        f.write(text + "\n")
 
 
-def from_dict(d: dict, path=None):
-    """Build a model from a parsed file (:class:`RationalModel` for version 1,
-    :class:`PiecewiseRationalModel` for version 2); :class:`BRDFFileError` on any problem."""
-    if not isinstance(d, dict) or d.get("format") != FORMAT:
-        raise BRDFFileError(path, f"not an {FORMAT} coefficient file (format key is "
-                                  f"{d.get('format') if isinstance(d, dict) else None!r})")
-    ver = d.get("version")
-    if ver not in VERSIONS:
-        raise BRDFFileError(path, f"unsupported {FORMAT} version {ver!r} (this reader knows versions "
-                                  f"{', '.join(map(str, VERSIONS))})")
-    if ver == VERSION_PIECEWISE:
-        return _piecewise_from_dict(d, path)
+# --------------------------------------------------------------------------------------------
+# Reading: every value checked for type, shape, range and size (fit.limits), Q > 0 re-proved
+# --------------------------------------------------------------------------------------------
+class _Budget:
+    """What a whole file may ask for: coefficients (compiled into the renderer's kernels) and
+    the work of re-proving Q > 0 (Bernstein coefficients examined)."""
+
+    def __init__(self):
+        self.coefficients = 0
+        self.certify_work = 0
+
+
+def _variables(v, key: str, kind: str) -> list:
+    vs = v
+    if not isinstance(vs, list) or not 1 <= len(vs) <= MAX_RATIONAL_VARIABLES:
+        raise F.Invalid(key, f"expected a list of 1 to {MAX_RATIONAL_VARIABLES} variables")
+    out = []
+    for i, vd in enumerate(vs):
+        k = F.sub(key, i)
+        F.obj(vd, k)
+        name = F.string(F.get(vd, "name", k), F.sub(k, "name"), max_len=64)
+        unit = F.string(vd.get("unit", ""), F.sub(k, "unit"), max_len=64)
+        transform = F.string(vd.get("transform", "identity"), F.sub(k, "transform"), choices=INPUT_TRANSFORMS)
+        lo, hi = F.array(F.get(vd, "domain", k), F.sub(k, "domain"), (2,))
+        if not hi > lo:
+            raise F.Invalid(F.sub(k, "domain"), f"empty domain [{lo:g}, {hi:g}]")
+        if transform == "sqrt" and lo < 0:
+            raise F.Invalid(F.sub(k, "domain"), f"starts at {lo:g} < 0 under the sqrt transform")
+        out.append(Variable(name=name, unit=unit, transform=transform, domain=(float(lo), float(hi))))
+    names = [v.name for v in out]
+    if len(set(names)) != len(names):
+        raise F.Invalid(key, f"variable names repeat: {names}")
+    if kind == "brdf":
+        if names != ["theta_h", "theta_d"]:
+            raise F.Invalid(key, f"a BRDF's variables are theta_h, theta_d, not {', '.join(names)}")
+        for i, var in enumerate(out):
+            if var.domain[0] < 0 or var.domain[1] > HALF_PI + 1e-9:
+                raise F.Invalid(F.sub(F.sub(key, i), "domain"), f"[{var.domain[0]:g}, {var.domain[1]:g}] rad "
+                                                                "is not inside [0, pi/2]")
+    return out
+
+
+def _polynomial(pd, key: str, n_vars: int, denominator: bool):
+    F.obj(pd, key)
+    kc = F.sub(key, "coefficients")
+    ke = F.sub(key, "exponents")
+    raw_c = F.get(pd, "coefficients", key)
+    if not isinstance(raw_c, list):
+        raise F.Invalid(kc, "expected a list of numbers")
+    if len(raw_c) > MAX_RATIONAL_TERMS:
+        raise F.Invalid(kc, f"{len(raw_c)} terms, above the limit {MAX_RATIONAL_TERMS} "
+                            "(fit.limits.MAX_RATIONAL_TERMS)")
+    if denominator and not raw_c:
+        raise F.Invalid(kc, "the denominator needs at least one term")
+    coef = F.array(raw_c, kc, (None,))
+    exps = F.array(F.get(pd, "exponents", key), ke, (len(coef), n_vars), kind="int")
+    if exps.size == 0:
+        exps = np.zeros((0, n_vars), np.int64)
+    if exps.size and (exps.min() < 0 or exps.max() > MAX_RATIONAL_EXPONENT):
+        bad = int(exps.max()) if exps.max() > MAX_RATIONAL_EXPONENT else int(exps.min())
+        raise F.Invalid(ke, f"exponent {bad} outside [0, {MAX_RATIONAL_EXPONENT}] "
+                            "(fit.limits.MAX_RATIONAL_EXPONENT)")
+    return exps, coef
+
+
+def _function(fd, key: str, variables: list, budget: _Budget):
+    F.obj(fd, key)
+    n = len(variables)
+    F.string(fd.get("output", ""), F.sub(key, "output"), max_len=64)
+    basis = F.string(fd.get("basis", "chebyshev"), F.sub(key, "basis"))
+    if basis != "chebyshev":
+        raise F.Invalid(F.sub(key, "basis"), f"unsupported basis {basis[:40]!r}")
+    dom = F.array(F.get(fd, "domain", key), F.sub(key, "domain"), (n, 2))
+    expected = np.array([v.rf_domain for v in variables])
+    if not np.allclose(dom, expected, rtol=1e-12, atol=1e-12):
+        raise F.Invalid(F.sub(key, "domain"), f"{dom.tolist()} does not match the transformed "
+                                              f"variable domains {expected.tolist()}")
+    ne, nc = _polynomial(F.get(fd, "numerator", key), F.sub(key, "numerator"), n, False)
+    de, dc = _polynomial(F.get(fd, "denominator", key), F.sub(key, "denominator"), n, True)
+    size = int(np.prod(de.max(axis=0) + 1))
+    if size > MAX_BERNSTEIN_COEFFICIENTS:
+        raise F.Invalid(F.sub(key, "denominator"), f"degrees {de.max(axis=0).tolist()} give {size} Bernstein "
+                                                   f"coefficients, above {MAX_BERNSTEIN_COEFFICIENTS} "
+                                                   "(fit.limits.MAX_BERNSTEIN_COEFFICIENTS)")
+    budget.coefficients += len(nc) + len(dc)
+    if budget.coefficients > MAX_FILE_COEFFICIENTS:
+        raise F.Invalid(key, f"the file holds more than {MAX_FILE_COEFFICIENTS} coefficients "
+                             "(fit.limits.MAX_FILE_COEFFICIENTS)")
+    # the record of the fit (what flagged() and the output clamps read), strictly typed
+    info = {k: v for k, v in fd.items() if k not in (
+        "output", "domain", "numerator", "denominator", "num_degrees", "den_degrees", "n_coefficients",
+        "basis")}
+    for k in ("valid", "feasible"):
+        if k in info:
+            F.flag(info[k], F.sub(key, k))
+    if "q_certificate" in info:
+        F.obj(info["q_certificate"], F.sub(key, "q_certificate"))
+        if "certified" in info["q_certificate"]:
+            F.flag(info["q_certificate"]["certified"], F.sub(F.sub(key, "q_certificate"), "certified"))
+    for k in ("measured_range", "vouched_range"):
+        if info.get(k) is not None:
+            lo, hi = F.array(info[k], F.sub(key, k), (2,))
+            if not lo <= hi:
+                raise F.Invalid(F.sub(key, k), f"[{lo:g}, {hi:g}] is empty")
+    f = RationalFunction(domain=dom, num_exponents=ne, num_coef=nc, den_exponents=de, den_coef=dc,
+                         var_names=tuple(v.name for v in variables))
+    return f, info
+
+
+def _value(d, key: str, kind: str) -> dict:
+    v = d.get("value", {})
+    F.obj(v, key)
+    out = {
+        "value_transform": F.string(v.get("transform", "linear"), F.sub(key, "transform"), choices=VALUE_TRANSFORMS),
+        "value_offset": F.number(v.get("offset", 0.0) if v.get("offset") is not None else 0.0,
+                                 F.sub(key, "offset"), lo=0.0),
+        "value_min": F.number(v.get("min"), F.sub(key, "min"), optional=True),
+        "value_max": F.number(v.get("max"), F.sub(key, "max"), optional=True),
+        "value_name": F.string(v.get("name", "y"), F.sub(key, "name"), max_len=64),
+        "value_unit": F.string(v.get("unit", ""), F.sub(key, "unit"), max_len=64),
+    }
+    lo, hi = out["value_min"], out["value_max"]
+    if lo is not None and hi is not None and not hi > lo:
+        raise F.Invalid(key, f"max {hi:g} is not above min {lo:g}")
+    if kind == "brdf":
+        if lo is None or lo < 0:
+            raise F.Invalid(F.sub(key, "min"), "a BRDF needs a clamp min >= 0 (it is never negative)")
+        if hi is not None and hi > MAX_BRDF_VALUE:
+            raise F.Invalid(F.sub(key, "max"), f"{hi:g} 1/sr is above {MAX_BRDF_VALUE:g} (fit.limits.MAX_BRDF_VALUE)")
+    return out
+
+
+def _domain_policy(d, key: str) -> dict:
+    pol = d.get("domain_policy", {"outside": "clamp"})
+    F.obj(pol, key)
+    # Q > 0 is proved on the box only: evaluating outside it (no clamp) could meet a pole
+    F.string(pol.get("outside", "clamp"), F.sub(key, "outside"), choices=("clamp",))
+    return dict(pol)
+
+
+def _model(d: dict, path, key: str, depth: int, budget: _Budget):
+    """A RationalModel (version 1 body) or PiecewiseRationalModel (version 2 body) from ``d``."""
+    F.obj(d, key or "(top level)")
+    kind = F.string(d.get("kind", "function"), F.sub(key, "kind"), choices=("brdf", "function"))
+    variables = _variables(F.get(d, "variables", key), F.sub(key, "variables"), kind)
+    if "split" in d or "pieces" in d:
+        return _piecewise(d, path, key, depth, budget, kind, variables)
+    value = _value(d, F.sub(key, "value"), kind)
+    raw = F.get(d, "functions", key)
+    if not isinstance(raw, list) or not 1 <= len(raw) <= 16:
+        raise F.Invalid(F.sub(key, "functions"), "expected a list of 1 to 16 functions")
+    functions, infos = [], []
+    for i, fd in enumerate(raw):
+        f, info = _function(fd, F.sub(F.sub(key, "functions"), i), variables, budget)
+        functions.append(f)
+        infos.append(info)
+    outputs = d.get("outputs")
+    if outputs is None:
+        outputs = [fd.get("output", "") for fd in raw]
+    if not isinstance(outputs, list) or len(outputs) != len(functions):
+        raise F.Invalid(F.sub(key, "outputs"), f"expected a list of {len(functions)} output names")
+    outputs = [F.string(o, F.sub(F.sub(key, "outputs"), i), max_len=64) for i, o in enumerate(outputs)]
+    if kind == "brdf" and outputs != ["R", "G", "B"]:
+        raise F.Invalid(F.sub(key, "outputs"), f"a BRDF's outputs are R, G, B, not {', '.join(outputs)}")
+    basis = F.string(d.get("basis", "chebyshev"), F.sub(key, "basis"))
+    if basis != "chebyshev":
+        raise F.Invalid(F.sub(key, "basis"), f"unsupported basis {basis[:40]!r}")
+    return RationalModel(
+        name=F.string(d.get("name", ""), F.sub(key, "name"), max_len=1000), variables=variables,
+        functions=functions, outputs=tuple(outputs), kind=kind, **value,
+        domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
+        fit_info=dict(F.obj(d.get("fit", {}), F.sub(key, "fit"))), function_info=infos,
+        source=dict(F.obj(d.get("source", {"file": "", "sha256": ""}), F.sub(key, "source"))))
+
+
+def _piecewise(d, path, key, depth, budget, kind, variables):
+    if depth >= MAX_SPLIT_DEPTH:
+        raise F.Invalid(key, f"pieces nested more than {MAX_SPLIT_DEPTH} deep (fit.limits.MAX_SPLIT_DEPTH)")
+    ks = F.sub(key, "split")
+    split = F.obj(F.get(d, "split", key), ks)
+    var = F.string(F.get(split, "variable", ks), F.sub(ks, "variable"), choices=[v.name for v in variables])
+    raw = F.get(d, "pieces", key)
+    kp = F.sub(key, "pieces")
+    if not isinstance(raw, list) or not 1 <= len(raw) <= MAX_PIECES:
+        raise F.Invalid(kp, f"expected a list of 1 to {MAX_PIECES} pieces (fit.limits.MAX_PIECES)")
+    edges = F.array(F.get(split, "edges", ks), F.sub(ks, "edges"), (len(raw) + 1,))
+    pieces, infos = [], []
+    for i, pd in enumerate(raw):
+        ki = F.sub(kp, i)
+        F.obj(pd, ki)
+        sub = {k: d[k] for k in ("name", "kind", "value", "basis", "outputs") if k in d}
+        sub.update(variables=F.get(pd, "variables", ki), domain_policy=d.get("domain_policy", {"outside": "clamp"}))
+        if "split" in pd:
+            sub.update(split=pd["split"], pieces=F.get(pd, "pieces", ki))
+        else:
+            sub.update(functions=F.get(pd, "functions", ki))
+        pieces.append(_model(sub, path, ki, depth + 1, budget))
+        infos.append(dict(F.obj(pd.get("info", {}), F.sub(ki, "info"))))
     try:
-        if d.get("basis", "chebyshev") != "chebyshev":
-            raise ValueError(f"unsupported basis {d.get('basis')!r}")
-        variables = [Variable(name=str(v["name"]), unit=str(v.get("unit", "")),
-                              transform=str(v.get("transform", "identity")), domain=v["domain"])
-                     for v in d["variables"]]
-        names = tuple(v.name for v in variables)
-        functions, infos = [], []
-        for fd in d["functions"]:
-            f = RationalFunction.from_dict(fd, var_names=names)
-            expected = np.array([v.rf_domain for v in variables])
-            if not np.allclose(f.domain, expected, rtol=1e-12, atol=1e-12):
-                raise ValueError(f"function {fd.get('output')}: domain {f.domain.tolist()} does not match "
-                                 f"the transformed variable domains {expected.tolist()}")
-            if not (np.all(np.isfinite(f.num_coef)) and np.all(np.isfinite(f.den_coef))):
-                raise ValueError("non-finite coefficient")
-            functions.append(f)
-            infos.append({k: v for k, v in fd.items() if k not in (
-                "output", "domain", "numerator", "denominator", "num_degrees", "den_degrees",
-                "n_coefficients")})
-        value = d.get("value", {})
-        outputs = tuple(d.get("outputs") or [fd["output"] for fd in d["functions"]])
-        return RationalModel(
-            name=str(d.get("name", "")), variables=variables, functions=functions, outputs=outputs,
-            kind=str(d.get("kind", "function")),
-            value_transform=str(value.get("transform", "linear")),
-            value_offset=float(value.get("offset", 0.0) or 0.0),
-            value_min=value.get("min", None), value_max=value.get("max", None),
-            value_name=str(value.get("name", "y")),
-            value_unit=str(value.get("unit", "")),
-            domain_policy=dict(d.get("domain_policy", {"outside": "clamp"})),
-            fit_info=dict(d.get("fit", {})), function_info=infos,
-            source=dict(d.get("source", {"file": "", "sha256": ""})),
-        )
-    except BRDFFileError:
-        raise
-    except (KeyError, TypeError, ValueError, IndexError) as e:
-        raise BRDFFileError(path, f"invalid {FORMAT} coefficient file ({e.__class__.__name__}: {e})") from None
-
-
-def _piecewise_from_dict(d: dict, path=None) -> PiecewiseRationalModel:
-    try:
-        split = d["split"]
-        pieces, infos = [], []
-        for k, pd in enumerate(d["pieces"]):
-            sub = {key: d[key] for key in ("name", "kind", "value", "basis", "outputs") if key in d}
-            sub.update(format=FORMAT, variables=pd["variables"],
-                       domain_policy=d.get("domain_policy", {"outside": "clamp"}))
-            if "split" in pd:        # a piece split again (e.g. theta_h peak piece + rest)
-                sub.update(version=VERSION_PIECEWISE, split=pd["split"], pieces=pd["pieces"])
-            else:
-                sub.update(version=VERSION, functions=pd["functions"])
-            pieces.append(from_dict(sub, path))
-            infos.append(dict(pd.get("info", {})))
-        variables = [Variable(name=str(v["name"]), unit=str(v.get("unit", "")),
-                              transform=str(v.get("transform", "identity")), domain=v["domain"])
-                     for v in d["variables"]]
         return PiecewiseRationalModel(
-            name=str(d.get("name", "")), variables=variables, split_variable=str(split["variable"]),
-            edges=list(split["edges"]), pieces=pieces, kind=str(d.get("kind", "function")),
-            domain_policy=dict(d.get("domain_policy", {"outside": "clamp"})),
-            fit_info=dict(d.get("fit", {})), piece_info=infos,
-            source=dict(d.get("source", {"file": "", "sha256": ""})))
-    except BRDFFileError:
-        raise
-    except (KeyError, TypeError, ValueError, IndexError) as e:
-        raise BRDFFileError(path, f"invalid {FORMAT} version-2 coefficient file "
-                                  f"({e.__class__.__name__}: {e})") from None
+            name=F.string(d.get("name", ""), F.sub(key, "name"), max_len=1000), variables=variables,
+            split_variable=var, edges=[float(e) for e in edges], pieces=pieces, kind=kind,
+            domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
+            fit_info=dict(F.obj(d.get("fit", {}), F.sub(key, "fit"))), piece_info=infos,
+            source=dict(F.obj(d.get("source", {"file": "", "sha256": ""}), F.sub(key, "source"))))
+    except ValueError as e:
+        raise F.Invalid(key or "pieces", str(e)) from None
+
+
+def _leaf_models(model, key: str = "") -> list:
+    """``[(key path, single-box model)]`` of ``model``, pieces first to last."""
+    if isinstance(model, PiecewiseRationalModel):
+        return [leaf for i, p in enumerate(model.pieces) for leaf in _leaf_models(p, F.sub(F.sub(key, "pieces"), i))]
+    return [(key, model)]
+
+
+def recertify(model, path=None, budget: _Budget | None = None) -> None:
+    """Prove Q > 0 again on the box of every function of ``model`` (whatever its record says);
+    :class:`BRDFFileError` naming the function when a denominator has a zero (a pole) or
+    cannot be proven positive within :data:`fit.limits.MAX_CERTIFY_BOXES` sub-boxes and the
+    file's work budget :data:`fit.limits.MAX_CERTIFY_WORK`. A log-valued model without an upper
+    clamp must also have a bounded exponent (no overflow)."""
+    budget = budget or _Budget()
+    for key, leaf in _leaf_models(model):
+        for c, f in enumerate(leaf.functions):
+            where = f"key {F.sub(F.sub(key, 'functions'), c)} ({leaf.outputs[c]})"
+            size = int(np.prod(np.asarray(f.den_degrees) + 1))
+            boxes = min(MAX_CERTIFY_BOXES, max((MAX_CERTIFY_WORK - budget.certify_work) // max(size, 1), 1))
+            cert = certify_positive(f.den_exponents, f.den_coef, max_depth=12, max_boxes=boxes)
+            budget.certify_work += cert.n_boxes * size
+            if not cert.certified:
+                said = leaf.function_info[c].get("q_certificate", {}) if leaf.function_info else {}
+                claim = " although the file says it is certified" if isinstance(said, dict) and said.get(
+                    "certified") is True else ""
+                raise BRDFFileError(path, f"{where}: {cert.reason or 'Q > 0 could not be proven'} "
+                                          f"(re-checked on load){claim}")
+            if leaf.value_transform == "log" and leaf.value_max is None:
+                bound = float(np.abs(f.num_coef).sum()) / cert.lower_bound
+                if bound > 700.0:
+                    raise BRDFFileError(path, f"{where}: log value without a 'max' clamp and |P/Q| up to "
+                                              f"{bound:.3g}: exp would overflow")
+
+
+def from_dict(d: dict, path=None, certify: bool = True):
+    """Build a model from a parsed file (:class:`RationalModel` for version 1,
+    :class:`PiecewiseRationalModel` for version 2) after checking every value's type, shape and
+    range and the limits of :mod:`fit.limits`, and (``certify``) re-proving Q > 0 of every
+    function (:func:`recertify`): a file's ``certified: true`` is never trusted.
+    :class:`BRDFFileError` naming the file and the key on any problem."""
+    if not isinstance(d, dict) or d.get("format") != FORMAT:
+        got = d.get("format") if isinstance(d, dict) else None
+        raise BRDFFileError(path, f"not an {FORMAT} coefficient file (format key is "
+                                  f"{str(got)[:40] if got is not None else None!r})")
+    ver = d.get("version")
+    if isinstance(ver, bool) or ver not in VERSIONS:
+        raise BRDFFileError(path, f"unsupported {FORMAT} version {ver if isinstance(ver, int) else repr(ver)[:20]} (this reader knows versions "
+                                  f"{', '.join(map(str, VERSIONS))})")
+    budget = _Budget()
+    label = "version-2 " if ver == VERSION_PIECEWISE else ""
+    try:
+        if ver == VERSION and ("split" in d or "pieces" in d):
+            raise F.Invalid("version", "a version-1 file has no 'split' or 'pieces' (version 2)")
+        if ver == VERSION_PIECEWISE and "split" not in d:
+            raise F.Invalid("split", "missing (a version-2 file is piecewise)")
+        model = _model(d, path, "", 0, budget)
+    except F.Invalid as e:
+        raise BRDFFileError(path, f"invalid {FORMAT} {label}coefficient file: {e}") from None
+    except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as e:
+        raise BRDFFileError(path, f"invalid {FORMAT} {label}coefficient file ({e.__class__.__name__}: {e})") from None
+    if certify:
+        recertify(model, path, budget)
+    return model
 
 
 def load(path):
-    """Read an ``rbrdf-rational`` JSON file; :class:`BRDFFileError` if missing, corrupt or of
-    an unknown version."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise BRDFFileError(path, "no such file") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise BRDFFileError(path, f"cannot read coefficient file ({e.__class__.__name__}: {e})") from None
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as e:
-        raise BRDFFileError(path, f"corrupt coefficient file: not valid JSON ({e})") from None
-    return from_dict(d, path)
+    """Read an ``rbrdf-rational`` JSON file (:func:`fit.inputs.read_json`: a regular file of at
+    most :data:`fit.limits.MAX_JSON_BYTES`, strict JSON) and build its model
+    (:func:`from_dict`, Q > 0 re-proved); :class:`BRDFFileError` if missing, corrupt, of an
+    unknown version, beyond a limit or with a denominator that is not positive."""
+    return from_dict(read_json(path, "coefficient file"), path)

@@ -9,17 +9,20 @@ from pathlib import Path
 
 import numpy as np
 
+from ..outputs import save_figure
 from .table import inverse_cdf_phi, inverse_cdf_theta, pdf_phi, pdf_theta
 
 
-def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:
+def plot_cdf(fit, out_dir, prefix: str = "cdf", outputs=None) -> list:
+    """Write ``<prefix>_theta.png`` and ``<prefix>_phi.png`` into ``out_dir``; returns their
+    paths. ``outputs``: an :class:`fit.outputs.OutputSet` to stage them in (the caller
+    commits), else each is written atomically at once."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     t = fit.table
     rational = not fit.fallback
     files = []
@@ -38,7 +41,8 @@ def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:
     ax[1].set(xlabel="mu", ylabel="theta_l (deg)", title="CDF^-1_v(mu)")
     ax[0].legend(); ax[1].legend(fontsize=7)
     f1 = out / f"{prefix}_theta.png"
-    fig.tight_layout(); fig.savefig(f1, dpi=100); plt.close(fig)
+    fig.tight_layout()
+    save_figure(fig, f1, outputs, dpi=100)
     files.append(f1)
 
     tvs = (0, 20, 45, 85)
@@ -62,6 +66,7 @@ def plot_cdf(fit, out_dir, prefix: str = "cdf") -> list:
         ax[1, k].set(title=f"CDF^-1_v(tau | theta_l), theta_v = {tv_deg} deg", xlabel="tau", ylabel="phi_l (deg)")
         ax[0, k].legend(fontsize=7); ax[1, k].legend(fontsize=7)
     f2 = out / f"{prefix}_phi.png"
-    fig.tight_layout(); fig.savefig(f2, dpi=90); plt.close(fig)
+    fig.tight_layout()
+    save_figure(fig, f2, outputs, dpi=90)
     files.append(f2)
     return files

@@ -28,6 +28,13 @@ import numpy as np
 
 from ..formats.angles import spherical_to_direction
 from ..formats.colour import LUMINANCE
+from ..limits import (
+    MAX_CDF_CELLS,
+    MAX_CDF_PHI_CELLS,
+    MAX_CDF_ROWS,
+    MAX_CDF_THETA_CELLS,
+    check_memory,
+)
 
 
 @dataclass
@@ -136,6 +143,23 @@ def _cosine_cell_masses(n_t: int, n_p: int):
     return m_t, m_p
 
 
+def check_table_size(n_v: int, n_t: int, n_p: int, sub: int = 3, chunk_rows: int = 4) -> None:
+    """``ValueError`` when a table of ``n_v`` rows x ``n_t`` x ``n_p`` cells (``sub`` x ``sub``
+    points per cell) is beyond the limits of :mod:`fit.limits` (rows, cells, and the estimated
+    memory of :func:`fit.sampling.table.tabulate`)."""
+    for name, v, lo, hi in (("n_v", n_v, 2, MAX_CDF_ROWS), ("n_t", n_t, 2, MAX_CDF_THETA_CELLS),
+                            ("n_p", n_p, 2, MAX_CDF_PHI_CELLS), ("sub", sub, 1, 16)):
+        if not lo <= v <= hi:
+            raise ValueError(f"{name} = {v} is outside [{lo}, {hi}] (fit.limits)")
+    cells = n_v * n_t * n_p
+    if cells > MAX_CDF_CELLS:
+        raise ValueError(f"n_v x n_t x n_p = {cells} cells, above the limit {MAX_CDF_CELLS} "
+                         "(fit.limits.MAX_CDF_CELLS)")
+    pts = (n_t * sub) * (n_p * sub)
+    # measured: 8 x 448 x 448 (sub 3) peaks at 1.58 GB, about 8 (8 cells + 100 points) bytes
+    check_memory(8.0 * (8 * cells + 9 * chunk_rows * 3 * pts), f"a {n_v} x {n_t} x {n_p} table")
+
+
 def tabulate(evaluate, n_v: int = 32, n_t: int = 64, n_p: int = 64, sub: int = 3,
              eps: float = 0.02, noise: float = 1e-6, chunk_rows: int = 4) -> CDFTable:
     """Tabulate the inverse-CDF sampler of ``evaluate(wi, wo) -> (..., 3)`` (1/sr, RGB).
@@ -145,6 +169,7 @@ def tabulate(evaluate, n_v: int = 32, n_t: int = 64, n_p: int = 64, sub: int = 3
     """
     if not 0.0 < eps <= 1.0:
         raise ValueError("eps must be in (0, 1]: it keeps every direction sampleable")
+    check_table_size(n_v, n_t, n_p, sub, chunk_rows)
     theta_v = (np.arange(n_v) + 0.5) / n_v * 0.5 * np.pi
     dt = 0.5 * np.pi / n_t
     dp = np.pi / n_p

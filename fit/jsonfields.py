@@ -1,0 +1,177 @@
+"""Typed, bounded access to the values of a parsed JSON file.
+
+``np.asarray(["1", "2"], float)`` quietly turns strings into numbers and ``float(True)`` is 1:
+the readers of :mod:`fit` never convert a file's values that way. They ask this module for a
+number, an integer, a string, a flag or an array of a stated shape; every mismatch raises
+:class:`Invalid` with the key's path (``functions[0].numerator.coefficients[3]``), which the
+reader turns into one :class:`fit.errors.BRDFFileError` line naming the file and the key.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+class Invalid(ValueError):
+    """A value of a JSON file is missing or of the wrong type, shape or range; ``str`` names
+    its key."""
+
+    def __init__(self, key: str, problem: str):
+        self.key = key
+        super().__init__(f"key {key}: {problem}" if key else problem)
+
+
+def _kind(v) -> str:
+    if v is None:
+        return "null"
+    if isinstance(v, bool):
+        return "true/false"
+    if isinstance(v, (int, float)):
+        return "a number"
+    if isinstance(v, str):
+        return f"a string ({v[:20]!r})"
+    if isinstance(v, list):
+        return "a list"
+    if isinstance(v, dict):
+        return "an object"
+    return type(v).__name__
+
+
+def is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def obj(v, key: str) -> dict:
+    """``v`` if it is a JSON object."""
+    if not isinstance(v, dict):
+        raise Invalid(key, f"expected an object, got {_kind(v)}")
+    return v
+
+
+def get(d: dict, name: str, key: str = ""):
+    """``d[name]``; :class:`Invalid` naming ``key.name`` when it is missing."""
+    if not isinstance(d, dict):
+        raise Invalid(key, f"expected an object, got {_kind(d)}")
+    if name not in d:
+        raise Invalid(f"{key}.{name}" if key else name, "missing")
+    return d[name]
+
+
+def sub(key: str, name) -> str:
+    """The key path of a member (``name`` a str) or an element (an int) of ``key``."""
+    if isinstance(name, int):
+        return f"{key}[{name}]"
+    return f"{key}.{name}" if key else str(name)
+
+
+def number(v, key: str, lo: float | None = None, hi: float | None = None, optional: bool = False):
+    """A finite JSON number in [lo, hi] as float (``None`` allowed when ``optional``)."""
+    if v is None and optional:
+        return None
+    if not is_number(v):
+        raise Invalid(key, f"expected a number, got {_kind(v)}")
+    f = float(v)
+    if not math.isfinite(f):
+        raise Invalid(key, "not a finite number")
+    if (lo is not None and f < lo) or (hi is not None and f > hi):
+        raise Invalid(key, f"{f:g} is outside [{lo if lo is not None else '-inf'}, "
+                           f"{hi if hi is not None else 'inf'}]")
+    return f
+
+
+def integer(v, key: str, lo: int | None = None, hi: int | None = None) -> int:
+    """A JSON integer (``3``, or ``3.0``) in [lo, hi]."""
+    if isinstance(v, float) and v.is_integer():
+        v = int(v)
+    if not isinstance(v, int) or isinstance(v, bool):
+        raise Invalid(key, f"expected an integer, got {_kind(v)}")
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        raise Invalid(key, f"{v} is outside [{lo if lo is not None else '-inf'}, "
+                           f"{hi if hi is not None else 'inf'}]")
+    return int(v)
+
+
+def string(v, key: str, choices=None, optional: bool = False, max_len: int = 10000):
+    """A JSON string (one of ``choices`` when given)."""
+    if v is None and optional:
+        return None
+    if not isinstance(v, str):
+        raise Invalid(key, f"expected a string, got {_kind(v)}")
+    if len(v) > max_len:
+        raise Invalid(key, f"string of {len(v)} characters (at most {max_len})")
+    if choices is not None and v not in choices:
+        raise Invalid(key, f"{v[:40]!r} is not one of {', '.join(map(repr, choices))}")
+    return v
+
+
+def flag(v, key: str) -> bool:
+    """A JSON ``true`` / ``false``."""
+    if not isinstance(v, bool):
+        raise Invalid(key, f"expected true or false, got {_kind(v)}")
+    return v
+
+
+def array(v, key: str, shape: tuple, kind: str = "number", max_size: int | None = None) -> np.ndarray:
+    """A nested JSON list of ``shape`` (``None`` entries: any length) holding only numbers
+    (``kind="number"``: finite, float64), integers (``"int"``: int64) or true/false
+    (``"bool"``); :class:`Invalid` naming the first offending element otherwise."""
+    ndim = len(shape)
+    dims = []
+    # the shape, read down the first elements, then checked on every list
+    probe = v
+    for level in range(ndim):
+        k = key if level == 0 else f"{key}{'[0]' * level}"
+        if not isinstance(probe, list):
+            raise Invalid(k, f"expected a list ({ndim}-D array), got {_kind(probe)}")
+        n = len(probe)
+        want = shape[level]
+        if want is not None and n != want:
+            raise Invalid(k, f"has {n} entries, expected {want}")
+        dims.append(n)
+        probe = probe[0] if n else None
+        if n == 0:
+            dims.extend([0] * (ndim - level - 1))
+            break
+    size = int(np.prod(dims)) if dims else 0
+    if max_size is not None and size > max_size:
+        raise Invalid(key, f"array of {size} entries, above the limit {max_size}")
+    if kind == "number":
+        ok = is_number
+    elif kind == "int":
+        def ok(x):
+            return isinstance(x, int) and not isinstance(x, bool) and -2**62 < x < 2**62
+    elif kind == "bool":
+        def ok(x):
+            return isinstance(x, bool)
+    else:
+        raise ValueError(kind)
+    flat = []
+
+    def walk(node, level, path):
+        if level == ndim:
+            if not ok(node):
+                want = {"int": "an integer", "bool": "true/false"}.get(kind, "a number")
+                raise Invalid(path, f"expected {want}, got {_kind(node)}")
+            flat.append(node)
+            return
+        if not isinstance(node, list):
+            raise Invalid(path, f"expected a list, got {_kind(node)}")
+        if len(node) != dims[level]:
+            raise Invalid(path, f"has {len(node)} entries, expected {dims[level]} (ragged array)")
+        if level == ndim - 1:
+            # fast path: the innermost lists
+            bad = [i for i, x in enumerate(node) if not ok(x)]
+            if bad:
+                walk(node[bad[0]], ndim, f"{path}[{bad[0]}]")
+            flat.extend(node)
+            return
+        for i, x in enumerate(node):
+            walk(x, level + 1, f"{path}[{i}]")
+
+    walk(v, 0, key)
+    dtype = {"number": np.float64, "int": np.int64, "bool": bool}[kind]
+    out = np.array(flat, dtype=dtype).reshape(dims)
+    if kind == "number" and not np.all(np.isfinite(out)):
+        raise Invalid(key, "contains a non-finite number")
+    return out
