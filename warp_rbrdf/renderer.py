@@ -161,7 +161,7 @@ class Renderer:
         k = self.kernels.render_tile
         fixed = [self.mesh.id, self.indices, self.normals, self.tri_mat, self.tri_smooth,
                  self.camera, self.env, self.directional, self.materials,
-                 spp, seed, sample_patterns.PATTERN_CODES[it.pattern], it.max_depth,
+                 spp, seed, sample_patterns.kernel_pattern(it.pattern, self.material_data), it.max_depth,
                  1 if it.hide_environment else 0, self.ray_epsilon]
 
         def one(t):
