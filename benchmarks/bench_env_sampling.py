@@ -22,7 +22,8 @@ the median over ``--pairs`` pairs (seeds 2k+1, 2k+2). No reference render is nee
 error is the noise only (every estimator here is unbiased).
 
 Cost: env_sample alone (a kernel that only samples, 10^6 uniforms, one thread, best of 3) per
-scheme and map, and the render's wall time (median over the pairs' renders, all cores).
+scheme and map, and the render's wall time at the largest spp (all cores, best of 5 renders,
+the schemes interleaved; the per-value seconds printed with the errors are medians).
 
 Usage: python -m benchmarks.bench_env_sampling [--quick] [--res 256] [--spp 1,16] [--pairs 3]
        [--maps studio,rooitou] [--schemes piecewise-constant,marginal,hierarchical]
@@ -145,6 +146,23 @@ def sample_rate(image, scheme: int, n: int = 1_000_000, reps: int = 3) -> float:
     return n / best
 
 
+def render_times(path, image, res, spp, schemes, rounds=5) -> dict:
+    """Best-of-``rounds`` render seconds (all cores, default pattern) per scheme, the schemes
+    interleaved round by round so that load changes hit them alike."""
+    from warp_rbrdf import lights
+    from warp_rbrdf.renderer import Renderer
+
+    r = Renderer(light_only_scene(path, res, "stratified"))
+    r.compile()
+    best = {}
+    for k in range(rounds):
+        for name in schemes:
+            use_scheme(r, image, lights.SCHEME_NAMES[name])
+            r.render(spp=spp, seed=k)
+            best[name] = min(best.get(name, np.inf), r.stats.render_seconds)
+    return best
+
+
 def table(rows) -> str:
     spps = sorted({r["spp"] for r in rows})
     keys = []
@@ -210,17 +228,20 @@ def main(argv=None):
             for r in mitsuba(path, res, spps, pairs, msamplers):
                 rows.append(dict(r, map=m))
         if not args.no_rate:
+            times = render_times(path, image, res, max(spps), schemes, rounds=2 if args.quick else 5)
             for s in schemes:
                 rate = sample_rate(image, lights.SCHEME_NAMES[s], n=100_000 if args.quick else 1_000_000)
-                rates.append(dict(map=m, scheme=s, samples_per_second=rate))
-                print(f"  env_sample {s:18s} {rate / 1e6:.2f} M samples/s (one thread)", flush=True)
+                rates.append(dict(map=m, scheme=s, samples_per_second=rate, render_seconds=times[s]))
+                print(f"  env_sample {s:18s} {rate / 1e6:.2f} M samples/s (one thread); render "
+                      f"{max(spps)} spp {times[s]:.2f} s (best of {2 if args.quick else 5})", flush=True)
     print()
     print(table(rows))
     if rates:
         print()
-        print("| map | env sampling | env_sample, M samples/s (one thread) |\n| --- | --- | --- |")
+        print(f"| map | env sampling | env_sample, M samples/s (one thread) | render {max(spps)} spp, s "
+              f"(best of {2 if args.quick else 5}, stratified) |\n| --- | --- | --- | --- |")
         for r in rates:
-            print(f"| {r['map']} | {r['scheme']} | {r['samples_per_second'] / 1e6:.2f} |")
+            print(f"| {r['map']} | {r['scheme']} | {r['samples_per_second'] / 1e6:.2f} | {r['render_seconds']:.2f} |")
     if args.json:
         with open(args.json, "w") as f:
             json.dump(dict(config=dict(res=res, spp=spps, pairs=pairs, albedo=ALBEDO, cores=os.cpu_count()),

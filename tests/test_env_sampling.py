@@ -105,10 +105,12 @@ def fine_chi2(env, samples, k):
 
 # --------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("scheme", SCHEMES)
-def test_chi2_tiny_sun_synthetic_map(scheme):
+@pytest.mark.parametrize("shape", [(32, 64), (17, 45)])
+def test_chi2_tiny_sun_synthetic_map(scheme, shape):
     """Quarter-pixel bins: the within-patch (bilinear x sin theta) shape is tested too, on the
-    sun's four patches (about 3/4 of the samples) and on the background."""
-    env = lights.build_env_distribution(sun_map(), _scheme=SCHEMES[scheme])
+    sun's four patches (about 3/4 of the samples) and on the background; odd sizes too (the
+    hierarchy's padding)."""
+    env = lights.build_env_distribution(sun_map(*shape), _scheme=SCHEMES[scheme])
     n = 1_000_000
     s = warp_sample(env, np.random.default_rng(3).random((n, 2)))
     assert fine_chi2(env, s[:, :3], 4) > P_MIN

@@ -20,18 +20,22 @@ bilinear luminance times the *exact* sin(pi v) Jacobian of the lat-long map, so 
 uniform (1/4pi) and a one-texel sun is sampled along its bilinear footprint, not by a constant
 per cell. ``Z`` is a sum of closed-form patch integrals (float64). Within a patch, the row
 fraction ``t`` has density ``((1 - t) A0 + t A1) sin(a + b t)`` (a = pi j / (H - 1),
-b = pi / (H - 1)); its closed-form CDF is inverted by bracketed Newton iterations in float64; given
-``t`` the column fraction is linear and is inverted in closed form. Two warps reach a patch (both
+b = pi / (H - 1)); its closed-form CDF is inverted in float64 (Newton on the cubic CDF of the
+chord of sin, then bracketed Newton on the exact CDF, usually one step); given ``t`` the column
+fraction is linear and is inverted in closed form. Two warps reach a patch (both
 give the same density; the pdf is exact and positive wherever the lookup is):
 
-* ``SCHEME_MARGINAL`` (default): the continuous marginal / conditional inversion (as Mitsuba's
+* ``SCHEME_HIERARCHICAL`` (default): a hierarchical (quadtree) warp over the patch masses (as
+  Mitsuba's ``Hierarchical2D``, which Mitsuba's ``envmap`` uses): each level sends the uniforms
+  to one of four children and rescales them, so nearby uniforms reach nearby patches and
+  stratified samples stay stratified. The Warp struct stores the levels above the patches
+  (float32, 2 x 2 children contiguous); the last step computes the four patch masses from the
+  luminance texels, which the patch inversion reads anyway;
+* ``SCHEME_MARGINAL``: the continuous marginal / conditional inversion (as Mitsuba's
   ``Marginal2D`` with continuous conditionals): ``xi[0]`` picks ``v`` from the marginal over the
-  H - 1 row intervals (binary search, then Newton inside the interval), ``xi[1]`` picks ``u``
-  from the conditional *at that v* (the two bounding rows' prefix sums mixed by ``t``, binary
-  search, then the linear inverse inside the patch). The map from the unit square is continuous,
-  so stratified uniforms stay stratified;
-* ``SCHEME_HIERARCHICAL``: a hierarchical (quadtree) warp over the patch masses (as Mitsuba's
-  ``Hierarchical2D``, which Mitsuba's ``envmap`` uses), then the same per-patch inversion.
+  H - 1 row intervals, ``xi[1]`` picks ``u`` from the conditional *at that v* (the two bounding
+  rows' prefix sums mixed by ``t``). Continuous too, but it stratifies less well than the
+  hierarchy (``benchmarks.bench_env_sampling``); kept, private, for that benchmark.
 
 ``SCHEME_PIECEWISE_CONSTANT`` is the sampler before issue 21 (one cell per texel, density
 constant in solid angle within a cell). It is kept, private, for ``benchmarks.bench_env_sampling``
