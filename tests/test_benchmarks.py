@@ -13,6 +13,9 @@ from conftest import IN_CI, data_file
 BENCHMARKS = ("bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers", "bench_vs_mitsuba")
 
 
+BENCHMARKS = ("bench_env_sampling", "bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers")
+
+
 @pytest.mark.parametrize("name", BENCHMARKS)
 def test_benchmark_help(name, capsys):
     module = importlib.import_module(f"benchmarks.{name}")
@@ -95,3 +98,17 @@ def test_bench_vs_mitsuba_smoke(tmp_path):
         assert 0.8 < chk[label]["ratio"] < 1.25, (label, chk[label])   # estimate == error vs reference
         assert abs(chk[label]["mean_z"]) < 5, (label, chk[label])       # same converged mean
     assert res["summary"]["cases"] == 1 and np.isfinite(res["summary"]["median_rate_ratio"])
+
+
+def test_bench_env_sampling_smoke(capsys):
+    """A tiny run: every row is a finite relative RMSE, and the table lists them."""
+    from benchmarks import bench_env_sampling as B
+    from conftest import data_file
+
+    data_file("envmaps/studio_small_03_1k.hdr")
+    r = B.main(["--quick", "--res", "24", "--spp", "1,4", "--maps", "studio", "--no-mitsuba",
+                "--schemes", "piecewise-constant,hierarchical", "--no-rate"])
+    assert {(x["scheme"], x["spp"]) for x in r["rows"]} == {(s, n) for s in ("piecewise-constant", "hierarchical")
+                                                           for n in (1, 4)}
+    assert all(0 < x["rel_rmse"] < 10 for x in r["rows"])
+    assert "| studio | ours | hierarchical | stratified |" in capsys.readouterr().out

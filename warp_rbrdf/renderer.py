@@ -159,7 +159,7 @@ class Renderer:
         tl = integrator.tiles(W, H, tile)
         k = self.kernels.render_tile
         fixed = [self.scene_geometry, self.camera, self.env, self.directional, self.materials,
-                 spp, seed, sample_patterns.PATTERN_CODES[it.pattern], it.max_depth,
+                 spp, seed, sample_patterns.kernel_pattern(it.pattern, self.material_data), it.max_depth,
                  1 if it.hide_environment else 0, self.ray_epsilon]
 
         def one(t):
