@@ -6,8 +6,8 @@ strategy of the material hit (:data:`warp_rbrdf.registry.STRATEGIES`, stored as
 ``Materials.combine`` and ``Materials.technique``):
 
 * every directional light: one shadow ray (delta light, always sampled);
-* ``COMBINE_LIGHT`` / ``COMBINE_MIS``: one environment sample (2-D luminance CDF,
-  :mod:`warp_rbrdf.lights`) with one shadow ray;
+* ``COMBINE_LIGHT`` / ``COMBINE_MIS``: one environment sample (hierarchical warp of the
+  looked-up luminance x sin theta, :mod:`warp_rbrdf.lights`) with one shadow ray;
 * ``COMBINE_BSDF`` / ``COMBINE_MIS``: one BSDF sample from the material's technique
   (:data:`warp_rbrdf.registry.TECHNIQUES`) with one ray; if it escapes, the environment is
   added, weighted by the power heuristic for ``COMBINE_MIS``. The MIS weights use the
