@@ -10,10 +10,8 @@ import numpy as np
 import pytest
 from conftest import IN_CI, data_file
 
-BENCHMARKS = ("bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers", "bench_vs_mitsuba")
-
-
-BENCHMARKS = ("bench_env_sampling", "bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers")
+BENCHMARKS = ("bench_env_sampling", "bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers",
+              "bench_startup", "bench_vs_mitsuba")
 
 
 @pytest.mark.parametrize("name", BENCHMARKS)

@@ -170,7 +170,7 @@ def test_warp_uses_the_projected_table_where_flagged_and_the_fit_elsewhere(fitte
     np.testing.assert_array_equal(got[:, :2], fit[:, :2])
     np.testing.assert_array_equal(got[core, 2], fit[core, 2])
     assert np.abs(got[band, 2] - fit[band, 2]).max() > 0.1     # the band's blue is replaced ...
-    # ... by the fallback table (NumPy reference of the generated code) ...
+    # ... by the fallback table (NumPy reference of the Warp evaluation) ...
     lm = renderer.material_data.loaded[renderer.material_index("flagged")]
     assert lm.fallback_table is not None
     ref = lm.evaluate(wi, wo)
@@ -207,16 +207,18 @@ def test_values_never_leave_the_regions_measured_range(fitted, renderer):
 
 def test_unflagged_fit_is_unchanged(renderer):
     """A fit without a flagged piece loads as before: its own NumPy evaluation, no table, no log
-    line, and the generated code the renderer had before this feature (no table, no clamp)."""
+    line, and the packed data the renderer had before this feature (no table channel, no clamp)."""
     from warp_rbrdf.paths import PACKAGE_DATA
 
     model = load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json")
     assert flagged_regions(model) == []
     lm = rational.load(MaterialSpec(name="s", type="rational", data=model))
     assert lm.fallback_table is None and lm.notes == () and lm.data is model
-    src = rational.generate_function(model, "f")
-    assert src == rational.generate_function(model, "f", table=False)
-    assert "tables" not in src and "clamp(y" not in src
+    packed = rational.pack_model(model)
+    assert all(np.array_equal(a, b) for a, b in zip(packed, rational.pack_model(model, table=False)))
+    assert all(np.array_equal(a, b) for a, b in zip(packed, lm.coefficients))
+    leaves = [q for p in model.pieces for q in getattr(p, "pieces", [p])]
+    assert all(rational.channel_modes(leaf, table=True) == [(False, None)] * 3 for leaf in leaves)
     # vouched coefficients: exactly the fit (the scene's 'vouched' material gets no table)
     lm = renderer.material_data.loaded[renderer.material_index("vouched")]
     assert lm.fallback_table is None and renderer.material_data.param[renderer.material_index("vouched")] == 0

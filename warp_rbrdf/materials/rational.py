@@ -1,16 +1,19 @@
 """``rational``: the fitter's ``rbrdf-rational`` coefficient files (:mod:`fit.rational.coefficient_file`,
-versions 1 and 2) compiled to generated, fully unrolled Warp code; ``scale`` multiplies them.
+versions 1 and 2) evaluated from data; ``scale`` multiplies them.
 
-For each rational material the generator writes one ``@wp.func`` ``(wi, wo) -> vec3`` that
-follows the file's evaluation recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles
--> clamp onto the fitted domain -> input transform (identity / sqrt) -> map onto [-1, 1] ->
-Chebyshev recurrences up to the largest exponent used -> P/Q per channel as sums grouped by the
-first variable's exponent -> value transform (linear / log) -> ``max(y, min)``; 0 below the
-horizon. The polynomial part runs in float64 (Chebyshev sums can cancel); the angles come from
-the float32 shading frame. Coefficients are literals (:mod:`warp_rbrdf.codegen`), so each fit
-gets its own code, cached by Warp under the hash of the generated source;
-:func:`kernel_eval` dispatches on ``Materials.offset`` (the material's index among the scene's
-rational materials).
+A fit is packed (:func:`pack_model`) into records of ``Materials.coef_i`` / ``coef_f`` /
+``coef_q``: a split record per piecewise level (the split variable, its inner edges, the
+pieces) and a leaf record per single-box piece (flags, per-variable box and map, per channel its
+mode and step-7 range, and the six numerators and denominators of its channels packed as one
+group of Chebyshev polynomials, :mod:`warp_rbrdf.chebyshev`). One Warp function,
+:func:`rational_eval`, evaluates every fit: it follows the file's
+recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles -> the piece
+(``x <= edge`` picks the lower piece) -> clamp onto the piece's box -> input transform
+(identity / sqrt) -> map onto [-1, 1] -> Chebyshev sums -> P/Q per channel -> value transform
+(linear / log) -> ``max(y, min)``, ``min(y, max)`` -> the step-7 range; 0 below the horizon.
+The polynomial part runs in float64 (Chebyshev sums can cancel); the angles come from the
+float32 shading frame. The kernels' source does not depend on the coefficients: a new fit
+compiles nothing (the kernel cache serves the same code for every fit).
 
 **What the fit does not vouch for.** A piece whose record flags a channel as not within its
 intervals (:func:`fit.rational.brdf_model.flagged_regions`: the core when no core was met, a
@@ -22,7 +25,8 @@ file's ``source``, found next to the coefficient file, next to the scene or in
 grazing cut-off, empty clusters filled from the nearest measured cluster), clamped to the
 measured range of that piece; the table goes into ``Materials.tables`` and ``Materials.param``
 holds its start. With ``unvouched = "refuse"`` loading fails with one line naming the material,
-the file and what is flagged. A fit without a flagged piece generates the same code as before.
+the file and what is flagged. A fit without a flagged piece packs exactly as before the table
+existed (no channel reads a table).
 """
 from __future__ import annotations
 
@@ -50,10 +54,10 @@ from fit.rational.brdf_model import (
 from fit.rational.coefficient_file import load as load_coefficients
 from fit.rational.model import flagged, measured_range, output_clamp
 
-from ..codegen import lit as _lit
-from ..codegen import load_generated
+from ..chebyshev import FlatData, cheb_sum6
 from ..errors import SceneError
 from ..paths import data_root
+from . import frame as F
 from .data import LoadedMaterial, Materials
 from .measured import scaled
 
@@ -75,7 +79,8 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     check_model(model, scene_file, key)
     regions = flagged_regions(model)
     if not regions:
-        return LoadedMaterial(spec, model, scaled(model.evaluate, spec.scale), scale=spec.scale)
+        return LoadedMaterial(spec, model, scaled(model.evaluate, spec.scale), scale=spec.scale,
+                              coefficients=_packed(model, False, scene_file, key))
     what = describe_regions(model, regions)
     fit_name = spec.file.name if spec.file is not None else f"(in memory, {model.name!r})"
     head = f"material {spec.name!r}: rational fit {fit_name} is not within its bound for {what}"
@@ -112,7 +117,15 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     note = (f"rational fit not within its bound for {what}: using the projected table there "
             f"(median projection of {src.name}, clamped to each region's measured range)")
     return LoadedMaterial(spec, model, scaled(evaluate_with_table(model, table), spec.scale),
-                          scale=spec.scale, fallback_table=table, notes=(note,))
+                          scale=spec.scale, fallback_table=table, notes=(note,),
+                          coefficients=_packed(model, True, scene_file, key))
+
+
+def _packed(model, table, scene_file, key) -> tuple:
+    try:
+        return pack_model(model, table)
+    except ValueError as e:
+        raise SceneError(scene_file, f"{key}.file", f"cannot render this rational fit ({e})") from None
 
 
 def source_dirs(spec, scene_file) -> list:
@@ -183,31 +196,40 @@ def fallback_table(p) -> np.ndarray:
 
 
 def evaluate_with_table(model, table):
-    """NumPy reference of the generated code with a fallback table: the model, except that every
-    flagged channel of a flagged piece is the table's nearest cluster at the inputs clamped onto
-    that piece's box, clamped to the piece's measured range; 0 below the horizon."""
-    flags = {r["leaf"]: r["channels"] for r in flagged_regions(model)}
+    """NumPy reference of :func:`rational_eval` with a fallback table: :func:`values_with_table`
+    at the directions' Rusinkiewicz angles; 0 below the horizon."""
     tab = np.asarray(table, np.float32).astype(np.float64)
 
     def evaluate(wi, wo):
         wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
         th, _, td, _ = directions_to_half_diff(wi, wo)
-        x = np.stack(np.broadcast_arrays(th, td), axis=-1)
-        out = np.array(model(x), dtype=np.float64)
-        for k, (leaf, sel, xl) in enumerate(model.leaves(x)):
-            if k not in flags or not np.any(sel):
-                continue
-            tv = tab[theta_h_index(xl[..., 0]), theta_d_index(xl[..., 1])]
-            for c in flags[k]:
-                v = tv[..., c]
-                rng = measured_range(leaf.function_info[c])
-                if rng is not None:
-                    v = np.clip(v, rng[0], rng[1])
-                out[..., c] = np.where(sel, v, out[..., c])
+        out = values_with_table(model, tab, np.stack(np.broadcast_arrays(th, td), axis=-1))
         above = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
         return np.where(above[..., None], out, 0.0)
 
     return evaluate
+
+
+def values_with_table(model, table, x) -> np.ndarray:
+    """rho (1/sr) ``(..., 3)`` at Rusinkiewicz angles ``x`` ``(..., 2)`` (theta_h, theta_d,
+    radians) of a model with a fallback table ``(90 * 90, 3)`` or ``(90, 90, 3)``: the model,
+    except that every flagged channel of a flagged piece is the table's nearest cluster at the
+    inputs clamped onto that piece's box, clamped to the piece's measured range."""
+    flags = {r["leaf"]: r["channels"] for r in flagged_regions(model)}
+    tab = np.asarray(table, np.float64).reshape(-1, N_THETA_D, 3)
+    x = np.asarray(x, np.float64)
+    out = np.array(model(x), dtype=np.float64)
+    for k, (leaf, sel, xl) in enumerate(model.leaves(x)):
+        if k not in flags or not np.any(sel):
+            continue
+        tv = tab[theta_h_index(xl[..., 0]), theta_d_index(xl[..., 1])]
+        for c in flags[k]:
+            v = tv[..., c]
+            rng = measured_range(leaf.function_info[c])
+            if rng is not None:
+                v = np.clip(v, rng[0], rng[1])
+            out[..., c] = np.where(sel, v, out[..., c])
+    return out
 
 
 def check_model(model, file="<scene>", key="materials"):
@@ -222,183 +244,190 @@ def check_model(model, file="<scene>", key="materials"):
         raise SceneError(file, f"{key}.file", f"expected 3 outputs (R, G, B), got {len(model.outputs)}")
 
 
-def _poly(lines, name, exps, coefs):
-    """Emit ``name = sum_j c_j prod_v T_{e_jv}(t_v)`` grouped by the first variable's exponent."""
-    groups: dict = {}
-    for e, c in zip(exps, coefs):
-        if c == 0.0:
-            continue
-        groups.setdefault(int(e[0]), []).append((tuple(int(k) for k in e[1:]), float(c)))
-    lines.append(f"    {name} = wp.float64(0.0)")
-    for a in sorted(groups):
-        terms = []
-        for rest, c in groups[a]:
-            factors = [f"T{v + 1}_{k}" for v, k in enumerate(rest) if k > 0]
-            terms.append(" * ".join([_lit(c)] + factors))
-        inner = " + ".join(terms)
-        lines.append(f"    {name} = {name} + " + (f"T0_{a} * ({inner})" if a > 0 else f"({inner})"))
+# --------------------------------------------------------------------------------------------
+# The fit as data (Materials.coef_i / coef_f / coef_q) and the one Warp function that evaluates it
+# --------------------------------------------------------------------------------------------
+NODE_LEAF, NODE_SPLIT = 0, 1
+# split record (ints): kind, variable (SUPPORTED_VARIABLES), pieces K, float offset of its K - 1
+# inner edges, then the K children's int offsets
+SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4
+# leaf record (ints): kind, variables, flags, float offset of its header, 3 variable codes
+# (source angle | transform << 2), the int and row offsets of its polynomials (one packed
+# group: P_R, P_G, P_B, Q_R, Q_G, Q_B, :func:`warp_rbrdf.chebyshev.cheb_sum6`), and per
+# channel its mode
+LEAF_NV, LEAF_FLAGS, LEAF_FH, LEAF_VARS, LEAF_POLY, LEAF_MODES = 1, 2, 3, 4, 7, 9
+LEAF_CLAMP, LEAF_LOG, LEAF_MIN, LEAF_MAX, LEAF_TABLE = 1, 2, 4, 8, 16   # flags
+CH_TABLE, CH_RANGE = 1, 2                                               # channel mode bits
+TRANSFORM_CODES = {"identity": 0, "sqrt": 1}
+# leaf header (floats): value offset, min, max, log(max + offset); per variable (lo, hi,
+# u_lo + u_hi, 1 / (u_hi - u_lo)); per channel the step-7 range (lo, hi); the table box
+# (theta_h lo, hi, theta_d lo, hi)
+FH_OFFSET, FH_MIN, FH_MAX, FH_LOGMAX, FH_VARS, FH_RANGES, FH_BOX = 0, 1, 2, 3, 4, 16, 22
+N_FH = 26
 
 
-def _signature(name: str, table: bool) -> str:
-    if table:   # the fallback table: mats.tables from index toff (Materials.param)
-        return f"def {name}(mats: Materials, toff: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:"
-    return f"def {name}(wi: wp.vec3, wo: wp.vec3) -> wp.vec3:"
+def channel_modes(model, table: bool = False) -> list:
+    """Per output of a single-box model: ``(from_table, range)``: whether the channel reads the
+    fallback table (``table`` and the function is flagged) and its step-7 clamp
+    (:func:`fit.rational.model.output_clamp`; None: none)."""
+    return [(bool(table and flagged(i)), output_clamp(i)) for i in model.function_info]
 
 
-def generate_function(model, name: str, table: bool = False) -> str:
-    """Source of ``@wp.func name(wi, wo) -> wp.vec3`` for a rational BRDF model; a piecewise
-    model (file version 2) gets one function per piece (``name_p0``, ...) and a dispatcher
-    that picks the piece from the split variable, clamped as in :mod:`fit.rational.coefficient_file`.
-    ``table``: the functions take ``(mats, toff, wi, wo)`` and every flagged channel reads the
-    fallback table at ``mats.tables[toff + i * 90 + j]`` instead of its fitted function
-    (module docstring); without it a flagged channel is its function clamped to its measured
-    range (step 7 of the recipe), and an unflagged model's code is unchanged."""
+def pack_model(model, table: bool = False) -> tuple:
+    """``(ints int32, floats float64, rows float64 (n, 6))``: a
+    :class:`~fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`
+    (nested pieces included) as the records :func:`rational_eval` walks, the root at int 0;
+    offsets are relative to the material's starts. ``table``: flagged channels read the
+    fallback table (module docstring)."""
+    fd = FlatData(6)
+    _pack_node(fd, model, table)
+    return fd.arrays()
+
+
+def _pack_node(fd, model, table) -> int:
     pieces = getattr(model, "pieces", None)
     if pieces is None:
-        return _generate_single(model, name, table)
-    parts = [generate_function(p, f"{name}_p{k}", table) for k, p in enumerate(pieces)]   # nested: recursive
-    src = SUPPORTED_VARIABLES[model.split_variable]
-    args = "mats, toff, wi, wo" if table else "wi, wo"
-    L = ["@wp.func", _signature(name, table),
-         f"    # piecewise rational BRDF {model.name!r}: {len(pieces)} pieces along {model.split_variable}",
-         "    if wi[2] <= 0.0 or wo[2] <= 0.0:", "        return wp.vec3(0.0)",
-         "    a = F.half_diff(wi, wo)", f"    x = wp.float64(a[{src}])"]
-    for k in range(len(pieces) - 1):
-        L.append(f"    if x <= {_lit(model.edges[k + 1])}:")
-        L.append(f"        return {name}_p{k}({args})")
-    L.append(f"    return {name}_p{len(pieces) - 1}({args})")
-    return "\n\n".join(parts) + "\n\n" + "\n".join(L) + "\n"
+        return _pack_leaf(fd, model, table)
+    n = fd.add_ints([NODE_SPLIT, SUPPORTED_VARIABLES[model.split_variable], len(pieces), 0] + [0] * len(pieces))
+    fd.ints[n + SPLIT_EDGES] = fd.add_floats(model.edges[1:-1])
+    for k, piece in enumerate(pieces):
+        fd.ints[n + SPLIT_CHILDREN + k] = _pack_node(fd, piece, table)
+    return n
 
 
-def _generate_single(model, name: str, table: bool = False) -> str:
+def _pack_leaf(fd, model, table) -> int:
     nv = len(model.variables)
-    flags = [flagged(i) for i in model.function_info]
-    ranges = [output_clamp(i) for i in model.function_info]
-    from_table = [table and fl for fl in flags]
-    kmax = [0] * nv
-    for f, tb in zip(model.functions, from_table):
-        if tb:
-            continue
-        for ex in (f.num_exponents, f.den_exponents):
-            if len(ex):
-                kmax = [max(k, int(m)) for k, m in zip(kmax, ex.max(axis=0))]
-    L = ["@wp.func", _signature(name, table),
-         f"    # generated from rational BRDF {model.name!r}: {model.n_coefficients} coefficients"
-         + (f"; channels {[c for c, tb in enumerate(from_table) if tb]} from the fallback table"
-            if any(from_table) else ""),
-         "    if wi[2] <= 0.0 or wo[2] <= 0.0:", "        return wp.vec3(0.0)",
-         "    a = F.half_diff(wi, wo)"]
-    if any(from_table):
-        box = {v.name: v.domain for v in model.variables}
-        (hl, hh), (dl, dh) = box["theta_h"], box["theta_d"]
-        L.append(f"    ih = F.merl_theta_h_index(float(wp.clamp(wp.float64(a[0]), {_lit(hl)}, {_lit(hh)})))")
-        L.append(f"    jd = F.merl_theta_d_index(float(wp.clamp(wp.float64(a[1]), {_lit(dl)}, {_lit(dh)})))")
-        L.append(f"    tv = mats.tables[toff + ih * {N_THETA_D} + jd]")
-    clamp = model.domain_policy.get("outside", "clamp") == "clamp"
+    modes = channel_modes(model, table)
+    vmax, vmin, off = model.value_max, model.value_min, float(model.value_offset)
+    flags = ((LEAF_CLAMP if model.domain_policy.get("outside", "clamp") == "clamp" else 0)
+             | (LEAF_LOG if model.value_transform == "log" else 0)
+             | (LEAF_MIN if vmin is not None else 0) | (LEAF_MAX if vmax is not None else 0)
+             | (LEAF_TABLE if any(t for t, _ in modes) else 0))
+    codes = [SUPPORTED_VARIABLES[v.name] | TRANSFORM_CODES[v.transform] << 2 for v in model.variables]
+    n = fd.add_ints([NODE_LEAF, nv, flags, 0] + codes + [0] * (3 - nv) + [0, 0] + [0] * 3)
+    head = np.zeros(N_FH)
+    head[[FH_OFFSET, FH_MIN, FH_MAX]] = off, vmin or 0.0, vmax or 0.0
+    if vmax is not None and model.value_transform == "log":
+        head[FH_LOGMAX] = np.log(vmax + off)
     for v, var in enumerate(model.variables):
-        src = SUPPORTED_VARIABLES[var.name]
-        x = f"wp.float64(a[{src}])"
-        if var.name == "phi_d":  # fold phi_d into [0, pi) as the MERL grid does
-            L.append(f"    p{v} = a[{src}]")
-            L.append(f"    if p{v} < 0.0:\n        p{v} = p{v} + wp.pi")
-            x = f"wp.float64(p{v})"
-        lo, hi = var.domain
-        if clamp:
-            x = f"wp.clamp({x}, {_lit(lo)}, {_lit(hi)})"
-        if var.transform == "sqrt":
-            x = f"wp.sqrt(wp.max({x}, wp.float64(0.0)))"
         ulo, uhi = var.rf_domain
-        L.append(f"    u{v} = {x}")
-        L.append(f"    t{v} = (wp.float64(2.0) * u{v} - {_lit(ulo + uhi)}) * {_lit(1.0 / (uhi - ulo))}")
-        L.append(f"    T{v}_0 = wp.float64(1.0)")
-        if kmax[v] >= 1:
-            L.append(f"    T{v}_1 = t{v}")
-        for k in range(2, kmax[v] + 1):
-            L.append(f"    T{v}_{k} = wp.float64(2.0) * t{v} * T{v}_{k - 1} - T{v}_{k - 2}")
-    outs = []
-    for c, f in enumerate(model.functions):
-        if from_table[c]:          # not vouched for: the measured projection, in its range
-            L.append(f"    y{c} = wp.float64(tv[{c}])")
-        else:
-            _poly(L, f"P{c}", f.num_exponents, f.num_coef)
-            _poly(L, f"Q{c}", f.den_exponents, f.den_coef)
-            L.append(f"    y{c} = P{c} / Q{c}")
-            vmax = getattr(model, "value_max", None)
-            if model.value_transform == "log":
-                if vmax is not None:
-                    L.append(f"    y{c} = wp.min(y{c}, {_lit(np.log(vmax + model.value_offset))})")
-                L.append(f"    y{c} = wp.exp(y{c}) - {_lit(model.value_offset)}")
-            if model.value_min is not None:
-                L.append(f"    y{c} = wp.max(y{c}, {_lit(model.value_min)})")
-            if vmax is not None:
-                L.append(f"    y{c} = wp.min(y{c}, {_lit(vmax)})")
-        if ranges[c] is not None:  # step 7: flagged: its measured range; valid: its vouched one
-            L.append(f"    y{c} = wp.clamp(y{c}, {_lit(ranges[c][0])}, {_lit(ranges[c][1])})")
-        outs.append(f"float(y{c})")
-    L.append(f"    return wp.vec3({', '.join(outs)})")
-    return "\n".join(L) + "\n"
-
-
-GENERATED_HEADER = """# Generated by warp_rbrdf.materials.rational -- do not edit.
-import warp as wp
-
-from warp_rbrdf.materials import frame as F
-"""
-
-
-def generated_functions(models, tables=None) -> list:
-    """The generated ``@wp.func`` of each model, in order (one module): ``(wi, wo) -> vec3``, or
-    ``(mats, toff, wi, wo) -> vec3`` where ``tables[i]`` (the model has a fallback table)."""
-    if not models:
-        return []
-    tables = [False] * len(models) if tables is None else [bool(t) for t in tables]
-    header = GENERATED_HEADER + ("from warp_rbrdf.materials.data import Materials\n" if any(tables) else "")
-    src = header + "\n\n" + "\n\n".join(generate_function(m, f"rational_{i}", t)
-                                            for i, (m, t) in enumerate(zip(models, tables)))
-    mod = load_generated(src, "rbrdf_rational")
-    return [getattr(mod, f"rational_{i}") for i in range(len(models))]
+        head[FH_VARS + 4 * v: FH_VARS + 4 * v + 4] = var.domain[0], var.domain[1], ulo + uhi, 1.0 / (uhi - ulo)
+    for c, (_, rng) in enumerate(modes):
+        if rng is not None:
+            head[FH_RANGES + 2 * c: FH_RANGES + 2 * c + 2] = rng
+    if flags & LEAF_TABLE:
+        box = {v.name: v.domain for v in model.variables}
+        head[FH_BOX:FH_BOX + 4] = (*box["theta_h"], *box["theta_d"])
+    fd.ints[n + LEAF_FH] = fd.add_floats(head)
+    fits = [(f, t) for f, (t, _) in zip(model.functions, modes)]
+    fd.ints[n + LEAF_POLY:n + LEAF_POLY + 2] = fd.add_polynomials(
+        [None if t else (f.num_exponents, f.num_coef) for f, t in fits] +
+        [None if t else (f.den_exponents, f.den_coef) for f, t in fits], nv)
+    for c, (from_table, rng) in enumerate(modes):
+        fd.ints[n + LEAF_MODES + c] = (CH_TABLE if from_table else 0) | (CH_RANGE if rng is not None else 0)
+    return n
 
 
 @wp.func
-def _no_rational(mats: Materials, m: int, r: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
-    return wp.vec3(0.0)
+def _mapped_input(ci: wp.array(dtype=int), cf: wp.array(dtype=wp.float64), code: int, b: int, flags: int,
+                  a: wp.vec3) -> wp.float64:
+    """Steps 1-3 of the recipe for a variable of code ``code`` (a leaf's variable code) whose
+    header entries start at float ``b``: clamp onto the box, transform, map onto [-1, 1];
+    phi_d folded into [0, pi] first."""
+    src = code & 3
+    x = wp.float64(a[src])
+    if src == 2:
+        p = a[2]
+        if p < 0.0:
+            p = p + wp.pi
+        x = wp.float64(p)
+    if (flags & LEAF_CLAMP) != 0:
+        x = wp.clamp(x, cf[b], cf[b + 1])
+    if (code >> 2) == 1:
+        x = wp.sqrt(wp.max(x, wp.float64(0.0)))
+    return (wp.float64(2.0) * x - cf[b + 2]) * cf[b + 3]
 
 
-def _chain(funcs, first: int = 0, tables=None):
-    """``link(mats, m, r, wi, wo)``: generated function ``r`` (one closure per function, see
-    :mod:`warp_rbrdf.integrator` for why not a static loop) times ``Materials.scale[m]``;
-    ``tables[r]``: that function reads a fallback table starting at ``Materials.param[m]``."""
-    if first >= len(funcs):
-        return _no_rational
-    tables = [False] * len(funcs) if tables is None else tables
-    func, rest = funcs[first], _chain(funcs, first + 1, tables)
+@wp.func
+def _channel(cf: wp.array(dtype=wp.float64), mode: int, h: int, flags: int, c: int, p: wp.float64,
+             q: wp.float64, tab: float) -> float:
+    """Steps 5-7 of channel ``c`` (``mode``) of a leaf with header at float ``h``: P/Q, value
+    transform, clamps; ``tab``: the fallback table's value, used where the channel is flagged
+    and a table is present."""
+    y = wp.float64(0.0)
+    if (mode & CH_TABLE) != 0:
+        y = wp.float64(tab)
+    else:
+        y = p / q
+        if (flags & LEAF_LOG) != 0:
+            if (flags & LEAF_MAX) != 0:
+                y = wp.min(y, cf[h + FH_LOGMAX])
+            y = wp.exp(y) - cf[h + FH_OFFSET]
+        if (flags & LEAF_MIN) != 0:
+            y = wp.max(y, cf[h + FH_MIN])
+        if (flags & LEAF_MAX) != 0:
+            y = wp.min(y, cf[h + FH_MAX])
+    if (mode & CH_RANGE) != 0:
+        y = wp.clamp(y, cf[h + FH_RANGES + 2 * c], cf[h + FH_RANGES + 2 * c + 1])
+    return float(y)
 
-    if tables[first]:
-        @wp.func
-        def link(mats: Materials, m: int, r: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
-            if r == wp.static(first):
-                return wp.cw_mul(wp.static(func)(mats, mats.param[m], wi, wo), mats.scale[m])
-            return wp.static(rest)(mats, m, r, wi, wo)
 
-        return link
-
-    @wp.func
-    def link(mats: Materials, m: int, r: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
-        if r == wp.static(first):
-            return wp.cw_mul(wp.static(func)(wi, wo), mats.scale[m])
-        return wp.static(rest)(mats, m, r, wi, wo)
-
-    return link
+@wp.func
+def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
+    """rho (1/sr) of rational material ``m``: its packed fit (:func:`pack_model`, ints from
+    ``coef_i[3 m]``, floats from ``coef_i[3 m + 1]``, coefficient rows from ``coef_i[3 m + 2]``)
+    at (wi, wo), times ``Materials.scale[m]``; 0 below the horizon."""
+    if wi[2] <= 0.0 or wo[2] <= 0.0:
+        return wp.vec3(0.0)
+    ci = mats.coef_i
+    cf = mats.coef_f
+    ib = ci[3 * m]
+    fb = ci[3 * m + 1]
+    a = F.half_diff(wi, wo)
+    n = ib
+    while ci[n] == NODE_SPLIT:     # piece k: the first with x <= edge k + 1
+        x = wp.float64(a[ci[n + SPLIT_VAR]])
+        e = fb + ci[n + SPLIT_EDGES]
+        k = int(0)
+        for j in range(ci[n + SPLIT_N] - 1):
+            if x > cf[e + j]:
+                k = j + 1
+        n = ib + ci[n + SPLIT_CHILDREN + k]
+    nv = ci[n + LEAF_NV]
+    flags = ci[n + LEAF_FLAGS]
+    h = fb + ci[n + LEAF_FH]
+    t0 = _mapped_input(ci, cf, ci[n + LEAF_VARS], h + FH_VARS, flags, a)
+    t1 = wp.float64(0.0)
+    t2 = wp.float64(0.0)
+    if nv >= 2:
+        t1 = _mapped_input(ci, cf, ci[n + LEAF_VARS + 1], h + FH_VARS + 4, flags, a)
+    if nv >= 3:
+        t2 = _mapped_input(ci, cf, ci[n + LEAF_VARS + 2], h + FH_VARS + 8, flags, a)
+    ta = wp.float64(0.0)        # padded in front (chebyshev module docstring)
+    tb = wp.float64(0.0)
+    tc = t0
+    if nv == 2:
+        tb = t0
+        tc = t1
+    elif nv == 3:
+        ta = t0
+        tb = t1
+        tc = t2
+    tab = wp.vec3(0.0)
+    if (flags & LEAF_TABLE) != 0:   # the projected table (theta_h, theta_d) clamped onto the box
+        ih = F.merl_theta_h_index(float(wp.clamp(wp.float64(a[0]), cf[h + FH_BOX], cf[h + FH_BOX + 1])))
+        jd = F.merl_theta_d_index(float(wp.clamp(wp.float64(a[1]), cf[h + FH_BOX + 2], cf[h + FH_BOX + 3])))
+        tab = mats.tables[mats.param[m] + ih * N_THETA_D + jd]
+    pq = cheb_sum6(mats.coef_q, ci, ci[3 * m + 2] + ci[n + LEAF_POLY + 1], ib + ci[n + LEAF_POLY],
+                   ta, tb, tc)
+    r = n + LEAF_MODES
+    y = wp.vec3(_channel(cf, ci[r], h, flags, 0, pq[0], pq[3], tab[0]),
+                _channel(cf, ci[r + 1], h, flags, 1, pq[1], pq[4], tab[1]),
+                _channel(cf, ci[r + 2], h, flags, 2, pq[2], pq[5], tab[2]))
+    return wp.cw_mul(y, mats.scale[m])
 
 
 def kernel_eval(loaded_list):
-    """``rational_eval(mats, m, wi, wo)``: the generated function of material ``m`` (index
-    ``Materials.offset[m]`` among the scene's rational materials) times ``Materials.scale[m]``."""
-    tables = [getattr(lm, "fallback_table", None) is not None for lm in loaded_list]
-    chain = _chain(generated_functions([lm.data for lm in loaded_list], tables), tables=tables)
-
-    @wp.func
-    def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
-        return wp.static(chain)(mats, m, mats.offset[m], wi, wo)
-
+    """:func:`rational_eval`, the same function for every scene: the fits are data
+    (:attr:`LoadedMaterial.coefficients`), so a new fit compiles nothing."""
     return rational_eval

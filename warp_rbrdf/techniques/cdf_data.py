@@ -7,6 +7,11 @@ the material itself at load. A technique that needs verified rational inverse CD
 from the same file, or fitted at load (printed: it takes seconds). A fit that failed its
 verification (``CDFFit.fallback``) switches the material to its strategy's ``fallback``
 (printed, never silent).
+
+Everything is packed as data (:func:`pack`): the pieces layout's knots into ``cdf_pw``, the
+global layout's F and G as packed Chebyshev polynomials (:func:`pack_global`,
+:mod:`warp_rbrdf.chebyshev`) into ``cdf_gi`` / ``cdf_gf`` / ``cdf_gq``, so a new CDF file
+compiles nothing.
 """
 from __future__ import annotations
 
@@ -20,6 +25,7 @@ from fit.sampling.pieces import PieceMaps, pieces_phi_knots
 from fit.sampling.table import tabulate
 
 from .. import registry
+from ..chebyshev import FlatData
 from ..errors import SceneError
 from ..materials.data import (
     CDF_LAYOUT,
@@ -83,11 +89,13 @@ def pack(cdfs) -> dict:
     """Pack the materials' inverse-CDF data (one entry per material: None, a CDFTable or a
     CDFFit) into the flat arrays of :class:`Materials`: ``cdf_t``, ``cdf_p``, ``cdf_pw``
     (pieces: theta pieces (n_v, n_mu, 4) then phi knots (n_v, n_mu, n_u + 1, 2), see
-    :func:`.rational.pieces_sample`), ``cdf_row_ok``, ``cdf_info`` (n, N_CDF_INFO) and
-    ``global_fits`` (the global-layout fits, in the order of their ``CDF_MAPS`` index)."""
+    :func:`.rational.pieces_sample`), ``cdf_row_ok``, ``cdf_info`` (n, N_CDF_INFO), ``cdf_gi``
+    / ``cdf_gf`` / ``cdf_gq`` (the global-layout maps, :func:`pack_global`; ``CDF_MAPS``: a
+    record's start)
+    and ``global_fits`` (the global-layout fits, in packing order)."""
     info = np.zeros((max(len(cdfs), 1), N_CDF_INFO), np.int32)
     ct, cp, pw, rows = Pool(), Pool(), Pool(), Pool(dtype=np.int32)
-    global_fits = []
+    global_fits, gd = [], FlatData(2)
     for m, cdf in enumerate(cdfs):
         if cdf is None:
             continue
@@ -106,7 +114,34 @@ def pack(cdfs) -> dict:
             info[m, CDF_OFF_ROWS] = rows.add(np.asarray(pm.row_ok, np.int32))
         else:
             info[m, CDF_LAYOUT] = LAYOUT_GLOBAL
-            info[m, CDF_MAPS] = len(global_fits)
+            info[m, CDF_MAPS] = pack_global(gd, cdf.maps)
             global_fits.append(cdf)
+    gi, gf, gq = gd.arrays()
     return dict(cdf_t=ct.array(), cdf_p=cp.array(), cdf_pw=pw.array(), cdf_row_ok=rows.array(),
-                cdf_info=info, global_fits=global_fits)
+                cdf_info=info, global_fits=global_fits, cdf_gi=gi, cdf_gf=gf, cdf_gq=gq)
+
+
+# global-layout record: GLOBAL_INTS ints per map (F, then G): the int and row offsets of
+# (P, Q) as one packed group (:func:`warp_rbrdf.chebyshev.cheb_sum2_d`), and the float offset
+# of the map's domain data: the scale 2 / (b - a) of the CDF variable (the last), then
+# (a + b, 1 / (b - a)) per variable
+GLOBAL_INTS = 3
+GLOBAL_THETA, GLOBAL_PHI = 0, GLOBAL_INTS
+
+
+def pack_global(fd: FlatData, maps) -> int:
+    """Append the record of a :class:`fit.sampling.global_layout.GlobalMaps` (F(theta_v, mu),
+    G(theta_v, theta_l, u); the CDF variable is the last of each) to ``fd``; returns its int
+    offset (:func:`.rational.global_sample` reads it)."""
+    g = fd.add_ints([0] * (2 * GLOBAL_INTS))
+    for r, f, nv in ((GLOBAL_THETA, maps.theta, 2), (GLOBAL_PHI, maps.phi, 3)):
+        if f is None or f.n_vars != nv:
+            raise ValueError(f"global-layout map with {None if f is None else f.n_vars} variables, expected {nv}")
+        dom = np.asarray(f.domain, np.float64)
+        head = [2.0 / (dom[-1, 1] - dom[-1, 0])]
+        for a, b in dom:
+            head += [a + b, 1.0 / (b - a)]
+        fd.ints[g + r:g + r + 2] = fd.add_polynomials([(f.num_exponents, f.num_coef),
+                                                        (f.den_exponents, f.den_coef)], nv)
+        fd.ints[g + r + 2] = fd.add_floats(head)
+    return g

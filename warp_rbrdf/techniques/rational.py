@@ -6,8 +6,12 @@ Layouts (``Materials.cdf_info[CDF_LAYOUT]``):
 * pieces (default; :mod:`fit.sampling.pieces`): per view row, monotone rational-quadratic pieces of
   equal mass, found without a search (:func:`pieces_sample`); coefficients in
   ``Materials.cdf_pw``, the rows with a verified map flagged in ``Materials.cdf_row_ok``;
-* global (the paper's: one F(theta_v, mu), one G(theta_v, theta_l, u)): generated, unrolled
-  float64 code per fit (coefficients are literals: :mod:`warp_rbrdf.codegen`).
+* global (the paper's: one F(theta_v, mu), one G(theta_v, theta_l, u)): packed Chebyshev
+  polynomials in ``Materials.cdf_gi`` / ``cdf_gf`` / ``cdf_gq`` (:func:`.cdf_data.pack_global`), evaluated
+  in float64 by :func:`global_sample`.
+
+Both layouts are data: the kernels' source is the same for every CDF file (a new file compiles
+nothing).
 
 Weight: alpha = dtheta_l/dmu * dphi_l/dtau * sin(theta_l), the exact inverse density of the map
 (eq. 3-4 of the supplementary text: for a monotone covering map ``f cos / pdf`` with pdf =
@@ -26,8 +30,7 @@ import warp as wp
 
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
 
-from ..codegen import lit as _lit
-from ..codegen import load_generated, tree_sum
+from ..chebyshev import cheb_sum2_d
 from ..materials.data import (
     CDF_LAYOUT,
     CDF_MAPS,
@@ -41,6 +44,7 @@ from ..materials.data import (
     Materials,
 )
 from . import tabulated
+from .cdf_data import GLOBAL_PHI, GLOBAL_THETA
 from .tabulated import local_dir, tab_row, view_frame
 
 HALF_PI = 0.5 * np.pi
@@ -136,165 +140,89 @@ def maps_to_direction(q: wp.vec3, va: wp.vec3) -> wp.vec4:
 
 
 # --------------------------------------------------------------------------------------------
-# Global layout: generated code (coefficients baked in)
+# Global layout: F and G as packed Chebyshev polynomials (Materials.cdf_gi / cdf_gf / cdf_gq)
 # --------------------------------------------------------------------------------------------
-def _emit_rf(L, pre, f, xs, dvar):
-    """Lines computing the polynomials ``{pre}P``, ``{pre}Q`` of RationalFunction ``f`` at
-    float64 expressions ``xs`` (one per variable) and their derivatives ``{pre}dP``,
-    ``{pre}dQ`` in variable ``dvar``, and ``{pre}Plo, {pre}Qlo`` /
-    ``{pre}Phi, {pre}Qhi``, the polynomials with ``dvar`` at the lower / upper end of its
-    domain (the endpoint normalisation's f(x|0), f(x|1)).
-
-    Each polynomial is grouped by the power of ``dvar``: ``P = sum_j a_j T_j(t_dvar)`` with
-    ``a_j = sum_i c_ij prod T_i(other variables)``; the derivative is ``sum_j a_j dT_j`` and
-    the ends are ``sum_j a_j (-1)^j`` and ``sum_j a_j`` -- one pass over the coefficients for
-    all four values, balanced sums for instruction-level parallelism."""
-    n = f.n_vars
-    kmax = [0] * n
-    for ex in (f.num_exponents, f.den_exponents):
-        if len(ex):
-            kmax = [max(k, int(m)) for k, m in zip(kmax, ex.max(axis=0))]
-    for v in range(n):
-        a, b = f.domain[v]
-        L.append(f"    {pre}t{v} = (wp.float64(2.0) * {xs[v]} - {_lit(a + b)}) * {_lit(1.0 / (b - a))}")
-        L.append(f"    {pre}T{v}_0 = wp.float64(1.0)")
-        if kmax[v] >= 1:
-            L.append(f"    {pre}T{v}_1 = {pre}t{v}")
-        for k in range(2, kmax[v] + 1):
-            L.append(f"    {pre}T{v}_{k} = wp.float64(2.0) * {pre}t{v} * {pre}T{v}_{k - 1} - {pre}T{v}_{k - 2}")
-    # derivative table of dvar: dT_k/dx = k U_{k-1}(t) * 2/(b-a)
-    a, b = f.domain[dvar]
-    sc = 2.0 / (b - a)
-    if kmax[dvar] >= 2:
-        L.append(f"    {pre}U_1 = wp.float64(2.0) * {pre}t{dvar}")
-    if kmax[dvar] >= 3:
-        L.append(f"    {pre}U_2 = wp.float64(2.0) * {pre}t{dvar} * {pre}U_1 - wp.float64(1.0)")
-    for k in range(3, kmax[dvar]):
-        L.append(f"    {pre}U_{k} = wp.float64(2.0) * {pre}t{dvar} * {pre}U_{k - 1} - {pre}U_{k - 2}")
-
-    def dT(k):
-        return _lit(sc) if k == 1 else f"{_lit(k * sc)} * {pre}U_{k - 1}"
-
-    for nm, ex, co in (("P", f.num_exponents, f.num_coef), ("Q", f.den_exponents, f.den_coef)):
-        groups: dict = {}
-        for e, c in zip(ex, co):
-            if c == 0.0:
-                continue
-            fac = [_lit(c)] + [f"{pre}T{v}_{int(e[v])}" for v in range(n) if v != dvar and e[v] > 0]
-            groups.setdefault(int(e[dvar]), []).append(" * ".join(fac))
-        for j, terms in sorted(groups.items()):
-            L.append(f"    {pre}{nm}a{j} = {tree_sum(terms)}")
-        L.append(f"    {pre}{nm} = " + tree_sum([f"{pre}{nm}a{j}" + (f" * {pre}T{dvar}_{j}" if j else "")
-                                                   for j in sorted(groups)]))
-        L.append(f"    {pre}d{nm} = " + tree_sum([f"{pre}{nm}a{j} * {dT(j)}" for j in sorted(groups) if j]))
-        L.append(f"    {pre}{nm}lo = " + tree_sum([("-" if j % 2 else "") + f"{pre}{nm}a{j}"
-                                                    for j in sorted(groups)]))
-        L.append(f"    {pre}{nm}hi = " + tree_sum([f"{pre}{nm}a{j}" for j in sorted(groups)]))
-
-
-def _emit_normalized(L, pre, span):
-    """Lines of ``{pre}v = span (R - R_lo) / (R_hi - R_lo)`` and its derivative ``{pre}dv``
-    from the polynomials of :func:`_emit_rf` (R = P/Q), with ONE division: with
-    D = P_hi Q_lo - P_lo Q_hi and N = P Q_lo - P_lo Q, value = span N Q_hi / (Q D) and
-    derivative = span (P' Q - P Q') Q_hi Q_lo / (Q^2 D)."""
-    sp = _lit(span)
-    L += [f"    {pre}inv = wp.float64(1.0) / ({pre}Q * {pre}Q * ({pre}Phi * {pre}Qlo - {pre}Plo * {pre}Qhi))",
-          f"    {pre}v = {sp} * ({pre}P * {pre}Qlo - {pre}Plo * {pre}Q) * {pre}Qhi * {pre}Q * {pre}inv",
-          f"    {pre}dv = {sp} * ({pre}dP * {pre}Q - {pre}P * {pre}dQ) * {pre}Qhi * {pre}Qlo * {pre}inv"]
-
-
-def _emit_maps(L, F, G):
-    """Lines of the endpoint-normalized maps theta_l = F(tv, mu), |phi_l| = G(tv, theta_l, u)
-    and alpha, ending in ``return vec3(theta_l, phi_l, alpha)``."""
-    _emit_rf(L, "f", F, ["tv", "m"], 1)
-    _emit_normalized(L, "f", HALF_PI)
-    L += ["    tl = fv",
-          "    inside = 1",
-          "    if tl < wp.float64(0.0) or tl > wp.float64(1.5707963267948966):\n        inside = 0",
-          "    tl = wp.clamp(tl, wp.float64(0.0), wp.float64(1.5707963267948966))",
-          "    s = wp.float64(1.0)",
-          "    if tau < 0.5:\n        s = wp.float64(-1.0)",
-          "    u = wp.float64(wp.abs(2.0 * tau - 1.0))"]
-    _emit_rf(L, "g", G, ["tv", "tl", "u"], 2)
-    _emit_normalized(L, "g", np.pi)
-    L += ["    ph = gv",
-          "    if ph < wp.float64(0.0) or ph > wp.float64(3.141592653589793):\n        inside = 0",
-          "    ph = wp.clamp(ph, wp.float64(0.0), wp.float64(3.141592653589793))",
-          "    alpha = wp.float64(0.0)",
-          "    if inside == 1:\n        alpha = fdv * wp.float64(2.0) * gdv * wp.sin(tl)",
-          "    return wp.vec3(float(tl), float(s * ph), float(alpha))"]
-    return "\n".join(L) + "\n"
-
-
-def generate_sampler_function(cdf_fit, name: str) -> str:
-    """``@wp.func name(theta_v, mu, tau) -> vec3(theta_l, phi_l, alpha)`` for a verified fit:
-    the endpoint-normalized map of :meth:`fit.sampling.cdf_file.CDFFit.sample`, float64, unrolled."""
-    L = ["@wp.func", f"def {name}(theta_v: float, mu: float, tau: float) -> wp.vec3:",
-         f"    # generated rational inverse CDFs of {cdf_fit.name!r}",
-         "    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))",
-         "    m = wp.float64(mu)"]
-    return _emit_maps(L, cdf_fit.maps.theta, cdf_fit.maps.phi)
-
-
-GENERATED_HEADER = """# Generated by warp_rbrdf.techniques.rational -- do not edit.
-import warp as wp
-"""
-
-
-def global_functions(fits) -> list:
-    """The generated ``@wp.func (theta_v, mu, tau) -> vec3(theta_l, phi_l, alpha)`` of each
-    global-layout fit, in order (one generated module)."""
-    if not fits:
-        return []
-    src = GENERATED_HEADER + "\n\n" + "\n\n".join(generate_sampler_function(f, f"cdf_global_{i}")
-                                                   for i, f in enumerate(fits))
-    mod = load_generated(src, "rbrdf_cdf_global")
-    return [getattr(mod, f"cdf_global_{i}") for i in range(len(fits))]
+@wp.func
+def _map_input(gf: wp.array(dtype=wp.float64), d: int, v: int, x: wp.float64) -> wp.float64:
+    """Variable ``v`` mapped onto [-1, 1] with the domain data at ``gf[d]`` (:func:`.cdf_data.pack_global`)."""
+    return (wp.float64(2.0) * x - gf[d + 1 + 2 * v]) * gf[d + 2 + 2 * v]
 
 
 @wp.func
-def _no_global(g: int, va: wp.vec3, xi: wp.vec2) -> wp.vec4:
-    return wp.vec4(0.0, 0.0, 0.0, -1.0)
+def _normalized(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), gq: wp.array(dtype=wp.vec2d),
+                r: int, ta: wp.float64, tb: wp.float64, tc: wp.float64, span: wp.float64) -> wp.vec2d:
+    """(value, d/dx) of the endpoint-normalized map ``span (R - R_lo) / (R_hi - R_lo)`` of the
+    map whose record starts at ``gi[r]`` (coefficient rows in ``gq``, domain data in ``gf``;
+    R = P/Q; R_lo, R_hi: its CDF variable, the last, at the ends of its domain) with ONE
+    division: with D = P_hi Q_lo - P_lo Q_hi and N = P Q_lo - P_lo Q, value = span N Q_hi /
+    (Q D), derivative = span (P' Q - P Q') Q_hi Q_lo / (Q^2 D)
+    (:func:`fit.sampling.maps.normalized_map`)."""
+    s = cheb_sum2_d(gq, gi, gi[r + 1], gi[r], ta, tb, tc)   # P, Q, P', Q', P_lo, Q_lo, P_hi, Q_hi
+    sc = gf[gi[r + 2]]
+    inv = wp.float64(1.0) / (s[1] * s[1] * (s[6] * s[5] - s[4] * s[7]))
+    v = span * (s[0] * s[5] - s[4] * s[1]) * s[7] * s[1] * inv
+    dv = span * (s[2] * sc * s[1] - s[0] * s[3] * sc) * s[7] * s[5] * inv
+    return wp.vec2d(v, dv)
 
 
-def _chain(funcs, first: int = 0):
-    """``link(g, va, xi) -> (wi, alpha)`` of generated global-layout sampler ``g`` (one closure
-    per function, see :mod:`warp_rbrdf.integrator` for why not a static loop)."""
-    if first >= len(funcs):
-        return _no_global
-    func, rest = funcs[first], _chain(funcs, first + 1)
+@wp.func
+def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), gq: wp.array(dtype=wp.vec2d),
+                  g: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
+    """``(theta_l, phi_l, alpha)`` of the global-layout maps whose record starts at ``gi[g]``:
+    :meth:`fit.sampling.cdf_file.CDFFit.sample` (:func:`fit.sampling.maps.sample_maps`),
+    float64; alpha = 0 where a clamp acts."""
+    half_pi = wp.float64(1.5707963267948966)
+    pi = wp.float64(3.141592653589793)
+    zero = wp.float64(0.0)
+    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))
+    d = gi[g + GLOBAL_THETA + 2]
+    f = _normalized(gf, gi, gq, g + GLOBAL_THETA, zero, _map_input(gf, d, 0, tv),
+                    _map_input(gf, d, 1, wp.float64(mu)), half_pi)
+    tl = f[0]
+    inside = 1
+    if tl < zero or tl > half_pi:
+        inside = 0
+    tl = wp.clamp(tl, zero, half_pi)
+    s = wp.float64(1.0)
+    if tau < 0.5:
+        s = wp.float64(-1.0)
+    u = wp.float64(wp.abs(2.0 * tau - 1.0))
+    d = gi[g + GLOBAL_PHI + 2]
+    h = _normalized(gf, gi, gq, g + GLOBAL_PHI, _map_input(gf, d, 0, tv), _map_input(gf, d, 1, tl),
+                    _map_input(gf, d, 2, u), pi)
+    ph = h[0]
+    if ph < zero or ph > pi:
+        inside = 0
+    ph = wp.clamp(ph, zero, pi)
+    alpha = zero
+    if inside == 1:
+        alpha = f[1] * wp.float64(2.0) * h[1] * wp.sin(tl)
+    return wp.vec3(float(tl), float(s * ph), float(alpha))
 
-    @wp.func
-    def link(g: int, va: wp.vec3, xi: wp.vec2) -> wp.vec4:
-        if g == wp.static(first):
-            return maps_to_direction(wp.static(func)(va[0], xi[0], xi[1]), va)
-        return wp.static(rest)(g, va, xi)
 
-    return link
+@wp.func
+def rational_sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
+    """(wi, alpha) of material ``m``'s maps (pieces or global layout; weight 1/pdf of the table on
+    table rows and for a table-only material)."""
+    b = m * N_CDF_INFO
+    va = view_frame(wo)
+    layout = mats.cdf_info[b + CDF_LAYOUT]
+    if layout == LAYOUT_PIECES:
+        n_v = mats.cdf_info[b + CDF_N_V]
+        v = tab_row(va[0], n_v)
+        if mats.cdf_row_ok[mats.cdf_info[b + CDF_OFF_ROWS] + v] != 0:   # else: a table row
+            return pieces_sample(mats.cdf_pw, mats.cdf_info[b + CDF_MAPS], n_v, mats.cdf_info[b + CDF_N_MU],
+                                 mats.cdf_info[b + CDF_N_U], v, va, xi[0], xi[1])
+    elif layout == LAYOUT_GLOBAL:
+        g = mats.cdf_info[b + CDF_MAPS]
+        return maps_to_direction(global_sample(mats.cdf_gf, mats.cdf_gi, mats.cdf_gq, g, va[0], xi[0], xi[1]), va)
+    return tabulated.table_sample(mats, m, va, xi)
 
 
 def kernel_functions(global_fits=()):
-    """``(sample, pdf)`` for a scene: pieces maps from the material's data, the generated code
-    of its global-layout fits (index ``cdf_info[CDF_MAPS]``), the table on table rows."""
-    global_sample = _chain(global_functions(list(global_fits)))
-
-    @wp.func
-    def rational_sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
-        b = m * N_CDF_INFO
-        va = view_frame(wo)
-        layout = mats.cdf_info[b + CDF_LAYOUT]
-        if layout == LAYOUT_PIECES:
-            n_v = mats.cdf_info[b + CDF_N_V]
-            v = tab_row(va[0], n_v)
-            if mats.cdf_row_ok[mats.cdf_info[b + CDF_OFF_ROWS] + v] != 0:   # else: a table row
-                return pieces_sample(mats.cdf_pw, mats.cdf_info[b + CDF_MAPS], n_v, mats.cdf_info[b + CDF_N_MU],
-                                     mats.cdf_info[b + CDF_N_U], v, va, xi[0], xi[1])
-        elif layout == LAYOUT_GLOBAL:
-            q = wp.static(global_sample)(mats.cdf_info[b + CDF_MAPS], va, xi)
-            if q[3] >= 0.0:
-                return q
-        return tabulated.table_sample(mats, m, va, xi)
-
+    """``(sample, pdf)``, the same for every scene (``global_fits`` is not needed: the maps are
+    data): pieces maps from ``cdf_pw``, global-layout maps from ``cdf_gi`` / ``cdf_gf`` / ``cdf_gq`` (record
+    at ``cdf_info[CDF_MAPS]``), the table on table rows."""
     return rational_sample, tabulated.pdf
 
 
