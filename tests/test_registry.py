@@ -71,7 +71,7 @@ def test_scene_format_and_help_list_every_name():
 def test_every_sampler_parses_in_a_scene(sampler):
     own = registry.technique(registry.strategy(sampler).technique).material
     if own is not None:   # a sampler of one kind's own tables: refused on another kind
-        with pytest.raises(ValueError, match=f"a 'lambert' material cannot use it"):
+        with pytest.raises(ValueError, match="a 'lambert' material cannot use it"):
             parse_scene(f'[materials.m]\ntype = "lambert"\nsampler = "{sampler}"\n')
         return
     sc = parse_scene(f'[materials.m]\ntype = "lambert"\nsampler = "{sampler}"\n')
