@@ -5,12 +5,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import data_file
+
 from fit.analytic import glossy_lobe, lambert
+from fit.errors import BRDFFileError
 from fit.formats.angles import half_diff_to_directions
-from fit.formats.grid import (FULL_SHAPE, MERL_SHAPE, phi_d_centres, phi_d_index, theta_d_centres,
-                              theta_h_centres)
+from fit.formats.grid import (
+    FULL_SHAPE,
+    MERL_SHAPE,
+    phi_d_centres,
+    phi_d_index,
+    theta_d_centres,
+    theta_h_centres,
+)
 from fit.formats.measured import MeasuredBRDF, ProjectedBRDF
 from fit.formats.merl import write_merl
 from fit.formats.rgl import read_rgl
@@ -186,7 +193,14 @@ def test_projected_npz_keeps_n_phi_d(tmp_path):
     assert q.n_phi_d == 360
     np.testing.assert_array_equal(q.n_below_horizon, p.n_below_horizon)
     # files written before the key existed are folded MERL projections
-    with np.load(tmp_path / "p.npz") as z:
+    project(MeasuredBRDF.from_function(lambert())).save(tmp_path / "folded.npz")
+    with np.load(tmp_path / "folded.npz") as z:
         old = {k: z[k] for k in z.files if k != "n_phi_d"}
     np.savez(tmp_path / "old.npz", **old)
     assert ProjectedBRDF.load(tmp_path / "old.npz").n_phi_d == 180
+    # a full-circle projection stripped of its key has counts up to 360: refused, not misread
+    with np.load(tmp_path / "p.npz") as z:
+        stripped = {k: z[k] for k in z.files if k != "n_phi_d"}
+    np.savez(tmp_path / "stripped.npz", **stripped)
+    with pytest.raises(BRDFFileError, match="'count' holds values outside"):
+        ProjectedBRDF.load(tmp_path / "stripped.npz")
