@@ -558,25 +558,48 @@ def env_dir_to_uv(env: EnvMap, d: wp.vec3) -> wp.vec2:
     return wp.vec2(u, v)
 
 
+@wp.struct
+class BilinearTaps:
+    """The four texels and weights of the conventions' bilinear lookup at (u, v): columns
+    ``x0``, ``x1`` (wrapping), rows ``y0``, ``y1`` (clamped), weights ``fx``, ``fy`` of the
+    second column / row."""
+    x0: int
+    x1: int
+    y0: int
+    y1: int
+    fx: float
+    fy: float
+
+
 @wp.func
-def env_lookup_uv(env: EnvMap, u: float, v: float) -> wp.vec3:
+def bilinear_taps(env: EnvMap, u: float, v: float) -> BilinearTaps:
+    """Texels of the lookup at (u, v) in [0, 1]^2 (rows are not texel-centred: v = 0 and 1 are
+    the first and last rows)."""
     W = env.width
     H = env.height
     x = u * float(W) - 0.5
     y = wp.clamp(v * float(H - 1), 0.0, float(H - 1))
     xf = wp.floor(x)
-    fx = x - xf
+    t = BilinearTaps()
+    t.fx = x - xf
     x0 = int(xf) % W
     if x0 < 0:
         x0 = x0 + W
-    x1 = (x0 + 1) % W
+    t.x0 = x0
+    t.x1 = (x0 + 1) % W
     yf = wp.floor(y)
-    fy = y - yf
-    y0 = wp.clamp(int(yf), 0, H - 1)
-    y1 = wp.min(y0 + 1, H - 1)
-    top = env.texels[y0, x0] * (1.0 - fx) + env.texels[y0, x1] * fx
-    bot = env.texels[y1, x0] * (1.0 - fx) + env.texels[y1, x1] * fx
-    return top * (1.0 - fy) + bot * fy
+    t.fy = y - yf
+    t.y0 = wp.clamp(int(yf), 0, H - 1)
+    t.y1 = wp.min(t.y0 + 1, H - 1)
+    return t
+
+
+@wp.func
+def env_lookup_uv(env: EnvMap, u: float, v: float) -> wp.vec3:
+    t = bilinear_taps(env, u, v)
+    top = env.texels[t.y0, t.x0] * (1.0 - t.fx) + env.texels[t.y0, t.x1] * t.fx
+    bot = env.texels[t.y1, t.x0] * (1.0 - t.fx) + env.texels[t.y1, t.x1] * t.fx
+    return top * (1.0 - t.fy) + bot * t.fy
 
 
 @wp.func
@@ -591,23 +614,10 @@ def env_eval(env: EnvMap, d: wp.vec3) -> wp.vec3:
 @wp.func
 def env_lookup_lum(env: EnvMap, u: float, v: float) -> float:
     """Bilinear lookup of the luminance map (the same weights as :func:`env_lookup_uv`)."""
-    W = env.width
-    H = env.height
-    x = u * float(W) - 0.5
-    y = wp.clamp(v * float(H - 1), 0.0, float(H - 1))
-    xf = wp.floor(x)
-    fx = x - xf
-    x0 = int(xf) % W
-    if x0 < 0:
-        x0 = x0 + W
-    x1 = (x0 + 1) % W
-    yf = wp.floor(y)
-    fy = y - yf
-    y0 = wp.clamp(int(yf), 0, H - 1)
-    y1 = wp.min(y0 + 1, H - 1)
-    top = env.lum[y0, x0] * (1.0 - fx) + env.lum[y0, x1] * fx
-    bot = env.lum[y1, x0] * (1.0 - fx) + env.lum[y1, x1] * fx
-    return top * (1.0 - fy) + bot * fy
+    t = bilinear_taps(env, u, v)
+    top = env.lum[t.y0, t.x0] * (1.0 - t.fx) + env.lum[t.y0, t.x1] * t.fx
+    bot = env.lum[t.y1, t.x0] * (1.0 - t.fx) + env.lum[t.y1, t.x1] * t.fx
+    return top * (1.0 - t.fy) + bot * t.fy
 
 
 @wp.func
