@@ -1,4 +1,4 @@
-"""Warp initialisation: kernel cache folder, quiet logging, device selection."""
+"""Warp initialisation: kernel cache folder, quiet logging, no adjoint code, device selection."""
 from __future__ import annotations
 
 import os
@@ -26,6 +26,9 @@ def init_warp():
                 wp.config.kernel_cache_dir = cache
             wp.config.log_level = wp.LOG_WARNING
             wp.config.quiet = True
+            # nothing is differentiated: without adjoints a kernel compiles in about half the
+            # time (benchmarks/bench_startup.py)
+            wp.config.enable_backward = False
             wp.init()
             _initialised = True
     return wp
