@@ -7,7 +7,7 @@ import importlib
 
 import pytest
 
-BENCHMARKS = ("bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers")
+BENCHMARKS = ("bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers", "bench_startup")
 
 
 @pytest.mark.parametrize("name", BENCHMARKS)

@@ -1,0 +1,292 @@
+"""Benchmark: start-up of ``rbrdf render`` with a rational material sampled by ``mis-rational``
+(issue 21, item 4: fits and inverse-CDF files are data, so a new one compiles nothing), against
+a baseline revision of the renderer (default: the last one that generated code per fit).
+
+Each run is one ``python -m warp_rbrdf render`` process (what a user pays: Python and Warp
+start-up, scene setup, compile or kernel-cache load, a small render), timed from outside (wall
+and CPU seconds), with the renderer's own setup / compile lines parsed. Per repeat and per
+variant (this checkout; this checkout compiling Warp's backward passes too, as before the
+renderer turned them off; the baseline; interleaved), with a fresh, empty kernel cache
+(``WARP_CACHE_PATH``):
+
+1. ``cold``: the scene, empty cache;
+2. ``warm``: the same scene again;
+3. ``new fit``: another rational fit (with its own CDF file), same cache;
+4. ``new CDF file``: the first fit with another pieces-layout CDF file, same cache;
+5. ``new global CDF`` (not with ``--quick``): the second fit with a global-layout CDF file (the
+   paper's fitted F and G: the layout the baseline generated code for), same cache.
+
+Then, on warm caches, interleaved: samples per second of a larger render of the scene, and the
+time per call of the material's Warp evaluation and BSDF sample (``Renderer.eval_material`` /
+``sample_material``, one thread). Medians over ``--repeats``. The fits are the two shipped
+coefficient files (``warp_rbrdf/data``); their CDF files are fitted once into the work folder
+(not timed). The baseline is exported with ``git archive`` (needs this git checkout).
+
+    python -m benchmarks.bench_startup [--quick] [--repeats 3] [--baseline 81db95c | none]
+                                       [--no-adjoints] [--resolution 128] [--spp 16] [--work DIR]
+
+Prints a table and a JSON line. The machine is shared: compare the two trees' medians within
+one run, never across runs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+BASELINE = "81db95c"   # the last revision with generated, unrolled code per fit and per global CDF
+
+SCENE = """[camera]
+origin = [0.0, 1.6, 4.2]
+target = [0.0, 0.8, 0.0]
+fov = 35.0
+resolution = [64, 64]
+
+[integrator]
+spp = 4
+sampler = "mis"
+
+[materials.coat]
+type = "rational"
+file = "{fit}"
+sampler = "mis-rational"
+cdf = "{cdf}"
+
+[materials.floor]
+type = "lambert"
+albedo = 0.45
+
+[[shapes]]
+type = "sphere"
+center = [0.0, 0.8, 0.0]
+radius = 0.8
+material = "coat"
+
+[[shapes]]
+type = "plane"
+size = [8.0, 8.0]
+material = "floor"
+
+[[lights]]
+type = "sky"
+sun_elevation = 40.0
+sun_azimuth = 140.0
+"""
+
+# ``rbrdf render`` with Warp's default of compiling backward passes (the "adjoints" variant)
+ADJOINTS = """
+import sys
+from warp_rbrdf.runtime import init_warp
+init_warp().config.enable_backward = True
+from warp_rbrdf.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+# timed in a subprocess of each tree: eval / sample per call (ns), one thread, warm cache
+MICRO = """
+import json, sys, time
+import numpy as np
+from fit.formats.angles import spherical_to_direction
+from warp_rbrdf import load_scene
+from warp_rbrdf.renderer import Renderer
+r = Renderer(load_scene(sys.argv[1]))
+n, reps = int(sys.argv[2]), int(sys.argv[3])
+rng = np.random.default_rng(0)
+wi = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+wo = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+xi = rng.random((n, 2))
+out = {}
+for name, call in (("eval_ns", lambda: r.eval_material("coat", wi, wo)),
+                   ("sample_ns", lambda: r.sample_material("coat", wo, xi))):
+    call()
+    ts = []
+    for _ in range(reps):
+        t0 = time.perf_counter(); call(); ts.append(time.perf_counter() - t0)
+    out[name] = float(np.median(ts)) / n * 1e9
+print("MICRO " + json.dumps(out))
+"""
+
+
+def export_baseline(rev: str, dest: Path) -> Path:
+    """The tree of revision ``rev`` of this checkout, exported into ``dest``."""
+    dest.mkdir(parents=True, exist_ok=True)
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev], capture_output=True)
+    if archive.returncode != 0:
+        raise SystemExit(f"bench_startup: cannot export baseline {rev!r}: {archive.stderr.decode().strip()} "
+                         f"(use --baseline none)")
+    subprocess.run(["tar", "-x", "-C", str(dest)], input=archive.stdout, check=True)
+    return dest
+
+
+def prepare(work: Path, quick: bool) -> dict:
+    """Scene files in ``work``: ``a`` (satin fit + pieces CDF), ``b`` (paper fit + its pieces
+    CDF), ``a2`` (satin fit + another pieces CDF) and, unless ``quick``, ``bg`` (paper fit +
+    a global-layout CDF; None if its fit falls back)."""
+    from fit.rational.coefficient_file import load as load_fit
+    from fit.sampling.cdf_file import fit_cdf
+
+    data = ROOT / "warp_rbrdf" / "data"
+    fits = {"a": data / "satin_rosaline_rgb.json", "b": data / "paper_white_rgb.json"}
+    small = dict(n_v=8, n_t=32, n_p=32)
+    params = {"a": small if quick else {}, "a2": dict(n_v=12, n_t=48, n_p=48), "b": small if quick else {}}
+    scenes = {}
+    for key, tp in params.items():
+        fit = fits[key[0]]
+        cdf_path = work / f"cdf_{key}.json"
+        if not cdf_path.exists():
+            c = fit_cdf(load_fit(fit).evaluate, name=key, table_params=tp)
+            c.save(cdf_path)
+        scenes[key] = work / f"scene_{key}.toml"
+        scenes[key].write_text(SCENE.format(fit=fit.as_posix(), cdf=cdf_path.as_posix()))
+    if not quick:
+        cdf_path = work / "cdf_bg.json"
+        if not cdf_path.exists():
+            c = fit_cdf(load_fit(fits["b"]).evaluate, name="bg", table_params=small, phi_kw=dict(degrees=(2, 1)),
+                        refinements=0, layout="global", time_limit_s=120.0)
+            c.save(cdf_path)
+        from fit.sampling.cdf_file import load as load_cdf
+
+        scenes["bg"] = None
+        if not load_cdf(cdf_path).fallback:
+            scenes["bg"] = work / "scene_bg.toml"
+            scenes["bg"].write_text(SCENE.format(fit=fits["b"].as_posix(), cdf=cdf_path.as_posix()))
+    return scenes
+
+
+def _num(pattern: str, text: str):
+    m = re.search(pattern, text)
+    return float(m.group(1)) if m else None
+
+
+def render_run(tree: Path, scene: Path, cache: Path, out: Path, extra=(), adjoints=False) -> dict:
+    """One ``rbrdf render`` process of ``tree``: wall and CPU time (user + system: less
+    sensitive than wall time to the other processes of a shared machine) and the renderer's own
+    lines. ``adjoints``: compile the kernels' backward passes too (Warp's default; the
+    renderer turns them off)."""
+    env = dict(os.environ, WARP_CACHE_PATH=str(cache), PYTHONPATH=str(tree))
+    args = ["render", str(scene), "--no-progress", "--out", str(out), *extra]
+    cmd = [sys.executable, "-c", ADJOINTS, *args] if adjoints else [sys.executable, "-m", "warp_rbrdf", *args]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    p = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if p.returncode != 0:
+        raise SystemExit(f"bench_startup: render failed in {tree}:\n{p.stdout}\n{p.stderr}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_s": wall, "cpu_s": cpu, "setup_s": _num(r"setup\s+([\d.]+) s", p.stdout),
+            "compile_s": _num(r"compile\s+([\d.]+) s", p.stdout),
+            "msamples_per_s": _num(r"([\d.]+) M samples/s", p.stdout)}
+
+
+def micro_run(tree: Path, scene: Path, cache: Path, n: int, reps: int) -> dict:
+    env = dict(os.environ, WARP_CACHE_PATH=str(cache), PYTHONPATH=str(tree))
+    p = subprocess.run([sys.executable, "-c", MICRO, str(scene), str(n), str(reps)], cwd=tree, env=env,
+                       capture_output=True, text=True)
+    if p.returncode != 0:
+        raise SystemExit(f"bench_startup: micro-benchmark failed in {tree}:\n{p.stdout}\n{p.stderr}")
+    return json.loads(p.stdout.split("MICRO ", 1)[1])
+
+
+def _median(rows, key):
+    vals = [r[key] for r in rows if r.get(key) is not None]
+    return statistics.median(vals) if vals else None
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_startup", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="one repeat, small CDF tables, no global CDF, no "
+                                                        "adjoints variant, small throughput render")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--baseline", default=BASELINE, help=f"git revision to compare with (default {BASELINE}, "
+                                                         f"the last with generated code); 'none': this tree only")
+    ap.add_argument("--no-adjoints", action="store_true", help="skip the variant of this tree that compiles "
+                                                               "backward passes (Warp's default)")
+    ap.add_argument("--resolution", type=int, default=128, help="throughput render (default 128)")
+    ap.add_argument("--spp", type=int, default=16, help="throughput render (default 16)")
+    ap.add_argument("--work", help="work folder (default: a temporary one, removed)")
+    a = ap.parse_args(argv)
+    repeats = 1 if a.quick else a.repeats
+    res, spp = (64, 4) if a.quick else (a.resolution, a.spp)
+
+    tmp = None if a.work else tempfile.mkdtemp(prefix="bench_startup_")
+    work = Path(a.work or tmp)
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        variants = {"current": (ROOT, False)}
+        if not (a.quick or a.no_adjoints):
+            variants["adjoints"] = (ROOT, True)
+        if a.baseline.lower() != "none":
+            variants["baseline"] = (export_baseline(a.baseline, work / "baseline"), False)
+        scenes = prepare(work, a.quick)
+        steps = [("cold", "a"), ("warm", "a"), ("new fit", "b"), ("new CDF file", "a2")]
+        if scenes.get("bg") is not None:
+            steps.append(("new global CDF", "bg"))
+        runs = {v: {s: [] for s, _ in steps} for v in variants}
+        for r in range(repeats):
+            for v, (tree, adj) in variants.items():
+                cache = work / f"cache_{v}_{r}"
+                shutil.rmtree(cache, ignore_errors=True)
+                for step, key in steps:
+                    runs[v][step].append(render_run(tree, scenes[key], cache, work / f"out_{v}.exr", adjoints=adj))
+        # throughput and per-call costs on warm caches (the last repeat's)
+        thr = {v: [] for v in variants if v != "adjoints"}
+        micro = {v: [] for v in thr}
+        for _ in range(repeats):
+            for v in thr:
+                tree = variants[v][0]
+                cache = work / f"cache_{v}_{repeats - 1}"
+                thr[v].append(render_run(tree, scenes["a"], cache, work / f"thr_{v}.exr",
+                                         ("--resolution", str(res), str(res), "--spp", str(spp))))
+                micro[v].append(micro_run(tree, scenes["a"], cache, 20000 if a.quick else 100000, 5))
+        out = {"repeats": repeats, "baseline": a.baseline, "cpu_count": os.cpu_count(),
+               "load_average": os.getloadavg(), "throughput_render": {"resolution": res, "spp": spp},
+               "variants": {}}
+        print(f"rbrdf render, medians of {repeats}: seconds of wall time / CPU time of the whole process / "
+              f"compile as the renderer prints it")
+        print(f"{'':16s}" + "".join(f"{v:>26s}" for v in variants))
+        for step, _ in steps:
+            line = f"{step:16s}"
+            for v in variants:
+                rows = runs[v][step]
+                line += (f"{_median(rows, 'wall_s'):>10.2f} /{_median(rows, 'cpu_s'):6.2f} /"
+                         f"{_median(rows, 'compile_s'):6.2f}")
+            print(line)
+        for v in variants:
+            out["variants"][v] = {"startup": {step: {k: _median(runs[v][step], k)
+                                                     for k in ("wall_s", "cpu_s", "setup_s", "compile_s")}
+                                              for step, _ in steps}}
+        for v in thr:
+            o = out["variants"][v]
+            o.update(msamples_per_s=_median(thr[v], "msamples_per_s"), eval_ns=_median(micro[v], "eval_ns"),
+                     sample_ns=_median(micro[v], "sample_ns"))
+            print(f"{v:9s} throughput {res}x{res} {spp} spp: {o['msamples_per_s']:.3f} M samples/s; "
+                  f"eval {o['eval_ns']:.0f} ns, mis-rational sample {o['sample_ns']:.0f} ns per call (1 thread)")
+        if "baseline" in variants:
+            c, b = out["variants"]["current"], out["variants"]["baseline"]
+            out["ratios"] = {"throughput": c["msamples_per_s"] / b["msamples_per_s"],
+                             "eval": c["eval_ns"] / b["eval_ns"], "sample": c["sample_ns"] / b["sample_ns"]}
+            print(f"current / baseline: throughput {out['ratios']['throughput']:.2f}x, eval time "
+                  f"{out['ratios']['eval']:.2f}x, sample time {out['ratios']['sample']:.2f}x")
+        print(f"load average during the run: {' '.join(f'{x:.1f}' for x in os.getloadavg())} "
+              f"({os.cpu_count()} cores)")
+        print(json.dumps(out))
+        return out
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
