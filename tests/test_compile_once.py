@@ -85,34 +85,39 @@ def test_packed_form_equals_the_basis_numpy():
     rng = np.random.default_rng(1)
     for nv, members in _random_groups(6):
         t = rng.uniform(-1, 1, size=(500, nv))
-        ints, floats = chebyshev.pack_polynomials(members, nv)
-        got = chebyshev.evaluate_packed(ints, floats, t, 6)
+        ints, rows = chebyshev.pack_polynomials(members, nv)
+        got = chebyshev.evaluate_packed(ints, rows, t)
         for w, member in enumerate(members):
             np.testing.assert_allclose(got[:, w], _basis_values(member, t), rtol=1e-12, atol=1e-12)
-    # the fitter's sets (tensor, total degree) pack without padding
+    # one slot per exponent row of the group's union
     for e in (basis.tensor_exponents((5, 3)), basis.total_degree_exponents(2, 12)):
         c = np.ones(len(e))
-        assert len(chebyshev.pack_polynomials([(e, c), (e[: len(e) // 2], c[: len(e) // 2])], 2)[1]) == 2 * len(e)
+        assert chebyshev.pack_polynomials([(e, c), (e[: len(e) // 2], c[: len(e) // 2])], 2)[1].shape == (len(e), 2)
 
 
 @wp.kernel
-def _cheb_kernel(fv: wp.array(dtype=wp.float64), iv: wp.array(dtype=int), t: wp.array(dtype=wp.vec3d),
-                 out6: wp.array(dtype=chebyshev.vec6d), out2: wp.array(dtype=chebyshev.vec8d), width: int):
+def _cheb_kernel(rows6: wp.array(dtype=chebyshev.vec6d), rows2: wp.array(dtype=wp.vec2d), iv: wp.array(dtype=int),
+                 t: wp.array(dtype=wp.vec3d), out6: wp.array(dtype=chebyshev.vec6d),
+                 out2: wp.array(dtype=chebyshev.vec8d), width: int):
     i = wp.tid()
     if width == 6:
-        out6[i] = chebyshev.cheb_sum6(fv, iv, 0, 0, t[i][0], t[i][1], t[i][2])
+        out6[i] = chebyshev.cheb_sum6(rows6, iv, 1, 2, t[i][0], t[i][1], t[i][2])
     else:
-        out2[i] = chebyshev.cheb_sum2_d(fv, iv, 0, 0, t[i][0], t[i][1], t[i][2])
+        out2[i] = chebyshev.cheb_sum2_d(rows2, iv, 1, 2, t[i][0], t[i][1], t[i][2])
 
 
 def _run_cheb(members, nv, t3, width):
-    ints, floats = chebyshev.pack_polynomials(members, nv)
+    """The group packed after one row and two ints of other data (offsets as in the kernels)."""
+    ints, rows = chebyshev.pack_polynomials(members, nv)
+    rows = np.concatenate([np.full((1, width), 7.0), rows, np.zeros((1, width))])
     n = len(t3)
     out6 = wp.zeros(n, dtype=chebyshev.vec6d, device="cpu")
     out2 = wp.zeros(n, dtype=chebyshev.vec8d, device="cpu")
     wp.launch(_cheb_kernel, dim=n, device="cpu",
-              inputs=[wp.array(floats if len(floats) else np.zeros(1), dtype=wp.float64, device="cpu"),
-                      wp.array(ints, dtype=int, device="cpu"), wp.array(t3, dtype=wp.vec3d, device="cpu")],
+              inputs=[wp.array(rows if width == 6 else np.zeros((1, 6)), dtype=chebyshev.vec6d, device="cpu"),
+                      wp.array(rows if width == 2 else np.zeros((1, 2)), dtype=wp.vec2d, device="cpu"),
+                      wp.array(np.concatenate([[5, 5], ints]), dtype=int, device="cpu"),
+                      wp.array(t3, dtype=wp.vec3d, device="cpu")],
               outputs=[out6, out2, width])
     return (out6 if width == 6 else out2).numpy()
 
@@ -372,10 +377,10 @@ def test_a_new_cdf_file_compiles_nothing(global_fits):
 
 
 @wp.kernel
-def _global_kernel(gi: wp.array(dtype=int), gf: wp.array(dtype=wp.float64), g: int, q: wp.array(dtype=wp.vec3),
-                   out: wp.array(dtype=wp.vec3)):
+def _global_kernel(gi: wp.array(dtype=int), gf: wp.array(dtype=wp.float64), gq: wp.array(dtype=wp.vec2d), g: int,
+                   q: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
     i = wp.tid()
-    out[i] = technique.global_sample(gf, gi, g, q[i][0], q[i][1], q[i][2])
+    out[i] = technique.global_sample(gf, gi, gq, g, q[i][0], q[i][1], q[i][2])
 
 
 def test_global_sampler_equals_numpy_closely(global_fits):
@@ -384,13 +389,14 @@ def test_global_sampler_equals_numpy_closely(global_fits):
     packed = cdf_data.pack(list(global_fits))
     gi = wp.array(packed["cdf_gi"], dtype=int, device="cpu")
     gf = wp.array(packed["cdf_gf"], dtype=wp.float64, device="cpu")
+    gq = wp.array(packed["cdf_gq"], dtype=wp.vec2d, device="cpu")
     rng = np.random.default_rng(8)
     n = 4000
     q = (rng.random((n, 3)) * [np.pi / 2, 1, 1]).astype(np.float32)
     for m, cdf in enumerate(global_fits):
         out = wp.zeros(n, dtype=wp.vec3, device="cpu")
         wp.launch(_global_kernel, dim=n, device="cpu",
-                  inputs=[gi, gf, int(packed["cdf_info"][m, CDF_MAPS]), wp.array(q, dtype=wp.vec3, device="cpu")],
+                  inputs=[gi, gf, gq, int(packed["cdf_info"][m, CDF_MAPS]), wp.array(q, dtype=wp.vec3, device="cpu")],
                   outputs=[out])
         got = out.numpy().astype(float)
         qq = q.astype(float)
@@ -398,3 +404,18 @@ def test_global_sampler_equals_numpy_closely(global_fits):
         np.testing.assert_allclose(got[:, 0], tl, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(got[:, 1], pl, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(got[:, 2], alpha, rtol=1e-5, atol=1e-6)
+
+
+def test_degree_beyond_the_limit_is_a_one_line_error():
+    from warp_rbrdf.errors import SceneError
+    from warp_rbrdf.scene import MaterialSpec
+
+    e = basis.tensor_exponents((chebyshev.MAX_DEGREE + 1, 1))
+    with pytest.raises(ValueError, match="exceeds the renderer's limit"):
+        chebyshev.pack_polynomials([(e, np.ones(len(e)))], 2)
+    m = _model()
+    for f in m.functions:
+        f.num_exponents, f.num_coef = e, np.full(len(e), 0.01)
+    with pytest.raises(SceneError) as err:
+        rational.load(MaterialSpec(name="m", type="rational", data=m))
+    assert "\n" not in str(err.value) and "materials.file" in str(err.value) and "limit 15" in str(err.value)

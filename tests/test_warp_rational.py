@@ -1,4 +1,4 @@
-"""The generated Warp code of rational materials against fit.rational.model's NumPy evaluation."""
+"""The Warp evaluation of rational materials against fit.rational.model's NumPy evaluation."""
 from __future__ import annotations
 
 import numpy as np

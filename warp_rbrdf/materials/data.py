@@ -16,14 +16,16 @@ One entry per material used by a shape (index ``m``):
 * ``rgl_f`` / ``rgl_i``: the tables (float32) and headers (:data:`N_RGL_INFO` ints per
   material, fields ``RGL_*`` of :mod:`warp_rbrdf.materials.rgl`) of the ``rgl`` materials;
 * ``tables``: every material table of the scene, concatenated (RGB, 1/sr);
-* ``coef_i`` / ``coef_f``: the coefficient data of the kinds that evaluate coefficients
-  (rational fits, :func:`warp_rbrdf.materials.rational.pack_model`): ``coef_i[2 m]`` and
-  ``coef_i[2 m + 1]`` are where material ``m``'s ints and float64 values start (its records
-  hold offsets relative to those), then the materials' ints;
+* ``coef_i`` / ``coef_f`` / ``coef_q``: the coefficient data of the kinds that evaluate
+  coefficients (rational fits, :func:`warp_rbrdf.materials.rational.pack_model`): ints, float64
+  values and rows of six float64 coefficients (:mod:`warp_rbrdf.chebyshev`); ``coef_i[3 m]``,
+  ``coef_i[3 m + 1]``, ``coef_i[3 m + 2]`` are where material ``m``'s start in each (its
+  records hold offsets relative to those), then the materials' ints;
 * the inverse-CDF data of the materials whose technique needs it: ``cdf_t`` (theta CDFs),
   ``cdf_p`` (phi CDFs), ``cdf_pw`` (rational pieces), ``cdf_row_ok`` (1: the row has a verified
-  rational map, 0: sampled with the table), ``cdf_gi`` / ``cdf_gf`` (global-layout maps as
-  packed Chebyshev polynomials: ints, float64, :func:`warp_rbrdf.techniques.cdf_data.pack_global`)
+  rational map, 0: sampled with the table), ``cdf_gi`` / ``cdf_gf`` / ``cdf_gq`` (global-layout
+  maps as packed Chebyshev polynomials: ints, float64, rows of (P, Q) coefficients,
+  :func:`warp_rbrdf.techniques.cdf_data.pack_global`)
   and ``cdf_info`` (:data:`N_CDF_INFO` ints per material, fields ``CDF_*``).
 
 The kernels' source depends on none of these values (only on which kinds and techniques a scene
@@ -35,6 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import warp as wp
+
+from ..chebyshev import vec6d
 
 # cdf_info fields, per material (N_CDF_INFO ints at m * N_CDF_INFO)
 CDF_OFF_T = 0        # start of the material's theta CDFs in cdf_t
@@ -72,8 +76,10 @@ class Materials:
     cdf_info: wp.array(dtype=int)
     coef_i: wp.array(dtype=int)
     coef_f: wp.array(dtype=wp.float64)
+    coef_q: wp.array(dtype=vec6d)
     cdf_gi: wp.array(dtype=int)
     cdf_gf: wp.array(dtype=wp.float64)
+    cdf_gq: wp.array(dtype=wp.vec2d)
 
 
 @dataclass
@@ -90,8 +96,9 @@ class LoadedMaterial:
     ``fallback_table``: RGB entries put into ``Materials.tables`` besides the kind's own
     indexing, their start in ``Materials.param`` (rational: the projected table where the fit
     is flagged); ``notes``: lines the scene load logs, prefixed with the material's name;
-    ``coefficients``: ``(ints int32, floats float64)`` the kind puts into ``Materials.coef_i`` /
-    ``coef_f`` (offsets relative to the material's own start there; rational: its packed fit)."""
+    ``coefficients``: ``(ints int32, floats float64, rows float64 (n, 6))`` the kind puts into
+    ``Materials.coef_i`` / ``coef_f`` / ``coef_q`` (offsets relative to the material's own start
+    there; rational: its packed fit)."""
 
     spec: object
     data: object
@@ -147,6 +154,7 @@ class MaterialData:
     global_fits: list = field(default_factory=list)   # CDFFits of the global layout, in packing order
     cdf_gi: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
     cdf_gf: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float64))
+    cdf_gq: np.ndarray = field(default_factory=lambda: np.zeros((1, 2), np.float64))
     param: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
     rgl_f: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
     rgl_i: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
@@ -159,23 +167,26 @@ class MaterialData:
         return sorted({int(t) for t in self.technique})
 
     def coefficients(self) -> tuple:
-        """``(coef_i, coef_f)`` of :class:`Materials`: a header of two ints per material (where
-        its ints and floats start), then each material's :attr:`LoadedMaterial.coefficients`."""
+        """``(coef_i, coef_f, coef_q)`` of :class:`Materials`: a header of three ints per material
+        (where its ints, floats and rows start), then each material's
+        :attr:`LoadedMaterial.coefficients`."""
         n = len(self.loaded)
-        head = np.zeros(2 * n, np.int32)
-        ints, floats = [head], [np.zeros(0, np.float64)]
-        ni, nf = 2 * n, 0
+        head = np.zeros(3 * n, np.int32)
+        ints, floats, rows = [head], [np.zeros(0)], [np.zeros((0, 6))]
+        start = np.array([3 * n, 0, 0])
         for m, lm in enumerate(self.loaded):
             if lm.coefficients is None:
                 continue
-            i, f = lm.coefficients
-            head[2 * m], head[2 * m + 1] = ni, nf
-            ints.append(np.asarray(i, np.int32))
-            floats.append(np.asarray(f, np.float64))
-            ni, nf = ni + len(i), nf + len(f)
-        ci, cf = np.concatenate(ints), np.concatenate(floats)
+            parts = [np.asarray(lm.coefficients[0], np.int32), np.asarray(lm.coefficients[1], np.float64),
+                     np.asarray(lm.coefficients[2], np.float64).reshape(-1, 6)]
+            head[3 * m:3 * m + 3] = start
+            for out, part in zip((ints, floats, rows), parts):
+                out.append(part)
+            start += [len(p) for p in parts]
+        ci, cf, cq = np.concatenate(ints), np.concatenate(floats), np.concatenate(rows)
         # Warp arrays need at least one element
-        return (ci if len(ci) else np.zeros(1, np.int32)), (cf if len(cf) else np.zeros(1, np.float64))
+        return (ci if len(ci) else np.zeros(1, np.int32), cf if len(cf) else np.zeros(1),
+                cq if len(cq) else np.zeros((1, 6)))
 
     def loaded_of_kind(self, code: int) -> list:
         """The loaded materials of kind ``code`` in the order of their ``offset`` index."""
@@ -203,9 +214,11 @@ def make_materials_struct(md: MaterialData, device) -> Materials:
     s.cdf_pw = arr(md.cdf_pw, float, np.float32)
     s.cdf_row_ok = arr(md.cdf_row_ok, int, np.int32)
     s.cdf_info = arr(np.asarray(md.cdf_info).reshape(-1), int, np.int32)
-    coef_i, coef_f = md.coefficients()
+    coef_i, coef_f, coef_q = md.coefficients()
     s.coef_i = arr(coef_i, int, np.int32)
     s.coef_f = arr(coef_f, wp.float64, np.float64)
+    s.coef_q = arr(coef_q, vec6d, np.float64)
     s.cdf_gi = arr(md.cdf_gi, int, np.int32)
     s.cdf_gf = arr(md.cdf_gf, wp.float64, np.float64)
+    s.cdf_gq = arr(md.cdf_gq, wp.vec2d, np.float64)
     return s

@@ -1,11 +1,12 @@
 """``rational``: the fitter's ``rbrdf-rational`` coefficient files (:mod:`fit.rational.coefficient_file`,
 versions 1 and 2) evaluated from data; ``scale`` multiplies them.
 
-A fit is packed (:func:`pack_model`) into records of ``Materials.coef_i`` / ``coef_f``: a split
-record per piecewise level (the split variable, its inner edges, the pieces) and a leaf record
-per single-box piece (flags, per-variable box and map, per channel its numerator and
-denominator, the six of a piece packed as one group of Chebyshev polynomials,
-:mod:`warp_rbrdf.chebyshev`, and its step-7 range). One Warp function, :func:`rational_eval`, evaluates every fit: it follows the file's
+A fit is packed (:func:`pack_model`) into records of ``Materials.coef_i`` / ``coef_f`` /
+``coef_q``: a split record per piecewise level (the split variable, its inner edges, the
+pieces) and a leaf record per single-box piece (flags, per-variable box and map, per channel its
+mode and step-7 range, and the six numerators and denominators of its channels packed as one
+group of Chebyshev polynomials, :mod:`warp_rbrdf.chebyshev`). One Warp function,
+:func:`rational_eval`, evaluates every fit: it follows the file's
 recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles -> the piece
 (``x <= edge`` picks the lower piece) -> clamp onto the piece's box -> input transform
 (identity / sqrt) -> map onto [-1, 1] -> Chebyshev sums -> P/Q per channel -> value transform
@@ -244,14 +245,14 @@ def check_model(model, file="<scene>", key="materials"):
 
 
 # --------------------------------------------------------------------------------------------
-# The fit as data (Materials.coef_i / coef_f) and the one Warp function that evaluates it
+# The fit as data (Materials.coef_i / coef_f / coef_q) and the one Warp function that evaluates it
 # --------------------------------------------------------------------------------------------
 NODE_LEAF, NODE_SPLIT = 0, 1
 # split record (ints): kind, variable (SUPPORTED_VARIABLES), pieces K, float offset of its K - 1
 # inner edges, then the K children's int offsets
 SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4
 # leaf record (ints): kind, variables, flags, float offset of its header, 3 variable codes
-# (source angle | transform << 2), the int and float offsets of its polynomials (one packed
+# (source angle | transform << 2), the int and row offsets of its polynomials (one packed
 # group: P_R, P_G, P_B, Q_R, Q_G, Q_B, :func:`warp_rbrdf.chebyshev.cheb_sum6`), and per
 # channel its mode
 LEAF_NV, LEAF_FLAGS, LEAF_FH, LEAF_VARS, LEAF_POLY, LEAF_MODES = 1, 2, 3, 4, 7, 9
@@ -273,11 +274,12 @@ def channel_modes(model, table: bool = False) -> list:
 
 
 def pack_model(model, table: bool = False) -> tuple:
-    """``(ints int32, floats float64)``: a :class:`~fit.rational.model.RationalModel` or
-    :class:`~fit.rational.model.PiecewiseRationalModel` (nested pieces included) as the records
-    :func:`rational_eval` walks, the root at int 0; offsets are relative to the material's
-    start. ``table``: flagged channels read the fallback table (module docstring)."""
-    fd = FlatData()
+    """``(ints int32, floats float64, rows float64 (n, 6))``: a
+    :class:`~fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`
+    (nested pieces included) as the records :func:`rational_eval` walks, the root at int 0;
+    offsets are relative to the material's starts. ``table``: flagged channels read the
+    fallback table (module docstring)."""
+    fd = FlatData(6)
     _pack_node(fd, model, table)
     return fd.arrays()
 
@@ -373,14 +375,14 @@ def _channel(cf: wp.array(dtype=wp.float64), mode: int, h: int, flags: int, c: i
 @wp.func
 def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     """rho (1/sr) of rational material ``m``: its packed fit (:func:`pack_model`, ints from
-    ``coef_i[2 m]``, floats from ``coef_i[2 m + 1]``) at (wi, wo), times ``Materials.scale[m]``;
-    0 below the horizon."""
+    ``coef_i[3 m]``, floats from ``coef_i[3 m + 1]``, coefficient rows from ``coef_i[3 m + 2]``)
+    at (wi, wo), times ``Materials.scale[m]``; 0 below the horizon."""
     if wi[2] <= 0.0 or wo[2] <= 0.0:
         return wp.vec3(0.0)
     ci = mats.coef_i
     cf = mats.coef_f
-    ib = ci[2 * m]
-    fb = ci[2 * m + 1]
+    ib = ci[3 * m]
+    fb = ci[3 * m + 1]
     a = F.half_diff(wi, wo)
     n = ib
     while ci[n] == NODE_SPLIT:     # piece k: the first with x <= edge k + 1
@@ -416,7 +418,8 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
         ih = F.merl_theta_h_index(float(wp.clamp(wp.float64(a[0]), cf[h + FH_BOX], cf[h + FH_BOX + 1])))
         jd = F.merl_theta_d_index(float(wp.clamp(wp.float64(a[1]), cf[h + FH_BOX + 2], cf[h + FH_BOX + 3])))
         tab = mats.tables[mats.param[m] + ih * N_THETA_D + jd]
-    pq = cheb_sum6(cf, ci, fb + ci[n + LEAF_POLY + 1], ib + ci[n + LEAF_POLY], ta, tb, tc)
+    pq = cheb_sum6(mats.coef_q, ci, ci[3 * m + 2] + ci[n + LEAF_POLY + 1], ib + ci[n + LEAF_POLY],
+                   ta, tb, tc)
     r = n + LEAF_MODES
     y = wp.vec3(_channel(cf, ci[r], h, flags, 0, pq[0], pq[3], tab[0]),
                 _channel(cf, ci[r + 1], h, flags, 1, pq[1], pq[4], tab[1]),

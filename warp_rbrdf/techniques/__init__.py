@@ -1,8 +1,8 @@
 """BSDF sampling techniques, one module each, listed in :data:`warp_rbrdf.registry.TECHNIQUES`.
 
 Every technique module has ``kernel_functions(global_fits) -> (sample, pdf)``, the Warp
-functions for a scene's materials (most techniques return two fixed module functions; the
-rational one adds generated code for the global-layout fits it is given):
+functions for a scene's materials (every technique returns two fixed module functions: its data,
+global-layout fits included, are in :class:`~warp_rbrdf.materials.data.Materials`):
 
 * ``sample(mats: Materials, m: int, wo: vec3, xi: vec2) -> vec4``: a light direction ``wi``
   (local frame, z = normal) and its estimator weight (1/pdf, or alpha for the rational maps;

@@ -10,7 +10,8 @@ verification (``CDFFit.fallback``) switches the material to its strategy's ``fal
 
 Everything is packed as data (:func:`pack`): the pieces layout's knots into ``cdf_pw``, the
 global layout's F and G as packed Chebyshev polynomials (:func:`pack_global`,
-:mod:`warp_rbrdf.chebyshev`) into ``cdf_gi`` / ``cdf_gf``, so a new CDF file compiles nothing.
+:mod:`warp_rbrdf.chebyshev`) into ``cdf_gi`` / ``cdf_gf`` / ``cdf_gq``, so a new CDF file
+compiles nothing.
 """
 from __future__ import annotations
 
@@ -89,11 +90,12 @@ def pack(cdfs) -> dict:
     CDFFit) into the flat arrays of :class:`Materials`: ``cdf_t``, ``cdf_p``, ``cdf_pw``
     (pieces: theta pieces (n_v, n_mu, 4) then phi knots (n_v, n_mu, n_u + 1, 2), see
     :func:`.rational.pieces_sample`), ``cdf_row_ok``, ``cdf_info`` (n, N_CDF_INFO), ``cdf_gi``
-    / ``cdf_gf`` (the global-layout maps, :func:`pack_global`; ``CDF_MAPS``: a record's start)
+    / ``cdf_gf`` / ``cdf_gq`` (the global-layout maps, :func:`pack_global`; ``CDF_MAPS``: a
+    record's start)
     and ``global_fits`` (the global-layout fits, in packing order)."""
     info = np.zeros((max(len(cdfs), 1), N_CDF_INFO), np.int32)
     ct, cp, pw, rows = Pool(), Pool(), Pool(), Pool(dtype=np.int32)
-    global_fits, gd = [], FlatData()
+    global_fits, gd = [], FlatData(2)
     for m, cdf in enumerate(cdfs):
         if cdf is None:
             continue
@@ -114,14 +116,12 @@ def pack(cdfs) -> dict:
             info[m, CDF_LAYOUT] = LAYOUT_GLOBAL
             info[m, CDF_MAPS] = pack_global(gd, cdf.maps)
             global_fits.append(cdf)
-    gi, gf = gd.arrays()
+    gi, gf, gq = gd.arrays()
     return dict(cdf_t=ct.array(), cdf_p=cp.array(), cdf_pw=pw.array(), cdf_row_ok=rows.array(),
-                cdf_info=info, global_fits=global_fits,
-                cdf_gi=gi if len(gi) else np.zeros(1, np.int32),
-                cdf_gf=gf if len(gf) else np.zeros(1, np.float64))
+                cdf_info=info, global_fits=global_fits, cdf_gi=gi, cdf_gf=gf, cdf_gq=gq)
 
 
-# global-layout record: GLOBAL_INTS ints per map (F, then G): the int and float offsets of
+# global-layout record: GLOBAL_INTS ints per map (F, then G): the int and row offsets of
 # (P, Q) as one packed group (:func:`warp_rbrdf.chebyshev.cheb_sum2_d`), and the float offset
 # of the map's domain data: the scale 2 / (b - a) of the CDF variable (the last), then
 # (a + b, 1 / (b - a)) per variable

@@ -7,7 +7,7 @@ Layouts (``Materials.cdf_info[CDF_LAYOUT]``):
   equal mass, found without a search (:func:`pieces_sample`); coefficients in
   ``Materials.cdf_pw``, the rows with a verified map flagged in ``Materials.cdf_row_ok``;
 * global (the paper's: one F(theta_v, mu), one G(theta_v, theta_l, u)): packed Chebyshev
-  polynomials in ``Materials.cdf_gi`` / ``cdf_gf`` (:func:`.cdf_data.pack_global`), evaluated
+  polynomials in ``Materials.cdf_gi`` / ``cdf_gf`` / ``cdf_gq`` (:func:`.cdf_data.pack_global`), evaluated
   in float64 by :func:`global_sample`.
 
 Both layouts are data: the kernels' source is the same for every CDF file (a new file compiles
@@ -140,7 +140,7 @@ def maps_to_direction(q: wp.vec3, va: wp.vec3) -> wp.vec4:
 
 
 # --------------------------------------------------------------------------------------------
-# Global layout: F and G as packed Chebyshev polynomials (Materials.cdf_gi / cdf_gf)
+# Global layout: F and G as packed Chebyshev polynomials (Materials.cdf_gi / cdf_gf / cdf_gq)
 # --------------------------------------------------------------------------------------------
 @wp.func
 def _map_input(gf: wp.array(dtype=wp.float64), d: int, v: int, x: wp.float64) -> wp.float64:
@@ -149,14 +149,15 @@ def _map_input(gf: wp.array(dtype=wp.float64), d: int, v: int, x: wp.float64) ->
 
 
 @wp.func
-def _normalized(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), r: int,
-                ta: wp.float64, tb: wp.float64, tc: wp.float64, span: wp.float64) -> wp.vec2d:
+def _normalized(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), gq: wp.array(dtype=wp.vec2d),
+                r: int, ta: wp.float64, tb: wp.float64, tc: wp.float64, span: wp.float64) -> wp.vec2d:
     """(value, d/dx) of the endpoint-normalized map ``span (R - R_lo) / (R_hi - R_lo)`` of the
-    map whose record starts at ``gi[r]`` (R = P/Q; R_lo, R_hi: its CDF variable, the last, at
-    the ends of its domain) with ONE division: with D = P_hi Q_lo - P_lo Q_hi and
-    N = P Q_lo - P_lo Q, value = span N Q_hi / (Q D), derivative = span (P' Q - P Q') Q_hi Q_lo
-    / (Q^2 D) (:func:`fit.sampling.maps.normalized_map`)."""
-    s = cheb_sum2_d(gf, gi, gi[r + 1], gi[r], ta, tb, tc)   # P, Q, P', Q', P_lo, Q_lo, P_hi, Q_hi
+    map whose record starts at ``gi[r]`` (coefficient rows in ``gq``, domain data in ``gf``;
+    R = P/Q; R_lo, R_hi: its CDF variable, the last, at the ends of its domain) with ONE
+    division: with D = P_hi Q_lo - P_lo Q_hi and N = P Q_lo - P_lo Q, value = span N Q_hi /
+    (Q D), derivative = span (P' Q - P Q') Q_hi Q_lo / (Q^2 D)
+    (:func:`fit.sampling.maps.normalized_map`)."""
+    s = cheb_sum2_d(gq, gi, gi[r + 1], gi[r], ta, tb, tc)   # P, Q, P', Q', P_lo, Q_lo, P_hi, Q_hi
     sc = gf[gi[r + 2]]
     inv = wp.float64(1.0) / (s[1] * s[1] * (s[6] * s[5] - s[4] * s[7]))
     v = span * (s[0] * s[5] - s[4] * s[1]) * s[7] * s[1] * inv
@@ -165,8 +166,8 @@ def _normalized(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), r: int,
 
 
 @wp.func
-def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), g: int,
-                  theta_v: float, mu: float, tau: float) -> wp.vec3:
+def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), gq: wp.array(dtype=wp.vec2d),
+                  g: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
     """``(theta_l, phi_l, alpha)`` of the global-layout maps whose record starts at ``gi[g]``:
     :meth:`fit.sampling.cdf_file.CDFFit.sample` (:func:`fit.sampling.maps.sample_maps`),
     float64; alpha = 0 where a clamp acts."""
@@ -175,7 +176,7 @@ def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), g: in
     zero = wp.float64(0.0)
     tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))
     d = gi[g + GLOBAL_THETA + 2]
-    f = _normalized(gf, gi, g + GLOBAL_THETA, zero, _map_input(gf, d, 0, tv),
+    f = _normalized(gf, gi, gq, g + GLOBAL_THETA, zero, _map_input(gf, d, 0, tv),
                     _map_input(gf, d, 1, wp.float64(mu)), half_pi)
     tl = f[0]
     inside = 1
@@ -187,7 +188,7 @@ def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), g: in
         s = wp.float64(-1.0)
     u = wp.float64(wp.abs(2.0 * tau - 1.0))
     d = gi[g + GLOBAL_PHI + 2]
-    h = _normalized(gf, gi, g + GLOBAL_PHI, _map_input(gf, d, 0, tv), _map_input(gf, d, 1, tl),
+    h = _normalized(gf, gi, gq, g + GLOBAL_PHI, _map_input(gf, d, 0, tv), _map_input(gf, d, 1, tl),
                     _map_input(gf, d, 2, u), pi)
     ph = h[0]
     if ph < zero or ph > pi:
@@ -213,14 +214,14 @@ def rational_sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec
             return pieces_sample(mats.cdf_pw, mats.cdf_info[b + CDF_MAPS], n_v, mats.cdf_info[b + CDF_N_MU],
                                  mats.cdf_info[b + CDF_N_U], v, va, xi[0], xi[1])
     elif layout == LAYOUT_GLOBAL:
-        return maps_to_direction(global_sample(mats.cdf_gf, mats.cdf_gi, mats.cdf_info[b + CDF_MAPS],
-                                               va[0], xi[0], xi[1]), va)
+        g = mats.cdf_info[b + CDF_MAPS]
+        return maps_to_direction(global_sample(mats.cdf_gf, mats.cdf_gi, mats.cdf_gq, g, va[0], xi[0], xi[1]), va)
     return tabulated.table_sample(mats, m, va, xi)
 
 
 def kernel_functions(global_fits=()):
     """``(sample, pdf)``, the same for every scene (``global_fits`` is not needed: the maps are
-    data): pieces maps from ``cdf_pw``, global-layout maps from ``cdf_gi`` / ``cdf_gf`` (record
+    data): pieces maps from ``cdf_pw``, global-layout maps from ``cdf_gi`` / ``cdf_gf`` / ``cdf_gq`` (record
     at ``cdf_info[CDF_MAPS]``), the table on table rows."""
     return rational_sample, tabulated.pdf
 
