@@ -16,14 +16,15 @@ renderer turned them off; the baseline; interleaved), with a fresh, empty kernel
 5. ``new global CDF`` (not with ``--quick``): the second fit with a global-layout CDF file (the
    paper's fitted F and G: the layout the baseline generated code for), same cache.
 
-Then, on warm caches, interleaved: samples per second of a larger render of the scene, and the
-time per call of the material's Warp evaluation and BSDF sample (``Renderer.eval_material`` /
-``sample_material``, one thread). Medians over ``--repeats``. The fits are the two shipped
+Then, on warm caches, interleaved: samples per second of a larger render of the scene (and the
+largest pixel difference between the two trees' images: same seed, so 0 when the evaluation
+and sampling give the same floats), and the time per call of the material's Warp evaluation and
+BSDF sample (``Renderer.eval_material`` / ``sample_material``, one thread). Medians over ``--repeats``. The fits are the two shipped
 coefficient files (``warp_rbrdf/data``); their CDF files are fitted once into the work folder
 (not timed). The baseline is exported with ``git archive`` (needs this git checkout).
 
     python -m benchmarks.bench_startup [--quick] [--repeats 3] [--baseline 81db95c | none]
-                                       [--no-adjoints] [--resolution 128] [--spp 16] [--work DIR]
+                                       [--no-adjoints] [--resolution 256] [--spp 32] [--work DIR]
 
 Prints a table and a JSON line. The machine is shared: compare the two trees' medians within
 one run, never across runs.
@@ -213,8 +214,8 @@ def main(argv=None):
                                                          f"the last with generated code); 'none': this tree only")
     ap.add_argument("--no-adjoints", action="store_true", help="skip the variant of this tree that compiles "
                                                                "backward passes (Warp's default)")
-    ap.add_argument("--resolution", type=int, default=128, help="throughput render (default 128)")
-    ap.add_argument("--spp", type=int, default=16, help="throughput render (default 16)")
+    ap.add_argument("--resolution", type=int, default=256, help="throughput render (default 256)")
+    ap.add_argument("--spp", type=int, default=32, help="throughput render (default 32)")
     ap.add_argument("--work", help="work folder (default: a temporary one, removed)")
     a = ap.parse_args(argv)
     repeats = 1 if a.quick else a.repeats
@@ -277,8 +278,13 @@ def main(argv=None):
             c, b = out["variants"]["current"], out["variants"]["baseline"]
             out["ratios"] = {"throughput": c["msamples_per_s"] / b["msamples_per_s"],
                              "eval": c["eval_ns"] / b["eval_ns"], "sample": c["sample_ns"] / b["sample_ns"]}
+            from warp_rbrdf.image_io import read_image
+
+            diff = float(abs(read_image(work / "thr_current.exr") - read_image(work / "thr_baseline.exr")).max())
+            out["max_pixel_difference"] = diff
             print(f"current / baseline: throughput {out['ratios']['throughput']:.2f}x, eval time "
-                  f"{out['ratios']['eval']:.2f}x, sample time {out['ratios']['sample']:.2f}x")
+                  f"{out['ratios']['eval']:.2f}x, sample time {out['ratios']['sample']:.2f}x; largest pixel "
+                  f"difference of the throughput renders {diff:.3g}")
         print(f"load average during the run: {' '.join(f'{x:.1f}' for x in os.getloadavg())} "
               f"({os.cpu_count()} cores)")
         print(json.dumps(out))

@@ -19,12 +19,12 @@ costs no compile:
 Evaluation fills the 1-D tables ``T_0 .. T_15`` of the three variables once (``T_{k+1} = 2 t
 T_k - T_{k-1}``, a loop of constant length that Warp unrolls), then makes one pass over the
 slots: ``W`` multiply-adds with the slot's product ``T_a T_b T_c``, two slots per step into two
-partial sums (one compiled function for every fit). Measured on a group of six total-degree-12
-and -6 polynomials (91 slots), one thread, same run: rows of ``vec6d`` 334 ns per group against
-475 ns with six float64 loads per slot; in an earlier run, tables of constant length 176 ns
-against 245 ns filled to the group's degree by a loop of variable length and 340 ns with nested
-loops and the recurrence inside them. Sums run in float64 (Chebyshev sums can cancel). Two
-groups are used:
+partial sums (one compiled function for every fit). Each choice here was the faster one in
+development timings of a six-polynomial group: rows read as one vector instead of ``W`` scalar
+loads, tables of constant length instead of filled to the group's degree by a loop of variable
+length, and one flat pass over slots instead of nested loops with the recurrence inside them;
+``benchmarks/bench_startup.py`` gives the resulting cost per evaluation against generated code.
+Sums run in float64 (Chebyshev sums can cancel). Two groups are used:
 
 * :func:`cheb_sum6`: the numerators and denominators of a BRDF piece's three channels,
   ``(P_R, P_G, P_B, Q_R, Q_G, Q_B)``;
