@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def warp_throughput(model, n: int = 1_000_000) -> float:
-    """Evaluations per second of the rational material's generated Warp code (one launch, one
+    """Evaluations per second of the rational material's Warp evaluation (one launch, one
     CPU thread, median of 5, host<->device copies included)."""
     from fit.formats.angles import spherical_to_direction
     from warp_rbrdf import testing as T
@@ -87,7 +87,7 @@ def main(argv=None) -> int:
     ap.add_argument("--value", default="log", choices=("log", "linear"))
     ap.add_argument("--theta-h", default="sqrt", choices=("sqrt", "identity"))
     ap.add_argument("--warp", action="store_true",
-                    help="also time the generated Warp code of the last model (CPU device, one thread)")
+                    help="also time the Warp evaluation of the last model (CPU device, one thread)")
     ap.add_argument("--transforms", action="store_true",
                     help="compare log/linear value x sqrt/identity theta_h at the first tolerance")
     ap.add_argument("--repeat", type=int, default=1)
