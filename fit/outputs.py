@@ -74,6 +74,17 @@ def _check_name(path: Path, flag):
         raise OutputError(path, f"file name longer than {_NAME_MAX} bytes", flag)
 
 
+def _stat_or_none(path: Path, flag):
+    """``os.stat(path)``, None when the path does not exist; one-line :class:`OutputError`
+    for any other failure."""
+    try:
+        return os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except (OSError, ValueError) as e:
+        raise OutputError(path, f"cannot use it ({getattr(e, 'strerror', None) or e})", flag) from None
+
+
 def check_output_file(path, flag: str | None = "--out", suffixes=None) -> Path:
     """The path a file output will be renamed onto, checked before any work: not a folder or
     special file (a symbolic link is followed: its target is replaced), writable where it is,
@@ -86,11 +97,9 @@ def check_output_file(path, flag: str | None = "--out", suffixes=None) -> Path:
     try:
         if path.is_symlink():
             path = Path(os.path.realpath(path))
-        st = os.stat(path)
-    except (FileNotFoundError, NotADirectoryError):
-        st = None
     except (OSError, ValueError) as e:
         raise OutputError(path, f"cannot use it ({getattr(e, 'strerror', None) or e})", flag) from None
+    st = _stat_or_none(path, flag)
     if st is not None:
         if not stat.S_ISREG(st.st_mode):
             raise OutputError(path, f"is a {_kind(st.st_mode)}; refusing to replace it", flag)
@@ -110,12 +119,7 @@ def check_output_dir(path, flag: str | None = "--out") -> Path:
     path = Path(path)
     if "\x00" in os.fspath(path):
         raise OutputError(path, "invalid path (NUL byte)", flag)
-    try:
-        st = os.stat(path)
-    except (FileNotFoundError, NotADirectoryError):
-        st = None
-    except (OSError, ValueError) as e:
-        raise OutputError(path, f"cannot use it ({getattr(e, 'strerror', None) or e})", flag) from None
+    st = _stat_or_none(path, flag)
     if st is not None:
         if not stat.S_ISDIR(st.st_mode):
             kind = "file" if stat.S_ISREG(st.st_mode) else _kind(st.st_mode)
