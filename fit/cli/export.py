@@ -1,0 +1,77 @@
+"""``rbrdf-fit export FIT.json OUT``: a rational fit (``rbrdf-rational`` file) as code other
+tools use without this project (:mod:`fit.export`); the format is chosen by OUT's extension:
+
+* ``.glsl``: GLSL functions (:func:`fit.export.to_glsl`);
+* ``.h`` / ``.c``: C99 / C++ header (``static inline``) or translation unit (:func:`fit.export.to_c`);
+* ``.brdf``: Disney BRDF Explorer ``analytic`` file (:func:`fit.export.to_brdf_explorer`);
+* ``.py``: standalone Mitsuba 3 BSDF plugin (:func:`fit.export.to_mitsuba_plugin`).
+
+Registered by :mod:`fit.cli`. Bad input: one line, exit status 2, nothing written (the output
+is checked first and renamed into place only when complete, :class:`fit.outputs.OutputSet`).
+Flagged pieces (the fit not within its tolerance there) are exported as the fitted function
+clamped to its measured range, and the command says so on stdout.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..errors import BRDFFileError, FlagError
+from ..outputs import OutputSet, check_output_file
+
+EXPORTERS = {".glsl": "glsl", ".h": "c_header", ".c": "c_source", ".brdf": "brdf_explorer",
+             ".py": "mitsuba"}
+
+
+def render(model, suffix: str, name=None) -> str:
+    """The exported text of ``model`` for an output suffix (a key of :data:`EXPORTERS`)."""
+    from .. import export as X
+
+    kind = EXPORTERS[suffix]
+    if kind == "glsl":
+        return X.to_glsl(model, name)
+    if kind == "c_header":
+        return X.to_c(model, name, header=True)
+    if kind == "c_source":
+        return X.to_c(model, name, header=False)
+    if kind == "brdf_explorer":
+        return X.to_brdf_explorer(model, name)
+    return X.to_mitsuba_plugin(model, name)
+
+
+def run(args, log=print) -> int:
+    from ..export.emitter import ExportError, flagged_summary, identifier
+    from ..rational.coefficient_file import load
+
+    out = check_output_file(args.out, flag="OUT", suffixes=tuple(EXPORTERS))
+    if args.name is not None and identifier(args.name) != args.name:
+        raise FlagError("--name", f"expected letters, digits and '_' (not starting with a digit), got {args.name!r}")
+    path = Path(args.fit)
+    model = load(path)
+    try:
+        text = render(model, out.suffix.lower(), args.name)
+    except ExportError as e:
+        raise BRDFFileError(path, f"cannot export this fit: {e}") from None
+    with OutputSet(flag="OUT") as outputs:
+        outputs.stage(out).write_text(text, encoding="utf-8")
+        outputs.commit()
+    log(f"wrote {out} ({EXPORTERS[out.suffix.lower()]}, {model.n_coefficients} coefficients)")
+    for k, chans in flagged_summary(model):
+        names = ", ".join(n for n, _ in chans)
+        log(f"note: piece {k} channel(s) {names} flagged (not within tolerance): exported as the fitted "
+            f"function clamped to its measured range (the renderer reads the measured table there)")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``export`` to the sub-parsers ``subparsers``."""
+    p = subparsers.add_parser(
+        "export", help="write a rational fit as GLSL, C/C++, a BRDF Explorer .brdf or a Mitsuba 3 plugin",
+        description="Export an rbrdf-rational coefficient file as code: OUT's extension picks the "
+                    "format (.glsl GLSL; .h C/C++ header; .c C translation unit; .brdf BRDF Explorer "
+                    "analytic file; .py Mitsuba 3 BSDF plugin). See docs/exports.md for the domain "
+                    "and clamp policy and the measured agreement.")
+    p.add_argument("fit", help="rbrdf-rational .json coefficient file")
+    p.add_argument("out", help="output file: .glsl, .h, .c, .brdf or .py (replaced only if the run succeeds)")
+    p.add_argument("--name", default=None,
+                   help="identifier used in the function / plugin names (default: the fit's name)")
+    p.set_defaults(func=run)

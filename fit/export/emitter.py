@@ -1,0 +1,284 @@
+"""The one expression emitter that the GLSL and C exports share: a rational BRDF fit
+(:class:`fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`,
+nested pieces included) as straight-line statements in the C-like subset common to GLSL and
+C99 (declarations, ``if``/``else``, ``+=``, calls of ``min``/``max``/``clamp``/``sqrt``/``exp``
+through a per-language name table).
+
+The statements follow the evaluation recipe of :mod:`fit.rational.coefficient_file` step by
+step, as :meth:`RationalModel.__call__` does in NumPy:
+
+1. clamp ``theta_h`` and ``theta_d`` (radians) onto the model's box; pick the piece
+   (``x <= edge`` selects the lower piece at a shared edge, recursively for nested splits) and
+   clamp onto the piece's box;
+2. input transform (``identity`` / ``sqrt``);
+3. map onto [-1, 1] with each function's own domain: ``t = (2 u - (lo + hi)) / (hi - lo)``;
+4. Chebyshev tables ``T_0 .. T_n`` by the recurrence (unrolled up to the largest exponent
+   used), then ``P`` and ``Q`` as explicit sums of coefficient x product terms;
+5. ``y = P / Q`` (linear) or ``exp(min(P / Q, log(max + offset))) - offset`` (log);
+6. ``max(y, min)``, ``min(y, max)``;
+7. the function's step-7 range (:func:`fit.rational.model.output_clamp`: the vouched range
+   of a valid function, the measured range of a flagged one).
+
+Everything runs in the language's ``real`` type (GLSL ``float``; C ``RBRDF_REAL``, float by
+default): the coefficients are printed with 17 significant digits so that a double build
+reproduces the NumPy evaluation to rounding. Only fits in ``(theta_h, theta_d)`` with 3
+outputs and ``"outside": "clamp"`` are exported (:func:`check_exportable`).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..rational.model import flagged, output_clamp
+
+VARIABLES = ("theta_h", "theta_d")
+
+
+class ExportError(ValueError):
+    """A fit this exporter cannot translate (the message names the problem)."""
+
+
+@dataclass
+class Language:
+    """What differs between GLSL and C in the emitted statements."""
+
+    real: str                         # scalar type
+    literal: callable                 # float -> source literal
+    funcs: dict = field(default_factory=dict)   # min, max, clamp, sqrt, exp -> names
+
+    def call(self, f: str, *args) -> str:
+        return f"{self.funcs.get(f, f)}({', '.join(args)})"
+
+
+def glsl_literal(v: float) -> str:
+    """A GLSL float literal (always with a '.' or an exponent; negative ones in parentheses),
+    9 significant digits (a float32 round trip)."""
+    s = _digits(abs(float(v)), 9)
+    return f"(-{s})" if v < 0 else s
+
+
+def c_literal(v: float) -> str:
+    """A C literal through ``RBRDF_K`` (a float or double constant by ``RBRDF_REAL``), 17
+    significant digits (a float64 round trip); negative ones in parentheses."""
+    s = f"RBRDF_K({_digits(abs(float(v)), 17)})"
+    return f"(-{s})" if v < 0 else s
+
+
+def _digits(v: float, digits: int) -> str:
+    if not np.isfinite(v):
+        raise ExportError(f"non-finite coefficient {v}")
+    s = f"{v:.{digits}g}"
+    if "e" not in s and "." not in s:
+        s += ".0"
+    return s
+
+
+def identifier(name: str) -> str:
+    """A C/GLSL identifier made of ``name`` (letters, digits, '_'; not starting with a digit)."""
+    s = re.sub(r"[^A-Za-z0-9_]", "_", str(name)) or "fit"
+    s = re.sub(r"_+", "_", s)
+    if s[0].isdigit():
+        s = "m" + s
+    return s
+
+
+def leaves(model) -> list:
+    """The single-box models of a fit, in the order the emitter visits them."""
+    pieces = getattr(model, "pieces", None)
+    if pieces is None:
+        return [model]
+    return [leaf for p in pieces for leaf in leaves(p)]
+
+
+def check_exportable(model) -> None:
+    """ExportError unless ``model`` is a BRDF fit in (theta_h, theta_d) with 3 outputs and the
+    clamp policy, every leaf with finite coefficients."""
+    names = [v.name for v in model.variables]
+    if getattr(model, "kind", "brdf") != "brdf":
+        raise ExportError(f"kind {model.kind!r}: only BRDF fits (kind 'brdf') are exported")
+    if names != list(VARIABLES):
+        raise ExportError(f"variables {names}: only fits in (theta_h, theta_d) are exported")
+    if len(model.outputs) != 3:
+        raise ExportError(f"{len(model.outputs)} outputs: a BRDF fit has 3 (R, G, B)")
+    for leaf in leaves(model):
+        if leaf.domain_policy.get("outside", "clamp") != "clamp":
+            raise ExportError("domain policy 'outside' is not 'clamp'")
+        if [v.name for v in leaf.variables] != list(VARIABLES):
+            raise ExportError(f"a piece has variables {[v.name for v in leaf.variables]}")
+        for f in leaf.functions:
+            for a in (f.num_coef, f.den_coef, f.domain):
+                if not np.all(np.isfinite(a)):
+                    raise ExportError("a function has non-finite coefficients or domain")
+
+
+def flagged_summary(model) -> list:
+    """``[(leaf index, channel names, step-7 range or None)]`` of every flagged function."""
+    out = []
+    for k, leaf in enumerate(leaves(model)):
+        chans = [(leaf.outputs[c], output_clamp(i)) for c, i in enumerate(leaf.function_info) if flagged(i)]
+        if chans:
+            out.append((k, chans))
+    return out
+
+
+class Emitter:
+    """Statements of one fit in one :class:`Language`; :meth:`rho` returns the lines of a block
+    that reads ``theta_h``, ``theta_d`` (radians) and assigns ``rho0, rho1, rho2`` (1/sr, declared
+    by the caller)."""
+
+    def __init__(self, lang: Language, indent: str = "    "):
+        self.lang = lang
+        self.ind = indent
+        self.n = 0
+
+    def _fresh(self, base: str) -> str:
+        self.n += 1
+        return f"{base}{self.n}"
+
+    def lit(self, v) -> str:
+        return self.lang.literal(v)
+
+    def rho(self, model, th: str = "theta_h", td: str = "theta_d",
+            out=("rho0", "rho1", "rho2"), depth: int = 1) -> list:
+        check_exportable(model)
+        L, R = self.lang, self.lang.real
+        pad = self.ind * depth
+        xh, xd = self._fresh("xh"), self._fresh("xd")
+        (hl, hh), (dl, dh) = (v.domain for v in model.variables)
+        lines = [f"{pad}{R} {xh} = {L.call('clamp', th, self.lit(hl), self.lit(hh))};",
+                 f"{pad}{R} {xd} = {L.call('clamp', td, self.lit(dl), self.lit(dh))};"]
+        lines += self._node(model, xh, xd, out, depth)
+        return lines
+
+    def _node(self, model, xh, xd, out, depth) -> list:
+        pieces = getattr(model, "pieces", None)
+        if pieces is None:
+            return self._leaf(model, xh, xd, out, depth)
+        pad = self.ind * depth
+        x = xh if model.split_variable == "theta_h" else xd
+        lines = []
+        for k, piece in enumerate(pieces):
+            last = k == len(pieces) - 1
+            if k == 0:
+                head = f"if ({x} <= {self.lit(model.edges[k + 1])}) {{"
+            elif not last:
+                head = f"}} else if ({x} <= {self.lit(model.edges[k + 1])}) {{"
+            else:
+                head = "} else {"
+            if len(pieces) == 1:
+                head = "{"
+            lines.append(pad + head)
+            lines += self._node(piece, xh, xd, out, depth + 1)
+        lines.append(pad + "}")
+        return lines
+
+    def _leaf(self, leaf, xh, xd, out, depth) -> list:
+        L, R = self.lang, self.lang.real
+        pad = self.ind * depth
+        lines = []
+        us = []
+        for x, var in zip((xh, xd), leaf.variables):
+            u = self._fresh("u")
+            v = L.call("clamp", x, self.lit(var.domain[0]), self.lit(var.domain[1]))
+            if var.transform == "sqrt":
+                v = L.call("sqrt", L.call("max", v, self.lit(0.0)))
+            elif var.transform != "identity":
+                raise ExportError(f"unknown input transform {var.transform!r}")
+            lines.append(f"{pad}{R} {u} = {v};")
+            us.append(u)
+        tables: dict = {}     # (variable, lo, hi) -> (names of T_0.., degree)
+
+        def table(v, lo, hi, degree):
+            key = (v, float(lo), float(hi))
+            if key in tables and tables[key][1] >= degree:
+                return tables[key][0]
+            t = self._fresh("t")
+            lines.append(f"{pad}{R} {t}_1 = ({self.lit(2.0)} * {us[v]} - {self.lit(lo + hi)}) * "
+                         f"{self.lit(1.0 / (hi - lo))};")
+            for k in range(2, degree + 1):
+                prev2 = self.lit(1.0) if k == 2 else f"{t}_{k - 2}"
+                lines.append(f"{pad}{R} {t}_{k} = {self.lit(2.0)} * {t}_1 * {t}_{k - 1} - {prev2};")
+            tables[key] = (t, degree)
+            return t
+
+        def poly(f, exps, coefs, name):
+            degs = exps.max(axis=0) if len(exps) else np.zeros(2, int)
+            names = [table(v, f.domain[v][0], f.domain[v][1], int(degs[v])) if degs[v] > 0 else None
+                     for v in range(2)]
+            lines.append(f"{pad}{R} {name} = {self.lit(0.0)};")
+            for e, c in zip(exps, coefs):
+                if c == 0.0:
+                    continue
+                factors = [f"{names[v]}_{int(e[v])}" for v in range(2) if e[v] > 0]
+                lines.append(f"{pad}{name} += {' * '.join([self.lit(c)] + factors)};")
+
+        for f in leaf.functions:        # every table once, at the largest degree used
+            exps = np.concatenate([f.num_exponents, f.den_exponents])
+            for v in range(2):
+                lo, hi = f.domain[v]
+                key = (v, float(lo), float(hi))
+                need = int(exps[:, v].max())
+                if need > 0 and tables.get(key, (None, 0))[1] < need:
+                    tables.pop(key, None)
+                    maxdeg = max(int(np.concatenate([g.num_exponents, g.den_exponents])[:, v].max())
+                                 for g in leaf.functions if tuple(g.domain[v]) == (lo, hi))
+                    table(v, lo, hi, maxdeg)
+        vmin, vmax, off = leaf.value_min, leaf.value_max, float(leaf.value_offset)
+        for c, (f, info) in enumerate(zip(leaf.functions, leaf.function_info)):
+            p, q, y = self._fresh("p"), self._fresh("q"), self._fresh("y")
+            state = "FLAGGED (not within its intervals)" if flagged(info) else "valid"
+            lines.append(f"{pad}/* {leaf.outputs[c]}: {state} */")
+            poly(f, f.num_exponents, f.num_coef, p)
+            poly(f, f.den_exponents, f.den_coef, q)
+            lines.append(f"{pad}{R} {y} = {p} / {q};")
+            if leaf.value_transform == "log":
+                if vmax is not None:
+                    lines.append(f"{pad}{y} = {L.call('min', y, self.lit(np.log(vmax + off)))};")
+                lines.append(f"{pad}{y} = {L.call('exp', y)} - {self.lit(off)};")
+            elif leaf.value_transform != "linear":
+                raise ExportError(f"unknown value transform {leaf.value_transform!r}")
+            if vmin is not None:
+                lines.append(f"{pad}{y} = {L.call('max', y, self.lit(vmin))};")
+            if vmax is not None:
+                lines.append(f"{pad}{y} = {L.call('min', y, self.lit(vmax))};")
+            rng = output_clamp(info)
+            if rng is not None:
+                lines.append(f"{pad}{y} = {L.call('clamp', y, self.lit(rng[0]), self.lit(rng[1]))};")
+            lines.append(f"{pad}{out[c]} = {y};")
+        return lines
+
+
+def policy_text(model, prefix: str = " * ") -> list:
+    """The domain and clamp policy of an exported fit, as comment lines (``prefix`` each)."""
+    (hl, hh), (dl, dh) = (v.domain for v in model.variables)
+    deg = np.degrees
+    lines = [
+        f"Fit {model.name!r}: rho(wi, wo) in 1/sr (no cosine), RGB, isotropic; local shading frame",
+        "z = normal; wi towards the light, wo towards the viewer, unit vectors.",
+        f"Fitted domain: theta_h in [{deg(hl):.4g}, {deg(hh):.4g}] deg, theta_d in [{deg(dl):.4g}, "
+        f"{deg(dh):.4g}] deg (Rusinkiewicz angles).",
+        "Policy: below the horizon (wi.z <= 0 or wo.z <= 0): 0. Outside the fitted domain the",
+        "angles are clamped onto it (e.g. theta_d beyond the grazing cut-off returns the value at",
+        "the cut-off). Values are clamped to [min, max] of the fit and, per function, to its",
+        "vouched range (valid functions) or measured range (flagged ones): never negative, never",
+        "above what the data of its piece vouch for.",
+    ]
+    fl = flagged_summary(model)
+    if fl:
+        lines.append("FLAGGED pieces (the fit is not within its tolerance there; the renderer of")
+        lines.append("warp-rbrdf reads the measured table instead, which is not exported): this")
+        lines.append("code evaluates the fitted function there, clamped to the measured range:")
+        for k, chans in fl:
+            for name, rng in chans:
+                r = "no range recorded: unclamped" if rng is None else f"[{rng[0]:.4g}, {rng[1]:.4g}] 1/sr"
+                lines.append(f"  piece {k}, channel {name}: {r}")
+    else:
+        lines.append("Every piece is valid (within its fitted tolerance).")
+    src = (getattr(model, "source", None) or {}).get("file") or ""
+    tol = (getattr(model, "fit_info", None) or {}).get("tolerance")
+    if src or tol is not None:
+        lines.append(f"Source measurement: {src or '?'}; tolerance: {tol}.")
+    lines.append("Generated by warp-rbrdf fit.export from an rbrdf-rational coefficient file.")
+    return [prefix + s for s in lines]

@@ -1,0 +1,57 @@
+"""GLSL export of a rational BRDF fit: a self-contained GLSL function (no uniforms, no
+textures; any GLSL version from 1.30 / ES 3.00 on).
+
+Emitted functions (``N`` = :func:`fit.export.emitter.identifier` of the name):
+
+* ``vec3 rbrdf_N_angles(float theta_h, float theta_d)``: rho (1/sr) at Rusinkiewicz angles
+  (radians), the fit's recipe with its clamps (:mod:`fit.export.emitter`);
+* ``vec3 rbrdf_N(vec3 wi, vec3 wo)``: rho at unit directions of the local shading frame (z =
+  normal, both pointing away from the surface); ``vec3(0)`` below the horizon;
+* ``vec3 rbrdf_N_frame(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)``: the same with world-space
+  light and view directions and an orthonormal frame (normal ``N``, tangent ``X``, bitangent
+  ``Y``), BRDF Explorer's signature.
+
+The angles come from ``atan(length(cross), dot)`` forms (full float precision near the
+specular peak, where ``acos`` loses half the digits). Computation is in ``float``: the C export
+built with ``RBRDF_REAL=float`` runs the same statements and measures what float32 costs
+(docs/exports.md).
+"""
+from __future__ import annotations
+
+from .emitter import Emitter, Language, glsl_literal, identifier, policy_text
+
+GLSL = Language(real="float", literal=glsl_literal,
+                funcs={"min": "min", "max": "max", "clamp": "clamp", "sqrt": "sqrt", "exp": "exp"})
+
+
+def function_name(model, name: str | None = None) -> str:
+    return "rbrdf_" + identifier(name or model.name)
+
+
+def to_glsl(model, name: str | None = None, header: bool = True) -> str:
+    """GLSL source (no ``#version`` line: it is meant to be pasted or included) of ``model``'s
+    three functions (module docstring); ``name`` overrides the fit's name in the identifiers."""
+    fn = function_name(model, name)
+    em = Emitter(GLSL)
+    body = em.rho(model, "theta_h", "theta_d")
+    out = []
+    if header:
+        out += ["/*"] + policy_text(model) + [
+            f" * Functions: vec3 {fn}(vec3 wi, vec3 wo); vec3 {fn}_frame(vec3 L, vec3 V, vec3 N,",
+            f" *   vec3 X, vec3 Y); vec3 {fn}_angles(float theta_h, float theta_d).",
+            " */"]
+    out += [f"vec3 {fn}_angles(float theta_h, float theta_d)", "{",
+            "    float rho0 = 0.0;", "    float rho1 = 0.0;", "    float rho2 = 0.0;"]
+    out += body
+    out += ["    return vec3(rho0, rho1, rho2);", "}", "",
+            f"vec3 {fn}(vec3 wi, vec3 wo)", "{",
+            "    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);",
+            "    vec3 h = normalize(wi + wo);",
+            "    float theta_h = atan(length(h.xy), h.z);",
+            "    float theta_d = atan(length(cross(wi, h)), dot(wi, h));",
+            f"    return {fn}_angles(theta_h, theta_d);", "}", "",
+            f"vec3 {fn}_frame(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)", "{",
+            "    vec3 wi = normalize(vec3(dot(L, X), dot(L, Y), dot(L, N)));",
+            "    vec3 wo = normalize(vec3(dot(V, X), dot(V, Y), dot(V, N)));",
+            f"    return {fn}(wi, wo);", "}", ""]
+    return "\n".join(out)
