@@ -22,13 +22,14 @@ EXPORTERS = {".glsl": "glsl", ".h": "c_header", ".c": "c_source", ".brdf": "brdf
              ".py": "mitsuba"}
 
 
-def render(model, suffix: str, name=None) -> str:
-    """The exported text of ``model`` for an output suffix (a key of :data:`EXPORTERS`)."""
+def render(model, suffix: str, name=None, precision: str = "float") -> str:
+    """The exported text of ``model`` for an output suffix (a key of :data:`EXPORTERS`);
+    ``precision``: the GLSL's scalar type (``.glsl`` only)."""
     from .. import export as X
 
     kind = EXPORTERS[suffix]
     if kind == "glsl":
-        return X.to_glsl(model, name)
+        return X.to_glsl(model, name, precision=precision)
     if kind == "c_header":
         return X.to_c(model, name, header=True)
     if kind == "c_source":
@@ -45,10 +46,12 @@ def run(args, log=print) -> int:
     out = check_output_file(args.out, flag="OUT", suffixes=tuple(EXPORTERS))
     if args.name is not None and identifier(args.name) != args.name:
         raise FlagError("--name", f"expected letters, digits and '_' (not starting with a digit), got {args.name!r}")
+    if args.precision != "float" and out.suffix.lower() != ".glsl":
+        raise FlagError("--precision", "only a .glsl output has a double variant (C: -DRBRDF_REAL_DOUBLE)")
     path = Path(args.fit)
     model = load(path)
     try:
-        text = render(model, out.suffix.lower(), args.name)
+        text = render(model, out.suffix.lower(), args.name, args.precision)
     except ExportError as e:
         raise BRDFFileError(path, f"cannot export this fit: {e}") from None
     with OutputSet(flag="OUT") as outputs:
@@ -74,4 +77,7 @@ def register(subparsers) -> None:
     p.add_argument("out", help="output file: .glsl, .h, .c, .brdf or .py (replaced only if the run succeeds)")
     p.add_argument("--name", default=None,
                    help="identifier used in the function / plugin names (default: the fit's name)")
+    p.add_argument("--precision", choices=("float", "double"), default="float",
+                   help="scalar type of the .glsl output (default float; double needs GLSL 4.00, "
+                        "see docs/exports.md for the agreement of each)")
     p.set_defaults(func=run)

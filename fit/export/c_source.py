@@ -34,7 +34,11 @@ PRELUDE = r"""#include <math.h>
 #define RBRDF_REAL double
 #define RBRDF_K(x) x
 #define RBRDF_SQRT sqrt
+#ifdef RBRDF_EXP_FLOAT  /* what the GLSL double variant does: GLSL has no double exp */
+#define RBRDF_EXP(x) ((double)expf((float)(x)))
+#else
 #define RBRDF_EXP exp
+#endif
 #define RBRDF_ATAN2 atan2
 #define RBRDF_MIN fmin
 #define RBRDF_MAX fmax
@@ -69,7 +73,7 @@ def to_c(model, name: str | None = None, header: bool = True) -> str:
     em = Emitter(C)
     body = em.rho(model, "theta_h", "theta_d")
     out = ["/*"] + policy_text(model) + [
-        f" * C99 / C++. Scalars are RBRDF_REAL: float by default, double with -DRBRDF_REAL_DOUBLE.",
+        " * C99 / C++. Scalars are RBRDF_REAL: float by default, double with -DRBRDF_REAL_DOUBLE.",
         f" * Functions: {fn}_angles, {fn}, {fn}_frame (rho[3] in 1/sr). Link with -lm.",
         " */"]
     if header:

@@ -257,8 +257,8 @@ def policy_text(model, prefix: str = " * ") -> list:
     lines = [
         f"Fit {model.name!r}: rho(wi, wo) in 1/sr (no cosine), RGB, isotropic; local shading frame",
         "z = normal; wi towards the light, wo towards the viewer, unit vectors.",
-        f"Fitted domain: theta_h in [{deg(hl):.4g}, {deg(hh):.4g}] deg, theta_d in [{deg(dl):.4g}, "
-        f"{deg(dh):.4g}] deg (Rusinkiewicz angles).",
+        (f"Fitted domain: theta_h in [{deg(hl):.4g}, {deg(hh):.4g}] deg, theta_d in [{deg(dl):.4g}, "
+         f"{deg(dh):.4g}] deg (Rusinkiewicz angles)."),
         "Policy: below the horizon (wi.z <= 0 or wo.z <= 0): 0. Outside the fitted domain the",
         "angles are clamped onto it (e.g. theta_d beyond the grazing cut-off returns the value at",
         "the cut-off). Values are clamped to [min, max] of the fit and, per function, to its",

@@ -18,7 +18,15 @@ built with ``RBRDF_REAL=float`` runs the same statements and measures what float
 """
 from __future__ import annotations
 
-from .emitter import Emitter, Language, glsl_literal, identifier, policy_text
+from .emitter import (
+    Emitter,
+    ExportError,
+    Language,
+    _digits,
+    glsl_literal,
+    identifier,
+    policy_text,
+)
 
 GLSL = Language(real="float", literal=glsl_literal,
                 funcs={"min": "min", "max": "max", "clamp": "clamp", "sqrt": "sqrt", "exp": "exp"})
@@ -28,20 +36,42 @@ def function_name(model, name: str | None = None) -> str:
     return "rbrdf_" + identifier(name or model.name)
 
 
-def to_glsl(model, name: str | None = None, header: bool = True) -> str:
+def glsl_double_literal(v: float) -> str:
+    """A GLSL double literal (``lf`` suffix), 17 significant digits; negative ones in
+    parentheses."""
+    s = _digits(abs(float(v)), 17) + "lf"
+    return f"(-{s})" if v < 0 else s
+
+
+def to_glsl(model, name: str | None = None, header: bool = True, precision: str = "float") -> str:
     """GLSL source (no ``#version`` line: it is meant to be pasted or included) of ``model``'s
-    three functions (module docstring); ``name`` overrides the fit's name in the identifiers."""
+    three functions (module docstring); ``name`` overrides the fit's name in the identifiers.
+    ``precision="double"``: the recipe in ``double`` (GLSL 4.00 / ``GL_ARB_gpu_shader_fp64``;
+    ``exp`` in float, GLSL has no double ``exp``): the statements of the C double build."""
     fn = function_name(model, name)
-    em = Emitter(GLSL)
-    body = em.rho(model, "theta_h", "theta_d")
+    if precision == "float":
+        lang, pre, conv = GLSL, [], ""
+    elif precision == "double":
+        lang = Language(real="double", literal=glsl_double_literal,
+                        funcs=dict(GLSL.funcs, exp=f"{fn}_exp_"))
+        pre = [f"double {fn}_exp_(double x)", "{", "    return double(exp(float(x)));", "}", ""]
+        conv = "double"
+    else:
+        raise ExportError(f"precision {precision!r}: expected 'float' or 'double'")
+    em = Emitter(lang)
+    body = em.rho(model, "th_", "td_") if conv else em.rho(model, "theta_h", "theta_d")
     out = []
     if header:
         out += ["/*"] + policy_text(model) + [
             f" * Functions: vec3 {fn}(vec3 wi, vec3 wo); vec3 {fn}_frame(vec3 L, vec3 V, vec3 N,",
             f" *   vec3 X, vec3 Y); vec3 {fn}_angles(float theta_h, float theta_d).",
             " */"]
-    out += [f"vec3 {fn}_angles(float theta_h, float theta_d)", "{",
-            "    float rho0 = 0.0;", "    float rho1 = 0.0;", "    float rho2 = 0.0;"]
+    r = lang.real
+    out += pre + [f"vec3 {fn}_angles(float theta_h, float theta_d)", "{",
+                  f"    {r} rho0 = {lang.literal(0.0)};", f"    {r} rho1 = {lang.literal(0.0)};",
+                  f"    {r} rho2 = {lang.literal(0.0)};"]
+    if conv:
+        out += ["    double th_ = double(theta_h);", "    double td_ = double(theta_d);"]
     out += body
     out += ["    return vec3(rho0, rho1, rho2);", "}", "",
             f"vec3 {fn}(vec3 wi, vec3 wo)", "{",

@@ -26,8 +26,8 @@ import json
 from pathlib import Path
 
 from ..rational.model import output_clamp
-from .emitter import check_exportable, identifier
 from . import _mitsuba_runtime
+from .emitter import check_exportable, identifier
 
 
 def _load(fit):
