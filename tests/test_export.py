@@ -337,6 +337,49 @@ def test_mitsuba_plugin_eval_matches_numpy():
     MR.set_variant(MR.VARIANT)
 
 
+@pytest.fixture(scope="module")
+def small_cdf():
+    """Tabulated inverse CDFs of satin_rosaline_rgb's fit (8 view rows, 16 x 16 cells)."""
+    from fit.sampling.cdf_file import table_only
+
+    return table_only(MODELS["satin"]().evaluate, {"n_v": 8, "n_t": 16, "n_p": 16})
+
+
+def test_mitsuba_plugin_samples_with_the_cdf_tables(small_cdf):
+    """With an rbrdf-cdf file the plugin samples its tables: the same directions and pdf as
+    :meth:`fit.sampling.table.CDFTable.sample` at the same (mu, tau) (measured: directions
+    within 3e-7, pdf within 7e-8 relative in scalar_rgb), its ``pdf(wo)`` equals the sample's
+    pdf (measured median 3e-8, max 2.4e-5 relative: float32 angles at cell edges), and the
+    weight is f cos / pdf."""
+    need_mitsuba()
+    import mitsuba as mi
+
+    from fit.export import mitsuba_plugin as MP
+
+    model = MODELS["satin"]()
+    bsdf = mi.load_dict({"type": MP.register("rbrdf_test_cdf", model, small_cdf)})
+    assert "tabulated inverse CDFs" in str(bsdf)
+    rng = np.random.default_rng(5)
+    n = 150
+    tv, pv = rng.uniform(0.01, 1.55, n), rng.uniform(-3.1, 3.1, n)
+    wi = np.stack([np.sin(tv) * np.cos(pv), np.sin(tv) * np.sin(pv), np.cos(tv)], -1)
+    mu, tau = rng.uniform(size=n), rng.uniform(size=n)
+    tl, pl, pdf = small_cdf.table.sample(tv, mu, tau)
+    ref_wo = np.stack([np.sin(tl) * np.cos(pl + pv), np.sin(tl) * np.sin(pl + pv), np.cos(tl)], -1)
+    ctx = mi.BSDFContext()
+    for k in range(n):
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*wi[k])
+        bs, w = bsdf.sample(ctx, si, 0.5, mi.Point2f(mu[k], tau[k]))
+        wo = np.array(bs.wo, float)
+        assert np.abs(wo - ref_wo[k]).max() < 1e-5, (k, wo, ref_wo[k])
+        assert np.isclose(bs.pdf, pdf[k], rtol=1e-5), (k, bs.pdf, pdf[k])
+        assert np.isclose(float(bsdf.pdf(ctx, si, bs.wo)), bs.pdf, rtol=1e-3)
+        if wo[2] > 0:
+            f = model.evaluate(wo, wi[k]) * wo[2] / pdf[k]
+            assert np.allclose(np.array(w, float), f, rtol=1e-3, atol=1e-7)
+
+
 def test_standalone_plugin_module(tmp_path):
     """The exported .py needs only Mitsuba: imported from a file, registered, it evaluates the fit."""
     need_mitsuba()
@@ -366,10 +409,28 @@ def test_standalone_plugin_module(tmp_path):
         assert np.allclose(e, model.evaluate(a, b) * max(a[2], 0.0), rtol=1e-4, atol=1e-7)
 
 
-def test_mitsuba_plugin_sphere_matches_our_render():
+@pytest.fixture(scope="module")
+def our_sphere():
+    """This project's render of the reference sphere with satin_rosaline_rgb's fit (rational
+    material, ``mis``): ``(res, spp, image, variance of the pixel means)``."""
+    MR = need_mitsuba()
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import MaterialSpec
+
+    res, spp = (48, 64) if MR.find_libllvm() is not None else (24, 16)
+    sc = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), data_file(ENVMAP), spp, res, seed=1)
+    sc.materials["obj"] = MaterialSpec(name="obj", type="rational", file=FITS[1], sampler="mis")
+    sc.integrator.sampler = "mis"
+    io, vo = Renderer(sc).render(return_variance=True)
+    return res, spp, io, vo / spp
+
+
+@pytest.mark.parametrize("sampling", ["cosine", "cdf"])
+def test_mitsuba_plugin_sphere_matches_our_render(our_sphere, small_cdf, sampling):
     """The reference sphere (warp_rbrdf.mitsuba_reference) in Mitsuba with the plugin (direct
-    integrator: environment + cosine BSDF sample, power heuristic) against our renderer's
-    rational material with ``mis`` (the same estimator) and the same fit: channel means within
+    integrator: environment + BSDF sample, power heuristic; the BSDF sample cosine or from the
+    CDF tables) against our renderer's rational material with ``mis`` (environment + cosine)
+    and the same fit: channel means within
     4 standard errors, per-pixel z-scores inside the silhouette distributed as noise. Runs in
     ``llvm_ad_rgb`` when a libLLVM is found (48 px, 64 spp: about 1 s), else in ``scalar_rgb``
     at 24 px, 16 spp (the plugin runs in Python per sample there)."""
@@ -377,16 +438,16 @@ def test_mitsuba_plugin_sphere_matches_our_render():
     import mitsuba as mi
 
     from fit.export import mitsuba_plugin as MP
-    from warp_rbrdf.renderer import Renderer
-    from warp_rbrdf.scene import MaterialSpec
 
     env = data_file(ENVMAP)
     llvm = MR.find_libllvm() is not None
-    res, spp, passes = (48, 64, 8) if llvm else (24, 16, 4)
+    res, spp, io, vo = our_sphere
+    passes = 8 if llvm else 4
     try:
         if llvm:
             MR.set_variant("llvm_ad_rgb")
-        name = MP.register("rbrdf_test_sphere", FITS[1])
+        name = MP.register(f"rbrdf_test_sphere_{sampling}", FITS[1],
+                           small_cdf if sampling == "cdf" else None)
         d = MR.mitsuba_scene_dict(("lambert", (0.5, 0.5, 0.5)), env, spp // passes, res)
         d["sphere"]["bsdf"] = {"type": name}
         scene = mi.load_dict(d)
@@ -395,17 +456,12 @@ def test_mitsuba_plugin_sphere_matches_our_render():
     finally:
         MR.set_variant(MR.VARIANT)
     im, vm = imgs.mean(0), imgs.var(0, ddof=1) / passes
-    sc = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), env, spp, res, seed=1)
-    sc.materials["obj"] = MaterialSpec(name="obj", type="rational", file=FITS[1], sampler="mis")
-    sc.integrator.sampler = "mis"
-    io, vo = Renderer(sc).render(return_variance=True)
-    vo = vo / spp
     mo, mm = io.reshape(-1, 3).mean(0), im.reshape(-1, 3).mean(0)
     se = np.sqrt(vo.reshape(-1, 3).sum(0) + vm.reshape(-1, 3).sum(0)) / (res * res)
     z = (mo - mm) / se
     mask = MR.sphere_mask(res)
     zp = ((io - im) / np.sqrt(vo + vm + 1e-30))[mask]
-    print(f"means ours {mo} mitsuba {mm}: z {z}, rel se {se / mm}; per-pixel z mean {zp.mean():.3f} "
+    print(f"{sampling}: means ours {mo} mitsuba {mm}: z {z}, rel se {se / mm}; per-pixel z mean {zp.mean():.3f} "
           f"std {zp.std():.3f}")
     assert np.all(mm > 0.05) and np.all(np.abs(z) < 4), (mo, mm, z)
     assert abs(zp.mean()) < 0.2 and 0.7 < zp.std() < 1.5, (zp.mean(), zp.std())
@@ -446,6 +502,18 @@ def test_cli_export_bad_input(tmp_path, capsys, args, what):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and what in err and "Traceback" not in err
     assert not any((tmp_path / f"x.{e}").exists() for e in ("glsl", "txt", "h"))
+
+
+def test_cli_export_plugin_with_cdf(tmp_path, small_cdf):
+    cdf = tmp_path / "satin_cdf.json"
+    small_cdf.save(cdf)
+    out = tmp_path / "p.py"
+    assert cli_main(["export", str(FITS[1]), str(out), "--cdf", str(cdf)]) == 0
+    text = out.read_text()
+    assert '\\"cdf_theta\\"' in text and "sampling: tabulated inverse CDFs" in text
+    assert cli_main(["export", str(FITS[1]), str(tmp_path / "p.glsl"), "--cdf", str(cdf)]) == 2
+    assert cli_main(["export", str(FITS[1]), str(tmp_path / "q.py"), "--cdf", str(FITS[0])]) == 2
+    assert not (tmp_path / "p.glsl").exists() and not (tmp_path / "q.py").exists()
 
 
 def test_cli_export_glsl_double(tmp_path):

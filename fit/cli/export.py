@@ -4,7 +4,8 @@ tools use without this project (:mod:`fit.export`); the format is chosen by OUT'
 * ``.glsl``: GLSL functions (:func:`fit.export.to_glsl`);
 * ``.h`` / ``.c``: C99 / C++ header (``static inline``) or translation unit (:func:`fit.export.to_c`);
 * ``.brdf``: Disney BRDF Explorer ``analytic`` file (:func:`fit.export.to_brdf_explorer`);
-* ``.py``: standalone Mitsuba 3 BSDF plugin (:func:`fit.export.to_mitsuba_plugin`).
+* ``.py``: standalone Mitsuba 3 BSDF plugin (:func:`fit.export.to_mitsuba_plugin`), sampled
+  with the tables of ``--cdf CDF.json`` when given (else cosine).
 
 Registered by :mod:`fit.cli`. Bad input: one line, exit status 2, nothing written (the output
 is checked first and renamed into place only when complete, :class:`fit.outputs.OutputSet`).
@@ -22,9 +23,10 @@ EXPORTERS = {".glsl": "glsl", ".h": "c_header", ".c": "c_source", ".brdf": "brdf
              ".py": "mitsuba"}
 
 
-def render(model, suffix: str, name=None, precision: str = "float") -> str:
+def render(model, suffix: str, name=None, precision: str = "float", cdf=None) -> str:
     """The exported text of ``model`` for an output suffix (a key of :data:`EXPORTERS`);
-    ``precision``: the GLSL's scalar type (``.glsl`` only)."""
+    ``precision``: the GLSL's scalar type (``.glsl`` only); ``cdf``: the ``rbrdf-cdf`` fit
+    whose tables the Mitsuba plugin samples with (``.py`` only)."""
     from .. import export as X
 
     kind = EXPORTERS[suffix]
@@ -36,7 +38,7 @@ def render(model, suffix: str, name=None, precision: str = "float") -> str:
         return X.to_c(model, name, header=False)
     if kind == "brdf_explorer":
         return X.to_brdf_explorer(model, name)
-    return X.to_mitsuba_plugin(model, name)
+    return X.to_mitsuba_plugin(model, name, cdf=cdf)
 
 
 def run(args, log=print) -> int:
@@ -48,10 +50,17 @@ def run(args, log=print) -> int:
         raise FlagError("--name", f"expected letters, digits and '_' (not starting with a digit), got {args.name!r}")
     if args.precision != "float" and out.suffix.lower() != ".glsl":
         raise FlagError("--precision", "only a .glsl output has a double variant (C: -DRBRDF_REAL_DOUBLE)")
+    if args.cdf is not None and out.suffix.lower() != ".py":
+        raise FlagError("--cdf", "only the Mitsuba plugin (.py output) samples with inverse CDFs")
     path = Path(args.fit)
     model = load(path)
+    cdf = None
+    if args.cdf is not None:
+        from ..sampling.cdf_file import load as load_cdf
+
+        cdf = load_cdf(Path(args.cdf))
     try:
-        text = render(model, out.suffix.lower(), args.name, args.precision)
+        text = render(model, out.suffix.lower(), args.name, args.precision, cdf)
     except ExportError as e:
         raise BRDFFileError(path, f"cannot export this fit: {e}") from None
     with OutputSet(flag="OUT") as outputs:
@@ -80,4 +89,7 @@ def register(subparsers) -> None:
     p.add_argument("--precision", choices=("float", "double"), default="float",
                    help="scalar type of the .glsl output (default float; double needs GLSL 4.00, "
                         "see docs/exports.md for the agreement of each)")
+    p.add_argument("--cdf", default=None, metavar="CDF.json",
+                   help="rbrdf-cdf file (rbrdf-fit cdf) whose tabulated inverse CDFs the Mitsuba plugin "
+                        "(.py) samples with; default: cosine sampling")
     p.set_defaults(func=run)

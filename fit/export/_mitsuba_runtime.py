@@ -13,9 +13,15 @@ already chosen (vouched range if valid, measured range if flagged).
 Evaluation is vectorised Dr.Jit arithmetic (every piece is evaluated and the right one
 selected), in ``Float64`` for the polynomial part; it works in every variant (scalar or JIT).
 The BSDF is rho(theta_h, theta_d) times cos(theta_o) (Mitsuba's ``eval`` includes the
-cosine), symmetric in its two directions, 0 below the horizon; it is sampled by the cosine
-distribution (``pdf = cos(theta_o) / pi``).
+cosine), symmetric in its two directions, 0 below the horizon. It is sampled by the cosine
+distribution (``pdf = cos(theta_o) / pi``), or, when the plan holds ``"cdf"``, by the tabulated
+inverse CDFs of an ``rbrdf-cdf`` file (:class:`fit.sampling.table.CDFTable`: rows by the view
+angle ``theta_v`` of ``si.wi``, ``theta_l`` by the row's marginal CDF, ``|phi_l - phi_v|`` by
+the symmetric conditional CDF, linear inside cells; ``pdf`` in closed form, as MIS needs):
+``{"n_v", "n_t", "n_p", "cdf_theta": (n_v (n_t + 1)) floats, "cdf_phi": (n_v n_t (n_p + 1))
+floats}``.
 """
+import bisect
 import math
 
 
@@ -100,6 +106,81 @@ def evaluate(mi, dr, plan, wi, wo):
     return dr.select(active, c, mi.Color3f(0.0))
 
 
+class _CDF:
+    """The tabulated inverse CDFs of a plan (module docstring), sampled and evaluated with
+    Dr.Jit gathers (Python lists in scalar variants)."""
+
+    def __init__(self, mi, dr, t):
+        self.mi, self.dr = mi, dr
+        self.n_v, self.n_t, self.n_p = int(t["n_v"]), int(t["n_t"]), int(t["n_p"])
+        self.scalar = mi.variant().startswith("scalar")
+        conv = (lambda a: [float(x) for x in a]) if self.scalar else mi.Float
+        self.ct = conv(t["cdf_theta"])
+        self.cp = conv(t["cdf_phi"])
+
+    def _get(self, arr, i):
+        return arr[int(i)] if self.scalar else self.dr.gather(self.mi.Float, arr, i)
+
+    def _cell(self, arr, off, n, x):
+        """Index of the cell of ``x`` in the CDF ``arr[off:off + n + 1]``: (number of entries
+        <= x) - 1, clipped to [0, n - 1]."""
+        if self.scalar:
+            c = bisect.bisect_right(arr, x, int(off), int(off) + n + 1) - int(off)
+        else:
+            c = self.dr.binary_search(0, n, lambda i: self.dr.gather(self.mi.Float, arr, off + i) <= x)
+        return self.dr.clip(self.mi.Int32(c) - 1, 0, n - 1)
+
+    def _row(self, wi):
+        tv = self.dr.acos(self.dr.clip(wi.z, -1.0, 1.0))
+        v = self.dr.clip(self.mi.Int32(self.dr.floor(tv / (0.5 * math.pi) * self.n_v)), 0, self.n_v - 1)
+        return v, self.dr.atan2(wi.y, wi.x)
+
+    def sample(self, wi, sample2):
+        """(wo, pdf in 1/sr) for the view ``wi`` and uniform ``sample2`` (mu, tau)."""
+        mi, dr = self.mi, self.dr
+        v, phi_v = self._row(wi)
+        mu, tau = sample2.x, sample2.y
+        nt, np_ = self.n_t, self.n_p
+        ot = v * (nt + 1)
+        j = self._cell(self.ct, ot, nt, mu)
+        c0, c1 = self._get(self.ct, ot + j), self._get(self.ct, ot + j + 1)
+        m_t = c1 - c0
+        dt = 0.5 * math.pi / nt
+        frac = dr.select(m_t > 0, (mu - c0) / dr.select(m_t > 0, m_t, 1.0), 0.5)
+        tl = (mi.Float(j) + dr.clip(frac, 0.0, 1.0)) * dt
+        u = dr.abs(2.0 * tau - 1.0)
+        op = (v * nt + j) * (np_ + 1)
+        k = self._cell(self.cp, op, np_, u)
+        q0, q1 = self._get(self.cp, op + k), self._get(self.cp, op + k + 1)
+        m_p = q1 - q0
+        fp = dr.select(m_p > 0, (u - q0) / dr.select(m_p > 0, m_p, 1.0), 0.5)
+        dp = math.pi / np_
+        pa = (mi.Float(k) + dr.clip(fp, 0.0, 1.0)) * dp
+        phi = phi_v + dr.select(tau < 0.5, -pa, pa)
+        st = dr.sin(tl)
+        wo = mi.Vector3f(st * dr.cos(phi), st * dr.sin(phi), dr.cos(tl))
+        pdf = (m_t / dt) * (0.5 * m_p / dp) / dr.maximum(st, 1e-30)
+        return wo, pdf
+
+    def pdf(self, wi, wo):
+        """Density (1/sr) of :meth:`sample` at ``wo``; 0 below the horizon."""
+        mi, dr = self.mi, self.dr
+        v, phi_v = self._row(wi)
+        nt, np_ = self.n_t, self.n_p
+        tl = dr.acos(dr.clip(wo.z, -1.0, 1.0))
+        d = dr.atan2(wo.y, wo.x) - phi_v
+        pl = dr.abs(dr.atan2(dr.sin(d), dr.cos(d)))          # |phi_l - phi_v| in [0, pi]
+        dt, dp = 0.5 * math.pi / nt, math.pi / np_
+        j = dr.clip(mi.Int32(dr.floor(tl / dt)), 0, nt - 1)
+        k = dr.clip(mi.Int32(dr.floor(pl / dp)), 0, np_ - 1)
+        ot = v * (nt + 1) + j
+        op = (v * nt + j) * (np_ + 1) + k
+        m_t = self._get(self.ct, ot + 1) - self._get(self.ct, ot)
+        m_p = self._get(self.cp, op + 1) - self._get(self.cp, op)
+        p = (m_t / dt) * (0.5 * m_p / dp) / dr.maximum(dr.sin(tl), 1e-30)
+        return dr.select(wo.z > 0, p, 0.0)
+
+
 def bsdf_class(mi, dr):
     """The ``mi.BSDF`` subclass evaluating a plan (``RationalBSDF(props, plan)``)."""
 
@@ -107,6 +188,7 @@ def bsdf_class(mi, dr):
         def __init__(self, props, plan):
             mi.BSDF.__init__(self, props)
             self.plan = plan
+            self.cdf = _CDF(mi, dr, plan["cdf"]) if plan.get("cdf") else None
             self.scale = props.get("scale", 1.0) if hasattr(props, "get") else 1.0
             flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide
             self.m_components = [flags]
@@ -118,13 +200,17 @@ def bsdf_class(mi, dr):
         def sample(self, ctx, si, sample1, sample2, active=True):
             active = active & (mi.Frame3f.cos_theta(si.wi) > 0)
             bs = mi.BSDFSample3f()
-            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
-            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+            if self.cdf is None:
+                bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+                bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+            else:
+                bs.wo, bs.pdf = self.cdf.sample(si.wi, sample2)
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
             bs.sampled_component = mi.UInt32(0)
-            ok = active & (bs.pdf > 0)
-            weight = self._f(si, bs.wo) * math.pi        # f cos / pdf with pdf = cos / pi
+            ok = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(bs.wo) > 0)
+            cos_o = dr.maximum(mi.Frame3f.cos_theta(bs.wo), 0.0)
+            weight = self._f(si, bs.wo) * cos_o / dr.select(ok, bs.pdf, 1.0)   # f cos / pdf
             return bs, dr.select(ok, weight, mi.Color3f(0.0))
 
         def eval(self, ctx, si, wo, active=True):
@@ -133,7 +219,9 @@ def bsdf_class(mi, dr):
 
         def pdf(self, ctx, si, wo, active=True):
             ok = active & (mi.Frame3f.cos_theta(si.wi) > 0)
-            return dr.select(ok, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+            if self.cdf is None:
+                return dr.select(ok, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+            return dr.select(ok, self.cdf.pdf(si.wi, wo), 0.0)
 
         def eval_pdf(self, ctx, si, wo, active=True):
             return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
@@ -142,6 +230,7 @@ def bsdf_class(mi, dr):
             pass
 
         def to_string(self):
-            return f"RationalBSDF[fit={self.plan['name']!r}]"
+            return (f"RationalBSDF[fit={self.plan['name']!r}, sampling="
+                    f"{'tabulated inverse CDFs' if self.cdf else 'cosine'}]")
 
     return RationalBSDF
