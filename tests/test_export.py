@@ -29,7 +29,7 @@ import pytest
 from conftest import IN_CI, ROOT, data_file
 
 from fit.cli import main as cli_main
-from fit.export import to_brdf_explorer, to_c, to_glsl, to_mitsuba_plugin
+from fit.export import to_brdf_explorer, to_c, to_glsl, to_hlsl, to_mitsuba_plugin
 from fit.export.brdf_explorer import extract_shader
 from fit.export.c_source import C, function_name
 from fit.export.emitter import Emitter, ExportError, flagged_summary, glsl_literal
@@ -260,6 +260,25 @@ def test_glsl_double_compiles(tmp_path):
         to_glsl(model, precision="half")
 
 
+def test_hlsl_compiles(tmp_path):
+    """HLSL: the GLSL statements verbatim (so the float C build measures it too), compiled by
+    glslang's HLSL front end (``-D``) to SPIR-V as a pixel shader; a broken one is rejected."""
+    model = MODELS["tricky"]()
+    src = to_hlsl(model)
+    assert "\n".join(Emitter(GLSL).rho(model)) in src
+    fn = "rbrdf_" + model.name
+    main = (f"float4 main(float4 pos : SV_Position) : SV_Target\n{{\n    return float4({fn}(normalize(pos.xyz), "
+            f"normalize(float3(-0.2, 0.1, 0.9))) + {fn}_frame(float3(0.0, 0.0, 1.0), float3(0.0, 0.6, 0.8), "
+            f"float3(0.0, 0.0, 1.0), float3(1.0, 0.0, 0.0), float3(0.0, 1.0, 0.0)), 1.0);\n}}\n")
+    exe = need("glslangValidator")
+    for text, ok in ((src, True), (src.replace("return float3(rho0, rho1, rho2);", "return float3(rho0, rho1, rho9);"), False)):
+        p = tmp_path / "shader.hlsl"
+        p.write_text(text + "\n" + main)
+        r = subprocess.run([exe, "-D", "-V", "-e", "main", "-S", "frag", "-o", str(tmp_path / "s.spv"), str(p)],
+                           check=False, capture_output=True, text=True)
+        assert (r.returncode == 0) == ok, (r.stdout + r.stderr)[-3000:]
+
+
 def test_glsl_validator_sees_errors(tmp_path):
     """The compile check can fail: a statement without its semicolon and an undeclared name."""
     model = MODELS["paper_white"]()
@@ -289,7 +308,7 @@ def test_brdf_explorer_file(tmp_path):
 def test_policy_in_comments():
     m = MODELS["tricky"]()
     assert flagged_summary(m) == [(0, [("G", (0.05, 3.0))])]
-    for text in (to_glsl(m), to_c(m)):
+    for text in (to_glsl(m), to_c(m), to_hlsl(m)):
         assert "below the horizon" in text and "clamped onto it" in text and "piece 0, channel G" in text
     assert "Every piece is valid" in to_glsl(MODELS["satin"]())
 
@@ -469,7 +488,7 @@ def test_mitsuba_plugin_sphere_matches_our_render(our_sphere, small_cdf, samplin
 
 # --------------------------------------------------------------------------------------------
 # rbrdf-fit export
-@pytest.mark.parametrize("ext", ["glsl", "h", "c", "brdf", "py"])
+@pytest.mark.parametrize("ext", ["glsl", "hlsl", "h", "c", "brdf", "py"])
 def test_cli_export(tmp_path, capsys, ext):
     out = tmp_path / "sub" / f"satin.{ext}"
     assert cli_main(["export", str(FITS[1]), str(out), "--name", "satin"]) == 0

@@ -2,6 +2,7 @@
 tools use without this project (:mod:`fit.export`); the format is chosen by OUT's extension:
 
 * ``.glsl``: GLSL functions (:func:`fit.export.to_glsl`);
+* ``.hlsl``: HLSL functions (:func:`fit.export.to_hlsl`);
 * ``.h`` / ``.c``: C99 / C++ header (``static inline``) or translation unit (:func:`fit.export.to_c`);
 * ``.brdf``: Disney BRDF Explorer ``analytic`` file (:func:`fit.export.to_brdf_explorer`);
 * ``.py``: standalone Mitsuba 3 BSDF plugin (:func:`fit.export.to_mitsuba_plugin`), sampled
@@ -19,7 +20,7 @@ from pathlib import Path
 from ..errors import BRDFFileError, FlagError
 from ..outputs import OutputSet, check_output_file
 
-EXPORTERS = {".glsl": "glsl", ".h": "c_header", ".c": "c_source", ".brdf": "brdf_explorer",
+EXPORTERS = {".glsl": "glsl", ".hlsl": "hlsl", ".h": "c_header", ".c": "c_source", ".brdf": "brdf_explorer",
              ".py": "mitsuba"}
 
 
@@ -32,6 +33,8 @@ def render(model, suffix: str, name=None, precision: str = "float", cdf=None) ->
     kind = EXPORTERS[suffix]
     if kind == "glsl":
         return X.to_glsl(model, name, precision=precision)
+    if kind == "hlsl":
+        return X.to_hlsl(model, name)
     if kind == "c_header":
         return X.to_c(model, name, header=True)
     if kind == "c_source":
@@ -79,11 +82,11 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "export", help="write a rational fit as GLSL, C/C++, a BRDF Explorer .brdf or a Mitsuba 3 plugin",
         description="Export an rbrdf-rational coefficient file as code: OUT's extension picks the "
-                    "format (.glsl GLSL; .h C/C++ header; .c C translation unit; .brdf BRDF Explorer "
+                    "format (.glsl GLSL; .hlsl HLSL; .h C/C++ header; .c C translation unit; .brdf BRDF Explorer "
                     "analytic file; .py Mitsuba 3 BSDF plugin). See docs/exports.md for the domain "
                     "and clamp policy and the measured agreement.")
     p.add_argument("fit", help="rbrdf-rational .json coefficient file")
-    p.add_argument("out", help="output file: .glsl, .h, .c, .brdf or .py (replaced only if the run succeeds)")
+    p.add_argument("out", help="output file: .glsl, .hlsl, .h, .c, .brdf or .py (replaced only if the run succeeds)")
     p.add_argument("--name", default=None,
                    help="identifier used in the function / plugin names (default: the fit's name)")
     p.add_argument("--precision", choices=("float", "double"), default="float",

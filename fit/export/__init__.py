@@ -3,12 +3,13 @@
 
 * :func:`to_glsl` (:mod:`fit.export.glsl`): a self-contained GLSL function;
 * :func:`to_c` (:mod:`fit.export.c_source`): the same in C99 / C++ (float or double);
+* :func:`to_hlsl` (:mod:`fit.export.hlsl`): the same in HLSL;
 * :func:`to_brdf_explorer` (:mod:`fit.export.brdf_explorer`): a Disney BRDF Explorer
   ``.brdf`` file (``analytic``) embedding the GLSL;
 * :func:`to_mitsuba_plugin` / :func:`fit.export.mitsuba_plugin.register`
   (:mod:`fit.export.mitsuba_plugin`): a Mitsuba 3 BSDF plugin (Python, ``mi.register_bsdf``).
 
-The GLSL and C code come from one statement emitter (:mod:`fit.export.emitter`) that follows
+The GLSL, HLSL and C code come from one statement emitter (:mod:`fit.export.emitter`) that follows
 the file's evaluation recipe; the domain and clamp policy of every export is in its header and
 in docs/exports.md, with the measured agreement against the NumPy evaluation.
 """
@@ -18,6 +19,7 @@ from .brdf_explorer import to_brdf_explorer
 from .c_source import to_c
 from .emitter import ExportError
 from .glsl import to_glsl
+from .hlsl import to_hlsl
 from .mitsuba_plugin import to_mitsuba_plugin
 
-__all__ = ["ExportError", "to_brdf_explorer", "to_c", "to_glsl", "to_mitsuba_plugin"]
+__all__ = ["ExportError", "to_brdf_explorer", "to_c", "to_glsl", "to_hlsl", "to_mitsuba_plugin"]
