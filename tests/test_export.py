@@ -399,6 +399,18 @@ def test_mitsuba_plugin_samples_with_the_cdf_tables(small_cdf):
             assert np.allclose(np.array(w, float), f, rtol=1e-3, atol=1e-7)
 
 
+def import_file(path, name):
+    """The module in file ``path``, imported as ``name`` (not left in sys.modules)."""
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod
+    try:
+        spec.loader.exec_module(mod)
+    finally:
+        sys.modules.pop(name, None)
+    return mod
+
+
 def test_standalone_plugin_module(tmp_path):
     """The exported .py needs only Mitsuba: imported from a file, registered, it evaluates the fit."""
     need_mitsuba()
@@ -409,14 +421,7 @@ def test_standalone_plugin_module(tmp_path):
     path.write_text(to_mitsuba_plugin(model))
     text = path.read_text()
     assert "from fit" not in text and "import fit" not in text and "warp_rbrdf" not in text
-    spec = importlib.util.spec_from_file_location("satin_plugin", path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["satin_plugin"] = mod
-    try:
-        spec.loader.exec_module(mod)
-        name = mod.register()
-    finally:
-        sys.modules.pop("satin_plugin", None)
+    name = import_file(path, "satin_plugin").register()
     assert name == "rbrdf_satin_rosaline_rgb"
     bsdf = mi.load_dict({"type": name})
     wi, wo = directions(50, seed=4)
@@ -530,6 +535,20 @@ def test_cli_export_plugin_with_cdf(tmp_path, small_cdf):
     assert cli_main(["export", str(FITS[1]), str(out), "--cdf", str(cdf)]) == 0
     text = out.read_text()
     assert '\\"cdf_theta\\"' in text and "sampling: tabulated inverse CDFs" in text
+    need_mitsuba()
+    import mitsuba as mi
+
+    mod = import_file(out, "satin_cdf_plugin")
+    bsdf = mi.load_dict({"type": mod.register("rbrdf_test_standalone_cdf"), "scale": 2.0})
+    assert "tabulated inverse CDFs" in str(bsdf)
+    si = mi.SurfaceInteraction3f()
+    si.wi = mi.Vector3f(0.3, 0.1, 0.9486833)
+    bs, w = bsdf.sample(mi.BSDFContext(), si, 0.5, mi.Point2f(0.4, 0.6))
+    pdf = small_cdf.table.sample(np.arccos(0.9486833), 0.4, 0.6)[2]
+    assert np.isclose(bs.pdf, pdf, rtol=1e-5)
+    wo = np.array(bs.wo, float)
+    f = 2.0 * MODELS["satin"]().evaluate(wo, np.array([0.3, 0.1, 0.9486833])) * wo[2] / pdf
+    assert np.allclose(np.array(w, float), f, rtol=1e-3)          # property scale = 2
     assert cli_main(["export", str(FITS[1]), str(tmp_path / "p.glsl"), "--cdf", str(cdf)]) == 2
     assert cli_main(["export", str(FITS[1]), str(tmp_path / "q.py"), "--cdf", str(FITS[0])]) == 2
     assert not (tmp_path / "p.glsl").exists() and not (tmp_path / "q.py").exists()

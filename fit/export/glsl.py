@@ -1,5 +1,6 @@
 """GLSL export of a rational BRDF fit: a self-contained GLSL function (no uniforms, no
-textures; any GLSL version from 1.30 / ES 3.00 on).
+textures; compiled by the tests as ``#version 330 core``, ``410 core`` and ``300 es``; the
+double variant needs 4.00).
 
 Emitted functions (``N`` = :func:`fit.export.emitter.identifier` of the name):
 
