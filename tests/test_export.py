@@ -85,7 +85,22 @@ def tricky_model():
     return m
 
 
-MODELS = {"paper_white": lambda: load(FITS[0]), "satin": lambda: load(FITS[1]), "tricky": tricky_model}
+def single_linear_model():
+    """A version-1 (single box) model with the linear value transform: satin_rosaline_rgb's
+    core piece read as linear values, P/Q + 5 (P + 5 Q: repeated exponent rows), clamped to
+    [0, max]: the emitter's single-box and linear paths."""
+    from fit.rational.function import RationalFunction
+
+    m = copy.deepcopy(load(FITS[1]).pieces[0])
+    m.value_transform, m.value_offset = "linear", 0.0
+    m.functions = [RationalFunction(f.domain, np.concatenate([f.num_exponents, f.den_exponents]),
+                                    np.concatenate([f.num_coef, 5.0 * f.den_coef]), f.den_exponents, f.den_coef)
+                   for f in m.functions]
+    return m
+
+
+MODELS = {"paper_white": lambda: load(FITS[0]), "satin": lambda: load(FITS[1]), "tricky": tricky_model,
+          "single_linear": single_linear_model}
 
 
 def directions(n, seed=0):
