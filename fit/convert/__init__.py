@@ -69,8 +69,12 @@ def convert(src, out, *, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = DEFAU
     out = check_output_file(out, flag, tuple(OUTPUT_SUFFIXES))
     if _same_file(src, out):
         raise OutputError(out, "is the input file; write the conversion to another file", flag)
-    source = load_source(src)
     suffix = out.suffix.lower()
+    if suffix == ".bsdf":
+        from .rgl_writer import check_sizes
+
+        check_sizes(n_theta_i, n_vndf, n_rgb, n_ndf)
+    source = load_source(src)
     summary = ConversionSummary(str(src), str(out), SOURCE_SUFFIXES[src.suffix.lower()],
                                 OUTPUT_SUFFIXES[suffix], source.name, notes=list(source.notes))
     with OutputSet(flag) as outputs:

@@ -35,7 +35,7 @@ def rational_source(path) -> Source:
     src = getattr(model, "source", {}) or {}
     desc = f"rational fit of {src.get('file') or model.name}"
     return Source("rational", model.name, str(path), model.evaluate, True, model, description=desc,
-                  notes=notes)
+                  notes=notes, evaluate_angles=model.evaluate_brdf)
 
 
 def _flags(model):

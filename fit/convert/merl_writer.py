@@ -101,8 +101,13 @@ def tabulate_merl(source: Source, horizon_margin_deg: float = HORIZON_MARGIN_DEG
     c_min = max(np.sin(np.radians(horizon_margin_deg)), 0.0)
     above = (wi[..., 2] > c_min) & (wo[..., 2] > c_min)
     a = np.zeros(MERL_SHAPE + (3,))
-    for i in range(0, MERL_SHAPE[0], _CHUNK):
-        a[i:i + _CHUNK] = source.evaluate(wi[i:i + _CHUNK], wo[i:i + _CHUNK])
+    if source.evaluate_angles is not None:
+        # a function of (theta_h, theta_d) alone: one value per (theta_h, theta_d) bin
+        rho = source.evaluate_angles(theta_h_centres()[:, None], theta_d_centres()[None, :])
+        a[:] = np.asarray(rho, np.float64)[:, :, None, :]
+    else:
+        for i in range(0, MERL_SHAPE[0], _CHUNK):
+            a[i:i + _CHUNK] = source.evaluate(wi[i:i + _CHUNK], wo[i:i + _CHUNK])
     stats = FoldStats(reciprocal=source.reciprocal)
     if not source.reciprocal:
         # the other orientation: phi_d + pi on the full-circle grid is exactly the swapped pair

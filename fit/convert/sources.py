@@ -38,6 +38,9 @@ class Source:
     reciprocal : bool  ``evaluate(wi, wo) == evaluate(wo, wi)`` by construction
     obj : the object read (``MeasuredBRDF``, ``RGLBRDF`` or a rational model)
     notes : list of str  what the reader did to the data (clamps, domain), for the summary
+    evaluate_angles : callable ``(theta_h, theta_d) -> (..., 3)`` or None  for a source that
+        is a function of the Rusinkiewicz angles (radians) alone (a rational fit): the same
+        rho above the horizon, so that a table is tabulated on 90 x 90 angles, not 1.5 M pairs
     """
 
     kind: str
@@ -48,6 +51,7 @@ class Source:
     obj: object = None
     description: str = ""
     notes: list = field(default_factory=list)
+    evaluate_angles: Callable | None = None
 
 
 def load_source(path) -> Source:
