@@ -57,11 +57,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import FlagError
+from ..errors import BRDFFileError, FlagError
 from ..formats.angles import HALF_PI
 from ..formats.colour import LUMINANCE
 from ..formats.rgl_interpolants import Bilinear, VNDFWarp, interval
-from ..limits import MAX_RGL_ELEMENTS
+from ..limits import MAX_RGL_ELEMENTS, MAX_RGL_FIELD_ABS, MIN_RGL_SIGMA
 from .sources import Source
 
 #: Default sizes: more theta_i slices (8) and rgb nodes (32 x 32) than the RGL-EPFL files,
@@ -252,6 +252,14 @@ def build_rgl(source: Source, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = 
     top = np.where(top > 0, top, 1.0)[:, None, None]
     lum = np.maximum(lum, 1e-6 * top)
 
+    for name, a in (("sigma", sigma32), ("ndf", ndf32), ("vndf", vndf32), ("rgb", rgb), ("luminance", lum)):
+        if not np.all(np.isfinite(a)) or float(np.abs(a).max()) > MAX_RGL_FIELD_ABS:
+            raise BRDFFileError(source.path or None, f"the RGL field {name!r} built from this source holds "
+                                                     f"values that are not finite or above {MAX_RGL_FIELD_ABS:g} "
+                                                     "(fit.limits.MAX_RGL_FIELD_ABS): the readers would refuse it")
+    if float(sigma32.min()) < MIN_RGL_SIGMA:
+        raise BRDFFileError(source.path or None, f"the projected area sigma of its NDF falls to "
+                                                 f"{float(sigma32.min()):.3g} (readers need >= {MIN_RGL_SIGMA:g})")
     text = description if description is not None else (source.description or source.name)
     text = f"{text} (converted by rbrdf-fit convert from {source.kind})"
     fields = {
