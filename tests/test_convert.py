@@ -4,6 +4,7 @@ phi_d fold, the RGL parameterization, rational fits as dense tables, the round t
 ``test_convert_mitsuba.py``. RGL outputs use small tensors here (the defaults are larger)."""
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -239,6 +240,7 @@ def test_cli_converts_and_prints_the_summary(lobe_merl, tmp_path, capsys):
     (["bad.txt", "x.bsdf"], "unknown input type '.txt'"),
     (["corrupt.bsdf", "x.binary"], "corrupt.bsdf: not an RGL tensor file"),
     (["corrupt.json", "x.binary"], "corrupt.json:"),
+    (["function.json", "x.binary"], "function.json: a rational file of kind 'function', not a BRDF fit"),
     (["IN", "x.bsdf", "--n-rgb", "2"], "argument --n-rgb: 2 is outside [4, 256]"),
     (["IN", "x.bsdf", "--pairs", "nan"], "argument --pairs: expected an integer"),
 ])
@@ -248,6 +250,9 @@ def test_cli_errors_are_one_line_and_write_nothing(lobe_merl, tmp_path, capsys, 
     (tmp_path / "bad.txt").write_text("x")
     (tmp_path / "corrupt.bsdf").write_bytes(b"not a tensor file at all")
     (tmp_path / "corrupt.json").write_text("{")
+    d = json.loads(FIT.read_text())
+    d["kind"] = "function"
+    (tmp_path / "function.json").write_text(json.dumps(d))
     (tmp_path / "x.binary").write_bytes(b"keep me")      # an existing output stays as it was
     args = [str(path) if a == "IN" else a for a in args]
     before = sorted(p.name for p in tmp_path.iterdir())

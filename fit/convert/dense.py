@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import BRDFFileError
 from ..rational.coefficient_file import load
 from .sources import Source
 
@@ -22,6 +23,9 @@ def rational_source(path) -> Source:
     problem) as a reciprocal :class:`Source` evaluating ``rho(wi, wo)`` in 1/sr."""
     path = Path(path)
     model = load(path)
+    if getattr(model, "kind", "") != "brdf":
+        raise BRDFFileError(path, f"a rational file of kind {getattr(model, 'kind', '?')!r}, not a BRDF fit "
+                                  "(kind 'brdf'): nothing to tabulate as a BRDF")
     policy = getattr(model, "domain_policy", {}) or {}
     notes = [(f"rational fit of {model.n_coefficients} coefficients: a function of (theta_h, theta_d) "
              "only (no phi_d dependence, reciprocal)")]
