@@ -73,6 +73,8 @@ DEFAULT_N_NDF = 128
 DEFAULT_POWER_ITERATIONS = 4
 #: Lowest cos(theta) a direction is lifted to where a node lies at or below the horizon.
 LIFT_Z = 1e-3
+#: Floor of the NDF, relative to its maximum (the rgb table divides by it).
+NDF_FLOOR = 1e-6
 _QUAD_THETA = 256
 _QUAD_PHI = 128
 
@@ -165,7 +167,7 @@ def estimate_ndf(source: Source, n_ndf: int, power_iterations: int = DEFAULT_POW
     tm, _, dA = _quadrature()
 
     def normalized(d):
-        d = np.maximum(d, 1e-6 * d.max())
+        d = np.maximum(d, NDF_FLOOR * d.max())
         total = np.sum(np.interp(np.sqrt(tm / HALF_PI), u, d) * np.cos(tm) * dA) * _QUAD_PHI
         return d / total
 
