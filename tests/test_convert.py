@@ -276,3 +276,17 @@ def test_bench_convert_help(capsys):
     with pytest.raises(SystemExit) as e:
         bench_convert.main(["--help"])
     assert e.value.code == 0 and "python -m benchmarks.bench_convert" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("option,value", [("n_rgb", 1), ("n_theta_i", 2.5), ("max_theta_deg", float("nan")),
+                                          ("n_pairs", -1), ("horizon_margin_deg", 50.0), ("seed", True)])
+def test_python_api_refuses_bad_options(lobe_merl, tmp_path, option, value):
+    """The Python API checks the options as the command line does (one-line FlagError naming
+    the flag), before anything is read or written."""
+    from fit.convert import OPTIONS
+    from fit.errors import FlagError
+
+    path, _ = lobe_merl
+    with pytest.raises(FlagError, match=OPTIONS[option][0]):
+        convert(path, tmp_path / "x.bsdf", **{option: value})
+    assert not (tmp_path / "x.bsdf").exists()

@@ -7,7 +7,7 @@ conversion succeeds; every error is one line, exit status 2 (docs/robustness.md)
 """
 from __future__ import annotations
 
-from ..convert import convert
+from ..convert import OPTIONS, convert
 from ..convert.merl_writer import HORIZON_MARGIN_DEG
 from ..convert.rgl_writer import (
     DEFAULT_N_NDF,
@@ -17,18 +17,12 @@ from ..convert.rgl_writer import (
     DEFAULT_POWER_ITERATIONS,
 )
 from ..convert.summary import DEFAULT_MAX_THETA_DEG, DEFAULT_PAIRS
-from ..limits import MAX_RGL_TABLE_SIDE, MAX_RGL_THETA_I
 from .flags import integer, number
-
-#: Most random direction pairs the comparison may draw.
-MAX_PAIRS = 1_000_000
 
 
 def _cmd_convert(args) -> int:
-    summary = convert(args.input, args.output, n_theta_i=args.theta_i, n_vndf=args.n_vndf,
-                      n_rgb=args.n_rgb, n_ndf=args.n_ndf, power_iterations=args.power_iterations,
-                      horizon_margin_deg=args.horizon_margin, n_pairs=args.pairs,
-                      max_theta_deg=args.max_theta, seed=args.seed, flag=None)
+    options = {k: getattr(args, k) for k in OPTIONS}
+    summary = convert(args.input, args.output, flag=None, **options)
     print(summary)
     return 0
 
@@ -44,26 +38,23 @@ def register(sub) -> None:
                     "written file against the source at random direction pairs. See docs/interop.md.")
     p.add_argument("input", help="input BRDF: .binary, .bsdf or a rational fit .json")
     p.add_argument("output", help="output file: .binary or .bsdf (replaced only if the run succeeds)")
+    def arg(group, key, default, help_, metavar="N"):
+        flag, lo, hi = OPTIONS[key]
+        conv = integer(lo, hi) if isinstance(lo, int) else number(lo, hi)
+        group.add_argument(flag, dest=key, type=conv, default=default, metavar=metavar,
+                           help=f"{help_} (default {default:g})")
+
     g = p.add_argument_group("RGL output (.bsdf)")
-    side = min(MAX_RGL_TABLE_SIDE, 512)
-    g.add_argument("--theta-i", type=integer(2, min(MAX_RGL_THETA_I, 90)), default=DEFAULT_N_THETA_I,
-                   metavar="N", help=f"incidence slices, uniform in [0, 90] deg (default {DEFAULT_N_THETA_I})")
-    g.add_argument("--n-vndf", type=integer(8, side), default=DEFAULT_N_VNDF, metavar="N",
-                   help=f"VNDF table side (default {DEFAULT_N_VNDF})")
-    g.add_argument("--n-rgb", type=integer(4, 256), default=DEFAULT_N_RGB, metavar="N",
-                   help=f"rgb and luminance table side on the warped grid (default {DEFAULT_N_RGB})")
-    g.add_argument("--n-ndf", type=integer(8, side), default=DEFAULT_N_NDF, metavar="N",
-                   help=f"ndf and sigma columns (default {DEFAULT_N_NDF})")
-    g.add_argument("--power-iterations", type=integer(0, 50), default=DEFAULT_POWER_ITERATIONS,
-                   metavar="N", help=f"power iterations of the NDF estimate (default {DEFAULT_POWER_ITERATIONS})")
+    arg(g, "n_theta_i", DEFAULT_N_THETA_I, "incidence slices, uniform in [0, 90] deg")
+    arg(g, "n_vndf", DEFAULT_N_VNDF, "VNDF table side")
+    arg(g, "n_rgb", DEFAULT_N_RGB, "rgb and luminance table side on the warped grid")
+    arg(g, "n_ndf", DEFAULT_N_NDF, "ndf and sigma columns")
+    arg(g, "power_iterations", DEFAULT_POWER_ITERATIONS, "power iterations of the NDF estimate")
     g = p.add_argument_group("MERL output (.binary)")
-    g.add_argument("--horizon-margin", type=number(0.0, 45.0), default=HORIZON_MARGIN_DEG, metavar="DEG",
-                   help="bins with a direction within this angle of the horizon are marked 'no sample' "
-                        f"(default {HORIZON_MARGIN_DEG:g})")
+    arg(g, "horizon_margin_deg", HORIZON_MARGIN_DEG,
+        "bins with a direction within this angle of the horizon are marked 'no sample'", "DEG")
     g = p.add_argument_group("comparison against the source")
-    g.add_argument("--pairs", type=integer(0, MAX_PAIRS), default=DEFAULT_PAIRS, metavar="N",
-                   help=f"random direction pairs (0: no comparison; default {DEFAULT_PAIRS})")
-    g.add_argument("--max-theta", type=number(1.0, 89.0), default=DEFAULT_MAX_THETA_DEG, metavar="DEG",
-                   help=f"largest polar angle of the pairs (default {DEFAULT_MAX_THETA_DEG:g})")
-    g.add_argument("--seed", type=integer(0, 2**31 - 1), default=0, help="seed of the pairs (default 0)")
+    arg(g, "n_pairs", DEFAULT_PAIRS, "random direction pairs (0: no comparison)")
+    arg(g, "max_theta_deg", DEFAULT_MAX_THETA_DEG, "largest polar angle of the pairs", "DEG")
+    arg(g, "seed", 0, "seed of the pairs", "SEED")
     p.set_defaults(func=_cmd_convert)

@@ -16,11 +16,13 @@ complete or untouched), reads the staged file back and measures it against the s
 """
 from __future__ import annotations
 
+import math
+import numbers
 import os
 import time
 from pathlib import Path
 
-from ..errors import OutputError
+from ..errors import FlagError, OutputError
 from ..outputs import OutputSet, check_output_file
 from .merl_writer import HORIZON_MARGIN_DEG
 from .rgl_writer import (
@@ -36,7 +38,34 @@ from .summary import DEFAULT_MAX_THETA_DEG, DEFAULT_PAIRS, ConversionSummary, co
 #: Output extensions and their formats.
 OUTPUT_SUFFIXES = {".binary": "MERL-MIT", ".bsdf": "RGL-EPFL"}
 
-__all__ = ["OUTPUT_SUFFIXES", "SOURCE_SUFFIXES", "ConversionSummary", "Source", "convert", "load_source"]
+#: The options of :func:`convert`: (command-line flag, lowest, highest). The RGL sizes also
+#: stay within the readers' limits together (:func:`fit.convert.rgl_writer.check_sizes`).
+OPTIONS = {
+    "n_theta_i": ("--theta-i", 2, 90),
+    "n_vndf": ("--n-vndf", 8, 512),
+    "n_rgb": ("--n-rgb", 4, 256),
+    "n_ndf": ("--n-ndf", 8, 512),
+    "power_iterations": ("--power-iterations", 0, 50),
+    "horizon_margin_deg": ("--horizon-margin", 0.0, 45.0),
+    "n_pairs": ("--pairs", 0, 1_000_000),
+    "max_theta_deg": ("--max-theta", 1.0, 89.0),
+    "seed": ("--seed", 0, 2**31 - 1),
+}
+
+
+def _check_options(values: dict) -> None:
+    """One-line :class:`fit.errors.FlagError` (naming the command-line flag) for an option of
+    the wrong type or outside :data:`OPTIONS`."""
+    for key, v in values.items():
+        flag, lo, hi = OPTIONS[key]
+        is_int = isinstance(lo, int)
+        ok_type = (isinstance(v, numbers.Integral) if is_int else isinstance(v, numbers.Real)) \
+            and not isinstance(v, bool)
+        if not ok_type or not (lo <= v <= hi) or (not is_int and not math.isfinite(v)):
+            raise FlagError(flag, f"{key} = {v!r}: expected {'an integer' if is_int else 'a number'} in "
+                                  f"[{lo}, {hi}]")
+
+__all__ = ["OPTIONS", "OUTPUT_SUFFIXES", "SOURCE_SUFFIXES", "ConversionSummary", "Source", "convert", "load_source"]
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -63,8 +92,12 @@ def convert(src, out, *, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = DEFAU
     ``max_theta_deg``, ``seed``: the comparison of the written file against the source
     (:func:`fit.convert.summary.compare`). The output path is checked before anything is read
     (``flag`` names it in errors); the file is replaced only when the conversion succeeds.
+    Options outside :data:`OPTIONS` are a one-line :class:`fit.errors.FlagError`.
     """
     t0 = time.perf_counter()
+    _check_options({"n_theta_i": n_theta_i, "n_vndf": n_vndf, "n_rgb": n_rgb, "n_ndf": n_ndf,
+                    "power_iterations": power_iterations, "horizon_margin_deg": horizon_margin_deg,
+                    "n_pairs": n_pairs, "max_theta_deg": max_theta_deg, "seed": seed})
     src, out = Path(src), Path(out)
     out = check_output_file(out, flag, tuple(OUTPUT_SUFFIXES))
     if _same_file(src, out):
