@@ -60,6 +60,7 @@ import numpy as np
 from ..errors import BRDFFileError, FlagError
 from ..formats.angles import HALF_PI
 from ..formats.colour import LUMINANCE
+from ..formats.rgl import GRAZING_Z, _lift
 from ..formats.rgl_interpolants import Bilinear, VNDFWarp, interval
 from ..limits import MAX_RGL_ELEMENTS, MAX_RGL_FIELD_ABS, MIN_RGL_SIGMA
 from .sources import Source
@@ -71,8 +72,9 @@ DEFAULT_N_VNDF = 128
 DEFAULT_N_RGB = 64
 DEFAULT_N_NDF = 128
 DEFAULT_POWER_ITERATIONS = 4
-#: Lowest cos(theta) a direction is lifted to where a node lies at or below the horizon.
-LIFT_Z = 1e-3
+#: Lowest cos(theta) a direction is lifted to where it lies at or below the horizon (the
+#: reader's :data:`fit.formats.rgl.GRAZING_Z`, same lift).
+LIFT_Z = GRAZING_Z
 #: Floor of the NDF, relative to its maximum (the rgb table divides by it).
 NDF_FLOOR = 1e-6
 _QUAD_THETA = 256
@@ -104,19 +106,6 @@ def check_sizes(n_theta_i: int, n_vndf: int, n_rgb: int, n_ndf: int) -> None:
         raise FlagError("--n-vndf/--n-rgb/--theta-i", f"the tables would hold {total} values, above the "
                                                       f"readers' limit {MAX_RGL_ELEMENTS} "
                                                       "(fit.limits.MAX_RGL_ELEMENTS)")
-
-
-def _lift(w):
-    """Unit directions with z raised to at least :data:`LIFT_Z` (azimuth kept)."""
-    w = np.array(w, dtype=np.float64)
-    low = w[..., 2] < LIFT_Z
-    if np.any(low):
-        r = np.hypot(w[..., 0], w[..., 1])
-        s = np.sqrt(1.0 - LIFT_Z ** 2) / np.maximum(r, 1e-300)
-        w[low, 0] *= s[low]
-        w[low, 1] *= s[low]
-        w[low, 2] = LIFT_Z
-    return w
 
 
 def _polar(theta):
