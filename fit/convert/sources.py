@@ -18,8 +18,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from ..errors import BRDFFileError
 
 #: Input extensions and what they hold.
@@ -82,12 +80,3 @@ def load_source(path) -> Source:
         return rational_source(path)
     raise BRDFFileError(path, f"unknown input type {suffix or '(no extension)'!r}; expected one of "
                               f"{', '.join(SOURCE_SUFFIXES)}")
-
-
-def reciprocity_difference(source: Source, wi: np.ndarray, wo: np.ndarray, floor: float) -> np.ndarray:
-    """Relative difference between the two orientations of each pair,
-    ``|f(wi, wo) - f(wo, wi)| / max((f(wi, wo) + f(wo, wi)) / 2, floor)`` per channel, shape
-    ``(..., 3)``; 0 for a reciprocal source."""
-    a = source.evaluate(wi, wo)
-    b = source.evaluate(wo, wi)
-    return np.abs(a - b) / np.maximum(0.5 * (a + b), floor)
