@@ -1,7 +1,9 @@
 """``rbrdf-fit``: command line of the fitter.
 
 Sub-commands: ``info``, ``project``, ``plot`` (:mod:`fit.cli.measured`), ``brdf``
-(:mod:`fit.cli.brdf`), ``cdf`` and ``plot-cdf`` (:mod:`fit.cli.cdf`).
+(:mod:`fit.cli.brdf`), ``cdf`` and ``plot-cdf`` (:mod:`fit.cli.cdf`), ``convert``
+(:mod:`fit.cli.convert`: between MERL, RGL and rational fits) and ``export`` (:mod:`fit.cli.export`:
+a rational fit as GLSL, HLSL, C, a BRDF Explorer file or a Mitsuba 3 plugin).
 
 Bad input (docs/robustness.md): every error is one line on stderr naming the file (and key),
 the flag or the output path -- ``rbrdf-fit: error: FILE: problem`` for the
@@ -18,7 +20,7 @@ import warnings
 import numpy as np
 
 from ..errors import RbrdfError
-from . import brdf, cdf, export, measured
+from . import brdf, cdf, convert, export, measured
 from .flags import OneLineParser
 
 DESCRIPTION = """\
@@ -40,6 +42,7 @@ def build_parser() -> OneLineParser:
     measured.register(sub)
     brdf.register(sub)
     cdf.register(sub)
+    convert.register(sub)
     export.register(sub)
     return parser
 
