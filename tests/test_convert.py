@@ -270,13 +270,6 @@ def test_sizes_beyond_the_readers_limit_are_refused(lobe_merl, tmp_path, capsys)
     assert not (tmp_path / "big.bsdf").exists()
 
 
-def test_bench_convert_help(capsys):
-    from benchmarks import bench_convert
-
-    with pytest.raises(SystemExit) as e:
-        bench_convert.main(["--help"])
-    assert e.value.code == 0 and "python -m benchmarks.bench_convert" in capsys.readouterr().out
-
 
 @pytest.mark.parametrize("option,value", [("n_rgb", 1), ("n_theta_i", 2.5), ("max_theta_deg", float("nan")),
                                           ("n_pairs", -1), ("horizon_margin_deg", 50.0), ("seed", True)])
