@@ -7,7 +7,8 @@ Inputs (:mod:`fit.convert.sources`): MERL-MIT ``.binary``, RGL-EPFL ``.bsdf``, a
 * ``.binary``: the exact MERL layout (:mod:`fit.convert.merl_writer`: bin centres, invalid bins
   stored negative, the phi_d fold of a non-reciprocal source measured and reported);
 * ``.bsdf``: an RGL-EPFL tensor file with the format's adaptive parameterization
-  (:mod:`fit.convert.rgl_writer`), read by Mitsuba 3's ``measured`` plugin.
+  (:mod:`fit.convert.rgl_writer`), read by Mitsuba 3's ``measured`` plugin; with
+  ``n_wavelengths`` a spectral one (:mod:`fit.convert.spectral`), read by pbrt-v4 too.
 
 Every conversion writes its output atomically (:class:`fit.outputs.OutputSet`: the file is
 complete or untouched), reads the staged file back and measures it against the source
@@ -46,6 +47,7 @@ OPTIONS = {
     "n_rgb": ("--n-rgb", 4, 256),
     "n_ndf": ("--n-ndf", 8, 512),
     "power_iterations": ("--power-iterations", 0, 50),
+    "n_wavelengths": ("--n-wavelengths", 16, 471),
     "horizon_margin_deg": ("--horizon-margin", 0.0, 45.0),
     "n_pairs": ("--pairs", 0, 1_000_000),
     "max_theta_deg": ("--max-theta", 1.0, 89.0),
@@ -82,7 +84,7 @@ def convert(src, out, *, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = DEFAU
             power_iterations: int = DEFAULT_POWER_ITERATIONS,
             horizon_margin_deg: float = HORIZON_MARGIN_DEG, n_pairs: int = DEFAULT_PAIRS,
             max_theta_deg: float = DEFAULT_MAX_THETA_DEG, seed: int = 0,
-            flag: str | None = None) -> ConversionSummary:
+            flag: str | None = None, n_wavelengths: int | None = None) -> ConversionSummary:
     """Convert the BRDF file ``src`` (``.binary``, ``.bsdf``, ``.json`` fit) into ``out``
     (``.binary`` or ``.bsdf``) and return what was lost.
 
@@ -93,20 +95,24 @@ def convert(src, out, *, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = DEFAU
     (:func:`fit.convert.summary.compare`). The output path is checked before anything is read
     (``flag`` names it in errors); the file is replaced only when the conversion succeeds.
     Options outside :data:`OPTIONS` are a one-line :class:`fit.errors.FlagError`.
+    ``n_wavelengths`` (None: RGB): a spectral ``.bsdf`` with that many wavelengths (``--spectral``).
     """
     t0 = time.perf_counter()
     _check_options({"n_theta_i": n_theta_i, "n_vndf": n_vndf, "n_rgb": n_rgb, "n_ndf": n_ndf,
                     "power_iterations": power_iterations, "horizon_margin_deg": horizon_margin_deg,
-                    "n_pairs": n_pairs, "max_theta_deg": max_theta_deg, "seed": seed})
+                    "n_pairs": n_pairs, "max_theta_deg": max_theta_deg, "seed": seed,
+                    **({} if n_wavelengths is None else {"n_wavelengths": n_wavelengths})})
     src, out = Path(src), Path(out)
     out = check_output_file(out, flag, tuple(OUTPUT_SUFFIXES))
     if _same_file(src, out):
         raise OutputError(out, "is the input file; write the conversion to another file", flag)
     suffix = out.suffix.lower()
+    if n_wavelengths is not None and suffix != ".bsdf":
+        raise FlagError("--spectral", f"a spectral output needs a .bsdf file, not {suffix}")
     if suffix == ".bsdf":
         from .rgl_writer import check_sizes
 
-        check_sizes(n_theta_i, n_vndf, n_rgb, n_ndf)
+        check_sizes(n_theta_i, n_vndf, n_rgb, n_ndf, n_wavelengths)
     source = load_source(src)
     summary = ConversionSummary(str(src), str(out), SOURCE_SUFFIXES[src.suffix.lower()],
                                 OUTPUT_SUFFIXES[suffix], source.name, notes=list(source.notes))
@@ -124,7 +130,8 @@ def convert(src, out, *, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = DEFAU
             from ..formats.tensor_file import write_tensor_file
             from .rgl_writer import build_rgl
 
-            summary.build = build_rgl(source, n_theta_i, n_vndf, n_rgb, n_ndf, power_iterations)
+            summary.build = build_rgl(source, n_theta_i, n_vndf, n_rgb, n_ndf, power_iterations,
+                                      n_wavelengths=n_wavelengths)
             write_tensor_file(tmp, summary.build.fields)
             back = read_rgl(tmp, incident="view").evaluate
         summary.difference = compare(back, source.evaluate, n_pairs, seed, max_theta_deg)

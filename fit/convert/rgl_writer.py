@@ -42,7 +42,16 @@ Construction (angles in radians; ``u = sqrt(2 theta / pi)`` is the tables' polar
    ``(n_theta_i, n_rgb, n_rgb)``, C order; a bit is **set where the node's reflected direction
    is at or below the horizon**. That is what the field holds in the RGL-EPFL files (checked
    bit for bit against ``satin_rosaline_rgb.bsdf``); no reader uses it.
-7. ``theta_i``: ``n_theta_i`` angles uniform in [0, 90] deg (the last one the float32 just
+7. **spectra** (``n_wavelengths`` given: a *spectral* file, the only kind pbrt-v4 reads):
+   every rgb node is upsampled to a smooth non-negative reflectance spectrum at
+   ``wavelengths`` (nm, float32, uniform over [360, 830]) by :mod:`fit.convert.spectral`, stored
+   as ``spectra`` ``(1, n_theta_i, n_wavelengths, n_rgb, n_rgb)`` float32 (the layout of the
+   RGL-EPFL spectral files: the ``rgb`` layout with the wavelengths in place of the channels).
+   ``rgb`` is then kept as the linear sRGB of the stored spectra (what a spectral renderer shows
+   under a D65 white; readers of spectral files ignore it, our reader :mod:`fit.formats.rgl`
+   uses it), and ``luminance`` is its luminance. Mitsuba 3 reads a file with ``wavelengths``
+   as spectral in its spectral variants only; pbrt-v4 requires ``spectra`` and ``wavelengths``.
+8. ``theta_i``: ``n_theta_i`` angles uniform in [0, 90] deg (the last one the float32 just
    below pi/2, as the files store it); ``phi_i = [0]``; ``jacobian = [1]``; ``description``:
    UTF-8 text; ``version = [1, 0]`` (uint32, as in the files). Every float field is float32
    (Mitsuba 3 requires it).
@@ -89,21 +98,34 @@ class RGLBuild:
     fields: dict
     n_nodes: int
     n_below_horizon: int
+    #: spectral files: :class:`fit.convert.spectral.RoundTrip` of the stored spectra against the
+    #: rgb nodes they were upsampled from (None for an RGB file)
+    round_trip: object = None
 
     def describe(self) -> str:
         f = self.fields
-        return (f"RGL parameterization: {f['theta_i'].size} theta_i slices, vndf {f['vndf'].shape[2]} x "
+        text = (f"RGL parameterization: {f['theta_i'].size} theta_i slices, vndf {f['vndf'].shape[2]} x "
                 f"{f['vndf'].shape[3]}, rgb {f['rgb'].shape[3]} x {f['rgb'].shape[4]}, ndf/sigma "
                 f"{f['ndf'].shape[1]}; {self.n_below_horizon} of {self.n_nodes} rgb nodes reflect below "
                 "the horizon (marked in 'valid'; they hold the nearest node above it)")
+        if "wavelengths" in f:
+            wl = f["wavelengths"]
+            text += (f"\n  spectral: {wl.size} wavelengths {float(wl[0]):g}-{float(wl[-1]):g} nm; "
+                     f"{self.round_trip.describe()}")
+        return text
 
 
-def check_sizes(n_theta_i: int, n_vndf: int, n_rgb: int, n_ndf: int) -> None:
+def check_sizes(n_theta_i: int, n_vndf: int, n_rgb: int, n_ndf: int, n_wavelengths: int | None = None) -> None:
     """Refuse sizes whose tables would exceed :data:`fit.limits.MAX_RGL_ELEMENTS` (the readers
-    refuse such files): one-line :class:`FlagError`."""
+    refuse such files): one-line :class:`FlagError`. ``n_wavelengths``: a spectral file's
+    ``spectra`` count too."""
     total = n_theta_i * (n_vndf * n_vndf + 4 * n_rgb * n_rgb) + 4 * n_ndf + n_theta_i + 1
+    flags = "--n-vndf/--n-rgb/--theta-i"
+    if n_wavelengths:
+        total += n_theta_i * n_wavelengths * n_rgb * n_rgb + n_wavelengths
+        flags += "/--n-wavelengths"
     if total > MAX_RGL_ELEMENTS:
-        raise FlagError("--n-vndf/--n-rgb/--theta-i", f"the tables would hold {total} values, above the "
+        raise FlagError(flags, f"the tables would hold {total} values, above the "
                                                       f"readers' limit {MAX_RGL_ELEMENTS} "
                                                       "(fit.limits.MAX_RGL_ELEMENTS)")
 
@@ -190,10 +212,12 @@ def _fill_below(rgb: np.ndarray, below: np.ndarray) -> np.ndarray:
 
 def build_rgl(source: Source, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = DEFAULT_N_VNDF,
               n_rgb: int = DEFAULT_N_RGB, n_ndf: int = DEFAULT_N_NDF,
-              power_iterations: int = DEFAULT_POWER_ITERATIONS, description: str | None = None) -> RGLBuild:
+              power_iterations: int = DEFAULT_POWER_ITERATIONS, description: str | None = None,
+              n_wavelengths: int | None = None) -> RGLBuild:
     """The tensor-file fields of ``source`` (module docstring); write them with
-    :func:`fit.formats.tensor_file.write_tensor_file`."""
-    check_sizes(n_theta_i, n_vndf, n_rgb, n_ndf)
+    :func:`fit.formats.tensor_file.write_tensor_file`. ``n_wavelengths`` (None: an RGB file)
+    makes a spectral file (step 7)."""
+    check_sizes(n_theta_i, n_vndf, n_rgb, n_ndf, n_wavelengths)
     u_nodes, d_nodes, sigma_nodes = estimate_ndf(source, n_ndf, power_iterations)
     ndf32 = np.repeat(d_nodes[None, :], 2, axis=0).astype(np.float32)
     sigma32 = np.repeat(sigma_nodes[None, :], 2, axis=0).astype(np.float32)
@@ -238,12 +262,24 @@ def build_rgl(source: Source, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = 
         scale = 4.0 * sigma_i.eval(u_t, np.zeros_like(u_t)) / ndf_i.eval(um_x, um_y)
         rgb[k] = (fcos * scale[:, None]).T.reshape(3, n_rgb, n_rgb)
     rgb = _fill_below(np.maximum(rgb, 0.0), below)
+    spectral = {}
+    trip = None
+    if n_wavelengths:
+        from . import spectral as sp
+
+        wl32 = sp.default_wavelengths(n_wavelengths)
+        rgb_nodes = np.moveaxis(rgb, 1, -1)                                       # (S, n, n, 3)
+        spectra32 = sp.upsample(rgb_nodes, wl32).astype(np.float32)              # (S, n, n, N)
+        trip = sp.round_trip(rgb_nodes, spectra32, wl32)
+        rgb = np.moveaxis(np.maximum(sp.to_rgb(spectra32, wl32), 0.0), -1, 1)      # what they show
+        spectral = {"wavelengths": wl32, "spectra": np.moveaxis(spectra32, -1, 1)[None]}
     lum = _luminance(np.moveaxis(rgb, 1, -1))
     top = lum.reshape(n_theta_i, -1).max(axis=1)
     top = np.where(top > 0, top, 1.0)[:, None, None]
     lum = np.maximum(lum, 1e-6 * top)
 
-    for name, a in (("sigma", sigma32), ("ndf", ndf32), ("vndf", vndf32), ("rgb", rgb), ("luminance", lum)):
+    for name, a in (("sigma", sigma32), ("ndf", ndf32), ("vndf", vndf32), ("rgb", rgb), ("luminance", lum),
+                    *spectral.items()):
         if not np.all(np.isfinite(a)) or float(np.abs(a).max()) > MAX_RGL_FIELD_ABS:
             raise BRDFFileError(source.path or None, f"the RGL field {name!r} built from this source holds "
                                                      f"values that are not finite or above {MAX_RGL_FIELD_ABS:g} "
@@ -263,7 +299,8 @@ def build_rgl(source: Source, n_theta_i: int = DEFAULT_N_THETA_I, n_vndf: int = 
         "vndf": vndf32,
         "luminance": lum[None].astype(np.float32),
         "rgb": rgb[None].astype(np.float32),
+        **spectral,
         "jacobian": np.array([1], np.uint8),
         "valid": np.packbits(below.astype(np.uint8).ravel()),
     }
-    return RGLBuild(fields, int(below.size), int(below.sum()))
+    return RGLBuild(fields, int(below.size), int(below.sum()), trip)
