@@ -11,7 +11,7 @@ import pytest
 from conftest import IN_CI, data_file
 
 BENCHMARKS = ("bench_convert", "bench_env_sampling", "bench_fit", "bench_projection", "bench_render", "bench_rgl", "bench_samplers",
-              "bench_startup", "bench_vs_mitsuba")
+              "bench_spectral", "bench_startup", "bench_vs_mitsuba")
 
 
 @pytest.mark.parametrize("name", BENCHMARKS)
