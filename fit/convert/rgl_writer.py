@@ -1,7 +1,8 @@
 """Any :class:`fit.convert.sources.Source` as an RGL-EPFL ``.bsdf`` tensor file: the format's
 adaptive parameterization (Dupuy & Jakob 2018, "An adaptive parameterization for efficient
 material acquisition and rendering"), built from the source's values so that Mitsuba 3's
-``measured`` plugin, pbrt-v4's ``MeasuredBxDF`` and :mod:`fit.formats.rgl` read and evaluate it.
+``measured`` plugin and :mod:`fit.formats.rgl` read and evaluate it, and, written spectral
+(step 7, ``n_wavelengths``), pbrt-v4's ``MeasuredBxDF`` and Mitsuba's spectral variants.
 
 Roles: the tensors are indexed by the incident direction ``wt`` of the reference
 implementations, the direction towards the **viewer** (:mod:`fit.formats.rgl`); the other
