@@ -101,6 +101,30 @@ def png_path_for_name(exr: Path, exposure: float) -> Path:
     return png_path_for(exr, exposure)
 
 
+def _init_warp_quietly() -> None:
+    """Initialise Warp with the C-level stderr silenced: on a machine without a CUDA driver its
+    native code prints "Warp CUDA warning: Could not find or load the NVIDIA CUDA driver" to
+    file descriptor 2, a warning that is no message to the user (``--device cuda`` there is a
+    one-line error of :func:`warp_rbrdf.runtime.get_device`)."""
+    from .runtime import init_warp
+
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError):
+        init_warp()
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+            try:
+                init_warp()
+            finally:
+                os.dup2(saved, 2)
+    finally:
+        os.close(saved)
+
+
 def cmd_render(a) -> int:
     from .image_io import nonfinite_pixels, write_exr, write_png
 
@@ -118,6 +142,7 @@ def cmd_render(a) -> int:
         flags = [f for f, v in (("--resolution", a.resolution), ("--spp", a.spp)) if v is not None]
         raise FlagError("/".join(flags) or "camera.resolution x integrator.spp", problem)
 
+    _init_warp_quietly()
     from .renderer import Renderer  # imports Warp: only when rendering
 
     r = Renderer(scene, device=a.device)
