@@ -198,7 +198,8 @@ ENV_CASES = [
     ("hdr-truncated", "silent", "e.hdr", lambda p: p.write_bytes(_hdr_header(64, 32) + bytes(100)), "e.hdr"),
     ("hdr-garbage", "traceback", "e.hdr", lambda p: p.write_bytes(b"#?RADIANCE\n" + bytes(range(256))), "e.hdr"),
     ("hdr-empty", "traceback", "e.hdr", lambda p: p.write_bytes(b""), "e.hdr"),
-    ("hdr-is-png", "traceback", "e.hdr", lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(50)), "e.hdr"),
+    ("hdr-is-png", "unclear", "e.hdr", lambda p: p.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(50)), "not a Radiance"),
+    ("exr-is-hdr", "unclear", "e.exr", lambda p: p.write_bytes(_hdr_header(4, 2) + bytes(32)), "not an OpenEXR"),
 ]
 
 

@@ -5,8 +5,9 @@ fresh-process runs of ``rbrdf`` (what a user sees: no library warning on stderr)
 Every mutated input must either load and keep the reader's promises (a scene: every number
 finite and within :mod:`warp_rbrdf.limits`; a mesh: at least one triangle, finite vertices,
 face indices in range; a map: (H >= 2, W, 3) finite texels in [0, MAX_ENV_TEXEL]) or be refused
-with a one-line :class:`~warp_rbrdf.errors.SceneError` naming the file. Any other exception,
-a second line or a broken promise fails the test. 600 mutated inputs, about 3 s (the two
+with a one-line :class:`~warp_rbrdf.errors.SceneError` naming the file, with nothing printed
+on file descriptor 2 by the libraries. Any other exception, a second line or a broken promise
+fails the test. 600 mutated inputs, about 3 s (the two
 fresh processes about 5 s more).
 """
 from __future__ import annotations
@@ -114,13 +115,14 @@ def _load_scene_or_refuse(tmp_path, data: bytes, i: int) -> bool:
 
 
 @pytest.mark.parametrize("mutator", ["truncate", "flip"])
-def test_fuzz_scene(tmp_path, mutator):
+def test_fuzz_scene(capfd, tmp_path, mutator):
     base = RICH_SCENE.encode()
     assert _load_scene_or_refuse(tmp_path, base, -1)
     inputs = truncations(base, 80, seed=22) if mutator == "truncate" else bit_flips(base, 80, seed=22, flips=1)
     loaded = sum(_load_scene_or_refuse(tmp_path, d, i) for i, d in enumerate(inputs))
     assert loaded < len(inputs)
     assert loaded > 0 or mutator == "flip"   # truncations at a table's end load: promises checked
+    assert capfd.readouterr().err == ""      # nothing printed by the libraries (file descriptor 2)
 
 
 def _mesh_or_refuse(tmp_path, data: bytes, suffix: str, i: int) -> bool:
@@ -147,7 +149,7 @@ def _sphere_obj() -> bytes:
 
 @pytest.mark.parametrize("fmt", ["obj", "ply"])
 @pytest.mark.parametrize("mutator", ["truncate", "flip"])
-def test_fuzz_mesh(tmp_path, fmt, mutator):
+def test_fuzz_mesh(capfd, tmp_path, fmt, mutator):
     base = _sphere_obj() if fmt == "obj" else ply_binary(QUAD_V, [(a - 1, b - 1, c - 1) for a, b, c in QUAD_F])
     assert _mesh_or_refuse(tmp_path, base, f".{fmt}", -1)
     header = 0 if fmt == "obj" else base.index(b"end_header") + 11
@@ -155,6 +157,7 @@ def test_fuzz_mesh(tmp_path, fmt, mutator):
         bit_flips(base, 60, seed=7, flips=3)
     results = [_mesh_or_refuse(tmp_path, d, f".{fmt}", i) for i, d in enumerate(inputs)]
     assert not all(results)
+    assert capfd.readouterr().err == ""
 
 
 def _env_or_refuse(tmp_path, data: bytes, suffix: str, i: int) -> bool:
@@ -174,7 +177,7 @@ def _env_or_refuse(tmp_path, data: bytes, suffix: str, i: int) -> bool:
 
 @pytest.mark.parametrize("fmt", ["exr", "hdr"])
 @pytest.mark.parametrize("mutator", ["truncate", "flip"])
-def test_fuzz_env_map(tmp_path, fmt, mutator):
+def test_fuzz_env_map(capfd, tmp_path, fmt, mutator):
     rng = np.random.default_rng(3)
     src = write_image_file(tmp_path / f"base.{fmt}", rng.random((8, 16, 3), np.float32) * 4)
     base = src.read_bytes()
@@ -183,6 +186,7 @@ def test_fuzz_env_map(tmp_path, fmt, mutator):
         bit_flips(base, 50, seed=5, flips=4)
     results = [_env_or_refuse(tmp_path, d, f".{fmt}", i) for i, d in enumerate(inputs)]
     assert not all(results)
+    assert capfd.readouterr().err == ""      # e.g. libpng's messages when OIIO guessed a format
 
 
 # ----------------------------------------------------------------------------------------------

@@ -46,13 +46,14 @@ functions ``env_pdf`` / ``env_sample``.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
 
 from fit.errors import BRDFFileError, display_path
-from fit.inputs import check_regular_file
+from fit.inputs import open_regular
 
 from . import limits
 from .errors import SceneError
@@ -123,6 +124,10 @@ class EnvData:
         return 1.0 / (2 * np.pi ** 2 * self.total) if self.total > 0 else 0.0
 
 
+#: First bytes of the environment-map formats (OpenEXR magic number; Radiance "#?").
+_MAGIC = {".exr": b"\x76\x2f\x31\x01", ".hdr": b"#?"}
+
+
 def read_latlong(path, file="<scene>", key="file") -> np.ndarray:
     """(H, W, 3) float32 linear RGB of an HDR/EXR lat-long map (OpenImageIO), validated by
     :func:`check_texels`.
@@ -135,9 +140,19 @@ def read_latlong(path, file="<scene>", key="file") -> np.ndarray:
 
     shown = display_path(path)
     try:
-        check_regular_file(path, limits.MAX_ENV_BYTES, "environment map")
+        with open_regular(path, limits.MAX_ENV_BYTES, "environment map") as f:
+            magic = f.read(4)
     except BRDFFileError as e:
         raise SceneError(file, key, f"environment map {shown}: {e.problem}") from None
+    except OSError as e:
+        raise SceneError(file, key, f"environment map {shown}: cannot read ({e.strerror or e})") from None
+    # the format must match the suffix: OpenImageIO would otherwise try every reader it has on
+    # the bytes (libpng then prints to stderr)
+    suffix = os.path.splitext(os.fspath(path))[1].lower()
+    want = _MAGIC.get(suffix)
+    if want is not None and not magic.startswith(want):
+        raise SceneError(file, key, f"environment map {shown}: not a{'n OpenEXR' if suffix == '.exr' else ' Radiance HDR'} "
+                                    f"file (it starts with {magic!r})")
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         err = " ".join(oiio.geterror().split())[:160]
