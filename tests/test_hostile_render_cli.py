@@ -303,6 +303,42 @@ def case_counts() -> dict:
         out[c[1]] += 1
     # bare rbrdf, unknown command/flag, read-only folder, outputs-before-scene, nonfinite naming,
     # write failures (2), created folders, python-api spp
-    for k in ("unclear", "unclear", "unclear", "lost", "lost", "unclear", "lost", "lost", "lost", "silent"):
+    # empty scene path
+    for k in ("unclear", "unclear", "unclear", "lost", "lost", "unclear", "lost", "lost", "lost", "silent",
+              "silent"):
         out[k] += 1
     return out
+
+
+def test_empty_scene_path(capsys, work):
+    """``rbrdf render ""`` used to render the embedded default scene (an empty path is falsy)."""
+    before = snapshot(work)
+    rc, out, err = render_run(capsys, ["render", "", "--out", work / "old.exr"])
+    assert_bad_input(rc, err, "SCENE", "empty path", out=out)
+    assert_unchanged(before, work)
+
+
+def test_case_counts_match_the_docs():
+    """The per-class table of docs/robustness.md (renderer's half) states these modules' counts."""
+    import re
+    from pathlib import Path
+
+    import test_hostile_render_assets
+    import test_hostile_render_fuzz
+    import test_hostile_render_scene
+
+    total = dict.fromkeys(CLASSES, 0)
+    for m in (test_hostile_render_scene, test_hostile_render_assets, test_hostile_render_fuzz):
+        for k, v in m.case_counts().items():
+            total[k] += v
+    for k, v in case_counts().items():
+        total[k] += v
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "robustness.md").read_text(encoding="utf-8")
+    section = doc[doc.index("## The renderer's half"):]
+    names = {"lost": "lost or half-written output", "hang": "hang", "memory": "memory",
+             "silent": "silent wrong result", "traceback": "traceback", "unclear": "unclear"}
+    for k, label in names.items():
+        m = re.search(rf"^\| {label} \| (\d+) \|", section, re.MULTILINE)
+        assert m and int(m.group(1)) == total[k], (k, total[k], m and m.group(0))
+    m = re.search(r"^\| \*\*total\*\* \| \*\*(\d+)\*\* \|", section, re.MULTILINE)
+    assert m and int(m.group(1)) == sum(total.values()), sum(total.values())
