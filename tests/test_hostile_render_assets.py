@@ -223,6 +223,22 @@ def test_env_too_large(capsys, tmp_path, work):
     assert_bad_input(rc, err, "lights[0].file", "above the limit", out=out)
 
 
+def test_non_utf8_env_map_name(capsys, tmp_path, work):
+    """A map whose file name is not UTF-8 (valid in TOML only through the folder: a relative
+    name is written in UTF-8) loads: OpenImageIO's binding used to raise TypeError."""
+    from warp_rbrdf.lights import read_latlong
+
+    folder = tmp_path / os.fsdecode(b"r\xe9p")
+    folder.mkdir()
+    os.replace(write_image_file(tmp_path / "e.exr", _map()), folder / "e.exr")
+    assert read_latlong(folder / "e.exr").shape == (4, 8, 3)
+    os.replace(write_image_file(tmp_path / "n.exr", _map(np.nan)), folder / "n.exr")
+    scene = folder / "s.toml"
+    scene.write_text(TINY_SCENE.replace(CONST, ENV_LIGHT.format(name="n.exr")))
+    rc, out, err = render_run(capsys, ["render", scene, "--out", work / "old.exr", "--no-progress"])
+    assert_bad_input(rc, err, "r\\xe9p", "lights[0].file", "NaN", out=out)
+
+
 def test_valid_env_maps_load(tmp_path):
     """Positive control: finite maps load, one channel is grey, a zero texel is fine."""
     from warp_rbrdf.lights import read_latlong
@@ -284,7 +300,8 @@ def case_counts() -> dict:
     for cases in (MESH_CASES, ENV_CASES, FIT_CASES):
         for c in cases:
             out[c[1]] += 1
-    # mesh pipe, mesh size, triangle budget, mesh triangles, env texels, env pipe, env size, cdf pipe
-    for k in ("hang", "memory", "memory", "memory", "memory", "hang", "memory", "hang"):
+    # mesh pipe, mesh size, triangle budget, mesh triangles, env texels, env pipe, env size, cdf pipe,
+    # non-UTF-8 env-map folder
+    for k in ("hang", "memory", "memory", "memory", "memory", "hang", "memory", "hang", "traceback"):
         out[k] += 1
     return out

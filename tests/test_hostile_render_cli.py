@@ -303,9 +303,9 @@ def case_counts() -> dict:
         out[c[1]] += 1
     # bare rbrdf, unknown command/flag, read-only folder, outputs-before-scene, nonfinite naming,
     # write failures (2), created folders, python-api spp
-    # empty scene path
+    # empty scene path, non-UTF-8 output name
     for k in ("unclear", "unclear", "unclear", "lost", "lost", "unclear", "lost", "lost", "lost", "silent",
-              "silent"):
+              "silent", "traceback"):
         out[k] += 1
     return out
 
@@ -342,3 +342,20 @@ def test_case_counts_match_the_docs():
         assert m and int(m.group(1)) == total[k], (k, total[k], m and m.group(0))
     m = re.search(r"^\| \*\*total\*\* \| \*\*(\d+)\*\* \|", section, re.MULTILINE)
     assert m and int(m.group(1)) == sum(total.values()), sum(total.values())
+
+
+def test_non_utf8_output_name(capsys, monkeypatch, scene, work):
+    """An output name that is not UTF-8: OpenImageIO's binding refused it with a TypeError
+    traceback after the whole render; now both files are written (and a bad suffix is one
+    escaped line)."""
+    from warp_rbrdf.image_io import read_image
+
+    rc, out, err = render_run(capsys, ["render", scene, "--out", work / os.fsdecode(b"caf\xe9.png")])
+    assert_bad_input(rc, err, "caf\\xe9.png", out=out)
+    _stub_render(monkeypatch, _image(0.25))
+    target = work / os.fsdecode(b"caf\xe9.exr")
+    rc, out, err = render_run(capsys, ["render", scene, "--out", target, "--no-progress"])
+    assert rc == 0 and err == "" and "caf\\xe9.exr" in out, err
+    assert np.allclose(read_image(target), 0.25)
+    assert read_image(work / os.fsdecode(b"caf\xe9_ev+0.0.png")).shape == (8, 8, 3)
+    assert len(os.listdir(work)) == 4

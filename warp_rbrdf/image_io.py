@@ -11,6 +11,10 @@ stages both in one :class:`fit.outputs.OutputSet` and renames them together.
 """
 from __future__ import annotations
 
+import contextlib
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -52,12 +56,45 @@ def nonfinite_pixels(img: np.ndarray) -> tuple:
     return n, (j, i)
 
 
+def _utf8(path) -> bool:
+    try:
+        os.fspath(path).encode("utf-8")
+    except UnicodeEncodeError:     # surrogate escapes of bytes that are not UTF-8
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def oiio_filename(path, write: bool = False):
+    """A ``str`` file name OpenImageIO accepts for ``path``. Its Python binding takes only valid
+    UTF-8 names (a name with other bytes raised ``TypeError``); for such a path this yields a
+    name in a fresh temporary folder: a symbolic link to ``path`` (reading), or a file that is
+    moved onto ``path`` when the block ends without an exception (``write``)."""
+    if _utf8(path):
+        yield str(path)
+        return
+    tmpdir = tempfile.mkdtemp(prefix="rbrdf-oiio-")
+    try:
+        name = os.path.join(tmpdir, "image" + Path(path).suffix.encode("ascii", "replace").decode())
+        if not write:
+            os.symlink(os.path.abspath(path), name)
+        yield name
+        if write:
+            shutil.move(name, os.fspath(path))
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+
+
 def _write(path: Path, pixels: np.ndarray, fmt, attrs: dict, atomic: bool = True):
     """Write ``pixels`` (H, W, C) to ``path``; ``atomic``: through a temporary file next to it,
     renamed onto ``path`` when complete (an existing file is never left half-written)."""
     if atomic:
         with atomic_path(path) as tmp:
             _write(tmp, pixels, fmt, attrs, atomic=False)
+        return
+    if not _utf8(path):
+        with oiio_filename(path, write=True) as name:
+            _write(Path(name), pixels, fmt, attrs, atomic=False)
         return
     import OpenImageIO as oiio
 
@@ -114,12 +151,13 @@ def read_image(path) -> np.ndarray:
     """(H, W, C) float32 pixels of any image OpenImageIO reads."""
     import OpenImageIO as oiio
 
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise RenderError(f"{display_path(path)}: cannot open image ({_oneline(oiio.geterror())})")
-    try:
-        spec = inp.spec()
-        px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
-    finally:
-        inp.close()
+    with oiio_filename(path) as name:
+        inp = oiio.ImageInput.open(name)
+        if inp is None:
+            raise RenderError(f"{display_path(path)}: cannot open image ({_oneline(oiio.geterror())})")
+        try:
+            spec = inp.spec()
+            px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        finally:
+            inp.close()
     return np.asarray(px, np.float32).reshape(spec.height, spec.width, spec.nchannels)

@@ -57,6 +57,7 @@ from fit.inputs import open_regular
 
 from . import limits
 from .errors import SceneError
+from .image_io import oiio_filename
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -153,7 +154,8 @@ def read_latlong(path, file="<scene>", key="file") -> np.ndarray:
     if want is not None and not magic.startswith(want):
         raise SceneError(file, key, f"environment map {shown}: not a{'n OpenEXR' if suffix == '.exr' else ' Radiance HDR'} "
                                     f"file (it starts with {magic!r})")
-    inp = oiio.ImageInput.open(str(path))
+    with oiio_filename(path) as name:   # OpenImageIO takes only UTF-8 names
+        inp = oiio.ImageInput.open(name)
     if inp is None:
         err = " ".join(oiio.geterror().split())[:160]
         raise SceneError(file, key, f"cannot open environment map {shown} ({err})")
