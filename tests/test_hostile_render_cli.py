@@ -288,12 +288,20 @@ def test_real_render_replaces_both(capsys, scene, work):
     assert (work / "old.exr").stat().st_mode & 0o777 == 0o640     # a replaced file keeps its mode
 
 
-def test_python_api_spp_bound():
-    """``Renderer.render(spp=2**31)`` used to wrap in the kernel (an all-black image)."""
+def test_python_api_spp_bound(monkeypatch):
+    """``Renderer.render(spp=2**31)`` used to wrap in the kernel (an all-black image): the
+    Python API applies the command line's bounds (the kernel compile is stubbed here)."""
+    from warp_rbrdf import renderer
+    from warp_rbrdf.errors import RenderError
     from warp_rbrdf.limits import MAX_SPP, check_render_size
+    from warp_rbrdf.scene import parse_scene
 
-    assert check_render_size(8, 8, 2**31) is not None and "MAX_SPP" in check_render_size(8, 8, 2**31)
     assert check_render_size(8, 8, MAX_SPP) is None
+    monkeypatch.setattr(renderer.Renderer, "compile", lambda self: 0.0)
+    r = renderer.Renderer(parse_scene(TINY_SCENE))
+    for spp in (0, 2**31, 2**64):
+        with pytest.raises(RenderError, match="MAX_SPP"):
+            r.render(spp=spp)
 
 
 def case_counts() -> dict:
