@@ -236,6 +236,7 @@ SCENE_CASES = [
     ("toml-unknown-table", "silent", add("\n[render]\nx = 1\n"), "render"),
     ("toml-control-key", "unclear", add('\n"a\\u001b[2Jb" = 1\n'), "a\\x1b[2Jb"),
     ("toml-newline-key", "unclear", add('\n"line1\\nline2" = 1\n'), "line1\\nline2"),
+    ("toml-huge-key", "unclear", add('\n"' + "k" * 200000 + '" = 1\n'), "kkk..."),
 ]
 
 
@@ -263,6 +264,7 @@ def test_bad_scene_values(capsys, tmp_path, work, name, klass, edit, key):
     assert klass in CLASSES
     rc, out, err = _run_scene(capsys, tmp_path, work, edit(TINY_SCENE).encode())
     assert_bad_input(rc, err, key, "s.toml", out=out)
+    assert len(err) < 500, len(err)     # readable: values and keys are shown cut
 
 
 FILE_CASES = [

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 from fit.errors import RbrdfError, display_path, display_text
 
+#: Longest scene key shown in a message (characters).
+_MAX_KEY_CHARS = 120
+
 
 class RenderError(RbrdfError):
     """Base class of the renderer's one-line errors (bad device, unreadable asset, ...)."""
@@ -31,5 +34,8 @@ class SceneError(RenderError, ValueError):
         self.file = display_path(file) if file is not None else "<scene>"
         self.key = key
         self.problem = problem
-        where = f"{self.file}: {display_text(key)}: " if key else f"{self.file}: "
+        shown = display_text(key) if key else ""
+        if len(shown) > _MAX_KEY_CHARS:   # a TOML key can be any string: keep the line readable
+            shown = shown[:_MAX_KEY_CHARS - 3] + "..."
+        where = f"{self.file}: {shown}: " if key else f"{self.file}: "
         super().__init__(where + display_text(problem))
