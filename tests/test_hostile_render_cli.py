@@ -234,6 +234,24 @@ def test_nonfinite_image_names_scene_and_materials(capsys, monkeypatch, scene, w
     assert_bad_input(rc, err, "tiny.toml", "materials: m", "x 5, y 3", "nothing written", out=out)
 
 
+FLOOR = '\n[materials.floor]\ntype = "lambert"\n[[shapes]]\ntype = "plane"\nmaterial = "floor"\nsize = [20, 20]\n'
+
+
+@pytest.mark.parametrize("extra,xy,seen", [
+    ("", (4, 4), "material 'm'"), ("", (0, 0), "the environment"), (FLOOR, (0, 7), "material 'floor'"),
+    (FLOOR, (4, 4), "material 'm'")], ids=["sphere", "sky", "plane", "sphere-over-plane"])
+def test_nonfinite_image_names_the_material_seen(capsys, monkeypatch, scene, work, extra, xy, seen):
+    """The message names what the camera sees through the first bad pixel (a NumPy cast of the
+    primary ray): the analytic sphere in the middle, the environment in a corner, the floor
+    plane (triangles) at the bottom."""
+    scene.write_text(TINY_SCENE + extra)
+    img = _image()
+    img[xy[1], xy[0], 2] = np.inf
+    _stub_render(monkeypatch, img)
+    rc, out, err = render_run(capsys, ["render", scene, "--out", work / "old.exr", "--no-progress"])
+    assert_bad_input(rc, err, f"x {xy[0]}, y {xy[1]}, where the camera sees {seen}", out=out)
+
+
 @pytest.mark.parametrize("which", ["exr", "png"])
 def test_write_failure_keeps_the_pair(capsys, monkeypatch, scene, work, which):
     """The EXR used to be written before the PNG path was even checked: a failing PNG write left
@@ -311,9 +329,9 @@ def case_counts() -> dict:
         out[c[1]] += 1
     # bare rbrdf, unknown command/flag, read-only folder, outputs-before-scene, nonfinite naming,
     # write failures (2), created folders, python-api spp
-    # empty scene path, non-UTF-8 output name
+    # empty scene path, non-UTF-8 output name, the material seen at a bad pixel (4)
     for k in ("unclear", "unclear", "unclear", "lost", "lost", "unclear", "lost", "lost", "lost", "silent",
-              "silent", "traceback"):
+              "silent", "traceback", "unclear", "unclear", "unclear", "unclear"):
         out[k] += 1
     return out
 

@@ -125,6 +125,54 @@ def _init_warp_quietly() -> None:
         os.close(saved)
 
 
+def seen_at(r, x: int, y: int) -> str:
+    """``", where the camera sees material 'NAME'"`` (or the environment) through the centre
+    of pixel (``x``, ``y``) of the renderer ``r``: a NumPy cast of the primary ray against its
+    spheres and triangles (in blocks of 2^20 triangles), for the message about a non-finite
+    image. Diagnostic only: "" when it cannot tell."""
+    from .camera import camera_rays_numpy
+
+    try:
+        cam = r.scene.camera
+        o = np.asarray(cam.origin, float)
+        d = camera_rays_numpy(cam, x + 0.5, y + 0.5)
+        g = r.geometry
+        best_t, best_m = np.inf, -1
+        if g.num_spheres:
+            c, rad = g.spheres[:, :3].astype(float), g.spheres[:, 3].astype(float)
+            oc = o - c
+            b = oc @ d
+            disc = b * b - ((oc * oc).sum(axis=1) - rad * rad)
+            sq = np.sqrt(np.maximum(disc, 0.0))
+            t = np.where(-b - sq > 1e-9, -b - sq, -b + sq)
+            t = np.where((disc >= 0) & (t > 1e-9), t, np.inf)
+            i = int(np.argmin(t))
+            if t[i] < best_t:
+                best_t, best_m = t[i], int(g.sphere_material[i])
+        pts, tris = g.points.astype(float), g.indices.reshape(-1, 3)
+        for s0 in range(0, len(tris), 1 << 20):
+            tri = tris[s0:s0 + (1 << 20)]
+            v0 = pts[tri[:, 0]]
+            e1, e2 = pts[tri[:, 1]] - v0, pts[tri[:, 2]] - v0
+            p = np.cross(d, e2)
+            det = (e1 * p).sum(axis=1)
+            inv = 1.0 / np.where(np.abs(det) > 1e-300, det, 1.0)
+            tv = o - v0
+            u = (tv * p).sum(axis=1) * inv
+            q = np.cross(tv, e1)
+            v = (q @ d) * inv
+            t = (e2 * q).sum(axis=1) * inv
+            t = np.where((np.abs(det) > 1e-300) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9), t, np.inf)
+            i = int(np.argmin(t))
+            if t[i] < best_t:
+                best_t, best_m = t[i], int(g.material[s0 + i])
+        if best_m < 0:
+            return ", where the camera sees the environment"
+        return f", where the camera sees material {r.material_data.names[best_m]!r}"
+    except Exception:  # noqa: BLE001 - a diagnostic must not turn the one-line error into a traceback
+        return ""
+
+
 def cmd_render(a) -> int:
     from .image_io import nonfinite_pixels, write_exr, write_png
 
@@ -151,9 +199,10 @@ def cmd_render(a) -> int:
     n_bad, first = nonfinite_pixels(img)
     if n_bad:
         mats = ", ".join(r.material_data.names) or "none"
+        seen = seen_at(r, first[1], first[0])
         raise RenderError(f"{display_path(scene.path)}: the rendered image has {n_bad} of {W * H} pixels "
-                          f"that are NaN or infinite (first at x {first[1]}, y {first[0]}; materials: {mats}); "
-                          "nothing written")
+                          f"that are NaN or infinite (first at x {first[1]}, y {first[0]}{seen}; "
+                          f"materials: {mats}); nothing written")
     s = r.stats
     meta = {"rbrdf:scene": display_path(scene.path), "rbrdf:spp": str(s.spp),
             "rbrdf:seed": str(a.seed if a.seed is not None else scene.integrator.seed),
