@@ -224,5 +224,18 @@ def test_fresh_process_non_utf8_name(tmp_path):
 
 
 def case_counts() -> dict:
-    """Fuzz tests are not named cases; the two fresh-process cases: unclear and traceback."""
-    return {"lost": 0, "hang": 0, "memory": 0, "silent": 0, "traceback": 1, "unclear": 1}
+    """Fuzz tests are not named cases; the three fresh-process cases."""
+    return {"lost": 0, "hang": 0, "memory": 0, "silent": 0, "traceback": 2, "unclear": 1}
+
+
+def test_fresh_process_closed_stdout(tmp_path):
+    """``rbrdf scene-format | head -0``: stdout closed before anything is written used to end in
+    a BrokenPipeError traceback; now exit 141 (as a tool killed by SIGPIPE), stderr empty."""
+    e = dict(os.environ)
+    e["PYTHONPATH"] = os.pathsep.join([str(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))]
+                                      + ([e["PYTHONPATH"]] if e.get("PYTHONPATH") else []))
+    p = subprocess.Popen([sys.executable, "-m", "warp_rbrdf", "scene-format"], cwd=tmp_path, env=e,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()                 # before the interpreter has even started
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 141 and err == b"", (p.returncode, err)

@@ -255,6 +255,20 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("rbrdf: interrupted (no output written)", file=sys.stderr)
         return 130
+    except BrokenPipeError:          # stdout closed early (rbrdf scene-format | head -1)
+        _quiet_stdout()
+        return 141                   # as a tool killed by SIGPIPE; the outputs were committed
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so the interpreter's final flush does not print a second
+    BrokenPipeError."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
 
 
 if __name__ == "__main__":
