@@ -7,8 +7,7 @@ finite and within :mod:`warp_rbrdf.limits`; a mesh: at least one triangle, finit
 face indices in range; a map: (H >= 2, W, 3) finite texels in [0, MAX_ENV_TEXEL]) or be refused
 with a one-line :class:`~warp_rbrdf.errors.SceneError` naming the file, with nothing printed
 on file descriptor 2 by the libraries. Any other exception, a second line or a broken promise
-fails the test. 600 mutated inputs, about 3 s (the two
-fresh processes about 5 s more).
+fails the test. 600 mutated inputs, about 3 s (the three fresh processes about 7 s more).
 """
 from __future__ import annotations
 
