@@ -329,9 +329,10 @@ def case_counts() -> dict:
         out[c[1]] += 1
     # bare rbrdf, unknown command/flag, read-only folder, outputs-before-scene, nonfinite naming,
     # write failures (2), created folders, python-api spp
-    # empty scene path, non-UTF-8 output name, the material seen at a bad pixel (4), Ctrl-C tiles
+    # empty scene path, non-UTF-8 output name, the material seen at a bad pixel (4), Ctrl-C tiles,
+    # tiny tiles
     for k in ("unclear", "unclear", "unclear", "lost", "lost", "unclear", "lost", "lost", "lost", "silent",
-              "silent", "traceback", "unclear", "unclear", "unclear", "unclear", "hang"):
+              "silent", "traceback", "unclear", "unclear", "unclear", "unclear", "hang", "memory"):
         out[k] += 1
     return out
 
@@ -409,3 +410,13 @@ def test_interrupt_drops_queued_tiles():
         launch_tiles(one, list(range(2000)), threads=2)
     time.sleep(0.05)
     assert len(done) < 200, len(done)
+
+
+def test_resolution_flag_with_tiny_tiles(capsys, scene, work):
+    """``--resolution`` over a scene with ``tile_size = 4``: 262144 tiles (each a launch and a
+    future: measured ~2 kB and 0.1 ms each) are refused before the scene's files are read."""
+    scene.write_text(TINY_SCENE.replace("spp = 1", "spp = 1\ntile_size = 4"))
+    before = snapshot(work)
+    rc, out, err = render_run(capsys, ["render", scene, "--out", work / "old.exr", "--resolution", "2048", "2048"])
+    assert_bad_input(rc, err, "--resolution", "262144 tiles", "MAX_TILES", out=out)
+    assert_unchanged(before, work)

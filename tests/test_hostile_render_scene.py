@@ -122,6 +122,8 @@ SCENE_CASES = [
     ("max-depth-huge", "hang", integ("max_depth", "100000"), "integrator.max_depth"),
     ("tile-size-zero", "traceback", integ("tile_size", "0"), "integrator.tile_size"),
     ("tile-size-huge", "silent", integ("tile_size", "1000000"), "integrator.tile_size"),
+    ("tile-size-one-large-image", "memory", lambda t: t.replace("[8, 8]", "[4096, 4096]").replace(
+        "spp = 1", "spp = 1\ntile_size = 1"), "integrator.tile_size"),
     ("ray-epsilon-negative", "silent", integ("ray_epsilon", "-1"), "integrator.ray_epsilon"),
     ("ray-epsilon-inf", "silent", integ("ray_epsilon", "inf"), "integrator.ray_epsilon"),
     ("ray-epsilon-huge", "silent", integ("ray_epsilon", "1e30"), "integrator.ray_epsilon"),

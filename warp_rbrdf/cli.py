@@ -189,6 +189,9 @@ def cmd_render(a) -> int:
     if problem:
         flags = [f for f, v in (("--resolution", a.resolution), ("--spp", a.spp)) if v is not None]
         raise FlagError("/".join(flags) or "camera.resolution x integrator.spp", problem)
+    problem = limits.check_tiles(W, H, scene.integrator.tile_size)
+    if problem:
+        raise FlagError("--resolution" if a.resolution else "integrator.tile_size", problem)
 
     _init_warp_quietly()
     from .renderer import Renderer  # imports Warp: only when rendering

@@ -36,6 +36,11 @@ MAX_SPP = 1 << 20
 #: Most camera samples of one render, width x height x spp (e.g. 2048 x 2048 at 2048 spp);
 #: at the CPU's ~1-3 M samples/s of a simple scene that is already about a day.
 MAX_SAMPLES = 1 << 33
+#: Most image tiles of one CPU render, ceil(W / tile_size) x ceil(H / tile_size): each is a
+#: launch and a future of the thread pool (measured: ~2 kB and ~0.1 ms each; tile_size = 1 at
+#: 512^2 took 796 MB and 27 s, at 4096^2 it would take ~34 GB). The default 32 gives 16384
+#: tiles at 4096^2.
+MAX_TILES = 1 << 16
 #: Estimated bytes per pixel of one render: the two vec3 float32 accumulation buffers (24),
 #: the image (12, a copy on a GPU), the EXR writer's copy (12), the PNG (3 + row-block
 #: temporaries) and the finite check (3): 64 with margin. Measured on the CPU: 24 B/pixel of
@@ -109,6 +114,16 @@ def check_render_size(width: int, height: int, spp: int) -> str | None:
     if est > MEMORY_BUDGET_BYTES:
         return (f"a {w} x {h} image would need about {est / 2**30:.3g} GiB of memory, above the limit "
                 f"{MEMORY_BUDGET_BYTES / 2**30:.3g} GiB (fit.limits.MEMORY_BUDGET_BYTES)")
+    return None
+
+
+def check_tiles(width: int, height: int, tile_size: int) -> str | None:
+    """None when a ``width`` x ``height`` image in tiles of ``tile_size`` pixels has at most
+    :data:`MAX_TILES` tiles, else the problem (one line)."""
+    n = -(-int(width) // int(tile_size)) * -(-int(height) // int(tile_size))
+    if n > MAX_TILES:
+        return (f"tile_size {tile_size} cuts a {width} x {height} image into {n} tiles, above the limit "
+                f"{MAX_TILES} (warp_rbrdf.limits.MAX_TILES); use larger tiles")
     return None
 
 

@@ -57,7 +57,8 @@ _TAIL = """\
   resolution = [512, 256]   sky: size of the tabulated map
 
 Limits (warp_rbrdf.limits; a value outside is an error, never clamped): every number finite;
-  resolution sides <= 16384 and <= 2^24 pixels, spp <= 2^20, pixels x spp <= 2^33; albedo in
+  resolution sides <= 16384 and <= 2^24 pixels, spp <= 2^20, pixels x spp <= 2^33, <= 2^16
+  tiles; albedo in
   [0, 1]; material scale <= 1e3; irradiance, radiance <= 1e6; envmap/sky scale <= 1e6;
   positions, directions, translations, matrix entries <= 1e6 in magnitude; lengths and scale
   factors in [1e-6, 1e6]; <= 64 materials, 4096 shapes, 64 directional lights, 2^22 triangles;

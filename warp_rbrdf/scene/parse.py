@@ -117,6 +117,9 @@ def scene_from_dict(data: dict, file="<scene>", base_dir: Path | None = None) ->
         key = ("integrator.spp" if problem.startswith("spp") else
                "camera.resolution x integrator.spp" if " spp = " in problem else "camera.resolution")
         raise SceneError(file, key, problem)
+    problem = limits.check_tiles(*sc.camera.resolution, sc.integrator.tile_size)
+    if problem:
+        raise SceneError(file, "integrator.tile_size", problem)
 
     # materials -----------------------------------------------------------------------------
     mats = Table(root._get("materials", None, False) if root.has("materials") else {}, file, "materials", base_dir)
