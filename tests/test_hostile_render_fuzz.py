@@ -83,6 +83,7 @@ def _finite_within(x, bound) -> bool:
 def _scene_promises(sc) -> None:
     c = sc.camera
     assert limits.check_render_size(*c.resolution, sc.integrator.spp) is None
+    assert limits.check_tiles(*c.resolution, sc.integrator.tile_size) is None
     for v in (c.origin, c.target, c.up):
         assert _finite_within(v, limits.MAX_COORDINATE)
     assert 0 < c.fov < 180
