@@ -210,3 +210,77 @@ def json_mutations(obj, n: int, seed: int) -> list:
             parent[key] = copy.deepcopy(_REPLACEMENTS[int(rng.integers(len(_REPLACEMENTS)))])
         out.append(d)
     return out
+
+
+# ----------------------------------------------------------------------------------------------
+# The renderer's side (tests/test_hostile_render_*.py)
+# ----------------------------------------------------------------------------------------------
+#: A tiny valid scene: 8 x 8 pixels, 1 spp, a Lambert sphere under a constant environment (the
+#: kernel configuration of tests/test_render_cli.py, so a render reuses its compiled kernels).
+TINY_SCENE = """\
+[camera]
+resolution = [8, 8]
+[integrator]
+spp = 1
+[materials.m]
+type = "lambert"
+albedo = 0.5
+[[shapes]]
+type = "sphere"
+material = "m"
+center = [0, 0.5, 0]
+radius = 0.5
+[[lights]]
+type = "constant"
+radiance = 0.5
+"""
+
+
+def render_run(capsys, argv) -> tuple:
+    """``(status, stdout, stderr)`` of ``rbrdf argv`` run in this process."""
+    from warp_rbrdf.cli import main as rbrdf_main
+
+    capsys.readouterr()
+    rc = rbrdf_main([os.fspath(a) if isinstance(a, Path) else a for a in argv])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def write_image_file(path, pixels) -> Path:
+    """Write float32 ``pixels`` (H, W, C) as ``path`` (.exr or .hdr, by OpenImageIO) as they are:
+    NaN, infinite and negative values included (EXR keeps them; RGBE cannot hold them)."""
+    import OpenImageIO as oiio
+
+    px = np.ascontiguousarray(np.asarray(pixels, np.float32))
+    H, W, C = px.shape
+    out = oiio.ImageOutput.create(str(path))
+    assert out is not None and out.open(str(path), oiio.ImageSpec(W, H, C, oiio.FLOAT)), oiio.geterror()
+    assert out.write_image(px)
+    out.close()
+    return Path(path)
+
+
+def obj_text(vertices, faces) -> bytes:
+    """A Wavefront OBJ of ``vertices`` (V, 3) and 1-based ``faces`` (F, 3), values as written."""
+    lines = [f"v {x} {y} {z}" for x, y, z in vertices] + [f"f {a} {b} {c}" for a, b, c in faces]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def ply_binary(vertices, faces, n_vertices=None, n_faces=None) -> bytes:
+    """A binary little-endian PLY of float32 ``vertices`` and int32 ``faces`` (0-based); the
+    header may state other counts (``n_vertices``, ``n_faces``) than the data hold."""
+    import struct
+
+    nv = len(vertices) if n_vertices is None else n_vertices
+    nf = len(faces) if n_faces is None else n_faces
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {nv}\nproperty float x\n"
+            f"property float y\nproperty float z\nelement face {nf}\n"
+            "property list uchar int vertex_indices\nend_header\n").encode()
+    body = b"".join(struct.pack("<3f", *v) for v in vertices)
+    body += b"".join(struct.pack("<B3i", 3, *f) for f in faces)
+    return head + body
+
+
+#: A unit quad as two triangles (OBJ faces 1-based).
+QUAD_V = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 0.0, 1.0), (0.0, 0.0, 1.0)]
+QUAD_F = [(1, 2, 3), (1, 3, 4)]

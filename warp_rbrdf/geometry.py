@@ -39,7 +39,10 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from . import transforms
+from fit.errors import BRDFFileError, display_path
+from fit.inputs import check_regular_file
+
+from . import limits, transforms
 from .errors import SceneError
 from .scene import Scene, ShapeSpec
 
@@ -93,17 +96,57 @@ class Geometry:
 
 
 def load_mesh_file(path, file="<scene>", key="file"):
-    """(vertices, faces, vertex_normals) of a mesh file read with trimesh (all parts merged)."""
+    """(vertices (V, 3) float64, faces (F, 3) int64, vertex_normals (V, 3) float64) of a mesh
+    file read with trimesh (all parts merged), in the file's units.
+
+    Checked before reading: a regular file (a named pipe or folder is refused, never opened) of
+    at most :data:`~warp_rbrdf.limits.MAX_MESH_BYTES`. Checked after reading, before trimesh
+    merges vertices (which would silently drop or keep bad data): at least one triangle, at most
+    :data:`~warp_rbrdf.limits.MAX_TRIANGLES`, every vertex finite and within
+    :data:`~warp_rbrdf.limits.MAX_COORDINATE`, every face index in range. Each problem is a
+    one-line :class:`SceneError` naming the scene key and the file."""
     import trimesh
 
+    shown = display_path(path)
     try:
-        m = trimesh.load(str(path), force="mesh", process=True)
+        check_regular_file(path, limits.MAX_MESH_BYTES, "mesh file")
+    except BRDFFileError as e:
+        raise SceneError(file, key, f"mesh {shown}: {e.problem}") from None
+    try:
+        m = trimesh.load(str(path), force="mesh", process=False)
+    except MemoryError:
+        raise SceneError(file, key, f"mesh {shown}: out of memory while reading it (corrupt counts?)") from None
     except Exception as e:  # noqa: BLE001 - trimesh raises many kinds
-        raise SceneError(file, key, f"cannot load mesh {path} ({e.__class__.__name__}: {e})") from None
+        msg = " ".join(str(e).split())[:120]
+        raise SceneError(file, key, f"cannot load mesh {shown} ({e.__class__.__name__}: {msg})") from None
     if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
-        raise SceneError(file, key, f"mesh {path} has no triangles")
-    return (np.asarray(m.vertices, float), np.asarray(m.faces, np.int64),
-            np.asarray(m.vertex_normals, float))
+        raise SceneError(file, key, f"mesh {shown} has no triangles")
+    v = np.asarray(m.vertices, float)
+    f = np.asarray(m.faces)
+    if f.ndim != 2 or f.shape[1] != 3 or v.ndim != 2 or v.shape[1] != 3 or len(v) == 0:
+        raise SceneError(file, key, f"mesh {shown}: expected triangles over 3-D vertices, got faces "
+                                    f"{f.shape} and vertices {v.shape}")
+    if len(f) > limits.MAX_TRIANGLES:
+        raise SceneError(file, key, f"mesh {shown} has {len(f)} triangles, above the limit "
+                                    f"{limits.MAX_TRIANGLES} (warp_rbrdf.limits.MAX_TRIANGLES)")
+    finite = np.isfinite(v).all(axis=1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        raise SceneError(file, key, f"mesh {shown}: {len(bad)} of {len(v)} vertices are not finite "
+                                    f"(NaN or infinity; first: vertex {bad[0]})")
+    if np.abs(v).max() > limits.MAX_COORDINATE:
+        raise SceneError(file, key, f"mesh {shown}: a vertex coordinate of magnitude {np.abs(v).max():.3g} is "
+                                    f"above the limit {limits.MAX_COORDINATE:g} (warp_rbrdf.limits.MAX_COORDINATE)")
+    if not np.issubdtype(f.dtype, np.integer) or f.min() < 0 or f.max() >= len(v):
+        bad = int(np.flatnonzero(((f < 0) | (f >= len(v))).any(axis=1))[0]) \
+            if np.issubdtype(f.dtype, np.integer) else 0
+        raise SceneError(file, key, f"mesh {shown}: face {bad} has a vertex index outside [0, {len(v) - 1}]")
+    try:
+        m.process(validate=False)   # merge duplicate vertices, as trimesh.load(process=True) did
+        normals = np.asarray(m.vertex_normals, float)
+    except MemoryError:
+        raise SceneError(file, key, f"mesh {shown}: out of memory while processing it") from None
+    return np.asarray(m.vertices, float), np.asarray(m.faces, np.int64), normals
 
 
 def sphere_mesh(center, radius, subdivisions):
@@ -158,6 +201,13 @@ def shape_triangles(shape: ShapeSpec, file="<scene>", key="shapes"):
     return v, f, n
 
 
+def _check_triangles(total: int, file, i: int) -> None:
+    """One-line error when the scene's triangles up to shape ``i`` exceed the limit."""
+    if total > limits.MAX_TRIANGLES:
+        raise SceneError(file, f"shapes[{i}]", f"the scene's triangles reach {total} here, above the limit "
+                                               f"{limits.MAX_TRIANGLES} (warp_rbrdf.limits.MAX_TRIANGLES)")
+
+
 def build_geometry(scene: Scene, material_index: dict, analytic_spheres: bool = True) -> Geometry:
     """The scene's shapes in world space: triangles (meshes, planes, spheres that are not
     similarity-transformed or all spheres when ``analytic_spheres`` is False) and analytic
@@ -165,6 +215,7 @@ def build_geometry(scene: Scene, material_index: dict, analytic_spheres: bool = 
     pts, idx, nrm, mat, smooth = [], [], [], [], []
     sph, sph_mat = [], []
     base = 0
+    n_triangles = 0
     for i, shape in enumerate(scene.shapes):
         if shape.type == "sphere" and analytic_spheres:
             cr = analytic_sphere(shape)
@@ -172,7 +223,13 @@ def build_geometry(scene: Scene, material_index: dict, analytic_spheres: bool = 
                 sph.append((*cr[0], cr[1]))
                 sph_mat.append(material_index[shape.material])
                 continue
+        if shape.type == "sphere":   # tessellated: check the count before building it
+            n_triangles += 20 * 4 ** int(shape.subdivisions)
+            _check_triangles(n_triangles, scene.path, i)
         v, f, n = shape_triangles(shape, scene.path, f"shapes[{i}]")
+        if shape.type != "sphere":
+            n_triangles += len(f)
+            _check_triangles(n_triangles, scene.path, i)
         bad = ~np.isfinite(n).all(axis=1) | (np.linalg.norm(n, axis=1) < 0.5)
         if bad.any():  # isolated / degenerate vertices: any unit vector, never used for shading
             n[bad] = (0.0, 1.0, 0.0)

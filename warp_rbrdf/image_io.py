@@ -3,14 +3,29 @@
 The PNG is ``clip(linear * 2**exposure)`` encoded with the sRGB transfer curve; the exposure
 (in stops) is written into the PNG metadata (``rbrdf:exposure_ev`` and the ``Comment``) and,
 by :func:`png_path_for`, into the file name (``name_ev+0.0.png``).
+
+:func:`write_exr` and :func:`write_png` write to a temporary file next to the target and rename
+it into place when it is complete (:func:`fit.outputs.atomic_path`); ``rbrdf render`` instead
+stages both in one :class:`fit.outputs.OutputSet` and renames them together.
+:func:`nonfinite_pixels` is the check every rendered image passes before it is written.
 """
 from __future__ import annotations
 
+import contextlib
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from fit.errors import display_path
+from fit.outputs import atomic_path
+
 from .errors import RenderError
+
+#: Rows tone-mapped at a time (bounds the float temporaries of :func:`tonemap`).
+_TONEMAP_ROWS = 256
 
 
 def srgb_encode(x: np.ndarray) -> np.ndarray:
@@ -19,12 +34,68 @@ def srgb_encode(x: np.ndarray) -> np.ndarray:
 
 
 def tonemap(img: np.ndarray, exposure: float = 0.0) -> np.ndarray:
-    """uint8 sRGB image of linear ``img`` after ``exposure`` stops."""
-    y = srgb_encode(np.nan_to_num(img, nan=0.0, posinf=1.0) * 2.0 ** exposure)
-    return np.clip(np.round(y * 255.0), 0, 255).astype(np.uint8)
+    """uint8 sRGB image (H, W, C) of linear ``img`` (H, W, C) after ``exposure`` stops,
+    computed in blocks of rows (temporaries of a few MB whatever the image size)."""
+    img = np.asarray(img)
+    out = np.empty(img.shape, np.uint8)
+    gain = np.float32(2.0 ** exposure)
+    for r in range(0, img.shape[0], _TONEMAP_ROWS):
+        blk = np.nan_to_num(img[r:r + _TONEMAP_ROWS].astype(np.float32), nan=0.0, posinf=1.0) * gain
+        out[r:r + _TONEMAP_ROWS] = np.clip(np.round(srgb_encode(blk) * 255.0), 0, 255).astype(np.uint8)
+    return out
 
 
-def _write(path: Path, pixels: np.ndarray, fmt, attrs: dict):
+def nonfinite_pixels(img: np.ndarray) -> tuple:
+    """``(count, (row, column) of the first)`` of the pixels of ``img`` (H, W, C) with a NaN or
+    infinite channel; ``(0, None)`` when every pixel is finite."""
+    bad = ~np.isfinite(img).all(axis=-1)
+    n = int(bad.sum())
+    if n == 0:
+        return 0, None
+    j, i = divmod(int(np.argmax(bad.ravel())), img.shape[1])
+    return n, (j, i)
+
+
+def _utf8(path) -> bool:
+    try:
+        os.fspath(path).encode("utf-8")
+    except UnicodeEncodeError:     # surrogate escapes of bytes that are not UTF-8
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def oiio_filename(path, write: bool = False):
+    """A ``str`` file name OpenImageIO accepts for ``path``. Its Python binding takes only valid
+    UTF-8 names (a name with other bytes raised ``TypeError``); for such a path this yields a
+    name in a fresh temporary folder: a symbolic link to ``path`` (reading), or a file that is
+    moved onto ``path`` when the block ends without an exception (``write``)."""
+    if _utf8(path):
+        yield str(path)
+        return
+    tmpdir = tempfile.mkdtemp(prefix="rbrdf-oiio-")
+    try:
+        name = os.path.join(tmpdir, "image" + Path(path).suffix.encode("ascii", "replace").decode())
+        if not write:
+            os.symlink(os.path.abspath(path), name)
+        yield name
+        if write:
+            shutil.move(name, os.fspath(path))
+    finally:
+        shutil.rmtree(tmpdir, ignore_errors=True)
+
+
+def _write(path: Path, pixels: np.ndarray, fmt, attrs: dict, atomic: bool = True):
+    """Write ``pixels`` (H, W, C) to ``path``; ``atomic``: through a temporary file next to it,
+    renamed onto ``path`` when complete (an existing file is never left half-written)."""
+    if atomic:
+        with atomic_path(path) as tmp:
+            _write(tmp, pixels, fmt, attrs, atomic=False)
+        return
+    if not _utf8(path):
+        with oiio_filename(path, write=True) as name:
+            _write(Path(name), pixels, fmt, attrs, atomic=False)
+        return
     import OpenImageIO as oiio
 
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -34,28 +105,33 @@ def _write(path: Path, pixels: np.ndarray, fmt, attrs: dict):
         spec.attribute(k, v)
     out = oiio.ImageOutput.create(str(path))
     if out is None:
-        raise RenderError(f"{path}: cannot create image writer ({oiio.geterror()})")
+        raise RenderError(f"{display_path(path)}: cannot create image writer ({_oneline(oiio.geterror())})")
     try:
         if not out.open(str(path), spec):
-            raise RenderError(f"{path}: cannot open for writing ({out.geterror()})")
+            raise RenderError(f"{display_path(path)}: cannot open for writing ({_oneline(out.geterror())})")
         if not out.write_image(np.ascontiguousarray(pixels)):
-            raise RenderError(f"{path}: cannot write image ({out.geterror()})")
+            raise RenderError(f"{display_path(path)}: cannot write image ({_oneline(out.geterror())})")
     finally:
         out.close()
 
 
-def write_exr(path, img: np.ndarray, attrs: dict | None = None):
-    """Linear, unclamped float32 RGB EXR."""
+def _oneline(text) -> str:
+    return " ".join(str(text).split())[:200]
+
+
+def write_exr(path, img: np.ndarray, attrs: dict | None = None, atomic: bool = True):
+    """Linear, unclamped float32 RGB EXR of ``img`` (H, W, 3); ``atomic``: see :func:`_write`
+    (False when ``path`` is already a staged temporary file)."""
     import OpenImageIO as oiio
 
     path = Path(path)
     a = {"compression": "zip"}
     a.update(attrs or {})
-    _write(path, np.asarray(img, np.float32), oiio.FLOAT, a)
+    _write(path, np.asarray(img, np.float32), oiio.FLOAT, a, atomic)
 
 
-def write_png(path, img: np.ndarray, exposure: float = 0.0, attrs: dict | None = None):
-    """sRGB PNG of linear ``img`` after ``exposure`` stops (stated in the metadata)."""
+def write_png(path, img: np.ndarray, exposure: float = 0.0, attrs: dict | None = None, atomic: bool = True):
+    """sRGB PNG of linear ``img`` (H, W, 3) after ``exposure`` stops (stated in the metadata)."""
     import OpenImageIO as oiio
 
     path = Path(path)
@@ -63,7 +139,7 @@ def write_png(path, img: np.ndarray, exposure: float = 0.0, attrs: dict | None =
          "Comment": f"linear render * 2^({exposure:+.2f}), clipped, sRGB transfer curve",
          "oiio:ColorSpace": "sRGB"}
     a.update(attrs or {})
-    _write(path, tonemap(img, exposure), oiio.UINT8, a)
+    _write(path, tonemap(img, exposure), oiio.UINT8, a, atomic)
 
 
 def png_path_for(exr_path, exposure: float) -> Path:
@@ -75,12 +151,13 @@ def read_image(path) -> np.ndarray:
     """(H, W, C) float32 pixels of any image OpenImageIO reads."""
     import OpenImageIO as oiio
 
-    inp = oiio.ImageInput.open(str(path))
-    if inp is None:
-        raise RenderError(f"{path}: cannot open image ({oiio.geterror()})")
-    try:
-        spec = inp.spec()
-        px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
-    finally:
-        inp.close()
+    with oiio_filename(path) as name:
+        inp = oiio.ImageInput.open(name)
+        if inp is None:
+            raise RenderError(f"{display_path(path)}: cannot open image ({_oneline(oiio.geterror())})")
+        try:
+            spec = inp.spec()
+            px = inp.read_image(0, 0, 0, spec.nchannels, oiio.FLOAT)
+        finally:
+            inp.close()
     return np.asarray(px, np.float32).reshape(spec.height, spec.width, spec.nchannels)

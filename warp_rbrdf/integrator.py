@@ -341,7 +341,11 @@ def launch_tiles(launch_one, tile_list, threads: int, progress=None):
         return
     with ThreadPoolExecutor(max_workers=threads) as ex:
         futures = [ex.submit(launch_one, t) for t in tile_list]
-        for f in as_completed(futures):
-            f.result()
-            if progress is not None:
-                progress.update(1)
+        try:
+            for f in as_completed(futures):
+                f.result()
+                if progress is not None:
+                    progress.update(1)
+        except BaseException:   # Ctrl-C or a failed tile: drop the queued tiles, don't render them
+            ex.shutdown(wait=False, cancel_futures=True)
+            raise

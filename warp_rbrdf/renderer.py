@@ -17,6 +17,7 @@ import numpy as np
 from . import camera, geometry, integrator, lights, registry, sample_patterns
 from .defaults import default_scene
 from .errors import RenderError, SceneError
+from .limits import check_render_size
 from .materials.build import build_material_data
 from .materials.data import make_materials_struct
 from .runtime import get_device, init_warp
@@ -146,8 +147,8 @@ class Renderer:
         it = self.scene.integrator
         spp = int(it.spp if spp is None else spp)
         seed = int(it.seed if seed is None else seed)
-        if spp < 1:
-            raise RenderError(f"spp must be >= 1, got {spp}")
+        if (problem := check_render_size(*self.scene.camera.resolution, spp)) is not None:
+            raise RenderError(problem)   # bounds: warp_rbrdf.limits (issue 22)
         if not 0 <= seed < 2**32:
             raise RenderError(f"seed must be in [0, 2^32), got {seed}")
         threads = int(threads or os.cpu_count() or 1)

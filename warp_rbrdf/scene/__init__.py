@@ -18,6 +18,21 @@ from .specs import (
                     ShapeSpec,
 )
 
-__all__ = ["FORMAT_DOC", "load_scene", "parse_scene", "scene_from_dict", "Scene", "CameraSpec",
-           "IntegratorSpec", "MaterialSpec", "ShapeSpec", "LightSpec", "MATERIAL_TYPES", "SAMPLERS",
-           "PATTERNS", "SHAPE_TYPES", "LIGHT_TYPES", "ENV_TYPES"]
+__all__ = [
+                    "ENV_TYPES",
+                    "FORMAT_DOC",
+                    "LIGHT_TYPES",
+                    "MATERIAL_TYPES",
+                    "PATTERNS",
+                    "SAMPLERS",
+                    "SHAPE_TYPES",
+                    "CameraSpec",
+                    "IntegratorSpec",
+                    "LightSpec",
+                    "MaterialSpec",
+                    "Scene",
+                    "ShapeSpec",
+                    "load_scene",
+                    "parse_scene",
+                    "scene_from_dict",
+]

@@ -56,6 +56,14 @@ _TAIL = """\
   sun_azimuth = 135.0       sky: degrees, 0 = -Z, 90 = +X (the lat-long u convention)
   resolution = [512, 256]   sky: size of the tabulated map
 
+Limits (warp_rbrdf.limits; a value outside is an error, never clamped): every number finite;
+  resolution sides <= 16384 and <= 2^24 pixels, spp <= 2^20, pixels x spp <= 2^33, <= 2^16
+  tiles; albedo in
+  [0, 1]; material scale <= 1e3; irradiance, radiance <= 1e6; envmap/sky scale <= 1e6;
+  positions, directions, translations, matrix entries <= 1e6 in magnitude; lengths and scale
+  factors in [1e-6, 1e6]; <= 64 materials, 4096 shapes, 64 directional lights, 2^22 triangles;
+  scene file <= 1 MiB, meshes and maps <= 256 MiB, maps <= 2^24 texels, each finite, >= 0, <= 1e9.
+
 Paths: "${RBRDF_DATA}/x" or "data:x" resolve through $RBRDF_DATA (run from a source checkout:
 default ../shared/data next to it; installed: no default, set it); "pkg:x" is
 warp_rbrdf/data/x; other relative paths are relative to the scene.
@@ -81,7 +89,7 @@ def _materials_section() -> str:
     lines += [
         "  cdf = \"...\"               rbrdf-cdf .json from `rbrdf-fit cdf` (tables + rational inverse",
         "                            CDFs); without it tables are built (and rational CDFs fitted) at load",
-        "  albedo = 0.8              number or [r, g, b]",
+        "  albedo = 0.8              number or [r, g, b], in [0, 1]",
         "  file = \"...\"              the material's file (types above); relative to the scene",
         "  statistic = \"median\"      projection of a 3-D file: median | mean | geometric | harmonic | rms",
         "  scale = 1.0               number or [r, g, b] multiplier",

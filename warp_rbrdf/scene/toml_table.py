@@ -7,8 +7,12 @@ from pathlib import Path
 
 import numpy as np
 
+from fit.errors import BRDFFileError, display_path
+from fit.inputs import check_regular_file
+
 from .. import transforms
 from ..errors import RenderError, SceneError
+from ..limits import MAX_ANGLE_DEG, MAX_COORDINATE, MAX_LENGTH, MIN_LENGTH
 from ..paths import resolve_path
 
 
@@ -62,21 +66,28 @@ class Table:
             raise self.error(k, f"expected {kind}{rng}, got {show(v)}")
         return int(v) if integer else float(v)
 
-    def vector(self, k, n, default=None, required=False, allow_scalar=False, nonneg=False):
+    def vector(self, k, n, default=None, required=False, allow_scalar=False, nonneg=False,
+               max_abs=MAX_COORDINATE, hi=None, integer=False):
+        """``n`` finite numbers (a tuple of floats, ints with ``integer``), each of magnitude at
+        most ``max_abs`` (:data:`warp_rbrdf.limits.MAX_COORDINATE` by default), ``>= 0`` with
+        ``nonneg``, ``<= hi`` when given."""
         v = self._get(k, default, required)
         if v is MISSING:
             return default
-        what = f"a list of {n} numbers" + (" (or one number)" if allow_scalar else "") \
-            + (" >= 0" if nonneg else "")
+        top = hi if hi is not None else max_abs
+        rng = f" in [0, {top:g}]" if nonneg else f" in [{-top:g}, {top:g}]" if hi is None else f" <= {top:g}"
+        what = f"a list of {n} {'integers' if integer else 'numbers'}" \
+            + (" (or one number)" if allow_scalar else "") + rng
         if allow_scalar and isinstance(v, (int, float)) and not isinstance(v, bool):
             v = [v] * n
+        num = int if integer else (int, float)
         if not (isinstance(v, list) and len(v) == n
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                and all(isinstance(x, num) and not isinstance(x, bool) and math.isfinite(x)
                         for x in v)):
             raise self.error(k, f"expected {what}, got {show(v)}")
-        if nonneg and any(x < 0 for x in v):
+        if (nonneg and any(x < 0 for x in v)) or any(abs(x) > top for x in v):
             raise self.error(k, f"expected {what}, got {show(v)}")
-        return tuple(float(x) for x in v)
+        return tuple(int(x) for x in v) if integer else tuple(float(x) for x in v)
 
     def string(self, k, default=None, choices=None, required=False):
         v = self._get(k, default, required)
@@ -103,9 +114,18 @@ class Table:
             p = resolve_path(v, self.base_dir)
         except RenderError as e:
             raise self.error(k, str(e)) from None
-        if must_exist and not p.is_file():
-            hint = " (set RBRDF_DATA to the shared data folder)" if ("RBRDF_DATA" in v or v.startswith("data:")) else ""
-            raise self.error(k, f"{what} not found: {p}{hint}")
+        if must_exist:
+            try:
+                missing = not p.exists()
+            except (OSError, ValueError):
+                missing = False
+            if missing:
+                hint = " (set RBRDF_DATA to the shared data folder)" if ("RBRDF_DATA" in v or v.startswith("data:")) else ""
+                raise self.error(k, f"{what} not found: {display_path(p)}{hint}")
+            try:
+                check_regular_file(p, None, what)   # a folder, named pipe or device: refused
+            except BRDFFileError as e:
+                raise self.error(k, f"{what} {display_path(p)}: {e.problem}") from None
         return p
 
     def rotation(self, k):
@@ -115,7 +135,7 @@ class Table:
         try:
             m = transforms.compose(rotate=_rotation_list(v))
         except (TypeError, ValueError, IndexError):
-            raise self.error(k, f"expected [angle_deg, ax, ay, az] or a list of them, got {show(v)}") from None
+            raise self.error(k, f"expected [angle_deg, ax, ay, az] (finite, |angle| <= {MAX_ANGLE_DEG:g}, a non-zero axis) or a list of them, got {show(v)}") from None
         return m[:3, :3]
 
     def transform(self, k):
@@ -126,20 +146,29 @@ class Table:
         if t.has("matrix"):
             m = t._get("matrix", None, True)
             try:
-                arr = np.asarray(m, dtype=float)
-                if arr.shape != (4, 4) or not np.all(np.isfinite(arr)):
+                if not (isinstance(m, list) and len(m) == 4 and all(
+                        isinstance(r, list) and len(r) == 4
+                        and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+                        for r in m)):
                     raise ValueError
-            except (TypeError, ValueError):
-                raise t.error("matrix", f"expected a 4x4 list of numbers, got {show(m)}") from None
+                arr = np.asarray(m, dtype=float)
+                if not np.all(np.isfinite(arr)) or np.abs(arr).max() > MAX_COORDINATE:
+                    raise ValueError
+            except (TypeError, ValueError, OverflowError):
+                raise t.error("matrix", f"expected a 4x4 list of finite numbers of magnitude <= "
+                                        f"{MAX_COORDINATE:g}, got {show(m)}") from None
+            if not np.array_equal(arr[3], [0.0, 0.0, 0.0, 1.0]):
+                raise t.error("matrix", f"expected an affine matrix (last row [0, 0, 0, 1]), got {show(m[3])}")
             if abs(np.linalg.det(arr[:3, :3])) < 1e-12:
                 raise t.error("matrix", "matrix is singular")
             t.finish(allowed=("matrix",))
             return arr
         scale = None
         if t.has("scale"):
-            scale = t.vector("scale", 3, allow_scalar=True)
-            if any(s == 0 for s in scale):
-                raise t.error("scale", "expected non-zero scale factors")
+            scale = t.vector("scale", 3, allow_scalar=True, max_abs=MAX_LENGTH)
+            if any(abs(s) < MIN_LENGTH for s in scale):
+                raise t.error("scale", f"expected scale factors of magnitude in [{MIN_LENGTH:g}, "
+                                       f"{MAX_LENGTH:g}], got {show(list(scale))}")
         rot = None
         if t.has("rotate"):
             rv = t._get("rotate", None, True)
@@ -147,7 +176,7 @@ class Table:
                 rot = _rotation_list(rv)
                 transforms.compose(rotate=rot)
             except (TypeError, ValueError, IndexError):
-                raise t.error("rotate", f"expected [angle_deg, ax, ay, az] or a list of them, got {show(rv)}") from None
+                raise t.error("rotate", f"expected [angle_deg, ax, ay, az] (finite, |angle| <= {MAX_ANGLE_DEG:g}, a non-zero axis) or a list of them, got {show(rv)}") from None
         tr = t.vector("translate", 3) if t.has("translate") else None
         t.finish()
         return transforms.compose(scale=scale, rotate=rot, translate=tr)
@@ -169,15 +198,42 @@ def _rotation_list(v):
     rots = v if isinstance(v[0], list) else [v]
     for r in rots:
         if not (isinstance(r, list) and len(r) == 4
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)):
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+                        for x in r)):
             raise ValueError
-        if all(x == 0 for x in r[1:]):
+        if abs(r[0]) > MAX_ANGLE_DEG or any(abs(x) > MAX_COORDINATE for x in r[1:]):
+            raise ValueError
+        if all(abs(x) < 1e-30 for x in r[1:]):
             raise ValueError
     return rots
 
 
 def show(v) -> str:
-    s = repr(v)
+    """A short one-line ``repr`` of a scene value (lists cut after a few items: a value nested
+    too deeply never reaches here, see :func:`depth`)."""
+    if isinstance(v, list) and len(v) > 8:
+        v = v[:8] + ["..."]
+    try:
+        s = repr(v)
+    except RecursionError:
+        s = "<nested too deeply>"
     return s if len(s) <= 60 else s[:57] + "..."
+
+
+def depth(obj, limit: int) -> int:
+    """Nesting depth of parsed TOML (tables and arrays), iteratively; stops past ``limit``."""
+    deepest = 0
+    stack = [(obj, 1)]
+    while stack:
+        o, d = stack.pop()
+        if d > deepest:
+            deepest = d
+            if deepest > limit:
+                return deepest
+        if isinstance(o, dict):
+            stack.extend((x, d + 1) for x in o.values() if isinstance(x, (dict, list)))
+        elif isinstance(o, list):
+            stack.extend((x, d + 1) for x in o if isinstance(x, (dict, list)))
+    return deepest
 
 
