@@ -3,7 +3,7 @@ where they come from, and how they are packed into :class:`warp_rbrdf.materials.
 
 A material whose strategy's technique needs a table (``tabulated``, ``rational``) gets one:
 from its ``cdf = "file.json"`` (an ``rbrdf-cdf`` file of ``rbrdf-fit cdf``), or tabulated from
-the material itself at load. A technique that needs verified rational inverse CDFs gets them
+the material itself at load (remembered on disk: :mod:`.table_cache`). A technique that needs verified rational inverse CDFs gets them
 from the same file, or fitted at load (printed: it takes seconds). A fit that failed its
 verification (``CDFFit.fallback``) switches the material to its strategy's ``fallback``
 (printed, never silent).
@@ -22,7 +22,6 @@ import numpy as np
 from fit.sampling.cdf_file import fit_cdf
 from fit.sampling.cdf_file import load as load_cdf
 from fit.sampling.pieces import PieceMaps, pieces_phi_knots
-from fit.sampling.table import tabulate
 
 from .. import registry
 from ..chebyshev import FlatData
@@ -44,6 +43,7 @@ from ..materials.data import (
     N_CDF_INFO,
     Pool,
 )
+from .table_cache import cached_tabulate
 
 
 def _read_cdf(spec, scene_file, key):
@@ -82,7 +82,7 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
         return strat, fitobj
     if fitobj is not None:
         return strat, fitobj.table
-    return strat, tabulate(loaded.evaluate)
+    return strat, cached_tabulate(spec, loaded.evaluate)
 
 
 def pack(cdfs) -> dict:
