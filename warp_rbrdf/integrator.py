@@ -173,30 +173,46 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     closest_hit, any_hit = G.make_tracer(has_mesh, has_spheres)
     bsdf_eval = make_bsdf_eval(kinds)
     bsdf_sample, bsdf_pdf, bsdf_mis_pdf = make_bsdf_sampling(techniques)
+    sample_2d = P.sample_2d
+    env_sample, env_eval, env_pdf = L.env_sample, L.env_eval, L.env_pdf
 
     @G.inline_func
     def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
                         pseed: wp.uint32, s: int, spp: int, pattern: int, max_depth: int,
                         hide_env: int, eps: float, px: int, py: int) -> wp.vec3:
-        j = P.sample_2d(pattern, pseed, s, spp, 0)
+        Lsum = wp.vec3(0.0)
+        if max_depth < 1:
+            return Lsum
+        j = sample_2d(pattern, pseed, s, spp, 0)
         d = C.camera_ray(cam, float(px) + j[0], float(py) + j[1])
         o = cam.origin
-        Lsum = wp.vec3(0.0)
         thr = wp.vec3(1.0)
-        mode = int(0)       # how to weight the environment when the ray escapes
-        prev_pdf = float(0.0)
-        depth = int(0)
-        while depth < max_depth:
-            hit, t, ng, ns, m = closest_hit(geo, o, d)
+        # how to weight the environment when the ray escapes
+        mode = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        prev_pdf = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+        depth = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        # 1: the next ray is the last BSDF ray, only tested for escaping (any hit)
+        shadow = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        hit = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        t = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+        ng = wp.vec3(0.0)
+        ns = wp.vec3(0.0)
+        m = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        # one call site per material / environment function (each is inlined where it is
+        # called: fewer sites compile faster, docs/architecture.md)
+        while True:
+            if shadow == 1:
+                hit = wp.where(any_hit(geo, o, d, 1.0e30), 1, 0)
+            else:
+                hit, t, ng, ns, m = closest_hit(geo, o, d)
             if hit == 0:
-                if mode == 0:
-                    if hide_env == 0:
-                        Lsum = Lsum + L.env_eval(env, d)
-                elif mode == 1:
-                    Lsum = Lsum + wp.cw_mul(thr, L.env_eval(env, d))
-                elif mode == 2:
-                    w = power_heuristic(prev_pdf, L.env_pdf(env, d))
-                    Lsum = Lsum + wp.cw_mul(thr, L.env_eval(env, d)) * w
+                if mode == 1 or mode == 2 or (mode == 0 and hide_env == 0):
+                    w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                    if mode == 2:
+                        w = power_heuristic(prev_pdf, env_pdf(env, d))
+                    Lsum = Lsum + wp.cw_mul(thr, env_eval(env, d)) * w
+                break
+            if shadow == 1:
                 break
             p = o + d * t
             wo_w = -d
@@ -209,39 +225,41 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             tech = mats.technique[m]
             org = p + ng * (eps * (1.0 + wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))))
 
-            # directional lights (delta): always one shadow ray each
-            for li in range(dl.count):
-                wl = dl.to_light[li]
-                if wp.dot(wl, ng) > 0.0:
-                    wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
-                    if wi[2] > 0.0:
-                        fv = bsdf_eval(mats, m, wi, wo)
-                        if max3(fv) > 0.0:
-                            if not any_hit(geo, org, wl, 1.0e30):
-                                Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, dl.irradiance[li])) * wi[2]
-
+            # light samples: every directional light (delta: always one shadow ray each), then
+            # one environment sample
             dim = 1 + 2 * depth
-            # environment light sample
+            n_dl = dl.count
+            n_light = n_dl
             if comb != COMBINE_BSDF and env.can_sample == 1:
-                ls = L.env_sample(env, P.sample_2d(pattern, pseed, s, spp, dim))
-                wl = wp.vec3(ls[0], ls[1], ls[2])
-                pl = ls[3]
+                n_light = n_dl + 1
+            for li in range(n_light):
+                wl = wp.vec3(0.0)
+                pl = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                if li < n_dl:
+                    wl = dl.to_light[li]
+                else:
+                    ls = env_sample(env, sample_2d(pattern, pseed, s, spp, dim))
+                    wl = wp.vec3(ls[0], ls[1], ls[2])
+                    pl = ls[3]
                 if pl > 0.0 and wp.dot(wl, ng) > 0.0:
                     wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
                     if wi[2] > 0.0:
                         fv = bsdf_eval(mats, m, wi, wo)
-                        if max3(fv) > 0.0:
+                        if max3(fv) > 0.0:  # noqa: SIM102 - Warp evaluates both sides of `and`
                             if not any_hit(geo, org, wl, 1.0e30):
-                                w = 1.0
-                                if comb == COMBINE_MIS:
-                                    w = power_heuristic(pl, bsdf_pdf(mats, m, tech, wi, wo))
-                                Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, L.env_eval(env, wl))) * (wi[2] * w / pl)
+                                if li < n_dl:
+                                    Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, dl.irradiance[li])) * wi[2]
+                                else:
+                                    w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                                    if comb == COMBINE_MIS:
+                                        w = power_heuristic(pl, bsdf_pdf(mats, m, tech, wi, wo))
+                                    Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, env_eval(env, wl))) * (wi[2] * w / pl)
 
             last = depth + 1 >= max_depth
             if comb == COMBINE_LIGHT and last:
                 break
             # BSDF sample
-            bs = bsdf_sample(mats, m, tech, wo, P.sample_2d(pattern, pseed, s, spp, dim + 1))
+            bs = bsdf_sample(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
             wi = wp.vec3(bs[0], bs[1], bs[2])
             wb = bs[3]
             if wb <= 0.0 or wi[2] <= 0.0:
@@ -263,13 +281,9 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                 pb = bsdf_mis_pdf(mats, m, tech, wi, wo, wb)
             prev_pdf = pb
             if last:
-                if mode != 3 and env.present == 1:
-                    if not any_hit(geo, org, wiw, 1.0e30):
-                        w = 1.0
-                        if mode == 2:
-                            w = power_heuristic(pb, L.env_pdf(env, wiw))
-                        Lsum = Lsum + wp.cw_mul(thr, L.env_eval(env, wiw)) * w
-                break
+                if mode == 3 or env.present == 0:
+                    break
+                shadow = 1   # the last ray: only whether it escapes
             o = org
             d = wiw
             depth = depth + 1
