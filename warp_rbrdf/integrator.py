@@ -120,6 +120,29 @@ def _no_mis_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3, weigh
     return 1.0 / weight
 
 
+@wp.func
+def _no_exact(t: int) -> bool:
+    return True
+
+
+def make_pdf_exact(techniques):
+    """``bsdf_pdf_exact(t) -> bool``: whether technique ``t``'s pdf is ``1 / weight`` of its
+    samples (``pdf_exact``), over ``techniques`` as for :func:`make_bsdf_sampling`."""
+    if not techniques:
+        return _no_exact
+    code, _, _, exact = techniques[0]
+    code, exact = int(code), bool(exact)
+    rest = make_pdf_exact(techniques[1:])
+
+    @G.inline_func
+    def bsdf_pdf_exact(t: int) -> bool:
+        if t == wp.static(code):
+            return wp.static(exact)
+        return wp.static(rest)(t)
+
+    return bsdf_pdf_exact
+
+
 def make_bsdf_sampling(techniques):
     """``(bsdf_sample, bsdf_pdf, bsdf_mis_pdf)`` over ``techniques``: (code, sample, pdf,
     pdf_exact) tuples, selected by the technique code ``t``. ``bsdf_mis_pdf(mats, m, t, wi, wo,
@@ -172,7 +195,8 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     queries of :func:`warp_rbrdf.geometry.make_tracer` test only those)."""
     closest_hit, any_hit = G.make_tracer(has_mesh, has_spheres)
     bsdf_eval = make_bsdf_eval(kinds)
-    bsdf_sample, bsdf_pdf, bsdf_mis_pdf = make_bsdf_sampling(techniques)
+    bsdf_sample, bsdf_pdf, _ = make_bsdf_sampling(techniques)
+    bsdf_pdf_exact = make_pdf_exact(techniques)
     sample_2d = P.sample_2d
     env_sample, env_eval, env_pdf = L.env_sample, L.env_eval, L.env_pdf
 
@@ -225,61 +249,85 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             tech = mats.technique[m]
             org = p + ng * (eps * (1.0 + wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))))
 
-            # light samples: every directional light (delta: always one shadow ray each), then
-            # one environment sample
+            # One loop over every directional light (delta: always one shadow ray each), one
+            # environment sample, then the BSDF sample; each calls the material's evaluation and
+            # pdf at one site (the compile time follows the number of inlined copies).
             dim = 1 + 2 * depth
+            last = depth + 1 >= max_depth
             n_dl = dl.count
             n_light = n_dl
             if comb != COMBINE_BSDF and env.can_sample == 1:
                 n_light = n_dl + 1
-            for li in range(n_light):
+            n_try = n_light + 1
+            if comb == COMBINE_LIGHT and last:
+                n_try = n_light       # the path ends: no BSDF sample
+            go_on = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+            wiw = wp.vec3(0.0)
+            for li in range(n_try):
+                wi = wp.vec3(0.0)
                 wl = wp.vec3(0.0)
                 pl = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                wb = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+                ok = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
                 if li < n_dl:
                     wl = dl.to_light[li]
-                else:
+                elif li < n_light:
                     ls = env_sample(env, sample_2d(pattern, pseed, s, spp, dim))
                     wl = wp.vec3(ls[0], ls[1], ls[2])
                     pl = ls[3]
-                if pl > 0.0 and wp.dot(wl, ng) > 0.0:
-                    wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
-                    if wi[2] > 0.0:
-                        fv = bsdf_eval(mats, m, wi, wo)
+                if li < n_light:
+                    if pl > 0.0 and wp.dot(wl, ng) > 0.0:
+                        wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
+                        if wi[2] > 0.0:
+                            ok = 1
+                else:
+                    bs = bsdf_sample(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
+                    wi = wp.vec3(bs[0], bs[1], bs[2])
+                    wb = bs[3]
+                    if wb > 0.0 and wi[2] > 0.0:
+                        wiw = T * wi[0] + B * wi[1] + ns * wi[2]
+                        if wp.dot(wiw, ng) > 0.0:
+                            ok = 1
+                if ok == 1:
+                    fv = bsdf_eval(mats, m, wi, wo)
+                    want_pdf = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+                    if li < n_light:
                         if max3(fv) > 0.0:  # noqa: SIM102 - Warp evaluates both sides of `and`
                             if not any_hit(geo, org, wl, 1.0e30):
-                                if li < n_dl:
-                                    Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, dl.irradiance[li])) * wi[2]
-                                else:
-                                    w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
-                                    if comb == COMBINE_MIS:
-                                        w = power_heuristic(pl, bsdf_pdf(mats, m, tech, wi, wo))
-                                    Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, env_eval(env, wl))) * (wi[2] * w / pl)
-
-            last = depth + 1 >= max_depth
-            if comb == COMBINE_LIGHT and last:
+                                ok = 2
+                                if li >= n_dl and comb == COMBINE_MIS:
+                                    want_pdf = 1
+                    else:
+                        thr = wp.cw_mul(thr, fv) * (wi[2] * wb)
+                        if max3(thr) > 0.0:
+                            ok = 2
+                            if comb == COMBINE_MIS and not bsdf_pdf_exact(tech):
+                                want_pdf = 1
+                    pb = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+                    if want_pdf == 1:
+                        pb = bsdf_pdf(mats, m, tech, wi, wo)
+                    if ok == 2:
+                        if li < n_dl:
+                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, dl.irradiance[li])) * wi[2]
+                        elif li < n_light:
+                            w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                            if comb == COMBINE_MIS:
+                                w = power_heuristic(pl, pb)
+                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, env_eval(env, wl))) * (wi[2] * w / pl)
+                        else:
+                            go_on = 1
+                            mode = 1
+                            if comb == COMBINE_LIGHT:
+                                mode = 3
+                            elif comb == COMBINE_MIS and env.can_sample == 1:
+                                mode = 2
+                            # the density MIS uses for the BSDF sample: 1 / weight where the
+                            # technique's pdf is exact, its pdf function otherwise
+                            prev_pdf = 1.0 / wb
+                            if want_pdf == 1:
+                                prev_pdf = pb
+            if go_on == 0:
                 break
-            # BSDF sample
-            bs = bsdf_sample(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
-            wi = wp.vec3(bs[0], bs[1], bs[2])
-            wb = bs[3]
-            if wb <= 0.0 or wi[2] <= 0.0:
-                break
-            wiw = T * wi[0] + B * wi[1] + ns * wi[2]
-            if wp.dot(wiw, ng) <= 0.0:
-                break
-            fv = bsdf_eval(mats, m, wi, wo)
-            thr = wp.cw_mul(thr, fv) * (wi[2] * wb)
-            if max3(thr) <= 0.0:
-                break
-            mode = 1
-            if comb == COMBINE_LIGHT:
-                mode = 3
-            elif comb == COMBINE_MIS and env.can_sample == 1:
-                mode = 2
-            pb = 1.0 / wb
-            if comb == COMBINE_MIS:
-                pb = bsdf_mis_pdf(mats, m, tech, wi, wo, wb)
-            prev_pdf = pb
             if last:
                 if mode == 3 or env.present == 0:
                     break

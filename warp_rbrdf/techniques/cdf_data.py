@@ -19,10 +19,6 @@ from pathlib import Path
 
 import numpy as np
 
-from fit.sampling.cdf_file import fit_cdf
-from fit.sampling.cdf_file import load as load_cdf
-from fit.sampling.pieces import PieceMaps, pieces_phi_knots
-
 from .. import registry
 from ..chebyshev import FlatData
 from ..errors import SceneError
@@ -50,6 +46,10 @@ def _read_cdf(spec, scene_file, key):
     cdf = getattr(spec, "cdf", None)
     if cdf is None or not isinstance(cdf, (str, bytes, Path)):
         return cdf
+    from fit.sampling.cdf_file import (
+        load as load_cdf,  # scipy: imported only when needed
+    )
+
     try:
         return load_cdf(cdf)
     except Exception as e:  # noqa: BLE001 - BRDFFileError and I/O errors, one line
@@ -74,6 +74,8 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
         if fitobj is None:
             log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
                 f"from `rbrdf-fit cdf` to skip this)")
+            from fit.sampling.cdf_file import fit_cdf
+
             fitobj = fit_cdf(loaded.evaluate, name=spec.name)
         if fitobj.fallback:
             fb = registry.strategy(strat.fallback)
@@ -106,6 +108,11 @@ def pack(cdfs) -> dict:
         info[m, CDF_LAYOUT] = LAYOUT_NONE
         if cdf is table:
             continue
+        from fit.sampling.pieces import (  # scipy: only with a fit
+            PieceMaps,
+            pieces_phi_knots,
+        )
+
         if isinstance(cdf.maps, PieceMaps):
             pm = cdf.maps
             info[m, CDF_LAYOUT] = LAYOUT_PIECES
