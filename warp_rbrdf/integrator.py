@@ -177,6 +177,61 @@ def make_bsdf_sampling(techniques):
     return bsdf_sample, bsdf_pdf, bsdf_mis_pdf
 
 
+@wp.func
+def _no_eval_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3):
+    return wp.vec3(0.0), 0.0, 0
+
+
+def make_fused(techniques):
+    """``(bsdf_sample_f, bsdf_eval_pdf)`` over ``techniques`` (tuples as for
+    :func:`make_bsdf_sampling`, optionally with two more entries: the technique's fused
+    ``sample_f(mats, m, wo, xi) -> (vec4, vec3 f, 1)`` and ``eval_pdf(mats, m, wi, wo) -> (vec3
+    f, float pdf, 0 | 1)``, or None; :func:`warp_rbrdf.techniques.rgl.kernel_fused`).
+
+    ``bsdf_sample_f(mats, m, t, wo, xi) -> (sample, f, has_f)``: the technique's sample, with
+    f_r at its direction where the technique computes it on the way (``has_f`` 1), else
+    ``has_f`` 0 (the caller evaluates the material). ``bsdf_eval_pdf(mats, m, t, wi, wo) -> (f,
+    pdf, has)``: f_r and the technique's pdf at one pair where it shares their work (``has``
+    1), else ``has`` 0."""
+    sample, _, _ = make_bsdf_sampling([t[:4] for t in techniques])
+    fused = [(int(t[0]), t[4], t[5]) for t in techniques if len(t) > 5 and t[4] is not None]
+    return _sample_f_chain(fused, sample), _eval_pdf_chain(fused)
+
+
+def _sample_f_chain(fused, sample):
+    if not fused:
+        @G.inline_func
+        def bsdf_sample_f0(mats: Materials, m: int, t: int, wo: wp.vec3, xi: wp.vec2):
+            return wp.static(sample)(mats, m, t, wo, xi), wp.vec3(0.0), 0
+
+        return bsdf_sample_f0
+    code, sample_f, _ = fused[0]
+    rest = _sample_f_chain(fused[1:], sample)
+
+    @G.inline_func
+    def bsdf_sample_f(mats: Materials, m: int, t: int, wo: wp.vec3, xi: wp.vec2):
+        if t == wp.static(code):
+            return wp.static(sample_f)(mats, m, wo, xi)
+        return wp.static(rest)(mats, m, t, wo, xi)
+
+    return bsdf_sample_f
+
+
+def _eval_pdf_chain(fused):
+    if not fused:
+        return _no_eval_pdf
+    code, _, eval_pdf = fused[0]
+    rest = _eval_pdf_chain(fused[1:])
+
+    @G.inline_func
+    def bsdf_eval_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3):
+        if t == wp.static(code):
+            return wp.static(eval_pdf)(mats, m, wi, wo)
+        return wp.static(rest)(mats, m, t, wi, wo)
+
+    return bsdf_eval_pdf
+
+
 # --------------------------------------------------------------------------------------------
 # Kernels
 # --------------------------------------------------------------------------------------------
@@ -195,8 +250,10 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     queries of :func:`warp_rbrdf.geometry.make_tracer` test only those)."""
     closest_hit, any_hit = G.make_tracer(has_mesh, has_spheres)
     bsdf_eval = make_bsdf_eval(kinds)
-    bsdf_sample, bsdf_pdf, _ = make_bsdf_sampling(techniques)
-    bsdf_pdf_exact = make_pdf_exact(techniques)
+    base = [t[:4] for t in techniques]
+    bsdf_sample, bsdf_pdf, _ = make_bsdf_sampling(base)
+    bsdf_pdf_exact = make_pdf_exact(base)
+    bsdf_sample_f, bsdf_eval_pdf = make_fused(techniques)
     sample_2d = P.sample_2d
     env_sample, env_eval, env_pdf = L.env_sample, L.env_eval, L.env_pdf
 
@@ -275,13 +332,19 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                     ls = env_sample(env, sample_2d(pattern, pseed, s, spp, dim))
                     wl = wp.vec3(ls[0], ls[1], ls[2])
                     pl = ls[3]
+                fv = wp.vec3(0.0)
+                pf = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+                has_f = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
                 if li < n_light:
                     if pl > 0.0 and wp.dot(wl, ng) > 0.0:
                         wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
                         if wi[2] > 0.0:
                             ok = 1
+                            if li >= n_dl and comb == COMBINE_MIS:
+                                # f and the MIS pdf together where the technique shares their work
+                                fv, pf, has_f = bsdf_eval_pdf(mats, m, tech, wi, wo)
                 else:
-                    bs = bsdf_sample(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
+                    bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
                     wi = wp.vec3(bs[0], bs[1], bs[2])
                     wb = bs[3]
                     if wb > 0.0 and wi[2] > 0.0:
@@ -289,13 +352,14 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                         if wp.dot(wiw, ng) > 0.0:
                             ok = 1
                 if ok == 1:
-                    fv = bsdf_eval(mats, m, wi, wo)
+                    if has_f == 0:
+                        fv = bsdf_eval(mats, m, wi, wo)
                     want_pdf = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
                     if li < n_light:
                         if max3(fv) > 0.0:  # noqa: SIM102 - Warp evaluates both sides of `and`
                             if not any_hit(geo, org, wl, 1.0e30):
                                 ok = 2
-                                if li >= n_dl and comb == COMBINE_MIS:
+                                if li >= n_dl and comb == COMBINE_MIS and has_f == 0:
                                     want_pdf = 1
                     else:
                         thr = wp.cw_mul(thr, fv) * (wi[2] * wb)
@@ -303,7 +367,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                             ok = 2
                             if comb == COMBINE_MIS and not bsdf_pdf_exact(tech):
                                 want_pdf = 1
-                    pb = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+                    pb = pf
                     if want_pdf == 1:
                         pb = bsdf_pdf(mats, m, tech, wi, wo)
                     if ok == 2:
