@@ -255,7 +255,6 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     bsdf_pdf_exact = make_pdf_exact(base)
     bsdf_sample_f, bsdf_eval_pdf = make_fused(techniques)
     sample_2d = P.sample_2d
-    env_sample, env_eval, env_pdf = L.env_sample, L.env_eval, L.env_pdf
 
     @G.inline_func
     def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
@@ -288,10 +287,11 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                 hit, t, ng, ns, m = closest_hit(geo, o, d)
             if hit == 0:
                 if mode == 1 or mode == 2 or (mode == 0 and hide_env == 0):
+                    uv = L.env_dir_to_uv(env, d)   # once for the radiance and the pdf
                     w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
                     if mode == 2:
-                        w = power_heuristic(prev_pdf, env_pdf(env, d))
-                    Lsum = Lsum + wp.cw_mul(thr, env_eval(env, d)) * w
+                        w = power_heuristic(prev_pdf, L.env_pdf_uv(env, uv))
+                    Lsum = Lsum + wp.cw_mul(thr, L.env_eval_uv(env, uv)) * w
                 break
             if shadow == 1:
                 break
@@ -323,13 +323,14 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             for li in range(n_try):
                 wi = wp.vec3(0.0)
                 wl = wp.vec3(0.0)
+                luv = wp.vec2(0.0)   # the environment sample's map coordinates
                 pl = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
                 wb = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
                 ok = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
                 if li < n_dl:
                     wl = dl.to_light[li]
                 elif li < n_light:
-                    ls = env_sample(env, sample_2d(pattern, pseed, s, spp, dim))
+                    ls, luv = L.env_sample_uv(env, sample_2d(pattern, pseed, s, spp, dim))
                     wl = wp.vec3(ls[0], ls[1], ls[2])
                     pl = ls[3]
                 fv = wp.vec3(0.0)
@@ -377,7 +378,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                             w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
                             if comb == COMBINE_MIS:
                                 w = power_heuristic(pl, pb)
-                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, env_eval(env, wl))) * (wi[2] * w / pl)
+                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, L.env_eval_uv(env, luv))) * (wi[2] * w / pl)
                         else:
                             go_on = 1
                             mode = 1
