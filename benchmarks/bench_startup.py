@@ -14,7 +14,11 @@ renderer turned them off; the baseline; interleaved), with a fresh, empty kernel
 3. ``new fit``: another rational fit (with its own CDF file), same cache;
 4. ``new CDF file``: the first fit with another pieces-layout CDF file, same cache;
 5. ``new global CDF`` (not with ``--quick``): the second fit with a global-layout CDF file (the
-   paper's fitted F and G: the layout the baseline generated code for), same cache.
+   paper's fitted F and G: the layout the baseline generated code for), same cache;
+
+and, first, ``default job cold``: the README's main job ``rbrdf render --out X`` (the embedded
+default scene: a rational sphere sampled with ``mis-tabulated``, 256x256, 16 spp) with its own
+empty kernel cache.
 
 Then, on warm caches, interleaved: samples per second of a larger render of the scene (and the
 largest pixel difference between the two trees' images: same seed, so 0 when the evaluation
@@ -175,7 +179,7 @@ def render_run(tree: Path, scene: Path, cache: Path, out: Path, extra=(), adjoin
     lines. ``adjoints``: compile the kernels' backward passes too (Warp's default; the
     renderer turns them off)."""
     env = dict(os.environ, WARP_CACHE_PATH=str(cache), PYTHONPATH=str(tree))
-    args = ["render", str(scene), "--no-progress", "--out", str(out), *extra]
+    args = ["render", *([] if scene is None else [str(scene)]), "--no-progress", "--out", str(out), *extra]
     cmd = [sys.executable, "-c", ADJOINTS, *args] if adjoints else [sys.executable, "-m", "warp_rbrdf", *args]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -209,7 +213,7 @@ def main(argv=None):
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="one repeat, small CDF tables, no global CDF, no "
                                                         "adjoints variant, small throughput render")
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, help="default 3 (1 with --quick)")
     ap.add_argument("--baseline", default=BASELINE, help=f"git revision to compare with (default {BASELINE}, "
                                                          f"the last with generated code); 'none': this tree only")
     ap.add_argument("--no-adjoints", action="store_true", help="skip the variant of this tree that compiles "
@@ -218,7 +222,7 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=32, help="throughput render (default 32)")
     ap.add_argument("--work", help="work folder (default: a temporary one, removed)")
     a = ap.parse_args(argv)
-    repeats = 1 if a.quick else a.repeats
+    repeats = a.repeats or (1 if a.quick else 3)
     res, spp = (64, 4) if a.quick else (a.resolution, a.spp)
 
     tmp = None if a.work else tempfile.mkdtemp(prefix="bench_startup_")
@@ -232,14 +236,21 @@ def main(argv=None):
             variants["baseline"] = (export_baseline(a.baseline, work / "baseline"), False)
         scenes = prepare(work, a.quick)
         steps = [("cold", "a"), ("warm", "a"), ("new fit", "b"), ("new CDF file", "a2")]
+        scenes["default"] = None   # the README's main job: the embedded default scene
+        first = [("default job cold", "default")]
         if scenes.get("bg") is not None:
             steps.append(("new global CDF", "bg"))
+        steps = first + steps
         runs = {v: {s: [] for s, _ in steps} for v in variants}
         for r in range(repeats):
             for v, (tree, adj) in variants.items():
                 cache = work / f"cache_{v}_{r}"
                 shutil.rmtree(cache, ignore_errors=True)
-                for step, key in steps:
+                for step, key in first:   # its own empty kernel cache
+                    dcache = work / f"cache_default_{v}_{r}"
+                    shutil.rmtree(dcache, ignore_errors=True)
+                    runs[v][step].append(render_run(tree, None, dcache, work / f"out_{v}.exr", adjoints=adj))
+                for step, key in steps[len(first):]:
                     runs[v][step].append(render_run(tree, scenes[key], cache, work / f"out_{v}.exr", adjoints=adj))
         # throughput and per-call costs on warm caches (the last repeat's)
         thr = {v: [] for v in variants if v != "adjoints"}

@@ -39,6 +39,12 @@ standard errors.
 
 ``--quick``: 2 materials, the studio map, 64 px, spp 4 16, check at 256 spp (the smoke test).
 ``--docs`` writes docs/bench_vs_mitsuba.md (generated; edits there are overwritten).
+The full benchmark is the one command ``python -m benchmarks.bench_vs_mitsuba --docs
+--json results/bench_vs_mitsuba.json``: every ``.bsdf`` of ``$RBRDF_DATA/rgl`` (20) under both maps,
+256 px, spp 4 16 64, the check on 2 materials at 1024 spp. Estimated 15-20 min on the 2-core
+machine at load 1-2 (the 6-material run, 12 cases with the check, took 249 s; a case is about
+20 s, the check about 20 s a material and map); ``--resolution 128`` takes about a quarter of
+that (the 2-material, 1-map, 128 px run without the check: 39-72 s at load 8-11).
 Mitsuba comes with the ``reference`` extra; its LLVM variant needs a shared libLLVM (Debian:
 ``apt-get install libllvm19``; found automatically, or set ``DRJIT_LIBLLVM_PATH``).
 """

@@ -120,6 +120,29 @@ def _no_mis_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3, weigh
     return 1.0 / weight
 
 
+@wp.func
+def _no_exact(t: int) -> bool:
+    return True
+
+
+def make_pdf_exact(techniques):
+    """``bsdf_pdf_exact(t) -> bool``: whether technique ``t``'s pdf is ``1 / weight`` of its
+    samples (``pdf_exact``), over ``techniques`` as for :func:`make_bsdf_sampling`."""
+    if not techniques:
+        return _no_exact
+    code, _, _, exact = techniques[0]
+    code, exact = int(code), bool(exact)
+    rest = make_pdf_exact(techniques[1:])
+
+    @G.inline_func
+    def bsdf_pdf_exact(t: int) -> bool:
+        if t == wp.static(code):
+            return wp.static(exact)
+        return wp.static(rest)(t)
+
+    return bsdf_pdf_exact
+
+
 def make_bsdf_sampling(techniques):
     """``(bsdf_sample, bsdf_pdf, bsdf_mis_pdf)`` over ``techniques``: (code, sample, pdf,
     pdf_exact) tuples, selected by the technique code ``t``. ``bsdf_mis_pdf(mats, m, t, wi, wo,
@@ -154,6 +177,61 @@ def make_bsdf_sampling(techniques):
     return bsdf_sample, bsdf_pdf, bsdf_mis_pdf
 
 
+@wp.func
+def _no_eval_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3):
+    return wp.vec3(0.0), 0.0, 0
+
+
+def make_fused(techniques):
+    """``(bsdf_sample_f, bsdf_eval_pdf)`` over ``techniques`` (tuples as for
+    :func:`make_bsdf_sampling`, optionally with two more entries: the technique's fused
+    ``sample_f(mats, m, wo, xi) -> (vec4, vec3 f, 1)`` and ``eval_pdf(mats, m, wi, wo) -> (vec3
+    f, float pdf, 0 | 1)``, or None; :func:`warp_rbrdf.techniques.rgl.kernel_fused`).
+
+    ``bsdf_sample_f(mats, m, t, wo, xi) -> (sample, f, has_f)``: the technique's sample, with
+    f_r at its direction where the technique computes it on the way (``has_f`` 1), else
+    ``has_f`` 0 (the caller evaluates the material). ``bsdf_eval_pdf(mats, m, t, wi, wo) -> (f,
+    pdf, has)``: f_r and the technique's pdf at one pair where it shares their work (``has``
+    1), else ``has`` 0."""
+    sample, _, _ = make_bsdf_sampling([t[:4] for t in techniques])
+    fused = [(int(t[0]), t[4], t[5]) for t in techniques if len(t) > 5 and t[4] is not None]
+    return _sample_f_chain(fused, sample), _eval_pdf_chain(fused)
+
+
+def _sample_f_chain(fused, sample):
+    if not fused:
+        @G.inline_func
+        def bsdf_sample_f0(mats: Materials, m: int, t: int, wo: wp.vec3, xi: wp.vec2):
+            return wp.static(sample)(mats, m, t, wo, xi), wp.vec3(0.0), 0
+
+        return bsdf_sample_f0
+    code, sample_f, _ = fused[0]
+    rest = _sample_f_chain(fused[1:], sample)
+
+    @G.inline_func
+    def bsdf_sample_f(mats: Materials, m: int, t: int, wo: wp.vec3, xi: wp.vec2):
+        if t == wp.static(code):
+            return wp.static(sample_f)(mats, m, wo, xi)
+        return wp.static(rest)(mats, m, t, wo, xi)
+
+    return bsdf_sample_f
+
+
+def _eval_pdf_chain(fused):
+    if not fused:
+        return _no_eval_pdf
+    code, _, eval_pdf = fused[0]
+    rest = _eval_pdf_chain(fused[1:])
+
+    @G.inline_func
+    def bsdf_eval_pdf(mats: Materials, m: int, t: int, wi: wp.vec3, wo: wp.vec3):
+        if t == wp.static(code):
+            return wp.static(eval_pdf)(mats, m, wi, wo)
+        return wp.static(rest)(mats, m, t, wi, wo)
+
+    return bsdf_eval_pdf
+
+
 # --------------------------------------------------------------------------------------------
 # Kernels
 # --------------------------------------------------------------------------------------------
@@ -172,31 +250,50 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     queries of :func:`warp_rbrdf.geometry.make_tracer` test only those)."""
     closest_hit, any_hit = G.make_tracer(has_mesh, has_spheres)
     bsdf_eval = make_bsdf_eval(kinds)
-    bsdf_sample, bsdf_pdf, bsdf_mis_pdf = make_bsdf_sampling(techniques)
+    base = [t[:4] for t in techniques]
+    bsdf_sample, bsdf_pdf, _ = make_bsdf_sampling(base)
+    bsdf_pdf_exact = make_pdf_exact(base)
+    bsdf_sample_f, bsdf_eval_pdf = make_fused(techniques)
+    sample_2d = P.sample_2d
 
     @G.inline_func
     def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
                         pseed: wp.uint32, s: int, spp: int, pattern: int, max_depth: int,
                         hide_env: int, eps: float, px: int, py: int) -> wp.vec3:
-        j = P.sample_2d(pattern, pseed, s, spp, 0)
+        Lsum = wp.vec3(0.0)
+        if max_depth < 1:
+            return Lsum
+        j = sample_2d(pattern, pseed, s, spp, 0)
         d = C.camera_ray(cam, float(px) + j[0], float(py) + j[1])
         o = cam.origin
-        Lsum = wp.vec3(0.0)
         thr = wp.vec3(1.0)
-        mode = int(0)       # how to weight the environment when the ray escapes
-        prev_pdf = float(0.0)
-        depth = int(0)
-        while depth < max_depth:
-            hit, t, ng, ns, m = closest_hit(geo, o, d)
+        # how to weight the environment when the ray escapes
+        mode = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        prev_pdf = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+        depth = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        # 1: the next ray is the last BSDF ray, only tested for escaping (any hit)
+        shadow = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        hit = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        t = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+        ng = wp.vec3(0.0)
+        ns = wp.vec3(0.0)
+        m = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+        # one call site per material / environment function (each is inlined where it is
+        # called: fewer sites compile faster, docs/architecture.md)
+        while True:
+            if shadow == 1:
+                hit = wp.where(any_hit(geo, o, d, 1.0e30), 1, 0)
+            else:
+                hit, t, ng, ns, m = closest_hit(geo, o, d)
             if hit == 0:
-                if mode == 0:
-                    if hide_env == 0:
-                        Lsum = Lsum + L.env_eval(env, d)
-                elif mode == 1:
-                    Lsum = Lsum + wp.cw_mul(thr, L.env_eval(env, d))
-                elif mode == 2:
-                    w = power_heuristic(prev_pdf, L.env_pdf(env, d))
-                    Lsum = Lsum + wp.cw_mul(thr, L.env_eval(env, d)) * w
+                if mode == 1 or mode == 2 or (mode == 0 and hide_env == 0):
+                    uv = L.env_dir_to_uv(env, d)   # once for the radiance and the pdf
+                    w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                    if mode == 2:
+                        w = power_heuristic(prev_pdf, L.env_pdf_uv(env, uv))
+                    Lsum = Lsum + wp.cw_mul(thr, L.env_eval_uv(env, uv)) * w
+                break
+            if shadow == 1:
                 break
             p = o + d * t
             wo_w = -d
@@ -209,67 +306,97 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             tech = mats.technique[m]
             org = p + ng * (eps * (1.0 + wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))))
 
-            # directional lights (delta): always one shadow ray each
-            for li in range(dl.count):
-                wl = dl.to_light[li]
-                if wp.dot(wl, ng) > 0.0:
-                    wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
-                    if wi[2] > 0.0:
-                        fv = bsdf_eval(mats, m, wi, wo)
-                        if max3(fv) > 0.0:
-                            if not any_hit(geo, org, wl, 1.0e30):
-                                Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, dl.irradiance[li])) * wi[2]
-
+            # One loop over every directional light (delta: always one shadow ray each), one
+            # environment sample, then the BSDF sample; each calls the material's evaluation and
+            # pdf at one site (the compile time follows the number of inlined copies).
             dim = 1 + 2 * depth
-            # environment light sample
-            if comb != COMBINE_BSDF and env.can_sample == 1:
-                ls = L.env_sample(env, P.sample_2d(pattern, pseed, s, spp, dim))
-                wl = wp.vec3(ls[0], ls[1], ls[2])
-                pl = ls[3]
-                if pl > 0.0 and wp.dot(wl, ng) > 0.0:
-                    wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
-                    if wi[2] > 0.0:
-                        fv = bsdf_eval(mats, m, wi, wo)
-                        if max3(fv) > 0.0:
-                            if not any_hit(geo, org, wl, 1.0e30):
-                                w = 1.0
-                                if comb == COMBINE_MIS:
-                                    w = power_heuristic(pl, bsdf_pdf(mats, m, tech, wi, wo))
-                                Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, L.env_eval(env, wl))) * (wi[2] * w / pl)
-
             last = depth + 1 >= max_depth
+            n_dl = dl.count
+            n_light = n_dl
+            if comb != COMBINE_BSDF and env.can_sample == 1:
+                n_light = n_dl + 1
+            n_try = n_light + 1
             if comb == COMBINE_LIGHT and last:
+                n_try = n_light       # the path ends: no BSDF sample
+            go_on = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+            wiw = wp.vec3(0.0)
+            for li in range(n_try):
+                wi = wp.vec3(0.0)
+                wl = wp.vec3(0.0)
+                luv = wp.vec2(0.0)   # the environment sample's map coordinates
+                pl = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                wb = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+                ok = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+                if li < n_dl:
+                    wl = dl.to_light[li]
+                elif li < n_light:
+                    ls, luv = L.env_sample_uv(env, sample_2d(pattern, pseed, s, spp, dim))
+                    wl = wp.vec3(ls[0], ls[1], ls[2])
+                    pl = ls[3]
+                fv = wp.vec3(0.0)
+                pf = float(0.0)  # noqa: UP018 - a Warp loop-carried variable
+                has_f = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+                if li < n_light:
+                    if pl > 0.0 and wp.dot(wl, ng) > 0.0:
+                        wi = wp.vec3(wp.dot(wl, T), wp.dot(wl, B), wp.dot(wl, ns))
+                        if wi[2] > 0.0:
+                            ok = 1
+                            if li >= n_dl and comb == COMBINE_MIS:
+                                # f and the MIS pdf together where the technique shares their work
+                                fv, pf, has_f = bsdf_eval_pdf(mats, m, tech, wi, wo)
+                else:
+                    bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
+                    wi = wp.vec3(bs[0], bs[1], bs[2])
+                    wb = bs[3]
+                    if wb > 0.0 and wi[2] > 0.0:
+                        wiw = T * wi[0] + B * wi[1] + ns * wi[2]
+                        if wp.dot(wiw, ng) > 0.0:
+                            ok = 1
+                if ok == 1:
+                    if has_f == 0:
+                        fv = bsdf_eval(mats, m, wi, wo)
+                    want_pdf = int(0)  # noqa: UP018, RUF046 - a Warp loop-carried variable
+                    if li < n_light:
+                        if max3(fv) > 0.0:  # noqa: SIM102 - Warp evaluates both sides of `and`
+                            if not any_hit(geo, org, wl, 1.0e30):
+                                ok = 2
+                                if li >= n_dl and comb == COMBINE_MIS and has_f == 0:
+                                    want_pdf = 1
+                    else:
+                        thr = wp.cw_mul(thr, fv) * (wi[2] * wb)
+                        if max3(thr) > 0.0:
+                            ok = 2
+                            if comb == COMBINE_MIS and not bsdf_pdf_exact(tech):
+                                want_pdf = 1
+                    pb = pf
+                    if want_pdf == 1:
+                        pb = bsdf_pdf(mats, m, tech, wi, wo)
+                    if ok == 2:
+                        if li < n_dl:
+                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, dl.irradiance[li])) * wi[2]
+                        elif li < n_light:
+                            w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
+                            if comb == COMBINE_MIS:
+                                w = power_heuristic(pl, pb)
+                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, L.env_eval_uv(env, luv))) * (wi[2] * w / pl)
+                        else:
+                            go_on = 1
+                            mode = 1
+                            if comb == COMBINE_LIGHT:
+                                mode = 3
+                            elif comb == COMBINE_MIS and env.can_sample == 1:
+                                mode = 2
+                            # the density MIS uses for the BSDF sample: 1 / weight where the
+                            # technique's pdf is exact, its pdf function otherwise
+                            prev_pdf = 1.0 / wb
+                            if want_pdf == 1:
+                                prev_pdf = pb
+            if go_on == 0:
                 break
-            # BSDF sample
-            bs = bsdf_sample(mats, m, tech, wo, P.sample_2d(pattern, pseed, s, spp, dim + 1))
-            wi = wp.vec3(bs[0], bs[1], bs[2])
-            wb = bs[3]
-            if wb <= 0.0 or wi[2] <= 0.0:
-                break
-            wiw = T * wi[0] + B * wi[1] + ns * wi[2]
-            if wp.dot(wiw, ng) <= 0.0:
-                break
-            fv = bsdf_eval(mats, m, wi, wo)
-            thr = wp.cw_mul(thr, fv) * (wi[2] * wb)
-            if max3(thr) <= 0.0:
-                break
-            mode = 1
-            if comb == COMBINE_LIGHT:
-                mode = 3
-            elif comb == COMBINE_MIS and env.can_sample == 1:
-                mode = 2
-            pb = 1.0 / wb
-            if comb == COMBINE_MIS:
-                pb = bsdf_mis_pdf(mats, m, tech, wi, wo, wb)
-            prev_pdf = pb
             if last:
-                if mode != 3 and env.present == 1:
-                    if not any_hit(geo, org, wiw, 1.0e30):
-                        w = 1.0
-                        if mode == 2:
-                            w = power_heuristic(pb, L.env_pdf(env, wiw))
-                        Lsum = Lsum + wp.cw_mul(thr, L.env_eval(env, wiw)) * w
-                break
+                if mode == 3 or env.present == 0:
+                    break
+                shadow = 1   # the last ray: only whether it escapes
             o = org
             d = wiw
             depth = depth + 1

@@ -673,12 +673,19 @@ def env_lookup_uv(env: EnvMap, u: float, v: float) -> wp.vec3:
 
 
 @wp.func
+def env_eval_uv(env: EnvMap, uv: wp.vec2) -> wp.vec3:
+    """:func:`env_eval` at the map coordinates ``uv`` (:func:`env_dir_to_uv`) of a direction."""
+    if env.present == 0:
+        return wp.vec3(0.0)
+    return env_lookup_uv(env, uv[0], uv[1])
+
+
+@wp.func
 def env_eval(env: EnvMap, d: wp.vec3) -> wp.vec3:
     """Radiance arriving from world direction ``d`` (pointing out to the environment)."""
     if env.present == 0:
         return wp.vec3(0.0)
-    uv = env_dir_to_uv(env, d)
-    return env_lookup_uv(env, uv[0], uv[1])
+    return env_eval_uv(env, env_dir_to_uv(env, d))
 
 
 @wp.func
@@ -698,14 +705,21 @@ def _pc_pdf(env: EnvMap, uv: wp.vec2) -> float:
 
 
 @wp.func
+def env_pdf_uv(env: EnvMap, uv: wp.vec2) -> float:
+    """:func:`env_pdf` at the map coordinates ``uv`` (:func:`env_dir_to_uv`) of a direction."""
+    if env.can_sample == 0:
+        return 0.0
+    if env.scheme == SCHEME_PIECEWISE_CONSTANT:
+        return _pc_pdf(env, uv)
+    return env_lookup_lum(env, uv[0], uv[1]) * env.pdf_scale
+
+
+@wp.func
 def env_pdf(env: EnvMap, d: wp.vec3) -> float:
     """Solid-angle density (1/sr) of :func:`env_sample` for world direction ``d``."""
     if env.can_sample == 0:
         return 0.0
-    uv = env_dir_to_uv(env, d)
-    if env.scheme == SCHEME_PIECEWISE_CONSTANT:
-        return _pc_pdf(env, uv)
-    return env_lookup_lum(env, uv[0], uv[1]) * env.pdf_scale
+    return env_pdf_uv(env, env_dir_to_uv(env, d))
 
 
 # --- inversion inside a patch (float64) -------------------------------------------------------
@@ -982,6 +996,27 @@ def _pc_sample_local(env: EnvMap, xi: wp.vec2) -> wp.vec3:
     sin_t = wp.sqrt(wp.max(0.0, 1.0 - cos_t * cos_t))
     phi = 2.0 * wp.pi * u
     return wp.vec3(wp.sin(phi) * sin_t, cos_t, -wp.cos(phi) * sin_t)
+
+
+@wp.func
+def env_sample_uv(env: EnvMap, xi: wp.vec2):
+    """:func:`env_sample` and the map coordinates of the sampled direction (``(vec4, vec2 uv)``,
+    uv as :func:`env_dir_to_uv` gives them), so its radiance (:func:`env_eval_uv`) needs no
+    second atan2 / acos."""
+    if env.can_sample == 0:
+        return wp.vec4(0.0, 1.0, 0.0, 0.0), wp.vec2(0.0)
+    dl = wp.vec3(0.0)
+    if env.scheme == SCHEME_PIECEWISE_CONSTANT:
+        dl = _pc_sample_local(env, xi)
+    else:
+        uv = _sample_patch_uv(env, xi)
+        phi = 2.0 * wp.pi * float(uv[0])
+        theta = wp.pi * float(uv[1])
+        st = wp.sin(theta)
+        dl = wp.vec3(wp.sin(phi) * st, wp.cos(theta), -wp.cos(phi) * st)
+    dw = env.rot * dl
+    uvw = env_dir_to_uv(env, dw)
+    return wp.vec4(dw[0], dw[1], dw[2], env_pdf_uv(env, uvw)), uvw
 
 
 @wp.func

@@ -111,8 +111,11 @@ class Renderer:
         techniques = []
         for c in codes:
             t = registry.technique_by_code(c)
-            sample, pdf = t.impl().kernel_functions(md.global_fits if t.needs_fit else ())
-            techniques.append((c, sample, pdf, t.pdf_exact))
+            fits = md.global_fits if t.needs_fit else ()
+            sample, pdf = t.impl().kernel_functions(fits)
+            fused = getattr(t.impl(), "kernel_fused", None)   # optional: sample + f, f + pdf
+            sample_f, eval_pdf = fused(fits) if fused is not None else (None, None)
+            techniques.append((c, sample, pdf, t.pdf_exact, sample_f, eval_pdf))
         g = self.geometry
         return integrator.make_kernels(kinds, techniques, has_mesh=g.num_triangles > 0,
                                        has_spheres=g.num_spheres > 0)

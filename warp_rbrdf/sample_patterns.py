@@ -27,6 +27,8 @@ the same sampler (the fidelity and comparison studies' paired renders rely on th
 """
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 import warp as wp
 
@@ -41,6 +43,17 @@ STREAM_SHIFT = 8
 STREAM_KEY_MASK = (1 << 23) - 1
 
 ONE_MINUS_EPS = 0.99999994
+
+_HAS_INLINE = "inline" in inspect.signature(wp.func).parameters
+
+
+def _noinline(f):
+    """``wp.func`` never inlined (Warp 1.19's ``inline=False``): :func:`sample_2d` holds every
+    pattern's code and the render kernel calls it three times per bounce; one out-of-line copy
+    (its arguments are five scalars, so a call costs a few ns) cut the cold compile of the
+    default scene's kernel by about 1.9 s of CPU (7.0 -> 5.2 s, ``docs/architecture.md``)."""
+    return wp.func(f, inline=False) if _HAS_INLINE else wp.func(f)
+
 
 # 32-bit hash constants above 2^31 (as uint32 constants so the C++ sees no int32 overflow)
 _K846CA68B = wp.constant(wp.uint32(0x846CA68B))
@@ -208,7 +221,7 @@ def sobol_2d(s: int, p: wp.uint32) -> wp.vec2:
     return wp.vec2(wp.min(u32_to_unit(x), ONE_MINUS_EPS), wp.min(u32_to_unit(y), ONE_MINUS_EPS))
 
 
-@wp.func
+@_noinline
 def sample_2d(pattern: int, pseed: wp.uint32, s: int, spp: int, dim: int) -> wp.vec2:
     """2-D sample ``dim`` of sample ``s`` (of ``spp``) in the pixel with seed ``pseed``.
     ``pattern``: :func:`kernel_pattern` (pattern code in the low bits, stream key above them;

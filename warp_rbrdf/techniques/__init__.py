@@ -13,5 +13,13 @@ global-layout fits included, are in :class:`~warp_rbrdf.materials.data.Materials
 and the NumPy references ``numpy_sample(cdf, wo, xi) -> (wi, weight)`` and
 ``numpy_pdf(cdf, wi, wo)``, where ``cdf`` is the material's inverse-CDF data (None, a
 :class:`fit.sampling.table.CDFTable` or a :class:`fit.sampling.cdf_file.CDFFit`).
-:mod:`.cdf_data` prepares and packs that data.
+:mod:`.cdf_data` prepares and packs that data (:mod:`.table_cache` remembers the tables it
+tabulates at load).
+
+Optional, for speed: ``kernel_fused(global_fits) -> (sample_f, eval_pdf)``, where ``sample_f(mats,
+m, wo, xi) -> (vec4, vec3 f, int)`` is ``sample`` with f_r at the sampled direction computed on
+the way (last value 1; 0: the integrator evaluates the material) and ``eval_pdf(mats, m, wi, wo)
+-> (vec3 f, float pdf, int)`` f_r and ``pdf`` at one pair sharing their work (last value 0: not
+applicable, e.g. another material kind). The integrator uses them where present
+(:func:`warp_rbrdf.integrator.make_fused`; ``rgl`` has them).
 """

@@ -3,7 +3,7 @@ where they come from, and how they are packed into :class:`warp_rbrdf.materials.
 
 A material whose strategy's technique needs a table (``tabulated``, ``rational``) gets one:
 from its ``cdf = "file.json"`` (an ``rbrdf-cdf`` file of ``rbrdf-fit cdf``), or tabulated from
-the material itself at load. A technique that needs verified rational inverse CDFs gets them
+the material itself at load (remembered on disk: :mod:`.table_cache`). A technique that needs verified rational inverse CDFs gets them
 from the same file, or fitted at load (printed: it takes seconds). A fit that failed its
 verification (``CDFFit.fallback``) switches the material to its strategy's ``fallback``
 (printed, never silent).
@@ -18,11 +18,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
-from fit.sampling.cdf_file import fit_cdf
-from fit.sampling.cdf_file import load as load_cdf
-from fit.sampling.pieces import PieceMaps, pieces_phi_knots
-from fit.sampling.table import tabulate
 
 from .. import registry
 from ..chebyshev import FlatData
@@ -44,12 +39,17 @@ from ..materials.data import (
     N_CDF_INFO,
     Pool,
 )
+from .table_cache import cached_tabulate
 
 
 def _read_cdf(spec, scene_file, key):
     cdf = getattr(spec, "cdf", None)
     if cdf is None or not isinstance(cdf, (str, bytes, Path)):
         return cdf
+    from fit.sampling.cdf_file import (
+        load as load_cdf,  # scipy: imported only when needed
+    )
+
     try:
         return load_cdf(cdf)
     except Exception as e:  # noqa: BLE001 - BRDFFileError and I/O errors, one line
@@ -74,6 +74,8 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
         if fitobj is None:
             log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
                 f"from `rbrdf-fit cdf` to skip this)")
+            from fit.sampling.cdf_file import fit_cdf
+
             fitobj = fit_cdf(loaded.evaluate, name=spec.name)
         if fitobj.fallback:
             fb = registry.strategy(strat.fallback)
@@ -82,7 +84,7 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
         return strat, fitobj
     if fitobj is not None:
         return strat, fitobj.table
-    return strat, tabulate(loaded.evaluate)
+    return strat, cached_tabulate(spec, loaded.evaluate)
 
 
 def pack(cdfs) -> dict:
@@ -106,6 +108,11 @@ def pack(cdfs) -> dict:
         info[m, CDF_LAYOUT] = LAYOUT_NONE
         if cdf is table:
             continue
+        from fit.sampling.pieces import (  # scipy: only with a fit
+            PieceMaps,
+            pieces_phi_knots,
+        )
+
         if isinstance(cdf.maps, PieceMaps):
             pm = cdf.maps
             info[m, CDF_LAYOUT] = LAYOUT_PIECES

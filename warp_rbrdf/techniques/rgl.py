@@ -21,7 +21,14 @@ from fit.formats.rgl_interpolants import interval
 
 from ..materials import rgl as R
 from ..materials.data import Materials
-from ..materials.rgl_tables import theta_interval, warp_eval, warp_invert, warp_sample
+from ..materials.rgl_tables import (
+    bilinear,
+    rgb_eval,
+    theta_interval,
+    warp_eval,
+    warp_invert,
+    warp_sample,
+)
 from ..registry import material
 
 RGL_CODE = material("rgl").code
@@ -94,8 +101,107 @@ def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
     return wp.max(sw[2] * lum / jac, 0.0)
 
 
+@wp.func
+def _value(mats: Materials, m: int, h: int, n: int, t0: int, w1: float, theta_t: float, phi_t: float,
+           umx: float, umy: float, sx: float, sy: float, wi: wp.vec3) -> wp.vec3:
+    """f_r of the material with header ``h`` (view incident) from its warped coordinates: the
+    rgb tensor at (sx, sy), the jacobian ndf(umx, umy) / (4 sigma(theta_t, phi_t)), clamped to
+    0, scaled, divided by cos(theta_l) -- the steps of :func:`warp_rbrdf.materials.rgl.rgl_eval`
+    after its inverse VNDF warp."""
+    v = rgb_eval(mats, mats.rgl_i[h + R.RGL_RGB], mats.rgl_i[h + R.RGL_LUM_NY], mats.rgl_i[h + R.RGL_LUM_NX],
+                 n, t0, w1, sx, sy)
+    if mats.rgl_i[h + R.RGL_JACOBIAN] != 0:
+        ndf = bilinear(mats, mats.rgl_i[h + R.RGL_NDF], mats.rgl_i[h + R.RGL_NDF_NY],
+                       mats.rgl_i[h + R.RGL_NDF_NX], umx, umy)
+        sig = bilinear(mats, mats.rgl_i[h + R.RGL_SIGMA], mats.rgl_i[h + R.RGL_SIGMA_NY],
+                       mats.rgl_i[h + R.RGL_SIGMA_NX], R.theta_to_u(theta_t), R.phi_to_u(phi_t))
+        v = v * (ndf / (4.0 * sig))
+    v = wp.vec3(wp.max(v[0], 0.0), wp.max(v[1], 0.0), wp.max(v[2], 0.0))
+    return wp.cw_mul(v, mats.scale[m]) / wi[2]
+
+
+@wp.func
+def sample_f(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2):
+    """:func:`sample` and f_r at the sampled light (``(vec4 sample, vec3 f, 1)``; ``0`` last:
+    not an rgl material with the view incident, use :func:`sample` and the material's eval).
+    The value is read at the luminance warp's output, the point the inverse VNDF warp of the
+    sampled micro-normal returns (up to rounding), so no inverse warp is needed."""
+    if mats.kind[m] != wp.static(RGL_CODE) or wo[2] <= 0.0:
+        return wp.vec4(0.0), wp.vec3(0.0), 1
+    h = mats.offset[m]
+    if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
+        return wp.vec4(0.0), wp.vec3(0.0), 1
+    theta_t = R.elevation(wo)
+    phi_t = wp.atan2(wo[1], wo[0])
+    n = mats.rgl_i[h + R.RGL_N_THETA]
+    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
+    t0 = int(tw[0])
+    w1 = tw[1]
+    s = warp_sample(mats, mats.rgl_i[h + R.RGL_LUM_DATA], mats.rgl_i[h + R.RGL_LUM_COND],
+                    mats.rgl_i[h + R.RGL_LUM_MARG], mats.rgl_i[h + R.RGL_LUM_NY],
+                    mats.rgl_i[h + R.RGL_LUM_NX], n, t0, w1, xi[1], xi[0])
+    u = warp_sample(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
+                    mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
+                    mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, s[0], s[1])
+    theta_m = u[0] * u[0] * wp.HALF_PI
+    phi_m = (2.0 * u[1] - 1.0) * wp.pi + phi_t
+    st = wp.sin(theta_m)
+    wm = wp.vec3(wp.cos(phi_m) * st, wp.sin(phi_m) * st, wp.cos(theta_m))
+    c = wp.dot(wm, wo)
+    jac = wp.max(2.0 * wp.pi * wp.pi * u[0] * st, MIN_JACOBIAN) * 4.0 * c
+    pdf_s = u[2] * s[2] / jac
+    wi = wm * (2.0 * c) - wo
+    if c <= 0.0 or wi[2] <= 0.0 or not (pdf_s > 0.0) or pdf_s > 1.0e30:
+        return wp.vec4(0.0), wp.vec3(0.0), 1
+    f = _value(mats, m, h, n, t0, w1, theta_t, phi_t, u[0], R.phi_to_u(phi_m - phi_t), s[0], s[1], wi)
+    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf_s), f, 1
+
+
+@wp.func
+def eval_pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3):
+    """f_r and :func:`pdf` at one direction pair with one inverse VNDF warp (``(vec3 f, float
+    pdf, 1)``; ``0`` last: not an rgl material with the view incident, use the material's eval
+    and :func:`pdf`)."""
+    if mats.kind[m] != wp.static(RGL_CODE):
+        return wp.vec3(0.0), 0.0, 0
+    h = mats.offset[m]
+    if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
+        return wp.vec3(0.0), 0.0, 0
+    if wi[2] <= 0.0 or wo[2] <= 0.0:
+        return wp.vec3(0.0), 0.0, 1
+    sv = wi + wo
+    wm = sv / wp.length(sv)
+    theta_t = R.elevation(wo)
+    phi_t = wp.atan2(wo[1], wo[0])
+    n = mats.rgl_i[h + R.RGL_N_THETA]
+    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
+    t0 = int(tw[0])
+    w1 = tw[1]
+    umx = R.theta_to_u(R.elevation(wm))
+    umy = R.phi_to_u(wp.atan2(wm[1], wm[0]) - phi_t)
+    sw = warp_invert(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
+                     mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
+                     mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, umx, umy)
+    f = _value(mats, m, h, n, t0, w1, theta_t, phi_t, umx, umy, sw[0], sw[1], wi)
+    lum = warp_eval(mats, mats.rgl_i[h + R.RGL_LUM_DATA], mats.rgl_i[h + R.RGL_LUM_NY],
+                    mats.rgl_i[h + R.RGL_LUM_NX], n, t0, w1, sw[0], sw[1])
+    st = wp.sqrt(wm[0] * wm[0] + wm[1] * wm[1])
+    jac = wp.max(2.0 * wp.pi * wp.pi * umx * st, MIN_JACOBIAN) * 4.0 * wp.dot(wo, wm)
+    p = float(0.0)  # noqa: UP018 - a Warp variable assigned in a branch
+    if jac > 0.0:
+        p = wp.max(sw[2] * lum / jac, 0.0)
+    return f, p, 1
+
+
 def kernel_functions(cdfs=()):
     return sample, pdf
+
+
+def kernel_fused(cdfs=()):
+    """``(sample_f, eval_pdf)``: the sample with f_r at its direction, and f_r with the pdf at
+    one pair, each sharing the warps (the integrator's per-sample cost; optional in the
+    technique interface, :func:`warp_rbrdf.integrator.make_bsdf_sampling`)."""
+    return sample_f, eval_pdf
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,0 +1,93 @@
+"""Inverse-CDF tables remembered on disk (warp_rbrdf.techniques.table_cache): the key follows
+the file and the spec, a stored table is the tabulated one bit for bit, and the table shipped
+for the embedded default scene is the one its fit tabulates to today."""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fit.sampling.table import tabulate
+from warp_rbrdf.defaults import default_scene
+from warp_rbrdf.materials.build import build_material_data
+from warp_rbrdf.registry import material
+from warp_rbrdf.techniques import table_cache as tc
+
+_ARRAYS = ("theta_v", "cdf_theta", "cdf_phi", "row_fallback", "albedo")
+
+
+def _same(a, b):
+    for k in _ARRAYS:
+        x, y = getattr(a, k), getattr(b, k)
+        assert x.dtype == y.dtype and x.shape == y.shape, k
+        assert np.array_equal(x, y), k
+    assert a.eps == b.eps
+
+
+def _sphere_spec():
+    return default_scene().materials["sphere"]
+
+
+def test_key_follows_file_and_spec(tmp_path):
+    spec = _sphere_spec()
+    k = tc.key(spec)
+    assert k is not None and k == tc.key(dataclasses.replace(spec))
+    assert tc.key(dataclasses.replace(spec, scale=(2.0, 1.0, 1.0))) != k
+    assert tc.key(dataclasses.replace(spec, unvouched="refuse")) != k
+    assert tc.key(dataclasses.replace(spec, data=object())) is None
+    copy = tmp_path / "fit.json"
+    raw = spec.file.read_bytes()
+    copy.write_bytes(raw)
+    assert tc.key(dataclasses.replace(spec, file=copy)) == k   # content, not the path
+    copy.write_bytes(raw + b" ")
+    assert tc.key(dataclasses.replace(spec, file=copy)) != k
+    assert tc.key(dataclasses.replace(spec, file=tmp_path / "missing.json")) is None
+
+
+def test_round_trip_and_user_cache(tmp_path, monkeypatch):
+    spec = dataclasses.replace(_sphere_spec(), type="lambert", file=None, albedo=(0.3, 0.5, 0.7))
+    lm = material("lambert").impl().load(spec, "<t>", "materials.m")
+    t = tabulate(lm.evaluate, n_v=4, n_t=8, n_p=8)
+    tc.write(tmp_path / "t.npz", t)
+    _same(tc.read(tmp_path / "t.npz"), t)
+    assert tc.read(tmp_path / "absent.npz") is None
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    assert tc.read(tmp_path / "bad.npz") is None
+
+    monkeypatch.setattr(tc, "user_dir", lambda: tmp_path / "user")
+    calls = []
+
+    def counting(evaluate):
+        calls.append(1)
+        return tabulate(evaluate, n_v=4, n_t=8, n_p=8)
+
+    monkeypatch.setattr(tc, "tabulate", counting)
+    first = tc.cached_tabulate(spec, lm.evaluate)
+    assert (tmp_path / "user" / f"{tc.key(spec)}.npz").is_file()
+    second = tc.cached_tabulate(spec, lm.evaluate)
+    assert len(calls) == 1
+    _same(first, second)
+    tc.cached_tabulate(dataclasses.replace(spec, data=object()), lm.evaluate)   # never cached
+    assert len(calls) == 2
+
+
+def test_shipped_default_table_is_current(monkeypatch):
+    """The default scene's table is shipped under today's key and equals a fresh tabulation
+    (about 5 s: if this fails, run ``python -m warp_rbrdf.techniques.table_cache``)."""
+    spec = _sphere_spec()
+    shipped = tc.read(tc.SHIPPED / f"{tc.key(spec)}.npz")
+    assert shipped is not None, "no shipped table for the default fit: python -m warp_rbrdf.techniques.table_cache"
+    monkeypatch.setattr(tc, "user_dir", lambda: None)
+    sc = default_scene()
+    md = build_material_data(sc, ["sphere"], log=lambda *a: None)
+    assert md.cdf[0] is not None
+    _same(md.cdf[0], shipped)
+    lm = md.loaded[0]
+    _same(tabulate(lm.evaluate), shipped)
+
+
+@pytest.mark.parametrize("field", ["statistic", "incident"])
+def test_key_spec_fields(field):
+    spec = _sphere_spec()
+    assert tc.key(dataclasses.replace(spec, **{field: "other"})) != tc.key(spec)

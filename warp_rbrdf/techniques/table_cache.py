@@ -1,0 +1,156 @@
+"""Inverse-CDF tables (:class:`fit.sampling.table.CDFTable`) tabulated at load, remembered on disk.
+
+Tabulating a material's table (:func:`fit.sampling.table.tabulate`: 32 view rows x 64 x 64 cells,
+9 evaluations per cell) takes 4-6 s for a rational fit on this 2-core machine: most of the cold
+start of ``rbrdf render`` on the embedded default scene before this module. The table depends
+only on the material's file and its spec fields, so it is stored once under a key:
+
+* ``key``: SHA-256 of the material's type, the bytes of its file, its other spec fields that
+  change the BRDF (``albedo``, ``statistic``, ``scale``, ``incident``, ``unvouched``), the
+  tabulation defaults, :data:`VERSION` and the source of :mod:`fit.sampling.table`; a material
+  given in memory (``spec.data``) or without a readable file is never cached.
+* where: the shipped tables of the shipped fits, ``warp_rbrdf/data/tables/<key>.npz`` (written
+  by ``python -m warp_rbrdf.techniques.table_cache``), then the user cache
+  ``<Warp kernel cache>/rbrdf-tables/<key>.npz`` (written atomically after a tabulation; it goes
+  with the kernel cache, so emptying one empties both).
+
+A stored table is the tabulated one bit for bit (float64 arrays, ``np.savez_compressed``);
+``tests/test_table_cache.py`` checks it and that the shipped tables match the current key.
+Bump :data:`VERSION` when the evaluation of a material kind changes what a file means.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from fit.sampling import table as table_mod
+from fit.sampling.table import CDFTable, tabulate
+
+from ..paths import PACKAGE_DATA
+
+#: Bump when a material kind's evaluation changes what the same file and spec mean.
+VERSION = 1
+SHIPPED = PACKAGE_DATA / "tables"
+_SPEC_FIELDS = ("albedo", "statistic", "scale", "incident", "unvouched")
+_ARRAYS = ("theta_v", "cdf_theta", "cdf_phi", "row_fallback", "albedo")
+
+
+def _source_hash() -> str:
+    return hashlib.sha256(Path(table_mod.__file__).read_bytes()).hexdigest()
+
+
+def key(spec) -> str | None:
+    """Hex key of the default-size table of material ``spec`` (a
+    :class:`warp_rbrdf.scene.specs.MaterialSpec`), or None when it cannot be cached (in-memory
+    data, no file, unreadable file)."""
+    if getattr(spec, "data", None) is not None:
+        return None
+    f = getattr(spec, "file", None)
+    h = hashlib.sha256()
+    if f is not None:
+        try:
+            h.update(Path(f).read_bytes())
+        except OSError:
+            return None
+    fields = {k: _plain(getattr(spec, k, None)) for k in _SPEC_FIELDS}
+    head = {"version": VERSION, "type": spec.type, "fields": fields, "table": _source_hash(),
+            "file": h.hexdigest() if f is not None else None}
+    return hashlib.sha256(json.dumps(head, sort_keys=True).encode()).hexdigest()[:32]
+
+
+def _plain(v):
+    if isinstance(v, (tuple, list, np.ndarray)):
+        return [float(x) for x in np.asarray(v, float).ravel()]
+    return v if v is None or isinstance(v, (str, int, float, bool)) else str(v)
+
+
+def user_dir() -> Path | None:
+    """``<Warp kernel cache>/rbrdf-tables``, or None before Warp knows its cache folder."""
+    try:
+        import warp as wp
+    except ImportError:   # pragma: no cover - warp is a dependency of warp_rbrdf
+        return None
+    base = getattr(wp.config, "kernel_cache_dir", None) or os.environ.get("WARP_CACHE_PATH")
+    return Path(base) / "rbrdf-tables" if base else None
+
+
+def read(path: Path) -> CDFTable | None:
+    """The table stored at ``path``, or None when it is missing or unreadable."""
+    try:
+        with np.load(path) as z:
+            return CDFTable(**{k: np.array(z[k]) for k in _ARRAYS}, eps=float(z["eps"]))
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def write(path: Path, t: CDFTable) -> None:
+    """Store ``t`` at ``path`` atomically (a temporary file in the same folder, then rename)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.stem, suffix=".tmp.npz", dir=path.parent)
+    os.close(fd)
+    try:
+        np.savez_compressed(tmp, **{k: getattr(t, k) for k in _ARRAYS}, eps=np.float64(t.eps))
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+def cached_tabulate(spec, evaluate) -> CDFTable:
+    """:func:`fit.sampling.table.tabulate` of ``evaluate`` (the material of ``spec``), read from
+    the shipped or the user cache when stored there, else tabulated and stored in the user
+    cache (a cache that cannot be written is skipped silently: the table is still correct)."""
+    k = key(spec)
+    if k is None:
+        return tabulate(evaluate)
+    udir = user_dir()
+    for d in (SHIPPED, udir):
+        if d is not None:
+            t = read(d / f"{k}.npz")
+            if t is not None:
+                return t
+    t = tabulate(evaluate)
+    if udir is not None:
+        try:
+            write(udir / f"{k}.npz", t)
+        except OSError:
+            pass
+    return t
+
+
+def ship_default_tables() -> list[Path]:
+    """Tabulate the embedded default scene's fit (the first of the shipped coefficient files,
+    ``warp_rbrdf/data/*.json``, as a rational material with the default spec fields) into
+    ``warp_rbrdf/data/tables/``, removing stale tables (about 1 MB each: only the default's is
+    shipped)."""
+    from ..defaults import shipped_coefficient_files
+    from ..materials.build import build_material_data
+    from ..scene import parse_scene
+
+    written = []
+    for f in shipped_coefficient_files()[:1]:
+        sc = parse_scene(f'[materials.m]\ntype = "rational"\nfile = "pkg:{f.name}"\n'
+                         f'sampler = "mis-tabulated"\n[[shapes]]\ntype = "sphere"\nmaterial = "m"\n',
+                         path="<ship>")
+        spec = sc.materials["m"]
+        k = key(spec)
+        out = SHIPPED / f"{k}.npz"
+        if read(out) is None:
+            md = build_material_data(sc, ["m"], log=lambda *a: None)
+            write(out, md.cdf[0])
+        written.append(out)
+    for p in SHIPPED.glob("*.npz"):
+        if p not in written:
+            p.unlink()
+    return written
+
+
+if __name__ == "__main__":
+    for p in ship_default_tables():
+        print(p)
