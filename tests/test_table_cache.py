@@ -91,3 +91,58 @@ def test_shipped_default_table_is_current(monkeypatch):
 def test_key_spec_fields(field):
     spec = _sphere_spec()
     assert tc.key(dataclasses.replace(spec, **{field: "other"})) != tc.key(spec)
+
+
+def _five_rational_scene():
+    """Five rational materials that each need a table (different scales: different keys; none
+    is the shipped default's)."""
+    from warp_rbrdf.scene import parse_scene
+
+    mats = "".join(f'[materials.m{i}]\ntype = "rational"\nfile = "pkg:satin_rosaline_rgb.json"\n'
+                   f'sampler = "mis-tabulated"\nscale = [{1.25 + i * 0.25}, 1.0, 1.0]\n'
+                   for i in range(5))
+    shapes = "".join(f'[[shapes]]\ntype = "sphere"\nmaterial = "m{i}"\n' for i in range(5))
+    return parse_scene(mats + shapes, path="many.toml")
+
+
+def test_load_time_builds_are_bounded(tmp_path, monkeypatch):
+    """A scene naming more materials than MAX_CDF_BUILDS_AT_LOAD whose tables must be built at
+    load is refused at the first build past the limit, naming that material's cdf key; cache
+    hits cost nothing (issue 22: a small scene file may not ask for minutes of work)."""
+    from warp_rbrdf import limits
+    from warp_rbrdf.errors import SceneError
+
+    built = []
+    shipped = tc.read(next(tc.SHIPPED.glob("*.npz")))
+
+    def fake_tabulate(evaluate):   # the real table of another material: only the count matters
+        built.append(1)
+        return shipped
+
+    monkeypatch.setattr(tc, "tabulate", fake_tabulate)
+    monkeypatch.setattr(tc, "user_dir", lambda: tmp_path / "tables")
+    monkeypatch.setattr(limits, "MAX_CDF_BUILDS_AT_LOAD", 2)
+    scene = _five_rational_scene()
+    with pytest.raises(SceneError, match=r"materials\.m2\.cdf: .*more than 2 .*rbrdf-fit cdf"):
+        build_material_data(scene, log=lambda *a: None)
+    assert len(built) == 2
+    # the two tables built are now cached: a second load builds only what is missing
+    with pytest.raises(SceneError, match=r"materials\.m4\.cdf"):
+        build_material_data(scene, log=lambda *a: None)
+    assert len(built) == 4
+
+
+def test_load_time_build_limit_is_one_line_exit_2(tmp_path, monkeypatch, capsys):
+    from warp_rbrdf import limits
+    from warp_rbrdf.cli import main
+
+    monkeypatch.setattr(tc, "user_dir", lambda: tmp_path / "tables")
+    monkeypatch.setattr(limits, "MAX_CDF_BUILDS_AT_LOAD", 0)
+    scene = tmp_path / "many.toml"
+    scene.write_text('[materials.m]\ntype = "rational"\nfile = "pkg:satin_rosaline_rgb.json"\n'
+                     'sampler = "mis-tabulated"\nscale = [2.0, 1.0, 1.0]\n[[shapes]]\ntype = "sphere"\nmaterial = "m"\n')
+    out = tmp_path / "o.exr"
+    assert main(["render", str(scene), "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "materials.m.cdf" in err and "MAX_CDF_BUILDS_AT_LOAD" in err
+    assert not out.exists()

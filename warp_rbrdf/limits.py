@@ -84,6 +84,13 @@ MAX_RAY_EPSILON = 1e3
 MAX_MATERIALS = 64
 MAX_SHAPES = 4096
 MAX_DIRECTIONAL_LIGHTS = 64
+#: Most inverse-CDF data a scene may have built while it loads: tables tabulated from a material
+#: (not found in the shipped or user table cache) plus rational inverse CDFs fitted at load (a
+#: ``mis-rational`` material without ``cdf =``). Each takes seconds to tens of seconds (a table
+#: ~5 s on an idle core here, 24 s under load; a fit longer), so a small scene file naming many
+#: such materials would otherwise run for many minutes before rendering. ``rbrdf-fit cdf`` makes
+#: the file once; ``cdf = "file.json"`` then costs a read.
+MAX_CDF_BUILDS_AT_LOAD = 4
 #: Most triangles of the whole scene (meshes, planes, tessellated spheres), each mesh file
 #: included; the shared bunny has 69451.
 MAX_TRIANGLES = 1 << 22

@@ -25,6 +25,7 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
     rgl_f, rgl_i = Pool(), Pool(dtype=np.int32)
     loaded, strategies, cdfs = [], [], []
     index_of_kind: dict = {}
+    budget = cdf_data.BuildBudget()   # inverse-CDF builds this load may start
     for i, name in enumerate(names):
         spec = scene.materials[name]
         key = f"materials.{name}"
@@ -46,7 +47,7 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
         else:   # kinds without a table index their own functions
             offset[i] = index_of_kind.get(kd.code, 0)
             index_of_kind[kd.code] = offset[i] + 1
-        strat, cdf = cdf_data.prepare(spec, lm, scene.path, key, log)
+        strat, cdf = cdf_data.prepare(spec, lm, scene.path, key, log, budget)
         technique[i] = registry.technique(strat.technique).code
         combine[i] = registry.combine_code(strat)
         loaded.append(lm)

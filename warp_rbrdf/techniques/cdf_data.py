@@ -56,10 +56,34 @@ def _read_cdf(spec, scene_file, key):
         raise SceneError(scene_file, f"{key}.cdf", f"cannot read CDF file ({e})") from None
 
 
-def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
+class BuildBudget:
+    """How many inverse-CDF builds (a table tabulated, rational inverse CDFs fitted) a scene's
+    load may still start: :data:`warp_rbrdf.limits.MAX_CDF_BUILDS_AT_LOAD` by default. A build
+    past it is refused with a one-line :class:`SceneError` naming the material's ``cdf`` key."""
+
+    def __init__(self, limit: int | None = None):
+        from ..limits import MAX_CDF_BUILDS_AT_LOAD
+
+        self.limit = MAX_CDF_BUILDS_AT_LOAD if limit is None else int(limit)
+        self.used = 0
+
+    def take(self, scene_file, key: str, what: str) -> None:
+        """Count one build of ``what`` for the material at ``key``; raise past the limit."""
+        if self.used >= self.limit:
+            raise SceneError(scene_file, f"{key}.cdf",
+                             f"{what} at load would be build number {self.used + 1} of this scene, "
+                             f"more than {self.limit} (warp_rbrdf.limits.MAX_CDF_BUILDS_AT_LOAD: "
+                             f"each takes seconds to minutes); make a CDF file once with "
+                             f"`rbrdf-fit cdf` and give it as cdf = \"file.json\"")
+        self.used += 1
+
+
+def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print, budget=None):
     """``(strategy actually used, inverse-CDF data)`` of one material: data None (hemisphere
     techniques), a :class:`fit.sampling.table.CDFTable` (tabulated) or a verified
-    :class:`fit.sampling.cdf_file.CDFFit` (rational)."""
+    :class:`fit.sampling.cdf_file.CDFFit` (rational). ``budget`` (a :class:`BuildBudget`, one
+    per scene load; default: a fresh one) bounds the builds a scene's load may start."""
+    budget = BuildBudget() if budget is None else budget
     strat = registry.strategy(spec.sampler)
     tech = registry.technique(strat.technique)
     if not tech.needs_table:
@@ -72,6 +96,7 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
                                                    f"{getattr(spec, 'incident', 'view')!r}")
     if tech.needs_fit:
         if fitobj is None:
+            budget.take(scene_file, key, "fitting rational inverse CDFs")
             log(f"material {spec.name!r}: fitting rational inverse CDFs (give `cdf = \"file.json\"` "
                 f"from `rbrdf-fit cdf` to skip this)")
             from fit.sampling.cdf_file import fit_cdf
@@ -84,7 +109,9 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print):
         return strat, fitobj
     if fitobj is not None:
         return strat, fitobj.table
-    return strat, cached_tabulate(spec, loaded.evaluate)
+    return strat, cached_tabulate(spec, loaded.evaluate,
+                                  before_build=lambda: budget.take(scene_file, key,
+                                                                   "tabulating inverse CDFs"))
 
 
 def pack(cdfs) -> dict:

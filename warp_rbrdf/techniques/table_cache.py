@@ -102,12 +102,16 @@ def write(path: Path, t: CDFTable) -> None:
             os.unlink(tmp)
 
 
-def cached_tabulate(spec, evaluate) -> CDFTable:
+def cached_tabulate(spec, evaluate, before_build=None) -> CDFTable:
     """:func:`fit.sampling.table.tabulate` of ``evaluate`` (the material of ``spec``), read from
     the shipped or the user cache when stored there, else tabulated and stored in the user
-    cache (a cache that cannot be written is skipped silently: the table is still correct)."""
+    cache (a cache that cannot be written is skipped silently: the table is still correct).
+    ``before_build()``, when given, is called just before a table is tabulated (not on a cache
+    hit): the scene's load-time budget (:class:`warp_rbrdf.techniques.cdf_data.BuildBudget`)."""
     k = key(spec)
     if k is None:
+        if before_build is not None:
+            before_build()
         return tabulate(evaluate)
     udir = user_dir()
     for d in (SHIPPED, udir):
@@ -115,6 +119,8 @@ def cached_tabulate(spec, evaluate) -> CDFTable:
             t = read(d / f"{k}.npz")
             if t is not None:
                 return t
+    if before_build is not None:
+        before_build()
     t = tabulate(evaluate)
     if udir is not None:
         try:
