@@ -18,7 +18,7 @@ import warnings
 import numpy as np
 
 from ..errors import RbrdfError
-from . import brdf, cdf, measured
+from . import batch, brdf, cdf, measured
 from .flags import OneLineParser
 
 DESCRIPTION = """\
@@ -40,6 +40,7 @@ def build_parser() -> OneLineParser:
     measured.register(sub)
     brdf.register(sub)
     cdf.register(sub)
+    batch.register(sub)
     return parser
 
 
