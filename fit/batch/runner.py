@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import glob
 import os
+import signal
+import threading
 import time
 from pathlib import Path
 
@@ -126,8 +128,18 @@ def _start_client(workers: int | None, scheduler: str | None, timeout_s: float):
             raise FlagError("--scheduler", f"no worker joined {scheduler} within {timeout_s:g} s") from None
         return client, None, len(client.scheduler_info(n_workers=-1)["workers"])
     n = workers or default_workers()
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                           env=dict(THREAD_ENV), silence_logs=logging.ERROR)
+    # Worker processes start with SIGINT ignored (inherited through exec): Ctrl-C in a terminal
+    # reaches the whole process group, and only this process must act on it (cancel, close the
+    # cluster); workers killed by their own KeyboardInterrupt would print tracebacks.
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               env=dict(THREAD_ENV), silence_logs=logging.ERROR)
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
     return Client(cluster), cluster, n
 
 

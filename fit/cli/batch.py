@@ -54,9 +54,14 @@ def _cmd_batch(args) -> int:
             check_table_size(args.n_v, args.n_t, args.n_p)
         except ValueError as e:
             raise FlagError("--n-v/--n-t/--n-p", str(e)) from None
-    report = fit_database(args.inputs, args.out, tols=args.tol, cdf=not args.no_cdf, brdf_options=brdf,
-                          cdf_options=cdf, workers=args.workers, scheduler=args.scheduler,
-                          log=None if args.quiet else (lambda s: print(display_text(s), flush=True)))
+    try:
+        report = fit_database(args.inputs, args.out, tols=args.tol, cdf=not args.no_cdf, brdf_options=brdf,
+                              cdf_options=cdf, workers=args.workers, scheduler=args.scheduler,
+                              log=None if args.quiet else (lambda s: print(display_text(s), flush=True)))
+    except KeyboardInterrupt:
+        print("rbrdf-fit batch: interrupted: the materials finished are kept, the tasks in flight were "
+              "cancelled (no file half-written); run the same command again to resume", file=sys.stderr)
+        return 130
     c = report.counts
     failed = report.failed()
     print(f"{len(report)} rows; outputs done {c.get('done', 0)}, skipped (done before) {c.get('skipped', 0)}, "
