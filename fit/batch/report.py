@@ -174,6 +174,12 @@ def plot_coefficients(rows, path, outputs=None, title: str = "coefficients again
 
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import (
+        FixedLocator,
+        LogLocator,
+        NullFormatter,
+        ScalarFormatter,
+    )
 
     from ..outputs import save_figure
 
@@ -202,8 +208,14 @@ def plot_coefficients(rows, path, outputs=None, title: str = "coefficients again
     ax.scatter([], [], s=22, marker="x", color="tab:red", label="core NOT guaranteed (flagged)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xticks(tols)
+    ax.xaxis.set_major_locator(FixedLocator(tols))
     ax.set_xticklabels([f"{t:g}" for t in tols])
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(ScalarFormatter())
+    ax.yaxis.set_minor_formatter(NullFormatter())
+    if len(tols) == 1:
+        ax.set_xlim(tols[0] / 1.5, tols[0] * 1.5)
     ax.set_xlabel("relative tolerance")
     ax.set_ylabel("coefficients (R + G + B, all pieces)")
     ax.set_title(f"{title} ({len(by_mat)} materials)")

@@ -195,7 +195,9 @@ def _error_text(e: BaseException) -> str:
 
 def run_material(path, options: BatchOptions, out, input_sha256: str | None = None) -> dict:
     """Fit one material (every tolerance of ``options``, and its CDF unless ``options.cdf`` is
-    None) into ``material_dir(out, path)``; outputs already done are skipped.
+    None) into ``material_dir(out, path)``; outputs already done are skipped. ``input_sha256``:
+    the hash the client computed; a file whose bytes changed since is a failure of this
+    material.
 
     Returns ``{"input", "name", "sha256", "brdf": [record per tolerance], "cdf": record or
     None, "error", "seconds", "worker"}``; every record has ``"status"`` (``"done"``,
@@ -214,7 +216,9 @@ def run_material(path, options: BatchOptions, out, input_sha256: str | None = No
     with warnings.catch_warnings(), _errstate():
         warnings.simplefilter("ignore")
         try:
-            sha = input_sha256 or file_sha256(path)
+            sha = file_sha256(path)             # the bytes this task reads (the client's hash may be older)
+            if input_sha256 and sha != input_sha256:
+                raise RbrdfError(f"{display_text(path)}: the file changed since the batch started")
             result["sha256"] = sha
             folder = material_dir(out, path)
             todo = []
