@@ -135,7 +135,7 @@ def _start_client(workers: int | None, scheduler: str | None, timeout_s: float):
     if threading.current_thread() is threading.main_thread():
         old = signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                env=dict(THREAD_ENV), silence_logs=logging.ERROR)
     finally:
         if old is not None:
