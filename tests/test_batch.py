@@ -142,8 +142,17 @@ def test_interrupt_and_resume_on_local_cluster(materials, tmp_path, capsys):
     first = {p.name for p in _manifests(out)}
     assert 1 <= len(first) < 6                   # 3 materials x (BRDF + CDF): interrupted half-way
 
-    report = __import__("fit.batch", fromlist=["fit_database"]).fit_database(
-        [materials / "*.binary"], out, workers=1, progress=False, **FAST_KW)
+    from fit.batch import fit_database
+
+    # --report-only: the report of what is done, nothing fitted, no cluster
+    partial = fit_database([materials], out, report_only=True, progress=False, **FAST_KW)
+    assert {p.name for p in _manifests(out)} == first and partial.workers == 0
+    assert partial.counts == {"done": 0, "skipped": len(first), "failed": 0, "missing": 6 - len(first)}
+    n_brdf = sum(1 for name in first if name.startswith("brdf-"))
+    assert partial["status"].count("skipped") == n_brdf and partial["status"].count("missing") == 3 - n_brdf
+    assert [c is None for c in partial["coefs"]] == [s == "missing" for s in partial["status"]]
+
+    report = fit_database([materials / "*.binary"], out, workers=1, progress=False, **FAST_KW)
     assert _parts(out) == []
     assert report.counts == {"done": 6 - len(first), "skipped": len(first), "failed": 0}
     assert report["material"] == ["a_lambert", "b_lambert", "c_glossy"]

@@ -3,7 +3,8 @@ written as CSV and Markdown, and the chart of coefficients against tolerance
 (:func:`plot_coefficients`).
 
 Columns (:data:`COLUMNS`; units in the names): ``material``, ``tol`` (relative tolerance),
-``status`` (``done`` / ``skipped`` (done by an earlier run) / ``failed``), ``coefs`` (total)
+``status`` (``done`` / ``skipped`` (done by an earlier run) / ``failed`` / ``missing`` (not done;
+``--report-only``)), ``coefs`` (total)
 and ``coefs_r`` / ``coefs_g`` / ``coefs_b`` (per channel, summed over the theta_d / theta_h
 pieces), ``core_deg`` (theta_d of the guaranteed core, degrees), ``guaranteed`` (every
 cluster of the core inside its interval, Q > 0 certified), ``band`` (grazing band: ``met``,
@@ -51,18 +52,18 @@ def rows_from_results(results) -> list:
     for res in results:
         cdf = res.get("cdf") or {}
         cdf_cols = {}
-        if cdf and cdf.get("status") != "failed":
+        if cdf and cdf.get("status") not in ("failed", "missing"):
             cdf_cols = {"cdf_rows_rational": f"{cdf.get('rows_rational')}/{cdf.get('rows')}",
                         "cdf_fallback": cdf.get("fallback"),
                         "cdf_var_ratio_med": _num(cdf.get("variance_ratio_median"), 3),
                         "cdf_var_ratio_max": _num(cdf.get("variance_ratio_max"), 3),
                         "cdf_s": _num(cdf.get("cdf_s"), 2)}
-        elif cdf:
+        elif cdf.get("status") == "failed":
             cdf_cols = {"cdf_rows_rational": "failed"}
         for rec in res.get("brdf") or [{"status": "failed", "tol": None}]:
             row = dict.fromkeys(COLUMNS)
             row.update(material=res.get("name"), tol=rec.get("tol"), status=rec.get("status"))
-            if rec.get("status") != "failed":
+            if rec.get("status") not in ("failed", "missing"):
                 rgb = rec.get("coefficients_rgb") or [None] * 3
                 row.update(coefs=rec.get("coefficients"), coefs_r=rgb[0], coefs_g=rgb[1], coefs_b=rgb[2],
                            core_deg=rec.get("core_theta_d_deg"), guaranteed=rec.get("guaranteed"),

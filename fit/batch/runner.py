@@ -145,7 +145,8 @@ def _start_client(workers: int | None, scheduler: str | None, timeout_s: float):
 
 def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: dict | None = None,
                  cdf_options: dict | None = None, workers: int | None = None, scheduler: str | None = None,
-                 progress: bool | None = None, log=None, connect_timeout_s: float = 30.0) -> BatchReport:
+                 progress: bool | None = None, log=None, connect_timeout_s: float = 30.0,
+                 report_only: bool = False) -> BatchReport:
     """Fit every material of ``inputs`` (files, folders, globs: :func:`expand_inputs`) into the
     folder ``out`` on dask.distributed and return the report (:class:`BatchReport`, also
     written to ``out/report.csv``, ``report.md`` and ``report_coefficients.png``).
@@ -157,7 +158,8 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
     those of ``rbrdf-fit cdf``). ``workers``: local worker processes (default: one per core);
     ``scheduler``: address of a running scheduler instead (``workers`` ignored).
     ``progress``: tqdm bar over materials (None: on when stderr is a terminal); ``log(str)``:
-    one line per material finished.
+    one line per material finished. ``report_only``: fit nothing, start no cluster: the report
+    of the outputs already done (rows of outputs not done have status ``"missing"``).
 
     Bad arguments (no input, a missing file, an unusable output folder, an unreachable
     scheduler) raise the one-line :class:`fit.errors.RbrdfError` before anything is fitted.
@@ -193,8 +195,8 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
                             "error": f"{p}: cannot read ({e.strerror or e})", "seconds": 0.0})
             continue
         # cheap in the client: which outputs are already done
-        r = run_material_status(p, options, out, sha)
-        if r is not None:
+        r, complete = material_status(p, options, out, sha)
+        if complete or report_only:
             results.append(r)
         else:
             pending.append((p, sha))
@@ -240,7 +242,7 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
             cluster.close()
 
     rows = rows_from_results(results)
-    counts = {"done": 0, "skipped": 0, "failed": 0}
+    counts = {"done": 0, "skipped": 0, "failed": 0} | ({"missing": 0} if report_only else {})
     for r in results:
         for rec in (r.get("brdf") or []) + ([r["cdf"]] if r.get("cdf") else []):
             counts[rec.get("status", "failed")] = counts.get(rec.get("status", "failed"), 0) + 1
@@ -256,28 +258,36 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
     return report
 
 
-def run_material_status(path, options: BatchOptions, out, sha: str):
-    """The task result of ``path`` made from manifests alone when every output is done (all
-    ``"skipped"``), else None (the material must be submitted)."""
+def material_status(path, options: BatchOptions, out, sha: str):
+    """``(result, complete)``: the task result of ``path`` made from its manifests alone (outputs
+    done: ``"skipped"`` with their records; not done: ``"missing"``), and whether every output
+    is done (then the material is not submitted)."""
     from .keys import brdf_key, cdf_key
     from .tasks import brdf_name, cdf_name, material_dir, read_done
 
     folder = material_dir(out, path)
     res = {"input": os.fspath(path), "name": Path(path).stem, "sha256": sha, "brdf": [], "cdf": None,
            "error": None, "seconds": 0.0, "worker": None}
+    complete = True
     for bo in options.brdf_options():
         key = brdf_key(sha, bo)
         d = read_done(folder / brdf_name(bo, key), key)
+        rec = {"key": key, "file": brdf_name(bo, key), "tol": bo.tol}
         if d is None:
-            return None
-        res["brdf"].append(dict(d.get("record", {}), status="skipped", key=key, file=brdf_name(bo, key), tol=bo.tol))
+            complete = False
+            res["brdf"].append(dict(rec, status="missing"))
+        else:
+            res["brdf"].append(dict(d.get("record", {}), status="skipped", **rec))
     if options.cdf is not None:
         key = cdf_key(sha, options.cdf)
         d = read_done(folder / cdf_name(key), key)
+        rec = {"key": key, "file": cdf_name(key)}
         if d is None:
-            return None
-        res["cdf"] = dict(d.get("record", {}), status="skipped", key=key, file=cdf_name(key))
-    return res
+            complete = False
+            res["cdf"] = dict(rec, status="missing")
+        else:
+            res["cdf"] = dict(d.get("record", {}), status="skipped", **rec)
+    return res, complete
 
 
 def _options_tag(options: BatchOptions) -> str:

@@ -57,6 +57,7 @@ def _cmd_batch(args) -> int:
     try:
         report = fit_database(args.inputs, args.out, tols=args.tol, cdf=not args.no_cdf, brdf_options=brdf,
                               cdf_options=cdf, workers=args.workers, scheduler=args.scheduler,
+                              report_only=args.report_only,
                               log=None if args.quiet else (lambda s: print(display_text(s), flush=True)))
     except KeyboardInterrupt:
         print("rbrdf-fit batch: interrupted: the materials finished are kept, the tasks in flight were "
@@ -65,7 +66,8 @@ def _cmd_batch(args) -> int:
     c = report.counts
     failed = report.failed()
     print(f"{len(report)} rows; outputs done {c.get('done', 0)}, skipped (done before) {c.get('skipped', 0)}, "
-          f"failed {c.get('failed', 0)}; {report.wall_s:.1f} s"
+          f"failed {c.get('failed', 0)}" + (f", missing {c['missing']}" if "missing" in c else "")
+          + f"; {report.wall_s:.1f} s"
           + (f" on {report.workers} workers" if report.workers else ""))
     for r in failed:
         print(f"FAILED: {display_text(r['material'])} (tol {r['tol']}): {display_text(r['error'])}", file=sys.stderr)
@@ -97,6 +99,8 @@ def register(sub) -> None:
                    help="address of a running dask scheduler (e.g. tcp://10.0.0.5:8786) instead of a local "
                         "cluster; its workers must import this fit package and see INPUTS and --out")
     p.add_argument("--no-cdf", dest="no_cdf", action="store_true", help="BRDF fits only, no inverse CDFs")
+    p.add_argument("--report-only", dest="report_only", action="store_true",
+                   help="fit nothing: write the report of the outputs already in --out (not done: 'missing')")
     p.add_argument("--quiet", action="store_true", help="no line per material (the summary only)")
     g = p.add_argument_group("BRDF fit (as rbrdf-fit brdf)")
     g.add_argument("--intervals", choices=INTERVALS, default="tol")
