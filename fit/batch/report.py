@@ -168,7 +168,8 @@ def _write_text(path, text: str) -> None:
 
 def plot_coefficients(rows, path, outputs=None, title: str = "coefficients against tolerance") -> bool:
     """PNG chart of every material's total coefficient count against the tolerance (log-log;
-    one line per material; failed rows left out; the median over materials in black). Staged
+    one line per material; failed rows left out; in black the median over the materials fitted
+    at every tolerance). Staged
     in ``outputs`` (:class:`fit.outputs.OutputSet`) when given. Returns False (nothing written)
     when no row has a coefficient count."""
     import matplotlib
@@ -200,11 +201,16 @@ def plot_coefficients(rows, path, outputs=None, title: str = "coefficients again
         ax.scatter([x for x, g in zip(t, ok) if g], [y for y, g in zip(c, ok) if g], s=14, color="tab:blue", zorder=2)
         ax.scatter([x for x, g in zip(t, ok) if not g], [y for y, g in zip(c, ok) if not g], s=22, marker="x",
                    color="tab:red", zorder=3)
-    med = []
-    for t in tols:
-        cs = sorted(c for pts in by_mat.values() for tt, c, _ in pts if tt == t)
-        med.append(cs[len(cs) // 2] if len(cs) % 2 else 0.5 * (cs[len(cs) // 2 - 1] + cs[len(cs) // 2]))
-    ax.plot(tols, med, "k-o", lw=2, ms=5, zorder=4, label="median over materials")
+    # the median over the materials fitted at every tolerance (a median over different sets of
+    # materials would mix the materials' differences into the trend)
+    full = [pts for pts in by_mat.values() if {t for t, _, _ in pts} == set(tols)]
+    if full:
+        med = []
+        for t in tols:
+            cs = sorted(c for pts in full for tt, c, _ in pts if tt == t)
+            med.append(cs[len(cs) // 2] if len(cs) % 2 else 0.5 * (cs[len(cs) // 2 - 1] + cs[len(cs) // 2]))
+        ax.plot(tols, med, "k-o", lw=2, ms=5, zorder=4,
+                label=f"median of the {len(full)} materials fitted at every tolerance")
     ax.scatter([], [], s=14, color="tab:blue", label="core guaranteed")
     ax.scatter([], [], s=22, marker="x", color="tab:red", label="core NOT guaranteed (flagged)")
     ax.set_xscale("log")
