@@ -2,8 +2,9 @@
 
 Sub-commands: ``info``, ``project``, ``plot`` (:mod:`fit.cli.measured`), ``brdf``
 (:mod:`fit.cli.brdf`), ``cdf`` and ``plot-cdf`` (:mod:`fit.cli.cdf`), ``convert``
-(:mod:`fit.cli.convert`: between MERL, RGL and rational fits) and ``export`` (:mod:`fit.cli.export`:
-a rational fit as GLSL, HLSL, C, a BRDF Explorer file or a Mitsuba 3 plugin).
+(:mod:`fit.cli.convert`: between MERL, RGL and rational fits), ``export`` (:mod:`fit.cli.export`:
+a rational fit as GLSL, HLSL, C, a BRDF Explorer file or a Mitsuba 3 plugin) and ``batch``
+(:mod:`fit.cli.batch`: a whole database on dask.distributed).
 
 Bad input (docs/robustness.md): every error is one line on stderr naming the file (and key),
 the flag or the output path -- ``rbrdf-fit: error: FILE: problem`` for the
@@ -20,7 +21,7 @@ import warnings
 import numpy as np
 
 from ..errors import RbrdfError
-from . import brdf, cdf, convert, export, measured
+from . import batch, brdf, cdf, convert, export, measured
 from .flags import OneLineParser
 
 DESCRIPTION = """\
@@ -42,6 +43,7 @@ def build_parser() -> OneLineParser:
     measured.register(sub)
     brdf.register(sub)
     cdf.register(sub)
+    batch.register(sub)
     convert.register(sub)
     export.register(sub)
     return parser

@@ -1,0 +1,24 @@
+"""Batch fitting of a whole database on dask.distributed (issue 24).
+
+* :mod:`fit.batch.keys`: what an output is keyed by (input content hash + options);
+* :mod:`fit.batch.tasks`: one material as one task (BRDF fits, inverse CDFs, manifests);
+* :mod:`fit.batch.report`: the database report (CSV, Markdown, chart);
+* :mod:`fit.batch.runner`: :func:`fit_database`, the cluster, resume and progress.
+
+``fit_database`` is imported on first use (dask is an optional extra, ``warp-rbrdf[batch]``).
+"""
+from importlib import import_module
+
+__all__ = ["BatchReport", "fit_database"]
+
+_LAZY = {"fit_database": ("fit.batch.runner", "fit_database"),
+         "BatchReport": ("fit.batch.report", "BatchReport")}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        module, attr = _LAZY[name]
+        value = getattr(import_module(module), attr)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'fit.batch' has no attribute {name!r}")

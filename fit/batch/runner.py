@@ -1,0 +1,313 @@
+"""Fit a whole database on dask.distributed: :func:`fit_database` (also ``rbrdf-fit batch``).
+
+Each material is one independent task (:func:`fit.batch.tasks.run_material`) on a
+``distributed`` cluster: by default a ``LocalCluster`` started for the run and closed after it,
+with one single-threaded worker *process* per core (``workers``; the BLAS/OpenMP variables of
+:data:`fit.batch.tasks.THREAD_ENV` set to 1, HiGHS with one thread), or any running cluster
+given by the address of its scheduler (``scheduler="tcp://host:8786"``: the workers were
+started by the user, e.g. ``dask scheduler`` and ``dask worker ADDRESS --nthreads 1``; they
+must import this ``fit`` package and see the input and output paths).
+
+Resume: before submitting, the client hashes every input and checks each output's manifest
+(:mod:`fit.batch.keys`, :mod:`fit.batch.tasks`): materials whose outputs are all done are not
+submitted, and a task skips what an earlier run completed. A run that is interrupted (Ctrl-C,
+killed) loses only the tasks in flight; Ctrl-C cancels them, closes the cluster and leaves no
+half-written file (outputs are renamed into place whole, temporary files of killed workers
+are removed by the next run). A failure of one material is a row of the report with its
+one-line error, never an exception.
+
+The report (:mod:`fit.batch.report`) is written to ``OUT/report.csv``, ``OUT/report.md`` and
+the chart ``OUT/report_coefficients.png`` (coefficients against tolerance), renamed into place
+together at the end of the run.
+"""
+from __future__ import annotations
+
+import glob
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+from ..errors import BRDFFileError, FlagError, OutputError
+from ..formats import SUFFIXES
+from .keys import BatchOptions, BrdfOptions, CdfOptions
+from .report import BatchReport, plot_coefficients, rows_from_results
+from .tasks import THREAD_ENV, run_material
+
+REPORT_FILES = ("report.csv", "report.md", "report_coefficients.png")
+
+
+def expand_inputs(inputs) -> list:
+    """Measured-BRDF files named by ``inputs``: files, folders (their ``.binary`` / ``.bsdf``
+    files, recursively) and glob patterns (``*``, ``?``, ``[``, ``**``), in sorted order
+    without duplicates (same resolved path). :class:`BRDFFileError` (one line) for a name that
+    matches nothing, a folder without BRDF files, or a file of another type."""
+    out, seen = [], set()
+
+    def add(p: Path):
+        key = os.path.realpath(p)
+        if key not in seen:
+            seen.add(key)
+            out.append(p)
+
+    if isinstance(inputs, (str, os.PathLike)):
+        inputs = [inputs]
+    for item in inputs:
+        s = os.fspath(item)
+        p = Path(s)
+        if p.is_dir():
+            found = sorted(q for q in p.rglob("*") if q.suffix.lower() in SUFFIXES and q.is_file())
+            if not found:
+                raise BRDFFileError(p, f"folder without measured-BRDF files ({', '.join(SUFFIXES)})")
+            for q in found:
+                add(q)
+        elif p.is_file():
+            if p.suffix.lower() not in SUFFIXES:
+                raise BRDFFileError(p, f"unknown BRDF file type {p.suffix or '(no extension)'!r}; "
+                                       f"expected one of {', '.join(SUFFIXES)}")
+            add(p)
+        elif glob.has_magic(s):
+            found = sorted(Path(q) for q in glob.glob(s, recursive=True)
+                           if Path(q).suffix.lower() in SUFFIXES and Path(q).is_file())
+            if not found:
+                raise BRDFFileError(s, "pattern matches no measured-BRDF file")
+            for q in found:
+                add(q)
+        elif p.exists():
+            raise BRDFFileError(p, "not a regular file or folder")
+        else:
+            raise BRDFFileError(p, "file not found")
+    return out
+
+
+def make_options(tols=(0.05,), cdf: bool = True, brdf_options: dict | None = None,
+                 cdf_options: dict | None = None) -> BatchOptions:
+    """:class:`BatchOptions` from plain arguments (unknown option names: ``ValueError``)."""
+    if isinstance(tols, (int, float)):
+        tols = (tols,)
+    tols = tuple(dict.fromkeys(float(t) for t in tols))
+    if not tols:
+        raise ValueError("no tolerance")
+    bo = dict(brdf_options or {})
+    BrdfOptions(**bo)                      # unknown names raise TypeError -> ValueError below
+    return BatchOptions(tols=tols, brdf=bo, cdf=CdfOptions(**(cdf_options or {})) if cdf else None)
+
+
+def _check_options(options: BatchOptions) -> None:
+    from ..rational.brdf_fit import _check_fit_args
+
+    for bo in options.brdf_options():
+        _check_fit_args(bo.tol, bo.max_degree, bo.max_den_degree, bo.floor_frac, bo.core_theta_d_deg,
+                        bo.intervals, bo.band_intervals)
+
+
+def default_workers() -> int:
+    """Cores this process may run on (``os.sched_getaffinity``, else ``os.cpu_count``)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def _start_client(workers: int | None, scheduler: str | None, timeout_s: float):
+    """``(client, cluster or None, n_workers)``."""
+    import logging
+
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=timeout_s)
+        except (OSError, TimeoutError) as e:
+            raise FlagError("--scheduler", f"cannot connect to {scheduler} ({e})") from None
+        try:
+            client.wait_for_workers(1, timeout=timeout_s)
+        except (TimeoutError, OSError):
+            client.close()
+            raise FlagError("--scheduler", f"no worker joined {scheduler} within {timeout_s:g} s") from None
+        return client, None, len(client.scheduler_info(n_workers=-1)["workers"])
+    n = workers or default_workers()
+    # Worker processes start with SIGINT ignored (inherited through exec): Ctrl-C in a terminal
+    # reaches the whole process group, and only this process must act on it (cancel, close the
+    # cluster); workers killed by their own KeyboardInterrupt would print tracebacks.
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               env=dict(THREAD_ENV), silence_logs=logging.ERROR)
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+    return Client(cluster), cluster, n
+
+
+def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: dict | None = None,
+                 cdf_options: dict | None = None, workers: int | None = None, scheduler: str | None = None,
+                 progress: bool | None = None, log=None, connect_timeout_s: float = 30.0,
+                 report_only: bool = False) -> BatchReport:
+    """Fit every material of ``inputs`` (files, folders, globs: :func:`expand_inputs`) into the
+    folder ``out`` on dask.distributed and return the report (:class:`BatchReport`, also
+    written to ``out/report.csv``, ``report.md`` and ``report_coefficients.png``).
+
+    ``tols``: relative tolerance(s), one BRDF fit per material and tolerance
+    (:func:`fit.fit_brdf`; ``brdf_options``: its other arguments, e.g. ``{"max_degree": 8}``,
+    defaults those of ``rbrdf-fit brdf``); ``cdf``: also fit the inverse CDFs
+    (:func:`fit.fit_cdf`; ``cdf_options``: :class:`fit.batch.keys.CdfOptions` fields, defaults
+    those of ``rbrdf-fit cdf``). ``workers``: local worker processes (default: one per core);
+    ``scheduler``: address of a running scheduler instead (``workers`` ignored).
+    ``progress``: tqdm bar over materials (None: on when stderr is a terminal); ``log(str)``:
+    one line per material finished. ``report_only``: fit nothing, start no cluster: the report
+    of the outputs already done (rows of outputs not done have status ``"missing"``).
+
+    Bad arguments (no input, a missing file, an unusable output folder, an unreachable
+    scheduler) raise the one-line :class:`fit.errors.RbrdfError` before anything is fitted.
+    ``KeyboardInterrupt`` cancels the tasks in flight and closes the local cluster before it
+    propagates."""
+    from tqdm import tqdm
+
+    from ..formats.measured import file_sha256
+    from ..outputs import OutputSet, check_output_dir
+
+    t0 = time.perf_counter()
+    log = log or (lambda s: None)
+    try:
+        options = make_options(tols, cdf, brdf_options, cdf_options)
+        _check_options(options)
+    except (TypeError, ValueError) as e:
+        raise FlagError("options", str(e)) from None
+    out = check_output_dir(out, "--out")
+    paths = expand_inputs(inputs)
+    if not paths:
+        raise BRDFFileError("<inputs>", "no input")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(out, f"cannot create folder ({e.strerror or e})", "--out") from None
+
+    results, pending = [], []
+    for p in paths:
+        try:
+            sha = file_sha256(p)
+        except OSError as e:
+            results.append({"input": os.fspath(p), "name": p.stem, "sha256": None, "brdf": [], "cdf": None,
+                            "error": f"{p}: cannot read ({e.strerror or e})", "seconds": 0.0})
+            continue
+        # cheap in the client: which outputs are already done
+        r, complete = material_status(p, options, out, sha)
+        if complete or report_only:
+            results.append(r)
+        else:
+            pending.append((p, sha))
+
+    n_total = len(paths)
+    bar = tqdm(total=n_total, initial=n_total - len(pending), desc="materials", unit="material",
+               disable=(not progress) if progress is not None else None)
+    n_workers = 0
+    client = cluster = None
+    futures = {}
+    try:
+        if pending:
+            from distributed import as_completed
+
+            client, cluster, n_workers = _start_client(workers, scheduler, connect_timeout_s)
+            for p, sha in pending:
+                f = client.submit(run_material, os.fspath(Path(p).resolve()), options, os.fspath(Path(out).resolve()),
+                                  sha, key=f"rbrdf-material-{p.stem}-{sha[:12]}-{_options_tag(options)}",
+                                  pure=False, retries=0)
+                futures[f] = (p, sha)
+            for f in as_completed(futures):
+                p, sha = futures[f]
+                try:
+                    r = f.result()
+                    r["input"] = os.fspath(p)
+                except (KeyboardInterrupt, SystemExit):
+                    raise
+                except BaseException as e:     # noqa: BLE001 - a lost worker is this material's failure
+                    r = {"input": os.fspath(p), "name": p.stem, "sha256": sha, "brdf": [], "cdf": None,
+                         "error": f"{p}: task failed ({type(e).__name__}: {str(e)[:300]})", "seconds": 0.0}
+                results.append(r)
+                bar.update(1)
+                log(_one_line(r))
+    except BaseException:
+        for f in futures:
+            f.cancel()
+        raise
+    finally:
+        bar.close()
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+    rows = rows_from_results(results)
+    counts = {"done": 0, "skipped": 0, "failed": 0} | ({"missing": 0} if report_only else {})
+    for r in results:
+        for rec in (r.get("brdf") or []) + ([r["cdf"]] if r.get("cdf") else []):
+            counts[rec.get("status", "failed")] = counts.get(rec.get("status", "failed"), 0) + 1
+        if r.get("error") and not r.get("brdf"):
+            counts["failed"] += 1
+    report = BatchReport(rows, wall_s=time.perf_counter() - t0, counts=counts, workers=n_workers)
+    with OutputSet() as outputs:
+        report.to_csv(outputs.stage(out / REPORT_FILES[0]))
+        (Path(outputs.stage(out / REPORT_FILES[1]))).write_text(report.to_markdown(), encoding="utf-8")
+        plot_coefficients(rows, out / REPORT_FILES[2], outputs=outputs)
+        outputs.commit()
+    report.wall_s = time.perf_counter() - t0
+    return report
+
+
+def material_status(path, options: BatchOptions, out, sha: str):
+    """``(result, complete)``: the task result of ``path`` made from its manifests alone (outputs
+    done: ``"skipped"`` with their records; not done: ``"missing"``), and whether every output
+    is done (then the material is not submitted)."""
+    from .keys import brdf_key, cdf_key
+    from .tasks import brdf_name, cdf_name, material_dir, read_done
+
+    folder = material_dir(out, path)
+    res = {"input": os.fspath(path), "name": Path(path).stem, "sha256": sha, "brdf": [], "cdf": None,
+           "error": None, "seconds": 0.0, "worker": None}
+    complete = True
+    for bo in options.brdf_options():
+        key = brdf_key(sha, bo)
+        d = read_done(folder / brdf_name(bo, key), key)
+        rec = {"key": key, "file": brdf_name(bo, key), "tol": bo.tol}
+        if d is None:
+            complete = False
+            res["brdf"].append(dict(rec, status="missing"))
+        else:
+            res["brdf"].append(dict(d.get("record", {}), status="skipped", **rec))
+    if options.cdf is not None:
+        key = cdf_key(sha, options.cdf)
+        d = read_done(folder / cdf_name(key), key)
+        rec = {"key": key, "file": cdf_name(key)}
+        if d is None:
+            complete = False
+            res["cdf"] = dict(rec, status="missing")
+        else:
+            res["cdf"] = dict(d.get("record", {}), status="skipped", **rec)
+    return res, complete
+
+
+def _options_tag(options: BatchOptions) -> str:
+    import hashlib
+
+    return hashlib.sha256(repr(options).encode()).hexdigest()[:8]
+
+
+def _one_line(r: dict) -> str:
+    if r.get("error"):
+        return f"{r['name']}: FAILED: {r['error']}"
+    parts = []
+    for rec in r.get("brdf") or []:
+        if rec.get("status") == "failed":
+            parts.append(f"tol {rec.get('tol'):g}: FAILED: {rec.get('error')}")
+        else:
+            parts.append(f"tol {rec.get('tol'):g}: {rec.get('coefficients')} coefficients "
+                         f"({'guaranteed' if rec.get('guaranteed') else 'NOT guaranteed'}, {rec.get('status')})")
+    c = r.get("cdf")
+    if c:
+        parts.append("CDF FAILED: " + str(c.get("error")) if c.get("status") == "failed"
+                     else f"CDF {c.get('rows_rational')}/{c.get('rows')} rows rational ({c.get('status')})")
+    return f"{r['name']}: " + "; ".join(parts) + f" [{r.get('seconds', 0.0):.1f} s]"
