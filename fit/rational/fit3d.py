@@ -53,32 +53,48 @@ import numpy as np
 from ..formats.angles import half_diff_to_directions
 from .fitter import IntervalRationalFitter
 from .model import PiecewiseRationalModel, RationalModel, Variable
+from .variables3d import half_diff_3d
 
 DEFAULT_GRID = (28, 22, 13)          # theta_h, theta_d, phi_d samples of the data grid
 DEFAULT_DEGREES = (7, 3)             # numerator, denominator total degree per piece
 DEFAULT_NOISE_FRAC = 0.01
+DEFAULT_RANDOM = 8000             # random points of each of the two kinds
 
 
-def sample_grid(theta_max: float, grid=DEFAULT_GRID) -> np.ndarray:
-    """``(N, 3)`` physical ``(theta_h, theta_d, |phi_d|)`` (radians) of the data grid (module
-    docstring) whose light and view directions are both above the horizon and within
-    ``theta_max`` of the normal."""
+def sample_grid(theta_max: float, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM, seed: int = 7) -> np.ndarray:
+    """``(N, 3)`` physical ``(theta_h, theta_d, |phi_d|)`` (radians) of the data points (module
+    docstring): the grid, ``n_random`` points uniform in ``(sqrt(theta_h), theta_d, phi_d)`` and
+    ``n_random`` pairs of cosine-distributed directions (seeded), all those whose light and view
+    directions are both above the horizon and within ``theta_max`` of the normal."""
     nh, nd, npd = (int(g) for g in grid)
     th = theta_max * np.linspace(0.0, 1.0, nh) ** 2
     td = np.linspace(0.0, theta_max, nd)
     pd = np.linspace(0.0, np.pi, npd)
-    X = np.stack(np.meshgrid(th, td, pd, indexing="ij"), axis=-1).reshape(-1, 3)
+    parts = [np.stack(np.meshgrid(th, td, pd, indexing="ij"), axis=-1).reshape(-1, 3)]
+    rng = np.random.default_rng(seed)
+    if n_random:
+        u = rng.random((n_random, 3))
+        parts.append(np.stack([theta_max * u[:, 0] ** 2, theta_max * u[:, 1], np.pi * u[:, 2]], axis=1))
+
+        def cos_dirs(n):
+            a, b = rng.random(n), rng.random(n)
+            r, p = np.sqrt(a), 2 * np.pi * b
+            return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - a, 0))], -1)
+
+        parts.append(half_diff_3d(cos_dirs(n_random), cos_dirs(n_random)))
+    X = np.concatenate(parts)
     wi, wo = half_diff_to_directions(X[:, 0], 0.0, X[:, 1], X[:, 2])
     cmin = np.cos(theta_max) - 1e-9
     keep = (wi[:, 2] >= cmin) & (wo[:, 2] >= cmin) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    keep &= (X[:, 0] <= theta_max) & (X[:, 1] <= theta_max)
     return X[keep]
 
 
-def sample_rgl(brdf, grid=DEFAULT_GRID):
+def sample_rgl(brdf, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM):
     """``(X (N, 3), rho (N, 3), theta_max)``: the data of a 3-D fit of an
     :class:`fit.formats.rgl.RGLBRDF` (its reference evaluation, light = ``wi``, negatives 0)."""
     theta_max = float(brdf.theta_i_max)
-    X = sample_grid(theta_max, grid)
+    X = sample_grid(theta_max, grid, n_random)
     wi, wo = half_diff_to_directions(X[:, 0], 0.0, X[:, 1], X[:, 2])
     rho = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
     return X, rho, theta_max
@@ -175,7 +191,7 @@ def _fit_channel(U, y, noise, offset, domain, tol, degrees, time_limit, step=1.6
     rec = {"degrees": [int(res.num_degree), int(res.den_degree)], "n_coefficients": int(f.n_coefficients),
            "tolerance": stated, "tolerance_met": t_ok, "tolerances_tried": tried,
            "noise": float(noise), "max_rel_error": stated, "rms_rel_error": float(np.sqrt(np.mean(err ** 2))),
-           "n_points": int(len(y)), "n_constraints": int(res.n_constraints), "n_lp": int(res.n_lp),
+           "n_points": len(y), "n_constraints": int(res.n_constraints), "n_lp": int(res.n_lp),
            "time_s": time.perf_counter() - t0, "feasible": True,
            "valid": bool(cert.certified and stated <= t_ok * (1 + 1e-9)),
            "q_certificate": {"certified": bool(cert.certified), "lower_bound": float(cert.lower_bound),
@@ -231,7 +247,7 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
     elapsed = time.perf_counter() - t0
     fit_info = {"kind": "3d", "tolerance": tol_all, "tolerance_kind": "relative to max(rho, noise)",
                 "start_tolerance": tol, "noise": noise.tolist(), "noise_frac": noise_frac,
-                "theta_max_deg": float(np.degrees(tm)), "n_points": int(len(X)), "time_s": elapsed,
+                "theta_max_deg": float(np.degrees(tm)), "n_points": len(X), "time_s": elapsed,
                 "fitter": "fit.rational.fit3d (interval LP, constraint generation, fixed degrees)",
                 "theta_h_edges": edges[1:-1], "valid": valid,
                 "guarantee": "every data point of the whole measured domain (theta_i, theta_o <= theta_max) "
@@ -244,15 +260,15 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
         model = PiecewiseRationalModel(name=name, variables=_variables([(0.0, tm), (0.0, tm), (0.0, np.pi)]),
                                        split_variable="theta_h", edges=edges, pieces=pieces,
                                        fit_info=fit_info, piece_info=piece_info, source=src)
-    return Fit3D(model, records, tol_all, valid, elapsed, int(len(X)), tuple(noise.tolist()),
+    return Fit3D(model, records, tol_all, valid, elapsed, len(X), tuple(noise.tolist()),
                  {"edges": edges})
 
 
-def fit_rgl(brdf, *, grid=DEFAULT_GRID, **options) -> Fit3D:
+def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM, **options) -> Fit3D:
     """:func:`fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by :func:`sample_rgl`
     (the sampling time counts in ``time_s``)."""
     t0 = time.perf_counter()
-    X, rho, tm = sample_rgl(brdf, grid)
+    X, rho, tm = sample_rgl(brdf, grid, n_random)
     src = {"file": str(getattr(brdf, "source", "") or ""), "sha256": str(getattr(brdf, "source_sha256", "") or "")}
     name = options.pop("name", f"{brdf.name}_3d")
     res = fit_samples(X, rho, name=name, theta_max=tm, source=src, **options)
