@@ -304,6 +304,8 @@ def main(argv=None) -> int:
     ap.add_argument("--degrees", default=None, help="3-D numerator,denominator degrees (default 5,2)")
     ap.add_argument("--edges", default=None, help="3-D theta_h inner edges in radians, comma-separated "
                                                   "('' for one piece; default 0.05,0.2)")
+    ap.add_argument("--grid", default=None, help="3-D data grid NH,ND,NP (default 28,22,13)")
+    ap.add_argument("--random", type=int, default=None, help="3-D random data points of each kind (default 8000)")
     ap.add_argument("--docs", action="store_true", help="write docs/fit_accuracy.md's table")
     args = ap.parse_args(argv)
     try:
@@ -334,13 +336,23 @@ def _run(args) -> int:
             if len(d) != 2 or not all(0 <= v <= 12 for v in d):
                 raise ValueError
             opts["degrees"] = d
+        if args.grid is not None:
+            g = tuple(int(v) for v in args.grid.split(","))
+            if len(g) != 3 or not all(3 <= v <= 200 for v in g):
+                raise ValueError
+            opts["grid"] = g
+        if args.random is not None:
+            if not 0 <= args.random <= 1_000_000:
+                raise ValueError
+            opts["n_random"] = args.random
         if args.edges is not None:
             opts["theta_h_edges"] = [float(v) for v in args.edges.split(",") if v.strip()]
             if not all(0 < e < 1.5 for e in opts["theta_h_edges"]):
                 raise ValueError
     except ValueError:
-        raise BenchError(f"--degrees {args.degrees!r} / --edges {args.edges!r}: expected 'M,N' (0..12) and "
-                         "radians in (0, 1.5) separated by commas") from None
+        raise BenchError(f"--degrees {args.degrees!r} / --edges {args.edges!r} / --grid {args.grid!r} / --random "
+                         f"{args.random!r}: expected 'M,N' (0..12), radians in (0, 1.5) separated by commas, "
+                         "'NH,ND,NP' (3..200 each), 0..1000000") from None
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

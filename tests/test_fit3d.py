@@ -19,7 +19,7 @@ import pytest
 from fit.errors import BRDFFileError
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.rational.coefficient_file import VERSION_3D, from_dict, load, save
-from fit.rational.fit3d import fit_samples, sample_grid
+from fit.rational.fit3d import fit_samples, grazing_weight, sample_grid
 from fit.rational.variables3d import evaluate_directions, half_diff_3d
 
 THETA_MAX = np.radians(80.0)
@@ -41,7 +41,7 @@ def synthetic_fit():
     X = sample_grid(THETA_MAX, grid=(10, 9, 7), n_random=300, seed=3)
     rho = lobe(X)
     res = fit_samples(X, rho, name="lobe3d", theta_max=THETA_MAX, degrees=(4, 2), theta_h_edges=[0.2],
-                      tol=0.01, time_limit=30.0)
+                      tol=0.01, time_limit=30.0, grazing_cos=0.0)
     return X, rho, res
 
 
@@ -81,6 +81,16 @@ def test_3d_fit_meets_its_bound_everywhere_and_beats_any_2d_fit(synthetic_fit):
     bound_2d = _two_d_lower_bound(X, rho, noise)
     assert bound_2d > 0.2                                      # the data really depend on phi_d
     assert res.tolerance < 0.5 * bound_2d, (res.tolerance, bound_2d)
+
+
+def test_grazing_weight():
+    """g = 1 (a relative bound) while cos(theta_i) cos(theta_o) >= grazing_cos, then the bound is
+    on rho cos(theta_i) cos(theta_o): g cos(theta_i) cos(theta_o) = grazing_cos."""
+    X = np.array([[0.0, 0.0, 0.0], [0.0, np.radians(60.0), 0.0], [0.0, np.radians(75.0), 1.0]])
+    g = grazing_weight(X, 0.25)
+    c = np.cos(X[:, 1]) ** 2     # theta_h = 0: theta_i = theta_o = theta_d
+    np.testing.assert_allclose(g, [1.0, 1.0, 0.25 / c[2]])
+    assert np.all(grazing_weight(X, 0.0) == 1.0)
 
 
 def test_directions_use_mirror_fold_and_keep_roles(synthetic_fit):
