@@ -59,7 +59,11 @@ ISSUE_TABLE = {"paper_white": (0.019, 0.027), "colodur_napoli_4f": (0.028, 0.050
                "cc_iris_purple_gem": (0.270, 0.489), "vch_golden_yellow": (0.133, 0.154)}
 ALBEDO_ANGLES_DEG = (0.0, 30.0, 60.0, 75.0)
 #: The 3-D fit configuration the benchmark uses (fit.rational.fit3d.fit_rgl keyword arguments).
-FIT3D_OPTIONS = {"degrees": (5, 2), "theta_h_edges": [0.05, 0.2], "tol": 0.03}
+#: Four theta_h pieces: the peak, two for the lobe's shoulder (where most of the error was) and
+#: the rest; 3 x (45 + 66 + 66 + 45) = 666 coefficients (< 675).
+#: Default: fit.rational.fit3d.fit_rgl_select over its VARIANTS (one layout when --degrees or
+#: --edges is given).
+FIT3D_OPTIONS = {"select": "VARIANTS", "tol": 0.01}
 DEFAULT_FITS_2D = ROOT.parent / "main" / "results" / "fits"
 
 
@@ -171,9 +175,10 @@ def load_2d(stem: str, fits_dir: Path):
 def fit_3d(brdf, out_dir: Path | None, options: dict):
     """``(Fit3D, file or None)``: the 3-D fit of ``brdf``, saved to ``out_dir`` when given."""
     from fit.rational.coefficient_file import save
-    from fit.rational.fit3d import fit_rgl
+    from fit.rational.fit3d import fit_rgl, fit_rgl_select
 
-    res = fit_rgl(brdf, **options)
+    rest = {k: v for k, v in options.items() if k != "select"}
+    res = fit_rgl_select(brdf, **rest) if options.get("select") is not None else fit_rgl(brdf, **rest)
     path = None
     if out_dir is not None:
         path = Path(out_dir) / f"{Path(str(brdf.source or brdf.name)).stem}_3d.json"
@@ -209,7 +214,8 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
                                 albedo_n),
                         coefficients=res.n_coefficients, fit_s=res.time_s, bound=res.tolerance, valid=res.valid,
                         n_points=res.n_points, file=str(fpath) if fpath else None,
-                        pieces=len(res.info["edges"]) - 1, options=_jsonable(fit_options))
+                        pieces=len(res.info["edges"]) - 1, options=_jsonable(fit_options),
+                        variant=res.info.get("variant"), variants=_jsonable(res.info.get("variants")))
     if name in NEURAL:
         row["neural"] = {"rel_rmse": NEURAL[name], "coefficients": NEURAL_WEIGHTS, "source": "published (issue 25)"}
     return row
@@ -301,9 +307,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "results" / "fit_accuracy"),
                     help="folder for the 3-D fits and results.json")
     ap.add_argument("--no-table", action="store_true", help="skip the phi_d-median table column")
-    ap.add_argument("--degrees", default=None, help="3-D numerator,denominator degrees (default 5,2)")
+    ap.add_argument("--degrees", default=None, help="3-D numerator,denominator degrees of every piece "
+                                                    "(default per piece 4,2 / 5,2 / 5,2 / 4,2)")
     ap.add_argument("--edges", default=None, help="3-D theta_h inner edges in radians, comma-separated "
-                                                  "('' for one piece; default 0.05,0.2)")
+                                                  "('' for one piece; default 0.05,0.1,0.2)")
     ap.add_argument("--grid", default=None, help="3-D data grid NH,ND,NP (default 28,22,13)")
     ap.add_argument("--random", type=int, default=None, help="3-D random data points of each kind (default 8000)")
     ap.add_argument("--docs", action="store_true", help="write docs/fit_accuracy.md's table")
@@ -336,6 +343,7 @@ def _run(args) -> int:
             if len(d) != 2 or not all(0 <= v <= 12 for v in d):
                 raise ValueError
             opts["degrees"] = d
+            opts.pop("select", None)
         if args.grid is not None:
             g = tuple(int(v) for v in args.grid.split(","))
             if len(g) != 3 or not all(3 <= v <= 200 for v in g):
@@ -347,6 +355,8 @@ def _run(args) -> int:
             opts["n_random"] = args.random
         if args.edges is not None:
             opts["theta_h_edges"] = [float(v) for v in args.edges.split(",") if v.strip()]
+            opts.pop("select", None)
+            opts.setdefault("degrees", (5, 2))
             if not all(0 < e < 1.5 for e in opts["theta_h_edges"]):
                 raise ValueError
     except ValueError:

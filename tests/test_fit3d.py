@@ -41,7 +41,7 @@ def synthetic_fit():
     X = sample_grid(THETA_MAX, grid=(10, 9, 7), n_random=300, seed=3)
     rho = lobe(X)
     res = fit_samples(X, rho, name="lobe3d", theta_max=THETA_MAX, degrees=(4, 2), theta_h_edges=[0.2],
-                      tol=0.01, time_limit=30.0, grazing_cos=0.0)
+                      tol=0.01, time_limit=30.0, grazing_cos=0.0, channel_floor=0.0)
     return X, rho, res
 
 
