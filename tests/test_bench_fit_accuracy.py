@@ -40,7 +40,8 @@ def test_smoke_run_and_bad_input(tmp_path, capsys):
     assert len(f3["albedo_err"]) == 4 and (out / "paper_white_rgb_3d.json").is_file()
     assert "| paper_white |" in capsys.readouterr().out
     for argv, words in ((["--materials", "no_such"], "--materials no_such"), (["--pairs", "5"], "--pairs 5"),
-                        (["--degrees", "x"], "--degrees 'x'")):
+                        (["--degrees", "x"], "--degrees 'x'"),
+                        (["--render-from", str(tmp_path / "none.json")], "--render-from")):
         assert B.main(["--data", str(data), "--out", str(tmp_path / "o2")] + argv) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and words in err
