@@ -368,6 +368,7 @@ def main(argv=None) -> int:
                                                   "('' for one piece; default 0.05,0.1,0.2)")
     ap.add_argument("--grid", default=None, help="3-D data grid NH,ND,NP (default 28,22,13)")
     ap.add_argument("--random", type=int, default=None, help="3-D random data points of each kind (default 8000)")
+    ap.add_argument("--verify", type=int, default=None, help="fresh points each 3-D fit is verified at (default 40000)")
     ap.add_argument("--render-from", default=None, metavar="RESULTS_JSON",
                     help="only render the 3-D fits of an earlier run's results.json against the rgl material "
                          "(render ΔE2000; --docs writes its own block)")
@@ -428,6 +429,10 @@ def _run(args) -> int:
             if not 0 <= args.random <= 1_000_000:
                 raise ValueError
             opts["n_random"] = args.random
+        if args.verify is not None:
+            if not 0 <= args.verify <= 10_000_000:
+                raise ValueError
+            opts["verify"] = args.verify
         if args.edges is not None:
             opts["theta_h_edges"] = [float(v) for v in args.edges.split(",") if v.strip()]
             opts.pop("select", None)

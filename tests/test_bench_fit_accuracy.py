@@ -32,7 +32,7 @@ def test_smoke_run_and_bad_input(tmp_path, capsys):
     out = tmp_path / "out"
     rc = B.main(["--data", str(data), "--materials", "paper_white", "--pairs", "500", "--albedo-samples", "300",
                  "--no-table", "--fits-2d", str(tmp_path), "--out", str(out), "--degrees", "3,1", "--edges", "",
-                 "--grid", "8,7,5", "--random", "200"])
+                 "--grid", "8,7,5", "--random", "200", "--verify", "2000"])
     assert rc == 0
     res = json.loads((out / "results.json").read_text())
     f3 = res["rows"][0]["fit3d"]

@@ -87,6 +87,7 @@ DEFAULT_CHANNEL_FLOOR = 0.05        # a channel's error unit is at least this fr
 INTERVALS = ("rho_c +- tolerance * max(rho_c, noise_c, channel_floor * max(rho_R, rho_G, rho_B)) "
              "* max(1, grazing_cos / (cos theta_i cos theta_o))")
 DEFAULT_THETA_FIT_DEG = 89.0         # data up to here: the file's own extrapolation beyond its last incidence
+DEFAULT_VERIFY = 40000                # fresh points a fit is checked at (fit_rgl)
 DEFAULT_RANDOM = 8000             # random points of each of the two kinds
 
 
@@ -325,19 +326,79 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
                  {"edges": edges})
 
 
+def verification_ratio(res, X, rho) -> np.ndarray:
+    """Per point of ``X`` ``(N, 3)`` with values ``rho`` ``(N, 3)``: the largest over R, G, B of
+    ``|fit - rho| / (s * tol_piece_channel)`` (``s`` the error unit of :func:`fit_samples` with the
+    fit's noise levels and policies, ``tol`` the stated tolerance of the piece and channel that
+    evaluates the point); <= 1 where the fit is within its stated bound."""
+    fi = res.model.fit_info
+    noise = np.asarray(res.noise)
+    g = grazing_weight(X, float(fi.get("grazing_cos", DEFAULT_GRAZING_COS)))
+    s = np.maximum(np.maximum(rho, noise[None, :]), float(fi.get("channel_floor", DEFAULT_CHANNEL_FLOOR))
+                   * rho.max(axis=1, keepdims=True)) * g[:, None]
+    edges = res.info["edges"]
+    k = np.searchsorted(np.asarray(edges[1:-1]), np.clip(X[:, 0], edges[0], edges[-1]), side="left")
+    tol = np.zeros((len(edges) - 1, 3))
+    for r in res.records:
+        tol[r["piece"], "RGB".index(r["channel"])] = r["tolerance"]
+    err = np.abs(res.model(X) - rho) / s
+    return np.max(err / np.maximum(tol[k], 1e-12), axis=1)
+
+
 def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
-            theta_fit_deg: float = DEFAULT_THETA_FIT_DEG, **options) -> Fit3D:
+            theta_fit_deg: float = DEFAULT_THETA_FIT_DEG, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2,
+            **options) -> Fit3D:
     """:func:`fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by :func:`sample_rgl`
-    (the sampling time counts in ``time_s``)."""
+    (the sampling time counts in ``time_s``), then **verified between the data points**: the fit
+    is evaluated at ``verify`` fresh points (half uniform in the variables, half cosine-distributed
+    pairs, new seed each round) and, where it leaves its stated bound there, the worst of them join
+    the data and it is fitted again (at most ``verify_rounds`` refits: constraint generation over
+    the sampled domain). Without it, a fit of satin_purple within 21 % at its 19,000 points reached
+    94 /sr against 0.4 in a spike between them (relative RMSE 1.35 on the benchmark's pairs).
+    ``fit_info`` records the last verification (``verify_points``, ``verify_max_ratio``: the
+    largest error over the stated bound there, ``verified``: <= 1)."""
     t0 = time.perf_counter()
     X, rho, tm = sample_rgl(brdf, grid, n_random, theta_fit_deg)
     src = {"file": str(getattr(brdf, "source", "") or ""), "sha256": str(getattr(brdf, "source_sha256", "") or "")}
-    name = options.pop("name", f"{brdf.name}_3d")
-    res = fit_samples(X, rho, name=name, theta_max=tm, source=src, **options)
+    options.setdefault("name", f"{brdf.name}_3d")
+    limit = float(options.pop("time_limit", 60.0))
+    res = fit_samples(X, rho, theta_max=tm, source=src, time_limit=limit, **options)
+    res.info["_refit"] = (X, rho, tm, src, options)
+    res = verify_and_refit(brdf, res, verify, verify_rounds, limit - (time.perf_counter() - t0))
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s
     res.model.fit_info["grid"] = list(grid)
     res.model.fit_info["theta_measured_deg"] = float(np.degrees(brdf.theta_i_max))
+    return res
+
+
+def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, time_limit: float = 60.0):
+    """The verification of :func:`fit_rgl` on a fit made by it (its data in ``res.info``):
+    returns the fit after at most ``verify_rounds`` refits, within ``time_limit`` seconds."""
+    t0 = time.perf_counter()
+    X, rho, tm, src, options = res.info["_refit"]
+    limit = time_limit
+    ratio_max, n_added = None, 0
+    for rnd in range(verify_rounds + 1 if verify else 0):
+        Xv = sample_grid(tm, (1, 1, 1), verify // 2, seed=1000 + rnd)
+        wi, wo = half_diff_to_directions(Xv[:, 0], 0.0, Xv[:, 1], Xv[:, 2])
+        rv = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
+        ratio = verification_ratio(res, Xv, rv)
+        ratio_max = float(ratio.max())
+        bad = np.flatnonzero(ratio > 1.0)
+        left = limit - (time.perf_counter() - t0)
+        if len(bad) == 0 or rnd == verify_rounds or left < res.time_s:
+            break
+        worst = bad[np.argsort(-ratio[bad])[:2000]]
+        X, rho = np.concatenate([X, Xv[worst]]), np.concatenate([rho, rv[worst]])
+        n_added += len(worst)
+        res = fit_samples(X, rho, theta_max=tm, source=src, time_limit=max(left, 5.0), **options)
+        res.info["_refit"] = (X, rho, tm, src, options)
+    if ratio_max is not None:
+        res.model.fit_info.update(verify_points=int(verify // 2 * 2), verify_max_ratio=ratio_max,
+                                  verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
+        res.info.update(verify_max_ratio=ratio_max, verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
+    res.info["verify_s"] = time.perf_counter() - t0
     return res
 
 
@@ -347,8 +408,8 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
 #: or only up to the last measured incidence, and three pieces of degrees (5, 2) (594).
 VARIANTS = (
     {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
-    {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)], "theta_fit_deg": 0.0},
     {"theta_h_edges": [0.05, 0.2], "degrees": (5, 2), "theta_fit_deg": 0.0},
+    {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)], "theta_fit_deg": 0.0},
     {"theta_h_edges": [0.05, 0.2], "degrees": (5, 2)},
 )
 
@@ -373,22 +434,25 @@ def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
     return float(np.mean(np.sqrt(np.mean((f - t) ** 2, axis=0)) / np.maximum(np.sqrt(np.mean(t ** 2, axis=0)), 1e-300)))
 
 
-def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, **common) -> Fit3D:
+def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_share: float = 0.6,
+                   verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, **common) -> Fit3D:
     """Fit every layout of ``variants`` (each :func:`fit_rgl` keyword arguments, updated with
     ``common``) within ``time_limit`` seconds in all, and return the one with the lowest
     :func:`validation_rmse`; ``info["variants"]`` logs what each achieved (coefficients, stated
     bound, validation RMSE, seconds). Variants that no longer fit in the time left are skipped
-    (logged as such). ``time_s`` is the whole selection."""
+    (logged as such): the selection stops starting variants after ``select_share`` of the time;
+    the chosen fit is then verified and refitted (:func:`verify_and_refit`) in the rest.
+    ``time_s`` is the whole selection."""
     t0 = time.perf_counter()
     best, log = None, []
     for k, v in enumerate(variants):
         left = time_limit - (time.perf_counter() - t0)
         opts = dict(common, **v)
-        if k and (best is None or left < 1.2 * best.time_s):
+        if k and (best is None or left - (1 - select_share) * time_limit < 1.2 * best.time_s):
             log.append({"variant": k, "options": _plain(opts), "skipped": "time"})
             continue
         opts["time_limit"] = max(left, 5.0) if k == 0 else left
-        res = fit_rgl(brdf, **opts)
+        res = fit_rgl(brdf, verify=0, **opts)
         v_rmse = validation_rmse(brdf, res.model)
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
                     "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse, "time_s": res.time_s})
@@ -398,10 +462,16 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, **common) 
             best.info["variant"] = k
     if best is None:
         raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
+    chosen = best.info
+    best = verify_and_refit(brdf, best, verify, verify_rounds, time_limit - (time.perf_counter() - t0))
+    for key in ("validation_rmse", "variant"):
+        best.info[key] = chosen[key]
+    best.info["validation_rmse"] = validation_rmse(brdf, best.model)
     best.info["variants"] = log
     best.time_s = time.perf_counter() - t0
     best.model.fit_info.update(time_s=best.time_s, variant=best.info["variant"], variants=log,
                                validation_rmse=best.info["validation_rmse"])
+    best.info.pop("_refit", None)
     return best
 
 
