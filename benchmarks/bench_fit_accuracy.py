@@ -215,7 +215,8 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
                         coefficients=res.n_coefficients, fit_s=res.time_s, bound=res.tolerance, valid=res.valid,
                         n_points=res.n_points, file=str(fpath) if fpath else None,
                         pieces=len(res.info["edges"]) - 1, options=_jsonable(fit_options),
-                        variant=res.info.get("variant"), variants=_jsonable(res.info.get("variants")))
+                        variant=res.info.get("variant"), variants=_jsonable(res.info.get("variants")),
+                        verified=res.info.get("verified"), verify_max_ratio=res.info.get("verify_max_ratio"))
     if name in NEURAL:
         row["neural"] = {"rel_rmse": NEURAL[name], "coefficients": NEURAL_WEIGHTS, "source": "published (issue 25)"}
     return row
