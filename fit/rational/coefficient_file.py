@@ -1,5 +1,6 @@
 """Versioned JSON coefficient files of fitted rational functions: format ``rbrdf-rational``,
-version 1 (one function per output) and version 2 (pieces along one variable).
+version 1 (one function per output), version 2 (pieces along one variable) and version 3
+(3-D BRDF fits of theta_h, theta_d, |phi_d|).
 
 Specification (version 1)
 =========================
@@ -95,6 +96,19 @@ of ``"functions"`` (e.g. a theta_d core split at a theta_h edge into a specular-
 the rest), evaluated the same way, recursively. Readers of version 1 reject version 2 files (they would
 evaluate only part of the model).
 
+Version 3 (3-D BRDF fits)
+=========================
+A version-1 or version-2 body (``functions``, or ``split`` and ``pieces``) whose BRDF variables
+are exactly ``theta_h``, ``theta_d``, ``phi_d`` (radians; theta_h and theta_d inside [0, pi/2],
+phi_d inside [0, pi]), written by :mod:`fit.rational.fit3d`. ``phi_d`` is the Rusinkiewicz
+difference azimuth **folded by mirror symmetry**, ``|phi_d|`` of phi_d in (-pi, pi] with the
+light as ``wi`` (:mod:`fit.rational.variables3d`): the measurement's (light, view) roles are
+kept, no reciprocity fold. Evaluation is steps 1-7 with the three variables. Each function's
+record adds ``tolerance`` and ``noise``: every data point of its piece lies within
+``rho +- tolerance * max(rho, noise)`` (``valid``: that, and Q > 0 certified); the top-level
+``fit`` says which domain the data covered (``theta_max_deg``: the last measured incidence).
+Readers of versions 1 and 2 reject version 3; this reader still reads versions 1 and 2.
+
 Outside the fitted domain the inputs are clamped onto it (step 1), so the function is continuous
 and bounded everywhere: e.g. for theta_d above ``theta_d_max_deg`` (grazing, where measurements
 are unreliable and grow like 1/cos theta_o) it returns the value at the cut-off. Q > 0 holds on
@@ -147,15 +161,23 @@ from .model import (
 FORMAT = "rbrdf-rational"
 VERSION = 1            # single rational function per output
 VERSION_PIECEWISE = 2  # pieces along one variable (see PiecewiseRationalModel)
-VERSIONS = (VERSION, VERSION_PIECEWISE)
+VERSION_3D = 3         # a BRDF of (theta_h, theta_d, |phi_d|), single or piecewise (fit.rational.fit3d)
+VERSIONS = (VERSION, VERSION_PIECEWISE, VERSION_3D)
+#: The variables of a version-3 BRDF (fit.rational.variables3d: phi_d folded to |phi_d|).
+BRDF_VARIABLES_3D = ["theta_h", "theta_d", "phi_d"]
+
+
+def _is_3d(model) -> bool:
+    return model.kind == "brdf" and [v.name for v in model.variables] == BRDF_VARIABLES_3D
 
 
 def to_dict(model) -> dict:
     """The file's JSON object of ``model``: version 1 for a :class:`RationalModel`, version 2 for
     a :class:`PiecewiseRationalModel` (pieces may be piecewise again)."""
-    if isinstance(model, PiecewiseRationalModel):
-        return _piecewise_to_dict(model)
-    return _model_to_dict(model)
+    d = _piecewise_to_dict(model) if isinstance(model, PiecewiseRationalModel) else _model_to_dict(model)
+    if _is_3d(model):
+        d["version"] = VERSION_3D
+    return d
 
 
 def _model_to_dict(model) -> dict:
@@ -250,7 +272,7 @@ class _Budget:
         self.certify_work = 0
 
 
-def _variables(v, key: str, kind: str) -> list:
+def _variables(v, key: str, kind: str, three_d: bool = False) -> list:
     vs = v
     if not isinstance(vs, list) or not 1 <= len(vs) <= MAX_RATIONAL_VARIABLES:
         raise F.Invalid(key, f"expected a list of 1 to {MAX_RATIONAL_VARIABLES} variables")
@@ -271,12 +293,15 @@ def _variables(v, key: str, kind: str) -> list:
     if len(set(names)) != len(names):
         raise F.Invalid(key, f"variable names repeat: {names}")
     if kind == "brdf":
-        if names != ["theta_h", "theta_d"]:
-            raise F.Invalid(key, f"a BRDF's variables are theta_h, theta_d, not {', '.join(names)}")
+        want = BRDF_VARIABLES_3D if three_d else ["theta_h", "theta_d"]
+        if names != want:
+            raise F.Invalid(key, f"a {'version-3 ' if three_d else ''}BRDF's variables are {', '.join(want)}, "
+                                 f"not {', '.join(names)}")
         for i, var in enumerate(out):
-            if var.domain[0] < 0 or var.domain[1] > HALF_PI + 1e-9:
+            top = math.pi if var.name == "phi_d" else HALF_PI
+            if var.domain[0] < 0 or var.domain[1] > top + 1e-9:
                 raise F.Invalid(F.sub(F.sub(key, i), "domain"), f"[{var.domain[0]:g}, {var.domain[1]:g}] rad "
-                                                                "is not inside [0, pi/2]")
+                                                                f"is not inside [0, {'pi' if top > 2 else 'pi/2'}]")
     return out
 
 
@@ -378,13 +403,13 @@ def _domain_policy(d, key: str) -> dict:
     return dict(pol)
 
 
-def _model(d: dict, path, key: str, depth: int, budget: _Budget):
+def _model(d: dict, path, key: str, depth: int, budget: _Budget, three_d: bool = False):
     """A RationalModel (version 1 body) or PiecewiseRationalModel (version 2 body) from ``d``."""
     F.obj(d, key or "(top level)")
     kind = F.string(d.get("kind", "function"), F.sub(key, "kind"), choices=("brdf", "function"))
-    variables = _variables(F.get(d, "variables", key), F.sub(key, "variables"), kind)
+    variables = _variables(F.get(d, "variables", key), F.sub(key, "variables"), kind, three_d)
     if "split" in d or "pieces" in d:
-        return _piecewise(d, path, key, depth, budget, kind, variables)
+        return _piecewise(d, path, key, depth, budget, kind, variables, three_d)
     value = _value(d, F.sub(key, "value"), kind)
     raw = F.get(d, "functions", key)
     if not isinstance(raw, list) or not 1 <= len(raw) <= 16:
@@ -413,7 +438,7 @@ def _model(d: dict, path, key: str, depth: int, budget: _Budget):
         source=dict(F.obj(d.get("source", {"file": "", "sha256": ""}), F.sub(key, "source"))))
 
 
-def _piecewise(d, path, key, depth, budget, kind, variables):
+def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
     if depth >= MAX_SPLIT_DEPTH:
         raise F.Invalid(key, f"pieces nested more than {MAX_SPLIT_DEPTH} deep (fit.limits.MAX_SPLIT_DEPTH)")
     ks = F.sub(key, "split")
@@ -434,7 +459,7 @@ def _piecewise(d, path, key, depth, budget, kind, variables):
             sub.update(split=pd["split"], pieces=F.get(pd, "pieces", ki))
         else:
             sub.update(functions=F.get(pd, "functions", ki))
-        pieces.append(_model(sub, path, ki, depth + 1, budget))
+        pieces.append(_model(sub, path, ki, depth + 1, budget, three_d))
         infos.append(dict(F.obj(pd.get("info", {}), F.sub(ki, "info"))))
     try:
         return PiecewiseRationalModel(
@@ -496,13 +521,13 @@ def from_dict(d: dict, path=None, certify: bool = True):
         raise BRDFFileError(path, f"unsupported {FORMAT} version {ver if isinstance(ver, int) else repr(ver)[:20]} (this reader knows versions "
                                   f"{', '.join(map(str, VERSIONS))})")
     budget = _Budget()
-    label = "version-2 " if ver == VERSION_PIECEWISE else ""
+    label = {VERSION_PIECEWISE: "version-2 ", VERSION_3D: "version-3 "}.get(ver, "")
     try:
         if ver == VERSION and ("split" in d or "pieces" in d):
             raise F.Invalid("version", "a version-1 file has no 'split' or 'pieces' (version 2)")
         if ver == VERSION_PIECEWISE and "split" not in d:
             raise F.Invalid("split", "missing (a version-2 file is piecewise)")
-        model = _model(d, path, "", 0, budget)
+        model = _model(d, path, "", 0, budget, three_d=ver == VERSION_3D)
     except F.Invalid as e:
         raise BRDFFileError(path, f"invalid {FORMAT} {label}coefficient file: {e}") from None
     except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as e:

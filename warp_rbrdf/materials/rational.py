@@ -1,5 +1,6 @@
 """``rational``: the fitter's ``rbrdf-rational`` coefficient files (:mod:`fit.rational.coefficient_file`,
-versions 1 and 2) evaluated from data; ``scale`` multiplies them.
+versions 1 and 2, and version 3: 3-D fits of (theta_h, theta_d, |phi_d|), :mod:`fit.rational.fit3d`)
+evaluated from data; ``scale`` multiplies them.
 
 A fit is packed (:func:`pack_model`) into records of ``Materials.coef_i`` / ``coef_f`` /
 ``coef_q``: a split record per piecewise level (the split variable, its inner edges, the
@@ -31,6 +32,7 @@ existed (no channel reads a table).
 from __future__ import annotations
 
 import copy
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +55,7 @@ from fit.rational.brdf_model import (
 )
 from fit.rational.coefficient_file import load as load_coefficients
 from fit.rational.model import flagged, measured_range, output_clamp
+from fit.rational.variables3d import evaluate_directions, is_3d
 
 from ..chebyshev import FlatData, cheb_sum6
 from ..errors import SceneError
@@ -79,7 +82,8 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     check_model(model, scene_file, key)
     regions = flagged_regions(model)
     if not regions:
-        return LoadedMaterial(spec, model, scaled(model.evaluate, spec.scale), scale=spec.scale,
+        evaluate = (partial(evaluate_directions, model) if is_3d(model) else model.evaluate)
+        return LoadedMaterial(spec, model, scaled(evaluate, spec.scale), scale=spec.scale,
                               coefficients=_packed(model, False, scene_file, key))
     what = describe_regions(model, regions)
     fit_name = spec.file.name if spec.file is not None else f"(in memory, {model.name!r})"
@@ -333,14 +337,12 @@ def _mapped_input(ci: wp.array(dtype=int), cf: wp.array(dtype=wp.float64), code:
                   a: wp.vec3) -> wp.float64:
     """Steps 1-3 of the recipe for a variable of code ``code`` (a leaf's variable code) whose
     header entries start at float ``b``: clamp onto the box, transform, map onto [-1, 1];
-    phi_d folded into [0, pi] first."""
+    phi_d folded into [0, pi] first by the mirror symmetry of isotropy, |phi_d| (file version 3,
+    :mod:`fit.rational.variables3d`; the light's and the view's roles are kept)."""
     src = code & 3
     x = wp.float64(a[src])
     if src == 2:
-        p = a[2]
-        if p < 0.0:
-            p = p + wp.pi
-        x = wp.float64(p)
+        x = wp.float64(wp.abs(a[2]))
     if (flags & LEAF_CLAMP) != 0:
         x = wp.clamp(x, cf[b], cf[b + 1])
     if (code >> 2) == 1:
@@ -387,6 +389,8 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     n = ib
     while ci[n] == NODE_SPLIT:     # piece k: the first with x <= edge k + 1
         x = wp.float64(a[ci[n + SPLIT_VAR]])
+        if ci[n + SPLIT_VAR] == 2:
+            x = wp.abs(x)
         e = fb + ci[n + SPLIT_EDGES]
         k = int(0)
         for j in range(ci[n + SPLIT_N] - 1):

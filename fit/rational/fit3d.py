@@ -1,0 +1,484 @@
+"""3-D rational BRDF fits of ``(theta_h, theta_d, |phi_d|)`` with a guaranteed bound at every
+data point (coefficient file version 3, :mod:`fit.rational.coefficient_file`).
+
+What is fitted
+==============
+The measurement itself, not its phi_d-median projection: rho (1/sr, RGB) sampled from the
+RGL reference evaluation (:meth:`fit.formats.rgl.RGLBRDF.evaluate`, the file's own (light,
+view) roles, no reciprocity fold; negatives clamped to 0) at points of the variables of
+:mod:`fit.rational.variables3d` (:func:`sample_grid`):
+
+* a grid ``theta_h = theta_max s^2`` (``s`` uniform: dense at the specular peak), ``theta_d``
+  uniform on ``[0, theta_max]``, ``phi_d`` uniform on ``[0, pi]``;
+* ``n_random`` points uniform in ``(sqrt(theta_h), theta_d, phi_d)`` and ``n_random`` pairs of
+  cosine-distributed directions (seeded): without them a fit met its bound on a 5,700-point
+  grid and was 50x off between the grid points (satin_rosaline, relative RMSE 53);
+* kept where both directions are above the horizon and within ``theta_max`` of the normal:
+  :func:`fit_rgl` takes ``theta_max`` = 89 deg (``theta_fit_deg``), beyond the **last measured
+  incidence** (:attr:`RGLBRDF.theta_i_max`, 78-85 deg on the six materials): the whole
+  measured domain, and the file's own extrapolation beyond it (its rgb tables clamped, its
+  other factors not), which is the truth the renderer's ``rgl`` material and the benchmark
+  use. Fitted only up to the last incidence, 8 % of cosine-distributed pairs lie outside the
+  data and made 39 % of the squared error of satin_rosaline (the fit extrapolated freely in
+  its box). ``fit_info.theta_measured_deg`` records the last measured incidence.
+
+Intervals and the bound
+=======================
+Per channel ``c`` a noise level ``n_c`` (:func:`noise_levels`: 1 % of the channel's median, or
+more where the file clamped negative values to 0) and, per point, the error unit
+
+    s = max(rho_c, n_c, channel_floor * max(rho_R, rho_G, rho_B)) * g,
+    g = max(1, grazing_cos / (cos theta_i cos theta_o))
+
+and the interval ``rho_c +- tol * s``: relative to the value down to the noise level (not an
+albedo-wide floor), a channel that is below ``channel_floor`` (5 %) of the brightest channel of
+the same pair bounded relative to that channel (vch_golden_yellow's blue rises from 0 to 0.8
+/sr within 10 deg of theta_d in the specular peak where green is 4 /sr: relative to itself it
+could not be followed, bound 100 %, relative RMSE 0.32; with the floor 0.17), and where
+``cos theta_i cos theta_o >= grazing_cos`` (default 0.25, e.g. both
+directions within 60 deg), and beyond it a bound on what a renderer sees, ``rho cos theta_i
+cos theta_o``, within ``tol * max(rho, n_c) * grazing_cos`` (the grazing pairs of the RGL
+files are where one function of these variables fails: paper_white, one piece of degrees
+(5, 2), met 2.5 % with both directions within 60 deg and 15 % over the whole domain; with
+``g`` its three pieces meet 1.6-6.5 % and the relative RMSE drops from 0.069 to 0.028).
+``grazing_cos = 0`` makes the bound relative everywhere. Values are fitted as
+``log(rho + offset)`` (``offset`` = the smallest ``n_c``), so the interval is
+``[log(max(rho - tol s, 0) + offset), log(rho + tol s + offset)]``: linear constraints of the
+interval LP of :class:`fit.rational.fitter.IntervalRationalFitter`, with constraint generation
+and the ``Q >= q_min`` Bernstein rows on the whole box.
+
+The degrees are fixed per piece (``degrees``; the coefficient budget is the design choice),
+and the **tolerance is the outcome**: ``tol, 1.6 tol, 1.6^2 tol, ...`` are tried until the
+intervals are met, then one geometric bisection step below (:func:`_fit_channel`). The LP is
+exact for feasibility only: its least-violation solution when infeasible is not a minimax fit
+(its margins are weighted by Q, and a small Q hid errors of 100x on satin_rosaline), so it is
+never used. The stated bound is then measured on every data point in float64: ``tol_c = max
+|fit - rho| / s`` per channel and piece (at most the tolerance met). Every data point lies
+within ``rho +- tol_c s`` and Q > 0 is certified on each piece's box (exact Bernstein
+coefficients); the record says so (``valid``, ``tolerance``, ``intervals``). The bound holds
+at the data points; between them the fit is bounded by its ``vouched_range`` (step 7 of the
+file's recipe), checked at 40,000 fresh points by :func:`fit_rgl` (violators join the data and
+the fit is made again: constraint generation over the sampled domain; ``fit_info.verified``,
+``verify_max_ratio`` say how far that got within the time) and measured by
+``benchmarks/bench_fit_accuracy.py``. :func:`fit_rgl_select` fits a few layouts
+(:data:`VARIANTS`) and keeps the one with the lowest relative RMSE on validation pairs.
+
+Pieces
+======
+``theta_h_edges`` splits the box along ``theta_h`` (a specular-peak piece, its shoulder and the
+rest, where one function cannot follow the lobe); each piece is fitted to its own points (points
+on an edge go to both sides) and the file is a piecewise model whose variables are the 3-D ones.
+``time_limit`` is shared by the whole fit: a channel out of its share takes larger tolerance
+steps.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..formats.angles import cos_theta_i_o, half_diff_to_directions
+from .fitter import IntervalRationalFitter
+from .model import PiecewiseRationalModel, RationalModel, Variable
+from .variables3d import half_diff_3d
+
+DEFAULT_GRID = (28, 22, 13)          # theta_h, theta_d, phi_d samples of the data grid
+DEFAULT_DEGREES = (7, 3)             # numerator, denominator total degree per piece
+DEFAULT_NOISE_FRAC = 0.01
+DEFAULT_GRAZING_COS = 0.25          # cos(theta_i) cos(theta_o) below which the bound is on rho cos cos
+DEFAULT_CHANNEL_FLOOR = 0.05        # a channel's error unit is at least this fraction of the largest channel
+INTERVALS = ("rho_c +- tolerance * max(rho_c, noise_c, channel_floor * max(rho_R, rho_G, rho_B)) "
+             "* max(1, grazing_cos / (cos theta_i cos theta_o))")
+DEFAULT_THETA_FIT_DEG = 89.0         # data up to here: the file's own extrapolation beyond its last incidence
+DEFAULT_VERIFY = 40000                # fresh points a fit is checked at (fit_rgl)
+DEFAULT_RANDOM = 8000             # random points of each of the two kinds
+
+
+def sample_grid(theta_max: float, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM, seed: int = 7) -> np.ndarray:
+    """``(N, 3)`` physical ``(theta_h, theta_d, |phi_d|)`` (radians) of the data points (module
+    docstring): the grid, ``n_random`` points uniform in ``(sqrt(theta_h), theta_d, phi_d)`` and
+    ``n_random`` pairs of cosine-distributed directions (seeded), all those whose light and view
+    directions are both above the horizon and within ``theta_max`` of the normal."""
+    nh, nd, npd = (int(g) for g in grid)
+    th = theta_max * np.linspace(0.0, 1.0, nh) ** 2
+    td = np.linspace(0.0, theta_max, nd)
+    pd = np.linspace(0.0, np.pi, npd)
+    parts = [np.stack(np.meshgrid(th, td, pd, indexing="ij"), axis=-1).reshape(-1, 3)]
+    rng = np.random.default_rng(seed)
+    if n_random:
+        u = rng.random((n_random, 3))
+        parts.append(np.stack([theta_max * u[:, 0] ** 2, theta_max * u[:, 1], np.pi * u[:, 2]], axis=1))
+
+        def cos_dirs(n):
+            a, b = rng.random(n), rng.random(n)
+            r, p = np.sqrt(a), 2 * np.pi * b
+            return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - a, 0))], -1)
+
+        parts.append(half_diff_3d(cos_dirs(n_random), cos_dirs(n_random)))
+    X = np.concatenate(parts)
+    wi, wo = half_diff_to_directions(X[:, 0], 0.0, X[:, 1], X[:, 2])
+    cmin = np.cos(theta_max) - 1e-9
+    keep = (wi[:, 2] >= cmin) & (wo[:, 2] >= cmin) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    keep &= (X[:, 0] <= theta_max) & (X[:, 1] <= theta_max)
+    return X[keep]
+
+
+def noise_levels(rho, noise_frac: float = DEFAULT_NOISE_FRAC) -> np.ndarray:
+    """Per channel the noise level ``n_c`` (1/sr) of data ``rho`` ``(N, 3)``: the larger of
+    ``noise_frac * median(rho_c)`` and, where a fraction ``z`` of the values are 0 (negative
+    measurements clamped: values within the noise of 0), the ``min(2 z, 0.5)`` quantile of the
+    channel (vch_golden_yellow's blue: 8.5 % zeros next to a peak of 364 /sr; with the 1 % floor
+    alone its fit went to 0 over the dark region and its bound was 100 % everywhere)."""
+    rho = np.asarray(rho, np.float64)
+    noise = noise_frac * np.median(rho, axis=0)
+    z = np.mean(rho <= 0.0, axis=0)
+    for c in range(rho.shape[1]):
+        if z[c] > 0:
+            noise[c] = max(noise[c], float(np.quantile(rho[:, c], min(2.0 * z[c], 0.5))))
+    return np.maximum(noise, 1e-12)
+
+
+def grazing_weight(X, grazing_cos: float) -> np.ndarray:
+    """``g = max(1, grazing_cos / (cos theta_i cos theta_o))`` of rows ``(theta_h, theta_d,
+    |phi_d|)`` ``(N, 3)``: 1 (a relative bound on rho) where the product of the cosines is at least
+    ``grazing_cos``, beyond it a bound on ``rho cos theta_i cos theta_o`` (module docstring);
+    ``grazing_cos = 0``: 1 everywhere."""
+    ci, co = cos_theta_i_o(X[:, 0], X[:, 1], X[:, 2])
+    return np.maximum(1.0, grazing_cos / np.maximum(ci * co, 1e-6))
+
+
+def sample_rgl(brdf, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM, theta_fit_deg: float = DEFAULT_THETA_FIT_DEG):
+    """``(X (N, 3), rho (N, 3), theta_fit)``: the data of a 3-D fit of an
+    :class:`fit.formats.rgl.RGLBRDF` (its reference evaluation, light = ``wi``, negatives 0) up
+    to ``theta_fit`` = the larger of ``theta_fit_deg`` and its last measured incidence (module
+    docstring)."""
+    theta_max = max(float(brdf.theta_i_max), float(np.radians(theta_fit_deg)))
+    X = sample_grid(theta_max, grid, n_random)
+    wi, wo = half_diff_to_directions(X[:, 0], 0.0, X[:, 1], X[:, 2])
+    rho = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
+    return X, rho, theta_max
+
+
+@dataclass
+class Fit3D:
+    """A 3-D fit: ``model`` (evaluate with :func:`fit.rational.variables3d.evaluate_directions`),
+    ``records`` (per piece and channel: degrees, stated tolerance, LP rounds, seconds),
+    ``tolerance`` (the largest stated tolerance: every data point is within it), ``time_s``."""
+
+    model: object
+    records: list
+    tolerance: float
+    valid: bool
+    time_s: float
+    n_points: int
+    noise: tuple
+    info: dict = field(default_factory=dict)
+
+    @property
+    def n_coefficients(self) -> int:
+        return int(self.model.n_coefficients)
+
+    def summary(self) -> str:
+        return (f"3-D fit {self.model.name}: {self.n_coefficients} coefficients, bound "
+                f"{100 * self.tolerance:.3g} % of max(rho, noise) at {self.n_points} points, "
+                f"{'valid' if self.valid else 'NOT valid'}, {self.time_s:.1f} s")
+
+
+def _variables(box) -> list:
+    (h0, h1), (d0, d1), (p0, p1) = box
+    return [Variable("theta_h", "rad", "sqrt", (h0, h1)), Variable("theta_d", "rad", "identity", (d0, d1)),
+            Variable("phi_d", "rad", "identity", (p0, p1))]
+
+
+class _TolFitter(IntervalRationalFitter):
+    """The interval fitter at fixed degrees, answering one question per tolerance: is there a
+    fit within these intervals (constraint generation, fast rejection on a subset), and if so
+    the certified function."""
+
+    def try_fit(self, U, lower, upper, degrees):
+        t0 = time.perf_counter()
+        self._prepare(U, None, lower, upper)
+        m, n = degrees
+        att = self._fit_pair(m, n)
+        if not att.feasible:
+            return None
+        att = self._make_certified(att)
+        if not att.feasible:
+            return None
+        return self._finish(att, [(m, n, True, self._ncoef(m, n))], t0)
+
+
+def _intervals(y, scale, offset, tol):
+    e = tol * scale
+    return np.log(np.maximum(y - e, 0.0) + offset), np.log(y + e + offset)
+
+
+def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6, max_tol=64.0):
+    """One channel of one piece: ``(RationalFunction, record)``; ``U`` transformed inputs, ``y``
+    the values, ``scale`` the per-point error unit (``max(rho, noise) * g``, module docstring).
+
+    Tolerances ``tol, tol * step, ...`` are tried until one is met (the LP is exact only for
+    feasibility: a least-violation LP solution can hide large errors where Q is small), then one
+    geometric bisection step below it if time is left. The stated tolerance is the error
+    measured at every point afterwards (at most the tolerance met)."""
+    t0 = time.perf_counter()
+    fitter = _TolFitter(domain=domain, max_iter=40, q_grid=7)
+    tried, res, t_ok, t_bad = [], None, None, None
+    t = float(tol)
+    while t <= max_tol:
+        r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
+        tried.append([t, r is not None])
+        if r is not None:
+            res, t_ok = r, t
+            break
+        t_bad = t
+        t *= step
+        if time.perf_counter() - t0 > time_limit and t_bad is not None:
+            step = step * step      # out of time: larger steps to any feasible level
+    if res is None:
+        raise RuntimeError(f"no fit within {max_tol:g} x the error unit at degrees {degrees}")
+    if t_bad is not None and time.perf_counter() - t0 < 0.6 * time_limit:
+        t = float(np.sqrt(t_ok * t_bad))
+        r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
+        tried.append([t, r is not None])
+        if r is not None:
+            res, t_ok = r, t
+    f = res.function
+    fit = np.maximum(np.exp(f(U)) - offset, 0.0)
+    err = np.abs(fit - y) / scale
+    cert = res.certificate
+    stated = float(np.max(err))
+    rec = {"degrees": [int(res.num_degree), int(res.den_degree)], "n_coefficients": int(f.n_coefficients),
+           "tolerance": stated, "tolerance_met": t_ok, "tolerances_tried": tried,
+           "max_rel_error": stated, "rms_rel_error": float(np.sqrt(np.mean(err ** 2))),
+           "n_points": len(y), "n_constraints": int(res.n_constraints), "n_lp": int(res.n_lp),
+           "time_s": time.perf_counter() - t0, "feasible": True,
+           "valid": bool(cert.certified and stated <= t_ok * (1 + 1e-9)),
+           "q_certificate": {"certified": bool(cert.certified), "lower_bound": float(cert.lower_bound),
+                             "method": "Bernstein coefficients, exact subdivision"},
+           "intervals": INTERVALS,
+           "measured_range": [float(y.min()), float(y.max())],
+           "vouched_range": [float(np.maximum(y - stated * scale, 0.0).min()), float((y + stated * scale).max())]}
+    return f, rec
+
+
+def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFAULT_DEGREES,
+                theta_h_edges=None, piece_degrees=None, noise_frac=DEFAULT_NOISE_FRAC,
+                grazing_cos=DEFAULT_GRAZING_COS, channel_floor=DEFAULT_CHANNEL_FLOOR, time_limit=60.0,
+                source=None) -> Fit3D:
+    """3-D fit of data ``X`` ``(N, 3)`` (theta_h, theta_d, |phi_d|, radians) with values ``rho``
+    ``(N, 3)`` (1/sr): pieces along theta_h at ``theta_h_edges`` (inner edges), each channel a
+    rational function of total degrees ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol``
+    (module docstring: the stated bound is what is met). ``time_limit`` (s) is shared by the
+    whole fit."""
+    t0 = time.perf_counter()
+    X = np.asarray(X, np.float64)
+    rho = np.maximum(np.asarray(rho, np.float64), 0.0)
+    tm = float(theta_max if theta_max is not None else max(X[:, 0].max(), X[:, 1].max()))
+    noise = noise_levels(rho, noise_frac)
+    g = grazing_weight(X, grazing_cos)
+    offset = float(noise.min())
+    edges = [0.0] + sorted(float(e) for e in (theta_h_edges or [])) + [tm]
+    pieces, piece_info, records = [], [], []
+    n_pieces = len(edges) - 1
+    for k in range(n_pieces):
+        a, b = edges[k], edges[k + 1]
+        sel = (X[:, 0] >= a - 1e-12) & (X[:, 0] <= b + 1e-12)
+        box = [(a, b), (0.0, tm), (0.0, np.pi)]
+        variables = _variables(box)
+        U = np.stack([np.sqrt(X[sel, 0]), X[sel, 1], X[sel, 2]], axis=1)
+        domain = np.array([v.rf_domain for v in variables])
+        deg = tuple(piece_degrees[k]) if piece_degrees else tuple(degrees)
+        funcs, infos = [], []
+        for c in range(3):
+            left = max(time_limit - (time.perf_counter() - t0), 1.0)
+            share = left / ((n_pieces - k) * 3 - c)
+            scale = np.maximum(np.maximum(rho[sel, c], noise[c]), channel_floor * rho[sel].max(axis=1)) * g[sel]
+            f, rec = _fit_channel(U, rho[sel, c], scale, offset, domain, tol, deg, share)
+            rec["noise"] = float(noise[c])
+            funcs.append(f)
+            infos.append(rec)
+            records.append(dict(rec, piece=k, channel="RGB"[c]))
+        vmax = float(2.0 * rho[sel].max() + 1.0)
+        pieces.append(RationalModel(name=name, variables=variables, functions=funcs, value_transform="log",
+                                    value_offset=offset, value_min=0.0, value_max=vmax, function_info=infos))
+        piece_info.append({"theta_h_range_deg": [float(np.degrees(a)), float(np.degrees(b))],
+                           "intervals": INTERVALS, "guaranteed": all(
+                               i["valid"] for i in infos), "n_points": int(sel.sum())})
+    tol_all = max(r["tolerance"] for r in records)
+    valid = all(r["valid"] for r in records)
+    elapsed = time.perf_counter() - t0
+    fit_info = {"kind": "3d", "tolerance": tol_all, "tolerance_kind": INTERVALS, "grazing_cos": grazing_cos,
+                "channel_floor": channel_floor,
+                "start_tolerance": tol, "noise": noise.tolist(), "noise_frac": noise_frac,
+                "theta_max_deg": float(np.degrees(tm)), "n_points": len(X), "time_s": elapsed,
+                "fitter": "fit.rational.fit3d (interval LP, constraint generation, fixed degrees)",
+                "theta_h_edges": edges[1:-1], "valid": valid,
+                "guarantee": "every data point (theta_i, theta_o <= theta_max: the whole measured domain and the "
+                             "file's own extrapolation beyond its last incidence up to theta_max) "
+                             f"within {INTERVALS}; Q > 0 certified on every piece"}
+    src = source or {"file": "", "sha256": ""}
+    if n_pieces == 1:
+        model = pieces[0]
+        model.fit_info, model.source = fit_info, src
+    else:
+        model = PiecewiseRationalModel(name=name, variables=_variables([(0.0, tm), (0.0, tm), (0.0, np.pi)]),
+                                       split_variable="theta_h", edges=edges, pieces=pieces,
+                                       fit_info=fit_info, piece_info=piece_info, source=src)
+    return Fit3D(model, records, tol_all, valid, elapsed, len(X), tuple(noise.tolist()),
+                 {"edges": edges})
+
+
+def verification_ratio(res, X, rho) -> np.ndarray:
+    """Per point of ``X`` ``(N, 3)`` with values ``rho`` ``(N, 3)``: the largest over R, G, B of
+    ``|fit - rho| / (s * tol_piece_channel)`` (``s`` the error unit of :func:`fit_samples` with the
+    fit's noise levels and policies, ``tol`` the stated tolerance of the piece and channel that
+    evaluates the point); <= 1 where the fit is within its stated bound."""
+    fi = res.model.fit_info
+    noise = np.asarray(res.noise)
+    g = grazing_weight(X, float(fi.get("grazing_cos", DEFAULT_GRAZING_COS)))
+    s = np.maximum(np.maximum(rho, noise[None, :]), float(fi.get("channel_floor", DEFAULT_CHANNEL_FLOOR))
+                   * rho.max(axis=1, keepdims=True)) * g[:, None]
+    edges = res.info["edges"]
+    k = np.searchsorted(np.asarray(edges[1:-1]), np.clip(X[:, 0], edges[0], edges[-1]), side="left")
+    tol = np.zeros((len(edges) - 1, 3))
+    for r in res.records:
+        tol[r["piece"], "RGB".index(r["channel"])] = r["tolerance"]
+    err = np.abs(res.model(X) - rho) / s
+    return np.max(err / np.maximum(tol[k], 1e-12), axis=1)
+
+
+def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
+            theta_fit_deg: float = DEFAULT_THETA_FIT_DEG, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2,
+            **options) -> Fit3D:
+    """:func:`fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by :func:`sample_rgl`
+    (the sampling time counts in ``time_s``), then **verified between the data points**: the fit
+    is evaluated at ``verify`` fresh points (half uniform in the variables, half cosine-distributed
+    pairs, new seed each round) and, where it leaves its stated bound there, the worst of them join
+    the data and it is fitted again (at most ``verify_rounds`` refits: constraint generation over
+    the sampled domain). Without it, a fit of satin_purple within 21 % at its 19,000 points reached
+    94 /sr against 0.4 in a spike between them (relative RMSE 1.35 on the benchmark's pairs).
+    ``fit_info`` records the last verification (``verify_points``, ``verify_max_ratio``: the
+    largest error over the stated bound there, ``verified``: <= 1)."""
+    t0 = time.perf_counter()
+    X, rho, tm = sample_rgl(brdf, grid, n_random, theta_fit_deg)
+    src = {"file": str(getattr(brdf, "source", "") or ""), "sha256": str(getattr(brdf, "source_sha256", "") or "")}
+    options.setdefault("name", f"{brdf.name}_3d")
+    limit = float(options.pop("time_limit", 60.0))
+    res = fit_samples(X, rho, theta_max=tm, source=src, time_limit=limit, **options)
+    res.info["_refit"] = (X, rho, tm, src, options)
+    res = verify_and_refit(brdf, res, verify, verify_rounds, limit - (time.perf_counter() - t0))
+    res.time_s = time.perf_counter() - t0
+    res.model.fit_info["time_s"] = res.time_s
+    res.model.fit_info["grid"] = list(grid)
+    res.model.fit_info["theta_measured_deg"] = float(np.degrees(brdf.theta_i_max))
+    return res
+
+
+def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, time_limit: float = 60.0):
+    """The verification of :func:`fit_rgl` on a fit made by it (its data in ``res.info``):
+    returns the fit after at most ``verify_rounds`` refits, within ``time_limit`` seconds."""
+    t0 = time.perf_counter()
+    X, rho, tm, src, options = res.info["_refit"]
+    limit = time_limit
+    ratio_max, n_added = None, 0
+    for rnd in range(verify_rounds + 1 if verify else 0):
+        Xv = sample_grid(tm, (1, 1, 1), verify // 2, seed=1000 + rnd)
+        wi, wo = half_diff_to_directions(Xv[:, 0], 0.0, Xv[:, 1], Xv[:, 2])
+        rv = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
+        ratio = verification_ratio(res, Xv, rv)
+        ratio_max = float(ratio.max())
+        bad = np.flatnonzero(ratio > 1.0)
+        left = limit - (time.perf_counter() - t0)
+        if len(bad) == 0 or rnd == verify_rounds or left < res.time_s:
+            break
+        worst = bad[np.argsort(-ratio[bad])[:2000]]
+        X, rho = np.concatenate([X, Xv[worst]]), np.concatenate([rho, rv[worst]])
+        n_added += len(worst)
+        res = fit_samples(X, rho, theta_max=tm, source=src, time_limit=max(left, 5.0), **options)
+        res.info["_refit"] = (X, rho, tm, src, options)
+    if ratio_max is not None:
+        res.model.fit_info.update(verify_points=int(verify // 2 * 2), verify_max_ratio=ratio_max,
+                                  verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
+        res.info.update(verify_max_ratio=ratio_max, verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
+    res.info["verify_s"] = time.perf_counter() - t0
+    return res
+
+
+
+#: The layouts :func:`fit_rgl_select` tries by default (fit_rgl keyword arguments): four theta_h
+#: pieces (peak, two for the lobe's shoulder, the rest; 666 coefficients) with data up to 89 deg
+#: or only up to the last measured incidence, and three pieces of degrees (5, 2) (594).
+VARIANTS = (
+    {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
+    {"theta_h_edges": [0.05, 0.2], "degrees": (5, 2), "theta_fit_deg": 0.0},
+    {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)], "theta_fit_deg": 0.0},
+    {"theta_h_edges": [0.05, 0.2], "degrees": (5, 2)},
+)
+
+
+def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
+    """Relative RMSE of ``rho cos(theta_i) cos(theta_o)`` (mean over R, G, B) of a 3-D ``model``
+    against the RGL reference on ``n`` pairs of cosine-distributed directions (``seed``: not the
+    benchmark's): the selection criterion of :func:`fit_rgl_select`."""
+    from .variables3d import evaluate_directions
+
+    rng = np.random.default_rng(seed)
+
+    def dirs():
+        a, b = rng.random(n), rng.random(n)
+        r, p = np.sqrt(a), 2 * np.pi * b
+        return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - a, 0))], -1)
+
+    wi, wo = dirs(), dirs()
+    c = (wi[:, 2] * wo[:, 2])[:, None]
+    t = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0) * c
+    f = evaluate_directions(model, wi, wo) * c
+    return float(np.mean(np.sqrt(np.mean((f - t) ** 2, axis=0)) / np.maximum(np.sqrt(np.mean(t ** 2, axis=0)), 1e-300)))
+
+
+def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_share: float = 0.6,
+                   verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, **common) -> Fit3D:
+    """Fit every layout of ``variants`` (each :func:`fit_rgl` keyword arguments, updated with
+    ``common``) within ``time_limit`` seconds in all, and return the one with the lowest
+    :func:`validation_rmse`; ``info["variants"]`` logs what each achieved (coefficients, stated
+    bound, validation RMSE, seconds). Variants that no longer fit in the time left are skipped
+    (logged as such): the selection stops starting variants after ``select_share`` of the time;
+    the chosen fit is then verified and refitted (:func:`verify_and_refit`) in the rest.
+    ``time_s`` is the whole selection."""
+    t0 = time.perf_counter()
+    best, log = None, []
+    for k, v in enumerate(variants):
+        left = time_limit - (time.perf_counter() - t0)
+        opts = dict(common, **v)
+        if k and (best is None or left - (1 - select_share) * time_limit < 1.2 * best.time_s):
+            log.append({"variant": k, "options": _plain(opts), "skipped": "time"})
+            continue
+        opts["time_limit"] = max(left, 5.0) if k == 0 else left
+        res = fit_rgl(brdf, verify=0, **opts)
+        v_rmse = validation_rmse(brdf, res.model)
+        log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
+                    "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse, "time_s": res.time_s})
+        if res.valid and (best is None or v_rmse < best.info["validation_rmse"]):
+            best = res
+            best.info["validation_rmse"] = v_rmse
+            best.info["variant"] = k
+    if best is None:
+        raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
+    chosen = best.info
+    best = verify_and_refit(brdf, best, verify, verify_rounds, time_limit - (time.perf_counter() - t0))
+    for key in ("validation_rmse", "variant"):
+        best.info[key] = chosen[key]
+    best.info["validation_rmse"] = validation_rmse(brdf, best.model)
+    best.info["variants"] = log
+    best.time_s = time.perf_counter() - t0
+    best.model.fit_info.update(time_s=best.time_s, variant=best.info["variant"], variants=log,
+                               validation_rmse=best.info["validation_rmse"])
+    best.info.pop("_refit", None)
+    return best
+
+
+def _plain(d: dict) -> dict:
+    return {k: ([list(x) if isinstance(x, tuple) else x for x in v] if isinstance(v, list)
+                else list(v) if isinstance(v, tuple) else v) for k, v in d.items()}

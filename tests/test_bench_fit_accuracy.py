@@ -1,0 +1,48 @@
+"""Smoke test of ``benchmarks/bench_fit_accuracy.py`` (issue 25) on a tiny pair count, and its
+metric on cases with a known answer; the benchmark's numbers themselves are docs/fit_accuracy.md."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from conftest import data_file
+
+from benchmarks import bench_fit_accuracy as B
+
+
+def test_metric_known_answers():
+    wi, wo = B.cosine_pairs(4000, 1)
+    assert np.allclose(np.linalg.norm(wi, axis=1), 1) and np.all(wi[:, 2] >= 0)
+    # cosine-distributed: E[cos theta] = 2/3
+    assert abs(wi[:, 2].mean() - 2 / 3) < 0.02
+    truth = np.ones((4000, 3)) * [0.1, 0.2, 0.3]
+    np.testing.assert_allclose(B.relative_rmse(truth * 1.05, truth, wi, wo), 0.05)
+    med, p95 = B.relative_error_stats(truth * 1.05, truth)
+    assert np.isclose(med, 0.05) and np.isclose(p95, 0.05)
+    # a constant rho against 1.1 times it: the albedo error is 0.1 at every angle (same views)
+
+    def lam(a, b):
+        return np.full(b.shape[:-1] + (3,), 0.5 / np.pi)
+
+    np.testing.assert_allclose(B.albedo_errors(lambda a, b: 1.1 * lam(a, b), lam, n=500), [0.1] * 4)
+
+
+def test_smoke_run_and_bad_input(tmp_path, capsys):
+    data = data_file("rgl/paper_white_rgb.bsdf").parents[1]
+    out = tmp_path / "out"
+    rc = B.main(["--data", str(data), "--materials", "paper_white", "--pairs", "500", "--albedo-samples", "300",
+                 "--no-table", "--fits-2d", str(tmp_path), "--out", str(out), "--degrees", "3,1", "--edges", "",
+                 "--grid", "8,7,5", "--random", "200", "--verify", "2000"])
+    assert rc == 0
+    res = json.loads((out / "results.json").read_text())
+    f3 = res["rows"][0]["fit3d"]
+    assert f3["valid"] and f3["coefficients"] == 3 * (20 + 4) and 0 < f3["rel_rmse"] < 1
+    assert len(f3["albedo_err"]) == 4 and (out / "paper_white_rgb_3d.json").is_file()
+    assert "| paper_white |" in capsys.readouterr().out
+    for argv, words in ((["--materials", "no_such"], "--materials no_such"), (["--pairs", "5"], "--pairs 5"),
+                        (["--degrees", "x"], "--degrees 'x'"),
+                        (["--render-from", str(tmp_path / "none.json")], "--render-from")):
+        assert B.main(["--data", str(data), "--out", str(tmp_path / "o2")] + argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and words in err
+    assert not (tmp_path / "o2" / "results.json").exists()
