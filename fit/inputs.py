@@ -98,8 +98,8 @@ def _no_constant(s: str):
     raise ValueError(f"{s} is not allowed (JSON has no NaN or infinity)")
 
 
-def _depth(obj, limit: int) -> int:
-    """Nesting depth of a parsed JSON value, iteratively (no recursion); stops past ``limit``."""
+def nesting_depth(obj, limit: int) -> int:
+    """Nesting depth of a parsed JSON (or TOML) value: dicts and lists, iteratively (no recursion); stops past ``limit``."""
     deepest = 0
     stack = [(obj, 1)]
     while stack:
@@ -136,7 +136,7 @@ def parse_json(text, path=None, what: str = "JSON file"):
         raise BRDFFileError(path, f"corrupt {what}: nested too deeply") from None
     except ValueError as e:
         raise BRDFFileError(path, f"corrupt {what}: {e}") from None
-    if _depth(obj, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
+    if nesting_depth(obj, MAX_JSON_DEPTH) > MAX_JSON_DEPTH:
         raise BRDFFileError(path, f"corrupt {what}: nested more than {MAX_JSON_DEPTH} levels deep "
                                   "(fit.limits.MAX_JSON_DEPTH)")
     return obj

@@ -1023,20 +1023,9 @@ def env_sample_uv(env: EnvMap, xi: wp.vec2):
 def env_sample(env: EnvMap, xi: wp.vec2) -> wp.vec4:
     """Importance-sample a world direction from uniforms ``xi`` in [0, 1)^2 (``xi[0]`` drives v,
     ``xi[1]`` u); returns (dx, dy, dz, pdf), pdf in 1/sr and equal to ``env_pdf`` of the returned
-    direction; pdf = 0 if impossible."""
-    if env.can_sample == 0:
-        return wp.vec4(0.0, 1.0, 0.0, 0.0)
-    dl = wp.vec3(0.0)
-    if env.scheme == SCHEME_PIECEWISE_CONSTANT:
-        dl = _pc_sample_local(env, xi)
-    else:
-        uv = _sample_patch_uv(env, xi)
-        phi = 2.0 * wp.pi * float(uv[0])
-        theta = wp.pi * float(uv[1])
-        st = wp.sin(theta)
-        dl = wp.vec3(wp.sin(phi) * st, wp.cos(theta), -wp.cos(phi) * st)
-    dw = env.rot * dl
-    return wp.vec4(dw[0], dw[1], dw[2], env_pdf(env, dw))
+    direction; pdf = 0 if impossible. :func:`env_sample_uv` without the map coordinates."""
+    s, _uv = env_sample_uv(env, xi)
+    return s
 
 
 # --------------------------------------------------------------------------------------------

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from fit.errors import BRDFFileError
-from fit.inputs import read_bytes
+from fit.inputs import nesting_depth, read_bytes
 
 from .. import limits, registry
 from ..errors import SceneError
@@ -29,7 +29,7 @@ from .specs import (
     Scene,
     ShapeSpec,
 )
-from .toml_table import MISSING, Table, depth, show
+from .toml_table import MISSING, Table, show
 
 
 # --------------------------------------------------------------------------------------------
@@ -68,7 +68,7 @@ def parse_scene(text: str, path=None, base_dir: Path | None = None) -> Scene:
 def scene_from_dict(data: dict, file="<scene>", base_dir: Path | None = None) -> Scene:
     """Validate parsed TOML ``data`` (nested dicts and lists) into a :class:`Scene`; every
     number finite and within :mod:`warp_rbrdf.limits`, every size bounded."""
-    if depth(data, limits.MAX_TOML_DEPTH) > limits.MAX_TOML_DEPTH:
+    if nesting_depth(data, limits.MAX_TOML_DEPTH) > limits.MAX_TOML_DEPTH:
         raise SceneError(file, None, f"tables and arrays nested more than {limits.MAX_TOML_DEPTH} "
                                      "levels deep (warp_rbrdf.limits.MAX_TOML_DEPTH)")
     root = Table(data, file, "", base_dir)

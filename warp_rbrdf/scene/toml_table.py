@@ -210,7 +210,7 @@ def _rotation_list(v):
 
 def show(v) -> str:
     """A short one-line ``repr`` of a scene value (lists cut after a few items: a value nested
-    too deeply never reaches here, see :func:`depth`)."""
+    too deeply never reaches here, see :func:`fit.inputs.nesting_depth`)."""
     if isinstance(v, list) and len(v) > 8:
         v = v[:8] + ["..."]
     try:
@@ -218,22 +218,3 @@ def show(v) -> str:
     except RecursionError:
         s = "<nested too deeply>"
     return s if len(s) <= 60 else s[:57] + "..."
-
-
-def depth(obj, limit: int) -> int:
-    """Nesting depth of parsed TOML (tables and arrays), iteratively; stops past ``limit``."""
-    deepest = 0
-    stack = [(obj, 1)]
-    while stack:
-        o, d = stack.pop()
-        if d > deepest:
-            deepest = d
-            if deepest > limit:
-                return deepest
-        if isinstance(o, dict):
-            stack.extend((x, d + 1) for x in o.values() if isinstance(x, (dict, list)))
-        elif isinstance(o, list):
-            stack.extend((x, d + 1) for x in o if isinstance(x, (dict, list)))
-    return deepest
-
-

@@ -44,17 +44,11 @@ def _incidence(mats: Materials, h: int, wt: wp.vec3) -> wp.vec3:
 
 
 @wp.func
-def sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
-    if mats.kind[m] != wp.static(RGL_CODE) or wo[2] <= 0.0:
-        return wp.vec4(0.0)
-    h = mats.offset[m]
-    if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
-        return wp.vec4(0.0)
-    inc = _incidence(mats, h, wo)
-    t0 = int(inc[0])
-    w1 = inc[1]
-    phi_t = inc[2]
-    n = mats.rgl_i[h + R.RGL_N_THETA]
+def _draw(mats: Materials, h: int, n: int, t0: int, w1: float, phi_t: float, wo: wp.vec3, xi: wp.vec2):
+    """The format's sample for view ``wo`` (theta_i slice ``t0``, weight ``w1``, azimuth
+    ``phi_t``): ``(wi, pdf, ok, u, s, phi_m)`` -- the light, its density in 1/sr, 1 when the sample
+    is usable (above both horizons, finite positive pdf), the VNDF warp's output ``u`` (u_x,
+    u_y, its density), the luminance warp's output ``s`` and the micro-normal's azimuth."""
     s = warp_sample(mats, mats.rgl_i[h + R.RGL_LUM_DATA], mats.rgl_i[h + R.RGL_LUM_COND],
                     mats.rgl_i[h + R.RGL_LUM_MARG], mats.rgl_i[h + R.RGL_LUM_NY],
                     mats.rgl_i[h + R.RGL_LUM_NX], n, t0, w1, xi[1], xi[0])
@@ -67,11 +61,30 @@ def sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
     wm = wp.vec3(wp.cos(phi_m) * st, wp.sin(phi_m) * st, wp.cos(theta_m))
     c = wp.dot(wm, wo)
     jac = wp.max(2.0 * wp.pi * wp.pi * u[0] * st, MIN_JACOBIAN) * 4.0 * c
-    pdf = u[2] * s[2] / jac
+    p = u[2] * s[2] / jac
     wi = wm * (2.0 * c) - wo
-    if c <= 0.0 or wi[2] <= 0.0 or not (pdf > 0.0) or pdf > 1.0e30:
+    ok = int(1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
+    if c <= 0.0 or wi[2] <= 0.0 or not (p > 0.0) or p > 1.0e30:
+        ok = 0
+    return wi, p, ok, u, s, phi_m
+
+
+@wp.func
+def sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
+    if mats.kind[m] != wp.static(RGL_CODE) or wo[2] <= 0.0:
         return wp.vec4(0.0)
-    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf)
+    h = mats.offset[m]
+    if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
+        return wp.vec4(0.0)
+    inc = _incidence(mats, h, wo)
+    t0 = int(inc[0])
+    w1 = inc[1]
+    phi_t = inc[2]
+    n = mats.rgl_i[h + R.RGL_N_THETA]
+    wi, p, ok, _u, _s, _phi_m = _draw(mats, h, n, t0, w1, phi_t, wo, xi)
+    if ok == 0:
+        return wp.vec4(0.0)
+    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / p)
 
 
 @wp.func
@@ -137,21 +150,8 @@ def sample_f(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2):
     tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
     t0 = int(tw[0])
     w1 = tw[1]
-    s = warp_sample(mats, mats.rgl_i[h + R.RGL_LUM_DATA], mats.rgl_i[h + R.RGL_LUM_COND],
-                    mats.rgl_i[h + R.RGL_LUM_MARG], mats.rgl_i[h + R.RGL_LUM_NY],
-                    mats.rgl_i[h + R.RGL_LUM_NX], n, t0, w1, xi[1], xi[0])
-    u = warp_sample(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
-                    mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
-                    mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, s[0], s[1])
-    theta_m = u[0] * u[0] * wp.HALF_PI
-    phi_m = (2.0 * u[1] - 1.0) * wp.pi + phi_t
-    st = wp.sin(theta_m)
-    wm = wp.vec3(wp.cos(phi_m) * st, wp.sin(phi_m) * st, wp.cos(theta_m))
-    c = wp.dot(wm, wo)
-    jac = wp.max(2.0 * wp.pi * wp.pi * u[0] * st, MIN_JACOBIAN) * 4.0 * c
-    pdf_s = u[2] * s[2] / jac
-    wi = wm * (2.0 * c) - wo
-    if c <= 0.0 or wi[2] <= 0.0 or not (pdf_s > 0.0) or pdf_s > 1.0e30:
+    wi, pdf_s, ok, u, s, phi_m = _draw(mats, h, n, t0, w1, phi_t, wo, xi)
+    if ok == 0:
         return wp.vec4(0.0), wp.vec3(0.0), 1
     f = _value(mats, m, h, n, t0, w1, theta_t, phi_t, u[0], R.phi_to_u(phi_m - phi_t), s[0], s[1], wi)
     return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf_s), f, 1
