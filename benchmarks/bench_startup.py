@@ -18,7 +18,10 @@ renderer turned them off; the baseline; interleaved), with a fresh, empty kernel
 
 and, first, ``default job cold``: the README's main job ``rbrdf render --out X`` (the embedded
 default scene: a rational sphere sampled with ``mis-tabulated``, 256x256, 16 spp) with its own
-empty kernel cache.
+empty kernel cache; this tree takes the default scene's render kernel from the shipped
+ahead-of-time set (``warp_rbrdf.shipped_kernels``); the variant ``no shipped`` (this tree with
+``RBRDF_SHIPPED_KERNELS=""``) compiles it. ``--default-only``: only this step (and ``default
+job warm``, the same job again on that cache), for this tree, ``no shipped`` and the baseline.
 
 Then, on warm caches, interleaved: samples per second of a larger render of the scene (and the
 largest pixel difference between the two trees' images: same seed, so 0 when the evaluation
@@ -27,7 +30,7 @@ BSDF sample (``Renderer.eval_material`` / ``sample_material``, one thread). Medi
 coefficient files (``warp_rbrdf/data``); their CDF files are fitted once into the work folder
 (not timed). The baseline is exported with ``git archive`` (needs this git checkout).
 
-    python -m benchmarks.bench_startup [--quick] [--repeats 3] [--baseline 81db95c | none]
+    python -m benchmarks.bench_startup [--quick | --default-only] [--repeats 3] [--baseline 81db95c | none]
                                        [--no-adjoints] [--resolution 256] [--spp 32] [--work DIR]
 
 Prints a table and a JSON line. The machine is shared: compare the two trees' medians within
@@ -173,12 +176,12 @@ def _num(pattern: str, text: str):
     return float(m.group(1)) if m else None
 
 
-def render_run(tree: Path, scene: Path, cache: Path, out: Path, extra=(), adjoints=False) -> dict:
+def render_run(tree: Path, scene: Path, cache: Path, out: Path, extra=(), adjoints=False, env=None) -> dict:
     """One ``rbrdf render`` process of ``tree``: wall and CPU time (user + system: less
     sensitive than wall time to the other processes of a shared machine) and the renderer's own
     lines. ``adjoints``: compile the kernels' backward passes too (Warp's default; the
     renderer turns them off)."""
-    env = dict(os.environ, WARP_CACHE_PATH=str(cache), PYTHONPATH=str(tree))
+    env = dict(os.environ, WARP_CACHE_PATH=str(cache), PYTHONPATH=str(tree), **(env or {}))
     args = ["render", *([] if scene is None else [str(scene)]), "--no-progress", "--out", str(out), *extra]
     cmd = [sys.executable, "-c", ADJOINTS, *args] if adjoints else [sys.executable, "-m", "warp_rbrdf", *args]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -218,6 +221,8 @@ def main(argv=None):
                                                          f"the last with generated code); 'none': this tree only")
     ap.add_argument("--no-adjoints", action="store_true", help="skip the variant of this tree that compiles "
                                                                "backward passes (Warp's default)")
+    ap.add_argument("--default-only", action="store_true", help="only the README main job, cold and warm: this "
+                                                                 "tree, without shipped kernels, the baseline")
     ap.add_argument("--resolution", type=int, default=256, help="throughput render (default 256)")
     ap.add_argument("--spp", type=int, default=32, help="throughput render (default 32)")
     ap.add_argument("--work", help="work folder (default: a temporary one, removed)")
@@ -230,14 +235,21 @@ def main(argv=None):
     work.mkdir(parents=True, exist_ok=True)
     try:
         variants = {"current": (ROOT, False)}
-        if not (a.quick or a.no_adjoints):
+        envs = {}
+        if a.default_only:
+            variants["no shipped"] = (ROOT, False)
+            envs["no shipped"] = {"RBRDF_SHIPPED_KERNELS": ""}
+        elif not (a.quick or a.no_adjoints):
             variants["adjoints"] = (ROOT, True)
         if a.baseline.lower() != "none":
             variants["baseline"] = (export_baseline(a.baseline, work / "baseline"), False)
-        scenes = prepare(work, a.quick)
-        steps = [("cold", "a"), ("warm", "a"), ("new fit", "b"), ("new CDF file", "a2")]
-        scenes["default"] = None   # the README's main job: the embedded default scene
         first = [("default job cold", "default")]
+        if a.default_only:
+            scenes, steps = {}, [("default job warm", "default")]
+        else:
+            scenes = prepare(work, a.quick)
+            steps = [("cold", "a"), ("warm", "a"), ("new fit", "b"), ("new CDF file", "a2")]
+        scenes["default"] = None   # the README's main job: the embedded default scene
         if scenes.get("bg") is not None:
             steps.append(("new global CDF", "bg"))
         steps = first + steps
@@ -249,11 +261,15 @@ def main(argv=None):
                 for step, key in first:   # its own empty kernel cache
                     dcache = work / f"cache_default_{v}_{r}"
                     shutil.rmtree(dcache, ignore_errors=True)
-                    runs[v][step].append(render_run(tree, None, dcache, work / f"out_{v}.exr", adjoints=adj))
+                    runs[v][step].append(render_run(tree, None, dcache, work / f"out_{v}.exr", adjoints=adj,
+                                                    env=envs.get(v)))
+                    if a.default_only:
+                        cache = dcache
                 for step, key in steps[len(first):]:
-                    runs[v][step].append(render_run(tree, scenes[key], cache, work / f"out_{v}.exr", adjoints=adj))
+                    runs[v][step].append(render_run(tree, scenes[key], cache, work / f"out_{v}.exr", adjoints=adj,
+                                                    env=envs.get(v)))
         # throughput and per-call costs on warm caches (the last repeat's)
-        thr = {v: [] for v in variants if v != "adjoints"}
+        thr = {} if a.default_only else {v: [] for v in variants if v not in ("adjoints", "no shipped")}
         micro = {v: [] for v in thr}
         for _ in range(repeats):
             for v in thr:
@@ -285,7 +301,7 @@ def main(argv=None):
                      sample_ns=_median(micro[v], "sample_ns"))
             print(f"{v:9s} throughput {res}x{res} {spp} spp: {o['msamples_per_s']:.3f} M samples/s; "
                   f"eval {o['eval_ns']:.0f} ns, mis-rational sample {o['sample_ns']:.0f} ns per call (1 thread)")
-        if "baseline" in variants:
+        if "baseline" in thr:
             c, b = out["variants"]["current"], out["variants"]["baseline"]
             out["ratios"] = {"throughput": c["msamples_per_s"] / b["msamples_per_s"],
                              "eval": c["eval_ns"] / b["eval_ns"], "sample": c["sample_ns"] / b["sample_ns"]}
