@@ -30,7 +30,14 @@ BSDF sample (``Renderer.eval_material`` / ``sample_material``, one thread). Medi
 coefficient files (``warp_rbrdf/data``); their CDF files are fitted once into the work folder
 (not timed). The baseline is exported with ``git archive`` (needs this git checkout).
 
-    python -m benchmarks.bench_startup [--quick | --default-only] [--repeats 3] [--baseline 81db95c | none]
+``--isa-levels``: instead, samples/s of the default scene (256x256, 8 spp) and of the RGL
+reference sphere (satin_purple under studio_small_03, 128x128, 16 spp) with the render kernel
+compiled with ``-march=native`` (Warp's default), ``-target-cpu x86-64-v3`` (the shipped level,
+``warp_rbrdf.shipped_kernels.PORTABLE_CPU_FLAGS``) and ``x86-64-v2``; one process, 2 threads,
+interleaved, medians of ``--repeats`` (default 5), and the largest pixel difference to native.
+
+    python -m benchmarks.bench_startup [--quick | --default-only | --isa-levels] [--repeats 3]
+                                       [--baseline 81db95c | none]
                                        [--no-adjoints] [--resolution 256] [--spp 32] [--work DIR]
 
 Prints a table and a JSON line. The machine is shared: compare the two trees' medians within
@@ -211,6 +218,50 @@ def _median(rows, key):
     return statistics.median(vals) if vals else None
 
 
+def isa_levels(repeats: int) -> dict:
+    """Samples/s of the render kernel compiled for ISA levels (see the module docstring)."""
+    import numpy as np
+
+    from benchmarks.bench_render import reference_scene
+    from warp_rbrdf import Renderer
+    from warp_rbrdf.defaults import default_scene
+    from warp_rbrdf.runtime import init_warp
+    from warp_rbrdf.shipped_kernels import PORTABLE_CPU_FLAGS
+
+    wp = init_warp()
+    tail = PORTABLE_CPU_FLAGS.split(" ", 2)[2]
+    variants = {"native": f"-march=native {tail}", "x86-64-v3": PORTABLE_CPU_FLAGS,
+                "x86-64-v2": f"-target-cpu x86-64-v2 {tail}"}
+    scenes = {"default": (default_scene, 8),
+              "rgl sphere": (lambda: reference_scene("satin_purple_rgb", "studio_small_03_1k", 128, 16), 16)}
+    rs = {}
+    for sn, (make, _) in scenes.items():
+        for vn, flags in variants.items():
+            r = Renderer(make())
+            wp.set_module_options({"cpu_compiler_flags": flags}, module=r.kernels.render_tile.module)
+            r.compile()
+            r.render(spp=1, threads=2)
+            rs[sn, vn] = r
+    rates, imgs = {k: [] for k in rs}, {}
+    for _ in range(repeats):
+        for (sn, vn), r in rs.items():
+            imgs[sn, vn] = r.render(spp=scenes[sn][1], seed=0, threads=2)
+            rates[sn, vn].append(r.stats.samples / r.stats.render_seconds / 1e6)
+    out = {"repeats": repeats, "load_average": os.getloadavg(), "rows": []}
+    for sn in scenes:
+        ref = statistics.median(rates[sn, "native"])
+        for vn in variants:
+            med = statistics.median(rates[sn, vn])
+            diff = float(np.abs(imgs[sn, vn] - imgs[sn, "native"]).max())
+            out["rows"].append({"scene": sn, "isa": vn, "msamples_per_s": med, "ratio": med / ref,
+                                "max_pixel_difference": diff})
+            print(f"{sn:11s} {vn:10s} {med:.3f} M samples/s, {med / ref:.3f}x native, largest pixel "
+                  f"difference {diff:.3g}")
+    print(f"load average: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} cores)")
+    print(json.dumps(out))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_startup", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -223,10 +274,14 @@ def main(argv=None):
                                                                "backward passes (Warp's default)")
     ap.add_argument("--default-only", action="store_true", help="only the README main job, cold and warm: this "
                                                                  "tree, without shipped kernels, the baseline")
+    ap.add_argument("--isa-levels", action="store_true", help="only the samples/s of the render kernel compiled "
+                                                               "for native, x86-64-v3 and x86-64-v2")
     ap.add_argument("--resolution", type=int, default=256, help="throughput render (default 256)")
     ap.add_argument("--spp", type=int, default=32, help="throughput render (default 32)")
     ap.add_argument("--work", help="work folder (default: a temporary one, removed)")
     a = ap.parse_args(argv)
+    if a.isa_levels:
+        return isa_levels(a.repeats or 5)
     repeats = a.repeats or (1 if a.quick else 3)
     res, spp = (64, 4) if a.quick else (a.resolution, a.spp)
 
