@@ -183,25 +183,23 @@ def _install(src: Path, dest: Path, names: list[str]) -> list[Path]:
 def load_module(module, device) -> str:
     """Load ``module`` on ``device`` as Warp does, taking a shipped binary when the kernel cache
     lacks one. Returns where it came from: ``"shipped"``, ``"cache"`` or ``"compiled"``
-    (``"compiled (<reason>)"`` when a shipped binary was found but not used or failed to load)."""
+    (``"compiled (<reason>)"`` when a shipped binary exists but was not used or failed to load)."""
     import warp as wp
 
-    ident, obj, meta = _names(module, device) if device.is_cpu else (None, None, None)
     written: list[Path] = []
-    reason = None
+    reason = cached = None
     if device.is_cpu:
-        dest = Path(wp.config.kernel_cache_dir) / ident
-        if (dest / obj).exists() and (dest / meta).exists():
-            wp.load_module(module, device=device)
-            return "cache"
-        src, why = find_shipped(module, device)
-        if src is not None:
-            try:
+        try:
+            ident, obj, meta = _names(module, device)
+            dest = Path(wp.config.kernel_cache_dir) / ident
+            cached = (dest / obj).exists() and (dest / meta).exists()
+            src, why = (None, "cached") if cached else find_shipped(module, device)
+            if src is not None:
                 written = _install(src, dest, [obj, meta])
-            except OSError as e:   # read-only or full cache: compile as usual
-                reason = f"copy failed: {e}"
-        elif why not in ("not-shipped", "disabled", "no-manifest"):
-            reason = why
+            elif why not in ("cached", "not-shipped", "disabled", "no-manifest"):
+                reason = why
+        except Exception as e:  # noqa: BLE001 - Warp internals or a read-only/full cache: compile
+            reason = f"shipped lookup failed: {e}"
     if written:
         try:
             wp.load_module(module, device=device)
@@ -212,6 +210,8 @@ def load_module(module, device) -> str:
                 p.unlink(missing_ok=True)
             module.unload()
     wp.load_module(module, device=device)
+    if cached:
+        return "cache"
     return "compiled" if reason is None else f"compiled ({reason})"
 
 
