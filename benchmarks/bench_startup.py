@@ -30,11 +30,11 @@ BSDF sample (``Renderer.eval_material`` / ``sample_material``, one thread). Medi
 coefficient files (``warp_rbrdf/data``); their CDF files are fitted once into the work folder
 (not timed). The baseline is exported with ``git archive`` (needs this git checkout).
 
-``--isa-levels``: instead, samples/s of the default scene (256x256, 8 spp) and of the RGL
-reference sphere (satin_purple under studio_small_03, 128x128, 16 spp) with the render kernel
+``--isa-levels``: instead, samples/s of the default scene (256x256, 16 spp) and of the RGL
+reference sphere (satin_purple under studio_small_03, 128x128, 64 spp) with the render kernel
 compiled with ``-march=native`` (Warp's default), ``-target-cpu x86-64-v3`` (the shipped level,
 ``warp_rbrdf.shipped_kernels.PORTABLE_CPU_FLAGS``) and ``x86-64-v2``; one process, 2 threads,
-interleaved, medians of ``--repeats`` (default 5), and the largest pixel difference to native.
+interleaved (the order reversed every other repeat), medians of ``--repeats`` (default 5), and the largest pixel difference to native.
 
     python -m benchmarks.bench_startup [--quick | --default-only | --isa-levels] [--repeats 3]
                                        [--baseline 81db95c | none]
@@ -232,8 +232,8 @@ def isa_levels(repeats: int) -> dict:
     tail = PORTABLE_CPU_FLAGS.split(" ", 2)[2]
     variants = {"native": f"-march=native {tail}", "x86-64-v3": PORTABLE_CPU_FLAGS,
                 "x86-64-v2": f"-target-cpu x86-64-v2 {tail}"}
-    scenes = {"default": (default_scene, 8),
-              "rgl sphere": (lambda: reference_scene("satin_purple_rgb", "studio_small_03_1k", 128, 16), 16)}
+    scenes = {"default": (default_scene, 16),
+              "rgl sphere": (lambda: reference_scene("satin_purple_rgb", "studio_small_03_1k", 128, 64), 64)}
     rs = {}
     for sn, (make, _) in scenes.items():
         for vn, flags in variants.items():
@@ -243,8 +243,9 @@ def isa_levels(repeats: int) -> dict:
             r.render(spp=1, threads=2)
             rs[sn, vn] = r
     rates, imgs = {k: [] for k in rs}, {}
-    for _ in range(repeats):
-        for (sn, vn), r in rs.items():
+    for i in range(repeats):
+        order = list(rs.items())
+        for (sn, vn), r in (order if i % 2 == 0 else order[::-1]):   # alternate: no fixed position
             imgs[sn, vn] = r.render(spp=scenes[sn][1], seed=0, threads=2)
             rates[sn, vn].append(r.stats.samples / r.stats.render_seconds / 1e6)
     out = {"repeats": repeats, "load_average": os.getloadavg(), "rows": []}
@@ -252,11 +253,13 @@ def isa_levels(repeats: int) -> dict:
         ref = statistics.median(rates[sn, "native"])
         for vn in variants:
             med = statistics.median(rates[sn, vn])
+            # per repeat, against the native render of the same round (close in time)
+            paired = statistics.median(x / y for x, y in zip(rates[sn, vn], rates[sn, "native"]))
             diff = float(np.abs(imgs[sn, vn] - imgs[sn, "native"]).max())
             out["rows"].append({"scene": sn, "isa": vn, "msamples_per_s": med, "ratio": med / ref,
-                                "max_pixel_difference": diff})
-            print(f"{sn:11s} {vn:10s} {med:.3f} M samples/s, {med / ref:.3f}x native, largest pixel "
-                  f"difference {diff:.3g}")
+                                "paired_ratio": paired, "max_pixel_difference": diff})
+            print(f"{sn:11s} {vn:10s} {med:.3f} M samples/s, {med / ref:.3f}x native (median of per-round "
+                  f"ratios {paired:.3f}), largest pixel difference {diff:.3g}")
     print(f"load average: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} cores)")
     print(json.dumps(out))
     return out

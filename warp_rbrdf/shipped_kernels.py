@@ -23,7 +23,7 @@ module as a cache hit. Anything else compiles as before. Never a wrong binary:
 The render kernels are compiled with :data:`PORTABLE_CPU_FLAGS` (Warp's default flags with
 ``-target-cpu x86-64-v3`` for ``-march=native``; the samples/s cost is measured in
 docs/architecture.md), so the module hash, and thus the shipped object, does not depend on the
-build machine's CPU.
+build machine's CPU; a CPU without x86-64-v3 keeps Warp's ``-march=native`` (and compiles).
 
 ``RBRDF_SHIPPED_KERNELS``: another folder to use in place of ``data/kernels`` (tests), or an
 empty string to use no shipped kernels.
@@ -64,8 +64,10 @@ ENV = "RBRDF_SHIPPED_KERNELS"
 
 
 def render_module_options() -> dict:
-    """Module options of every render kernel (``@wp.kernel(module_options=...)``)."""
-    return {"cpu_compiler_flags": PORTABLE_CPU_FLAGS}
+    """Module options of every render kernel (``@wp.kernel(module_options=...)``): the portable
+    flags on a CPU with every :data:`ISA_LEVEL` feature, else none (Warp's ``-march=native``:
+    an x86-64-v3 object would stop such a CPU with an illegal instruction)."""
+    return {"cpu_compiler_flags": PORTABLE_CPU_FLAGS} if cpu_supports_isa() else {}
 
 
 def platform_tag() -> str:
