@@ -142,7 +142,11 @@ def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, de
     assert sk.find_shipped(module, device) == (None, "disabled")
 
 
-def test_render_kernels_use_portable_flags(default_module):
+def test_render_kernels_use_portable_flags(default_module, monkeypatch):
     module, _ = default_module
-    assert module.options["cpu_compiler_flags"] == sk.PORTABLE_CPU_FLAGS
+    expected = sk.PORTABLE_CPU_FLAGS if sk.cpu_supports_isa() else None
+    assert module.options["cpu_compiler_flags"] == expected
     assert "-march=native" not in sk.PORTABLE_CPU_FLAGS.split()
+    # a CPU without the shipped ISA level keeps Warp's -march=native (never an x86-64-v3 object)
+    monkeypatch.setattr(sk, "ISA_FEATURES", sk.ISA_FEATURES | {"no-such-cpu-feature"})
+    assert sk.render_module_options() == {}
