@@ -140,6 +140,11 @@ def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, de
 
     monkeypatch.setenv(sk.ENV, "")
     assert sk.find_shipped(module, device) == (None, "disabled")
+    monkeypatch.setenv(sk.ENV, str(root))
+    import warp as wp
+
+    monkeypatch.setattr(wp.config, "cache_kernels", False)
+    assert sk.find_shipped(module, device) == (None, "cache-off")
 
 
 def test_render_kernels_use_portable_flags(default_module, monkeypatch):

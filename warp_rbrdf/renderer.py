@@ -131,7 +131,9 @@ class Renderer:
         return self._kernels
 
     def compile(self):
-        """Generate and compile (or load from the kernel cache) the scene's render kernel."""
+        """Generate and compile (or load from the kernel cache, or from the shipped ahead-of-time
+        set when the cache lacks it: :mod:`warp_rbrdf.shipped_kernels`) the scene's render
+        kernel; ``self.kernel_source`` says which."""
         if self.compile_seconds is not None:
             return self.compile_seconds
         t0 = time.perf_counter()

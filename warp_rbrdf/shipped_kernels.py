@@ -134,6 +134,8 @@ def find_shipped(module, device) -> tuple[Path | None, str]:
 
     if not device.is_cpu:
         return None, "not-cpu"
+    if not wp.config.cache_kernels:   # Warp would compile over the copy anyway
+        return None, "cache-off"
     pdir = platform_dir(wp)
     if pdir is None:
         return None, "disabled"
@@ -198,7 +200,7 @@ def load_module(module, device) -> str:
             src, why = (None, "cached") if cached else find_shipped(module, device)
             if src is not None:
                 written = _install(src, dest, [obj, meta])
-            elif why not in ("cached", "not-shipped", "disabled", "no-manifest"):
+            elif why not in ("cached", "not-shipped", "disabled", "no-manifest", "cache-off"):
                 reason = why
         except Exception as e:  # noqa: BLE001 - Warp internals or a read-only/full cache: compile
             reason = f"shipped lookup failed: {e}"
