@@ -18,7 +18,10 @@ renderer turned them off; the baseline; interleaved), with a fresh, empty kernel
 
 and, first, ``default job cold``: the README's main job ``rbrdf render --out X`` (the embedded
 default scene: a rational sphere sampled with ``mis-tabulated``, 256x256, 16 spp) with its own
-empty kernel cache.
+empty kernel cache; this tree takes the default scene's render kernel from the shipped
+ahead-of-time set (``warp_rbrdf.shipped_kernels``); the variant ``no shipped`` (this tree with
+``RBRDF_SHIPPED_KERNELS=""``) compiles it. ``--default-only``: only this step (and ``default
+job warm``, the same job again on that cache), for this tree, ``no shipped`` and the baseline.
 
 Then, on warm caches, interleaved: samples per second of a larger render of the scene (and the
 largest pixel difference between the two trees' images: same seed, so 0 when the evaluation
@@ -27,7 +30,14 @@ BSDF sample (``Renderer.eval_material`` / ``sample_material``, one thread). Medi
 coefficient files (``warp_rbrdf/data``); their CDF files are fitted once into the work folder
 (not timed). The baseline is exported with ``git archive`` (needs this git checkout).
 
-    python -m benchmarks.bench_startup [--quick] [--repeats 3] [--baseline 81db95c | none]
+``--isa-levels``: instead, samples/s of the default scene (256x256, 16 spp) and of the RGL
+reference sphere (satin_purple under studio_small_03, 128x128, 64 spp) with the render kernel
+compiled with ``-march=native`` (Warp's default), ``-target-cpu x86-64-v3`` (the shipped level,
+``warp_rbrdf.shipped_kernels.PORTABLE_CPU_FLAGS``) and ``x86-64-v2``; one process, 2 threads,
+interleaved (the order reversed every other repeat), medians of ``--repeats`` (default 5), and the largest pixel difference to native.
+
+    python -m benchmarks.bench_startup [--quick | --default-only | --isa-levels] [--repeats 3]
+                                       [--baseline 81db95c | none]
                                        [--no-adjoints] [--resolution 256] [--spp 32] [--work DIR]
 
 Prints a table and a JSON line. The machine is shared: compare the two trees' medians within
@@ -173,12 +183,12 @@ def _num(pattern: str, text: str):
     return float(m.group(1)) if m else None
 
 
-def render_run(tree: Path, scene: Path, cache: Path, out: Path, extra=(), adjoints=False) -> dict:
+def render_run(tree: Path, scene: Path, cache: Path, out: Path, extra=(), adjoints=False, env=None) -> dict:
     """One ``rbrdf render`` process of ``tree``: wall and CPU time (user + system: less
     sensitive than wall time to the other processes of a shared machine) and the renderer's own
     lines. ``adjoints``: compile the kernels' backward passes too (Warp's default; the
     renderer turns them off)."""
-    env = dict(os.environ, WARP_CACHE_PATH=str(cache), PYTHONPATH=str(tree))
+    env = dict(os.environ, WARP_CACHE_PATH=str(cache), PYTHONPATH=str(tree), **(env or {}))
     args = ["render", *([] if scene is None else [str(scene)]), "--no-progress", "--out", str(out), *extra]
     cmd = [sys.executable, "-c", ADJOINTS, *args] if adjoints else [sys.executable, "-m", "warp_rbrdf", *args]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -208,6 +218,53 @@ def _median(rows, key):
     return statistics.median(vals) if vals else None
 
 
+def isa_levels(repeats: int) -> dict:
+    """Samples/s of the render kernel compiled for ISA levels (see the module docstring)."""
+    import numpy as np
+
+    from benchmarks.bench_render import reference_scene
+    from warp_rbrdf import Renderer
+    from warp_rbrdf.defaults import default_scene
+    from warp_rbrdf.runtime import init_warp
+    from warp_rbrdf.shipped_kernels import PORTABLE_CPU_FLAGS
+
+    wp = init_warp()
+    tail = PORTABLE_CPU_FLAGS.split(" ", 2)[2]
+    variants = {"native": f"-march=native {tail}", "x86-64-v3": PORTABLE_CPU_FLAGS,
+                "x86-64-v2": f"-target-cpu x86-64-v2 {tail}"}
+    scenes = {"default": (default_scene, 16),
+              "rgl sphere": (lambda: reference_scene("satin_purple_rgb", "studio_small_03_1k", 128, 64), 64)}
+    rs = {}
+    for sn, (make, _) in scenes.items():
+        for vn, flags in variants.items():
+            r = Renderer(make())
+            wp.set_module_options({"cpu_compiler_flags": flags}, module=r.kernels.render_tile.module)
+            r.compile()
+            r.render(spp=1, threads=2)
+            rs[sn, vn] = r
+    rates, imgs = {k: [] for k in rs}, {}
+    for i in range(repeats):
+        order = list(rs.items())
+        for (sn, vn), r in (order if i % 2 == 0 else order[::-1]):   # alternate: no fixed position
+            imgs[sn, vn] = r.render(spp=scenes[sn][1], seed=0, threads=2)
+            rates[sn, vn].append(r.stats.samples / r.stats.render_seconds / 1e6)
+    out = {"repeats": repeats, "load_average": os.getloadavg(), "rows": []}
+    for sn in scenes:
+        ref = statistics.median(rates[sn, "native"])
+        for vn in variants:
+            med = statistics.median(rates[sn, vn])
+            # per repeat, against the native render of the same round (close in time)
+            paired = statistics.median(x / y for x, y in zip(rates[sn, vn], rates[sn, "native"]))
+            diff = float(np.abs(imgs[sn, vn] - imgs[sn, "native"]).max())
+            out["rows"].append({"scene": sn, "isa": vn, "msamples_per_s": med, "ratio": med / ref,
+                                "paired_ratio": paired, "max_pixel_difference": diff})
+            print(f"{sn:11s} {vn:10s} {med:.3f} M samples/s, {med / ref:.3f}x native (median of per-round "
+                  f"ratios {paired:.3f}), largest pixel difference {diff:.3g}")
+    print(f"load average: {' '.join(f'{x:.1f}' for x in os.getloadavg())} ({os.cpu_count()} cores)")
+    print(json.dumps(out))
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_startup", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -218,10 +275,16 @@ def main(argv=None):
                                                          f"the last with generated code); 'none': this tree only")
     ap.add_argument("--no-adjoints", action="store_true", help="skip the variant of this tree that compiles "
                                                                "backward passes (Warp's default)")
+    ap.add_argument("--default-only", action="store_true", help="only the README main job, cold and warm: this "
+                                                                 "tree, without shipped kernels, the baseline")
+    ap.add_argument("--isa-levels", action="store_true", help="only the samples/s of the render kernel compiled "
+                                                               "for native, x86-64-v3 and x86-64-v2")
     ap.add_argument("--resolution", type=int, default=256, help="throughput render (default 256)")
     ap.add_argument("--spp", type=int, default=32, help="throughput render (default 32)")
     ap.add_argument("--work", help="work folder (default: a temporary one, removed)")
     a = ap.parse_args(argv)
+    if a.isa_levels:
+        return isa_levels(a.repeats or 5)
     repeats = a.repeats or (1 if a.quick else 3)
     res, spp = (64, 4) if a.quick else (a.resolution, a.spp)
 
@@ -230,14 +293,21 @@ def main(argv=None):
     work.mkdir(parents=True, exist_ok=True)
     try:
         variants = {"current": (ROOT, False)}
-        if not (a.quick or a.no_adjoints):
+        envs = {}
+        if a.default_only:
+            variants["no shipped"] = (ROOT, False)
+            envs["no shipped"] = {"RBRDF_SHIPPED_KERNELS": ""}
+        elif not (a.quick or a.no_adjoints):
             variants["adjoints"] = (ROOT, True)
         if a.baseline.lower() != "none":
             variants["baseline"] = (export_baseline(a.baseline, work / "baseline"), False)
-        scenes = prepare(work, a.quick)
-        steps = [("cold", "a"), ("warm", "a"), ("new fit", "b"), ("new CDF file", "a2")]
-        scenes["default"] = None   # the README's main job: the embedded default scene
         first = [("default job cold", "default")]
+        if a.default_only:
+            scenes, steps = {}, [("default job warm", "default")]
+        else:
+            scenes = prepare(work, a.quick)
+            steps = [("cold", "a"), ("warm", "a"), ("new fit", "b"), ("new CDF file", "a2")]
+        scenes["default"] = None   # the README's main job: the embedded default scene
         if scenes.get("bg") is not None:
             steps.append(("new global CDF", "bg"))
         steps = first + steps
@@ -249,11 +319,15 @@ def main(argv=None):
                 for step, key in first:   # its own empty kernel cache
                     dcache = work / f"cache_default_{v}_{r}"
                     shutil.rmtree(dcache, ignore_errors=True)
-                    runs[v][step].append(render_run(tree, None, dcache, work / f"out_{v}.exr", adjoints=adj))
+                    runs[v][step].append(render_run(tree, None, dcache, work / f"out_{v}.exr", adjoints=adj,
+                                                    env=envs.get(v)))
+                    if a.default_only:
+                        cache = dcache
                 for step, key in steps[len(first):]:
-                    runs[v][step].append(render_run(tree, scenes[key], cache, work / f"out_{v}.exr", adjoints=adj))
+                    runs[v][step].append(render_run(tree, scenes[key], cache, work / f"out_{v}.exr", adjoints=adj,
+                                                    env=envs.get(v)))
         # throughput and per-call costs on warm caches (the last repeat's)
-        thr = {v: [] for v in variants if v != "adjoints"}
+        thr = {} if a.default_only else {v: [] for v in variants if v not in ("adjoints", "no shipped")}
         micro = {v: [] for v in thr}
         for _ in range(repeats):
             for v in thr:
@@ -285,7 +359,7 @@ def main(argv=None):
                      sample_ns=_median(micro[v], "sample_ns"))
             print(f"{v:9s} throughput {res}x{res} {spp} spp: {o['msamples_per_s']:.3f} M samples/s; "
                   f"eval {o['eval_ns']:.0f} ns, mis-rational sample {o['sample_ns']:.0f} ns per call (1 thread)")
-        if "baseline" in variants:
+        if "baseline" in thr:
             c, b = out["variants"]["current"], out["variants"]["baseline"]
             out["ratios"] = {"throughput": c["msamples_per_s"] / b["msamples_per_s"],
                              "eval": c["eval_ns"] / b["eval_ns"], "sample": c["sample_ns"] / b["sample_ns"]}

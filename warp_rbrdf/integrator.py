@@ -21,7 +21,10 @@ The integrator only calls the material and technique interfaces: :func:`make_ker
 the scene's material evaluations and techniques as Warp functions and builds, with closures and
 ``wp.static`` dispatch, kernels that contain exactly those (a scene compiles only what it uses).
 Each kernel is its own Warp module (``module="unique"``), hashed by its code: the same
-configuration loads from Warp's kernel cache in milliseconds.
+configuration loads from Warp's kernel cache in milliseconds. Every kernel is compiled for a fixed
+ISA level (``shipped_kernels.render_module_options``: ``-target-cpu x86-64-v3``, not
+``-march=native``), so its module hash does not depend on the build machine and the default
+scene's render kernel can ship compiled (:mod:`warp_rbrdf.shipped_kernels`).
 """
 from __future__ import annotations
 
@@ -36,6 +39,7 @@ from . import lights as L
 from . import sample_patterns as P
 from .materials.data import Materials
 from .registry import COMBINE_BSDF, COMBINE_LIGHT, COMBINE_MIS
+from .shipped_kernels import render_module_options
 
 
 @wp.func
@@ -402,7 +406,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             depth = depth + 1
         return Lsum
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
     def render_tile(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
                     spp: int, seed: int, pattern: int, max_depth: int, hide_env: int, eps: float,
                     x0: int, y0: int, tile_w: int,
@@ -425,21 +429,21 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
         out_mean[pix] = acc * inv
         out_sq[pix] = acc2 * inv
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
     def eval_bsdf(mats: Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
                   out: wp.array(dtype=wp.vec3)):
         """Material ``m`` at local direction pairs (tests, studies)."""
         i = wp.tid()
         out[i] = bsdf_eval(mats, m, wi[i], wo[i])
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
     def sample_bsdf(mats: Materials, m: int, t: int, wo: wp.array(dtype=wp.vec3),
                     xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4)):
         """Technique ``t`` of material ``m`` at (wo, xi) -> (wi, weight) (tests, benchmarks)."""
         i = wp.tid()
         out[i] = bsdf_sample(mats, m, t, wo[i], xi[i])
 
-    @wp.kernel(module="unique", enable_backward=False)
+    @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
     def pdf_bsdf(mats: Materials, m: int, t: int, wi: wp.array(dtype=wp.vec3),
                  wo: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
         """Density (1/sr) the MIS weights use for technique ``t`` of material ``m`` (tests)."""

@@ -22,6 +22,7 @@ from .materials.build import build_material_data
 from .materials.data import make_materials_struct
 from .runtime import get_device, init_warp
 from .scene import Scene, load_scene
+from .shipped_kernels import load_module as load_render_module
 
 
 @dataclass
@@ -62,6 +63,7 @@ class Renderer:
         self._build()
         self.setup_seconds = time.perf_counter() - t0
         self.compile_seconds = None
+        self.kernel_source = None   # "shipped", "cache" or "compiled" (shipped_kernels.load_module)
         self._kernels = self._all_kernels = None
 
     # ------------------------------------------------------------------------------------------
@@ -129,11 +131,14 @@ class Renderer:
         return self._kernels
 
     def compile(self):
-        """Generate and compile (or load from the kernel cache) the scene's render kernel."""
+        """Generate and compile (or load from the kernel cache, or from the shipped ahead-of-time
+        set when the cache lacks it: :mod:`warp_rbrdf.shipped_kernels`) the scene's render
+        kernel; ``self.kernel_source`` says which."""
         if self.compile_seconds is not None:
             return self.compile_seconds
         t0 = time.perf_counter()
-        self.wp.load_module(self.kernels.render_tile.module, device=self.device)
+        # a shipped ahead-of-time binary when the kernel cache lacks one (issue 21, cold start)
+        self.kernel_source = load_render_module(self.kernels.render_tile.module, self.device)
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
 

@@ -1,0 +1,157 @@
+"""Shipped ahead-of-time render kernels (warp_rbrdf.shipped_kernels, issue 21 cold start): the
+README main job's kernel loads from the shipped set into an empty kernel cache without a
+compile and renders what a compiled kernel renders; the set is current; a damaged, mismatched
+or unsupported binary is never used (a load failure falls back to compiling)."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from warp_rbrdf import shipped_kernels as sk
+
+ROOT = Path(__file__).resolve().parents[1]
+REGENERATE = "python -m warp_rbrdf.shipped_kernels"
+
+# one process = a fresh install: render the default scene at 1 spp, report where the render
+# kernel came from and what Warp left in the (empty at start) kernel cache
+_CHILD = r"""
+import json, os, sys
+from pathlib import Path
+import numpy as np
+from warp_rbrdf import Renderer
+from warp_rbrdf.defaults import default_scene
+r = Renderer(default_scene())
+img = r.render(spp=1, seed=3, threads=1)
+m = r.kernels.render_tile.module
+ex = m.execs[(None, 1)]
+np.save(sys.argv[1], img)
+cache = Path(os.environ["WARP_CACHE_PATH"])
+print(json.dumps({"source": r.kernel_source, "binary": ex.binary_path,
+                  "files": sorted(p.name for p in cache.rglob("*") if p.is_file())}))
+"""
+
+
+def _fresh_render(tmp_path, name, shipped_root=None):
+    env = dict(os.environ, PYTHONPATH=str(ROOT), WARP_CACHE_PATH=str(tmp_path / f"cache_{name}"))
+    if shipped_root is not None:
+        env[sk.ENV] = str(shipped_root)
+    else:
+        env.pop(sk.ENV, None)
+    out = tmp_path / f"{name}.npy"
+    p = subprocess.run([sys.executable, "-c", _CHILD, str(out)], env=env, capture_output=True, check=False,
+                       text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    return json.loads(p.stdout.strip().splitlines()[-1]), np.load(out)
+
+
+@pytest.fixture(scope="module")
+def default_module():
+    from warp_rbrdf.defaults import default_scene
+    from warp_rbrdf.renderer import Renderer
+
+    r = Renderer(default_scene())
+    return r.kernels.render_tile.module, r.device
+
+
+def _shipped_copy(tmp_path):
+    """A copy of the shipped set to damage; returns (root, platform folder, manifest)."""
+    import warp as wp
+
+    src = sk.PACKAGE_DATA / "kernels"
+    root = tmp_path / "kernels"
+    shutil.copytree(src, root)
+    pdir = root / wp.config.version / sk.platform_tag()
+    return root, pdir, json.loads((pdir / sk.MANIFEST).read_text())
+
+
+def test_shipped_set_is_current():
+    problems = sk.check()
+    assert not problems, (f"the shipped AOT kernels do not match the default scene's ({problems}); "
+                          f"regenerate them with `{REGENERATE}` and commit warp_rbrdf/data/kernels")
+
+
+def test_fresh_cache_loads_shipped_kernel_and_matches_a_compile(tmp_path, monkeypatch):
+    if not sk.cpu_supports_isa():
+        pytest.skip(f"this CPU lacks {sk.ISA_LEVEL}: the shipped kernels are not used here")
+    info, img = _fresh_render(tmp_path, "shipped")
+    assert info["source"] == "shipped", info
+    # no code generation happened: Warp writes the module's .cpp source only when it compiles
+    assert not any(f.endswith(".cpp") for f in info["files"]), info["files"]
+    assert any(f.endswith(".o") for f in info["files"])
+    assert "cache_shipped" in info["binary"]
+
+    # the same shipped object, damaged, with a manifest that vouches for it: Warp fails to
+    # load it, the copied files are removed and the kernel compiles as without a shipped set
+    root, pdir, manifest = _shipped_copy(tmp_path)
+    (entry,) = manifest["modules"].values()
+    (ident,) = manifest["modules"]
+    obj = next(n for n in entry["files"] if n.endswith(".o"))
+    (pdir / ident / obj).write_bytes(b"not an object file" * 100)
+    entry["files"][obj] = sk._sha256(pdir / ident / obj)
+    (pdir / sk.MANIFEST).write_text(json.dumps(manifest))
+    info2, img2 = _fresh_render(tmp_path, "fallback", shipped_root=root)
+    assert info2["source"].startswith("compiled (load failed"), info2
+    assert any(f.endswith(".cpp") for f in info2["files"]), info2["files"]
+    assert img.shape == img2.shape == (256, 256, 3)
+    assert np.isfinite(img).all() and img.mean() > 0
+    assert np.array_equal(img, img2), float(np.abs(img - img2).max())
+
+
+def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, default_module):
+    module, device = default_module
+    if not sk.cpu_supports_isa():
+        pytest.skip(f"this CPU lacks {sk.ISA_LEVEL}")
+    root, pdir, manifest = _shipped_copy(tmp_path)
+    monkeypatch.setenv(sk.ENV, str(root))
+    assert sk.find_shipped(module, device) == (pdir / next(iter(manifest["modules"])), "ok")
+
+    (ident,) = manifest["modules"]
+    obj = next(n for n in manifest["modules"][ident]["files"] if n.endswith(".o"))
+    good = (pdir / ident / obj).read_bytes()
+    (pdir / ident / obj).write_bytes(good[:-1] + bytes([good[-1] ^ 1]))
+    assert sk.find_shipped(module, device) == (None, "checksum-mismatch")
+    (pdir / ident / obj).write_bytes(good)
+
+    bad = json.loads(json.dumps(manifest))
+    bad["modules"][ident]["hash"] = "0" * 64
+    (pdir / sk.MANIFEST).write_text(json.dumps(bad))
+    assert sk.find_shipped(module, device) == (None, "hash-mismatch")
+
+    bad = json.loads(json.dumps(manifest))
+    bad["toolchain"]["llvm"] = "0.0"
+    (pdir / sk.MANIFEST).write_text(json.dumps(bad))
+    assert sk.find_shipped(module, device) == (None, "other-toolchain")
+
+    bad = json.loads(json.dumps(manifest))
+    bad["modules"] = {ident + "x": bad["modules"][ident]}
+    (pdir / sk.MANIFEST).write_text(json.dumps(bad))
+    assert sk.find_shipped(module, device) == (None, "not-shipped")
+
+    (pdir / sk.MANIFEST).write_text(json.dumps(manifest))
+    monkeypatch.setattr(sk, "ISA_FEATURES", sk.ISA_FEATURES | {"no-such-cpu-feature"})
+    assert sk.find_shipped(module, device) == (None, "cpu-lacks-isa")
+
+    monkeypatch.setenv(sk.ENV, "")
+    assert sk.find_shipped(module, device) == (None, "disabled")
+    monkeypatch.setenv(sk.ENV, str(root))
+    import warp as wp
+
+    monkeypatch.setattr(wp.config, "cache_kernels", False)
+    assert sk.find_shipped(module, device) == (None, "cache-off")
+
+
+def test_render_kernels_use_portable_flags(default_module, monkeypatch):
+    module, _ = default_module
+    expected = sk.PORTABLE_CPU_FLAGS if sk.cpu_supports_isa() else None
+    assert module.options["cpu_compiler_flags"] == expected
+    assert "-march=native" not in sk.PORTABLE_CPU_FLAGS.split()
+    # a CPU without the shipped ISA level keeps Warp's -march=native (never an x86-64-v3 object)
+    monkeypatch.setattr(sk, "ISA_FEATURES", sk.ISA_FEATURES | {"no-such-cpu-feature"})
+    assert sk.render_module_options() == {}
