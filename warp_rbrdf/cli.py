@@ -218,7 +218,10 @@ def cmd_render(a) -> int:
     print(f"scene    {display_path(scene.path)}: {s.width}x{s.height}, {s.spp} spp, "
           f"{r.geometry.num_triangles} triangles, max_depth {scene.integrator.max_depth}")
     print(f"setup    {s.setup_seconds:.2f} s (files, tables, BVH)")
-    print(f"compile  {s.compile_seconds:.2f} s (code generation + Warp compile or cache load)")
+    how = {"shipped": "kernel shipped with the package, nothing compiled",
+           "cache": "kernel loaded from the Warp cache",
+           "compiled": "kernel compiled and cached"}.get(r.kernel_source, "Warp compile or cache load")
+    print(f"compile  {s.compile_seconds:.2f} s ({how})")
     print(f"render   {s.render_seconds:.3f} s on {s.device} with {s.threads} thread(s), "
           f"{s.tiles} tiles: {s.samples_per_second / 1e6:.3f} M samples/s")
     print(f"wrote    {display_path(out)} (linear EXR) and {display_path(png)} "
