@@ -236,6 +236,16 @@ radiance = 0.5
 """
 
 
+def render_work_folder(tmp_path) -> Path:
+    """An output folder holding the EXR and PNG of an earlier render (``old.exr``,
+    ``old_ev+0.0.png``): what a failing ``rbrdf render`` must leave as it was."""
+    w = tmp_path / "work"
+    w.mkdir()
+    (w / "old.exr").write_bytes(b"earlier exr")
+    (w / "old_ev+0.0.png").write_bytes(b"earlier png")
+    return w
+
+
 def render_run(capsys, argv) -> tuple:
     """``(status, stdout, stderr)`` of ``rbrdf argv`` run in this process."""
     from warp_rbrdf.cli import main as rbrdf_main

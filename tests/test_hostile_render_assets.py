@@ -25,6 +25,7 @@ from hostile import (
     obj_text,
     ply_binary,
     render_run,
+    render_work_folder,
     snapshot,
     write_image_file,
 )
@@ -38,11 +39,8 @@ CONST = 'type = "constant"\nradiance = 0.5\n'
 
 @pytest.fixture
 def work(tmp_path):
-    w = tmp_path / "work"
-    w.mkdir()
-    (w / "old.exr").write_bytes(b"earlier exr")
-    (w / "old_ev+0.0.png").write_bytes(b"earlier png")
-    return w
+    """An output folder holding the EXR and PNG of an earlier render."""
+    return render_work_folder(tmp_path)
 
 
 def _render(capsys, tmp_path, work, scene_text):

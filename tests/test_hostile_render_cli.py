@@ -16,7 +16,14 @@ import os
 
 import numpy as np
 import pytest
-from hostile import TINY_SCENE, assert_bad_input, assert_unchanged, render_run, snapshot
+from hostile import (
+    TINY_SCENE,
+    assert_bad_input,
+    assert_unchanged,
+    render_run,
+    render_work_folder,
+    snapshot,
+)
 
 CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 
@@ -32,11 +39,7 @@ def scene(tmp_path):
 @pytest.fixture
 def work(tmp_path):
     """An output folder holding the EXR and PNG of an earlier render."""
-    w = tmp_path / "work"
-    w.mkdir()
-    (w / "old.exr").write_bytes(b"earlier exr")
-    (w / "old_ev+0.0.png").write_bytes(b"earlier png")
-    return w
+    return render_work_folder(tmp_path)
 
 
 FLAG_CASES = [

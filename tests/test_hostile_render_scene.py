@@ -14,7 +14,14 @@ from __future__ import annotations
 import os
 
 import pytest
-from hostile import TINY_SCENE, assert_bad_input, assert_unchanged, render_run, snapshot
+from hostile import (
+    TINY_SCENE,
+    assert_bad_input,
+    assert_unchanged,
+    render_run,
+    render_work_folder,
+    snapshot,
+)
 
 CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 
@@ -245,11 +252,7 @@ SCENE_CASES = [
 @pytest.fixture
 def work(tmp_path):
     """An output folder holding the EXR and PNG of an earlier render."""
-    w = tmp_path / "work"
-    w.mkdir()
-    (w / "old.exr").write_bytes(b"earlier exr")
-    (w / "old_ev+0.0.png").write_bytes(b"earlier png")
-    return w
+    return render_work_folder(tmp_path)
 
 
 def _run_scene(capsys, tmp_path, work, data: bytes, name="s.toml"):
