@@ -9,11 +9,10 @@ Sub-packages: :mod:`fit.formats` (measured-BRDF files and types), :mod:`fit.proj
 The public API below keeps ``import fit`` cheap: ``fit_brdf``, ``fit_cdf`` and ``load_cdf``
 (SciPy's optimizer and interpolators) are imported on first use.
 """
-from importlib import import_module
-
 from .errors import BRDFFileError, FlagError, OutputError, RbrdfError
 from .formats import load_measured
 from .formats.measured import MeasuredBRDF, ProjectedBRDF
+from .lazy import lazy_attributes
 from .projection.project import project
 from .rational.coefficient_file import load as load_coefficients
 
@@ -26,10 +25,4 @@ _LAZY = {"fit_brdf": ("fit.rational.brdf_fit", "fit_brdf"),
          "load_cdf": ("fit.sampling.cdf_file", "load")}
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        module, attr = _LAZY[name]
-        value = getattr(import_module(module), attr)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'fit' has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _LAZY, globals())

@@ -36,6 +36,19 @@ def data_file(relative: str) -> Path:
     return p
 
 
+def require_mitsuba():
+    """:mod:`warp_rbrdf.mitsuba_reference` when Mitsuba 3 is usable; skip (locally) or fail (CI:
+    the ``test`` extra installs it) when it is not."""
+    from warp_rbrdf import mitsuba_reference as MR
+
+    if not MR.available():
+        msg = f"Mitsuba 3 is not installed ({MR.INSTALL_HINT})"
+        if IN_CI:
+            pytest.fail(msg)
+        pytest.skip(msg)
+    return MR
+
+
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     return DATA

@@ -8,7 +8,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import IN_CI, data_file
+from conftest import data_file, require_mitsuba
 
 BENCHMARKS = ("bench_convert", "bench_env_sampling", "bench_fit", "bench_fit_accuracy", "bench_projection", "bench_render", "bench_rgl", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba")
@@ -69,12 +69,7 @@ def test_bench_vs_mitsuba_smoke(tmp_path):
     """A tiny run (Mitsuba's scalar variant, no system package): every number is there, and the
     check against a converged Mitsuba reference says the seed-pair estimate is right for both
     renderers and that our rgl render agrees with Mitsuba's (what the benchmark rests on)."""
-    from warp_rbrdf import mitsuba_reference as MR
-
-    if not MR.available():
-        if IN_CI:
-            pytest.fail("Mitsuba 3 is not installed (the test extra installs it)")
-        pytest.skip("Mitsuba 3 is not installed")
+    MR = require_mitsuba()
     data_file("rgl/paper_white_rgb.bsdf")
     data_file("envmaps/studio_small_03_1k.hdr")
     from benchmarks import bench_vs_mitsuba as B

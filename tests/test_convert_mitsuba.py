@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import IN_CI, data_file
+from conftest import data_file, require_mitsuba
 
 from fit.analytic import glossy_lobe
 from fit.convert import convert
@@ -30,11 +30,7 @@ SIZES = {"n_theta_i": 12, "n_vndf": 64, "n_rgb": 48, "n_ndf": 64}
 
 @pytest.fixture(scope="module", autouse=True)
 def _need_mitsuba():
-    if not MR.available():
-        msg = f"Mitsuba 3 is not installed ({MR.INSTALL_HINT})"
-        if IN_CI:
-            pytest.fail(msg)
-        pytest.skip(msg)
+    require_mitsuba()
 
 
 def test_analytic_lobe_via_merl_to_rgl_in_mitsuba(tmp_path):

@@ -26,7 +26,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import IN_CI, ROOT, data_file
+from conftest import IN_CI, ROOT, data_file, require_mitsuba
 
 from fit.cli import main as cli_main
 from fit.export import to_brdf_explorer, to_c, to_glsl, to_hlsl, to_mitsuba_plugin
@@ -53,14 +53,7 @@ def need(tool: str) -> str:
 
 
 def need_mitsuba():
-    try:
-        import mitsuba  # noqa: F401
-    except ImportError:
-        if IN_CI:
-            pytest.fail("mitsuba missing (pip install -e '.[reference]')")
-        pytest.skip("mitsuba missing")
-    from warp_rbrdf import mitsuba_reference as MR
-
+    MR = require_mitsuba()
     MR.set_variant(MR.VARIANT)
     return MR
 

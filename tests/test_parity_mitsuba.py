@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import IN_CI, data_file
+from conftest import data_file, require_mitsuba
 from fit.formats.angles import spherical_to_direction
 from fit.formats.rgl import read_rgl
 from warp_rbrdf import mitsuba_reference as MR
@@ -60,11 +60,7 @@ ABS_TOL = 5e-5          # absolute error everywhere, as a fraction of that maxim
 
 @pytest.fixture(scope="module", autouse=True)
 def _need_mitsuba():
-    if not MR.available():
-        msg = f"Mitsuba 3 is not installed ({MR.INSTALL_HINT})"
-        if IN_CI:
-            pytest.fail(msg)
-        pytest.skip(msg)
+    require_mitsuba()
 
 
 def rgl_path(name: str) -> Path:

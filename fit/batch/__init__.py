@@ -7,7 +7,7 @@
 
 ``fit_database`` is imported on first use (dask is an optional extra, ``warp-rbrdf[batch]``).
 """
-from importlib import import_module
+from ..lazy import lazy_attributes
 
 __all__ = ["BatchReport", "fit_database"]
 
@@ -15,10 +15,4 @@ _LAZY = {"fit_database": ("fit.batch.runner", "fit_database"),
          "BatchReport": ("fit.batch.report", "BatchReport")}
 
 
-def __getattr__(name):
-    if name in _LAZY:
-        module, attr = _LAZY[name]
-        value = getattr(import_module(module), attr)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'fit.batch' has no attribute {name!r}")
+__getattr__ = lazy_attributes(__name__, _LAZY, globals())
