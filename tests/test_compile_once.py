@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import warp as wp
+from test_warp_rational import random_model
 
 import fit.rational.basis as basis
 import fit.rational.function as function
@@ -151,22 +152,8 @@ def test_packed_form_equals_the_basis_warp():
 # --------------------------------------------------------------------------------------------
 def _model(value_transform="linear", seed=0, th=(0.0, np.pi / 2), td=(0.0, np.radians(80.0)),
            value_max=None, info=None):
-    rng = np.random.default_rng(seed)
-    variables = [model_types.Variable("theta_h", "rad", "sqrt", th),
-                 model_types.Variable("theta_d", "rad", "identity", td)]
-    rf_dom = np.array([v.rf_domain for v in variables])
-    num_e, den_e = basis.tensor_exponents((5, 3)), basis.total_degree_exponents(2, 2)
-    funcs = []
-    for c in range(3):
-        p = rng.normal(size=len(num_e)) * 0.3
-        p[0] = 1.5 + c
-        q = rng.normal(size=len(den_e)) * 0.05
-        q[0] = 1.0
-        funcs.append(function.RationalFunction(rf_dom, num_e, p, den_e, q))
-    return model_types.RationalModel(name=f"m{seed}", variables=variables, functions=funcs,
-                                      value_transform=value_transform, value_max=value_max,
-                                      value_offset=0.01 if value_transform == "log" else 0.0,
-                                      function_info=info or [])
+    return random_model(value_transform, seed, theta_d_range=td, value_max=value_max, theta_h_range=th,
+                        name=f"m{seed}", info=info)
 
 
 def _clamped_piecewise(flag=True):

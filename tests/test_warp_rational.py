@@ -14,9 +14,13 @@ import fit.rational.function as function  # noqa: E402
 import fit.rational.model as model_types  # noqa: E402
 
 
-def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radians(80.0)), value_max=None):
+def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radians(80.0)), value_max=None,
+                 theta_h_range=(0.0, np.pi / 2), name="random", info=None):
+    """Three random but positive rational functions of (theta_h, theta_d) (numerator tensor
+    degrees (5, 3), denominator total degree 2) as a :class:`RationalModel` on the given ranges
+    (radians); ``info`` its ``function_info``."""
     rng = np.random.default_rng(seed)
-    dom = [(0.0, np.pi / 2), tuple(theta_d_range)]
+    dom = [tuple(theta_h_range), tuple(theta_d_range)]
     variables = [model_types.Variable("theta_h", "rad", "sqrt", dom[0]),
                  model_types.Variable("theta_d", "rad", "identity", dom[1])]
     rf_dom = np.array([v.rf_domain for v in variables])
@@ -29,9 +33,10 @@ def random_model(value_transform="linear", seed=0, theta_d_range=(0.0, np.radian
         q = rng.normal(size=len(den_e)) * 0.05
         q[0] = 1.0
         funcs.append(function.RationalFunction(rf_dom, num_e, p, den_e, q))
-    return model_types.RationalModel(name="random", variables=variables, functions=funcs,
+    return model_types.RationalModel(name=name, variables=variables, functions=funcs,
                                       value_transform=value_transform, value_max=value_max,
-                                      value_offset=0.01 if value_transform == "log" else 0.0)
+                                      value_offset=0.01 if value_transform == "log" else 0.0,
+                                      function_info=info or [])
 
 
 def piecewise_model(value_transform="log"):
