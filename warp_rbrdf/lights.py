@@ -55,6 +55,7 @@ import warp as wp
 from fit.errors import BRDFFileError, display_path
 from fit.inputs import open_regular
 
+from . import fastmath as fmath
 from . import limits
 from .errors import SceneError
 from .image_io import oiio_filename
@@ -619,7 +620,7 @@ def make_directional_struct(dirs: np.ndarray, irr: np.ndarray, device) -> Direct
 @wp.func
 def env_dir_to_uv(env: EnvMap, d: wp.vec3) -> wp.vec2:
     dl = wp.transpose(env.rot) * d
-    u = wp.atan2(dl[0], -dl[2]) * (0.5 / wp.pi)
+    u = fmath.atan2(dl[0], -dl[2]) * (0.5 / wp.pi)
     if u < 0.0:
         u = u + 1.0
     if u >= 1.0:

@@ -21,6 +21,7 @@ import warp as wp
 
 from fit.formats.rgl import read_rgl
 
+from .. import fastmath as fmath
 from .. import registry
 from ..errors import SceneError
 from .data import LoadedMaterial, Materials
@@ -126,7 +127,7 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
 @wp.func
 def elevation(w: wp.vec3) -> float:
     """theta of a unit vector (radians), accurate near the pole."""
-    return wp.atan2(wp.sqrt(w[0] * w[0] + w[1] * w[1]), w[2])
+    return fmath.atan2(wp.sqrt(w[0] * w[0] + w[1] * w[1]), w[2])
 
 
 @wp.func
@@ -147,9 +148,9 @@ def rgl_reference_eval(mats: Materials, h: int, wt: wp.vec3, wx: wp.vec3) -> wp.
     s = wt + wx
     wm = s / wp.length(s)
     theta_t = elevation(wt)
-    phi_t = wp.atan2(wt[1], wt[0])
+    phi_t = fmath.atan2(wt[1], wt[0])
     umx = theta_to_u(elevation(wm))
-    umy = phi_to_u(wp.atan2(wm[1], wm[0]) - phi_t)
+    umy = phi_to_u(fmath.atan2(wm[1], wm[0]) - phi_t)
     n = mats.rgl_i[h + RGL_N_THETA]
     tw = theta_interval(mats, mats.rgl_i[h + RGL_THETA], n, theta_t)
     t0 = int(tw[0])

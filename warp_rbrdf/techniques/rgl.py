@@ -19,6 +19,7 @@ import warp as wp
 
 from fit.formats.rgl_interpolants import interval
 
+from .. import fastmath as fmath
 from ..materials import rgl as R
 from ..materials.data import Materials
 from ..materials.rgl_tables import (
@@ -40,7 +41,7 @@ def _incidence(mats: Materials, h: int, wt: wp.vec3) -> wp.vec3:
     """(t0, w1, phi_t) of the tensors' incident direction ``wt``: its theta_i slice interval
     (``t0`` as a float) and azimuth."""
     tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], mats.rgl_i[h + R.RGL_N_THETA], R.elevation(wt))
-    return wp.vec3(tw[0], tw[1], wp.atan2(wt[1], wt[0]))
+    return wp.vec3(tw[0], tw[1], fmath.atan2(wt[1], wt[0]))
 
 
 @wp.func
@@ -100,7 +101,7 @@ def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
     t0 = int(inc[0])
     w1 = inc[1]
     umx = R.theta_to_u(R.elevation(wm))
-    umy = R.phi_to_u(wp.atan2(wm[1], wm[0]) - inc[2])
+    umy = R.phi_to_u(fmath.atan2(wm[1], wm[0]) - inc[2])
     n = mats.rgl_i[h + R.RGL_N_THETA]
     sw = warp_invert(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
                      mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
@@ -145,7 +146,7 @@ def sample_f(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2):
     if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
         return wp.vec4(0.0), wp.vec3(0.0), 1
     theta_t = R.elevation(wo)
-    phi_t = wp.atan2(wo[1], wo[0])
+    phi_t = fmath.atan2(wo[1], wo[0])
     n = mats.rgl_i[h + R.RGL_N_THETA]
     tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
     t0 = int(tw[0])
@@ -172,13 +173,13 @@ def eval_pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3):
     sv = wi + wo
     wm = sv / wp.length(sv)
     theta_t = R.elevation(wo)
-    phi_t = wp.atan2(wo[1], wo[0])
+    phi_t = fmath.atan2(wo[1], wo[0])
     n = mats.rgl_i[h + R.RGL_N_THETA]
     tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
     t0 = int(tw[0])
     w1 = tw[1]
     umx = R.theta_to_u(R.elevation(wm))
-    umy = R.phi_to_u(wp.atan2(wm[1], wm[0]) - phi_t)
+    umy = R.phi_to_u(fmath.atan2(wm[1], wm[0]) - phi_t)
     sw = warp_invert(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
                      mats.rgl_i[h + R.RGL_VNDF_MARG], mats.rgl_i[h + R.RGL_VNDF_NY],
                      mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, umx, umy)
