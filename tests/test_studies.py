@@ -928,3 +928,24 @@ def test_failure_map_smoke_cli_end_to_end(tmp_path, rgl_data):
     block = _split(_results(root), "failure_map")[1]
     assert "**Failure map** · `python -m studies.failure_map --smoke --out " in block
     assert (root / "docs/images/study_failure_map.png").read_bytes() == (out / "failure_map.png").read_bytes()
+
+
+def test_fidelity_explains_rational_misses_by_the_projection_ceiling():
+    """The study says why ``rational`` misses: the projected table (what a 2-D fit approximates)
+    missing the same statistic, or the fit's own error, and the rim pixels apart."""
+    from studies.fidelity import MET, MISSED, explain_rational
+
+    def row(name, rat, proj, status, rim=0):
+        return {"material": name, "map": "studio", "checks": {"rational": status},
+                "compare": {"rational": {"de_mean": rat[0], "de_p99": rat[1], "rim_above": rim},
+                            "projected": {"de_mean": proj[0], "de_p99": proj[1], "rim_above": 0}}}
+
+    rows = [row("a", (2.0, 4.0), (1.5, 3.0), MISSED),        # the table misses the mean too
+            row("b", (1.2, 4.0), (0.8, 3.0), MISSED),        # only the fit misses
+            row("c", (0.9, 9.0), (0.5, 8.0), MISSED, rim=7),  # p99 ceiling, and rim pixels
+            row("d", (0.5, 2.0), (0.4, 1.0), MET)]
+    text = explain_rational(rows, 0.05)
+    assert "On 2 missed cases the projected table itself misses" in text and "a/studio, c/studio" in text
+    assert "On 1 the table meets it and the fit does not" in text and "b/studio." in text
+    assert "c/studio (7 px; projected 0)" in text and "d/studio" not in text
+    assert explain_rational([rows[-1]], 0.05) == ""
