@@ -601,8 +601,8 @@ def explain_rational(rows, tol) -> str:
             ratios.append(x["de_mean"] / pr["de_mean"])
     if not (ceiling or fit_only or rim):
         return ""
-    out = [f"**Why `rational` {100 * tol:g} % misses** (from the table above). A 2-D fit approximates the "
-           f"projected (θh, θd) table — the φd median of the measurement — and adds its own error to the table's."]
+    out = [(f"**Why `rational` {100 * tol:g} % misses** (from the table above). A 2-D fit approximates the "
+            f"projected (θh, θd) table — the φd median of the measurement — and adds its own error to the table's.")]
     if ceiling:
         out.append(f"On {len(ceiling)} missed cases the projected table itself misses the same statistic, so a fit "
                    f"of it is not expected to meet the target there: the projection's ceiling (φd and non-reciprocity "
