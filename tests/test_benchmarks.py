@@ -86,6 +86,9 @@ def test_bench_vs_mitsuba_smoke(tmp_path):
         assert r["time_to_target_s"] > 0 and r["samples_per_s"] > 0 and r["how"] == "extrapolated"
         assert r["rungs"][1]["rel_rmse"] < r["rungs"][0]["rel_rmse"]
     assert np.isfinite(case["ratio"]) and case["ratio"] > 0
+    # an easy case: not extended, and its ratio carries a small standard error
+    assert case["extension"] == {**case["extension"], "status": "trusted", "rungs": [], "top_spp": 16}
+    assert 0 < case["ratio_log_se"] < 0.2
     chk = case["check"]["renderers"]
     for label in ("rgl:mis-rgl", "mitsuba"):
         assert 0.8 < chk[label]["ratio"] < 1.25, (label, chk[label])   # estimate == error vs reference
