@@ -58,7 +58,11 @@ The full benchmark is the one command ``python -m benchmarks.bench_vs_mitsuba --
 256 px, spp 4 16 64, the check on 2 materials at 1024 spp. Estimated 15-20 min on the 2-core
 machine at load 1-2 (the 6-material run, 12 cases with the check, took 249 s; a case is about
 20 s, the check about 20 s a material and map); ``--resolution 128`` takes about a quarter of
-that (the 2-material, 1-map, 128 px run without the check: 39-72 s at load 8-11).
+that (the 2-material, 1-map, 128 px run without the check: 39-72 s at load 8-11). The
+extension adds, per heavy-tailed case, a 256- and a 1024-spp rung: about 2.5 min on a quiet
+machine at the samples/s of the last full run (ours 2 M/s, Mitsuba 5.5 M/s at 256 px), 7-8 min at
+load 4-5 (ilm_solo_m_68 / rooitou: 256 spp 33 s / 10 s a render, 1024 spp 107 s / 38 s, ours /
+Mitsuba); expect 4 such cases (ilm_solo_m_68 and chm_mint under both maps).
 Mitsuba comes with the ``reference`` extra; its LLVM variant needs a shared libLLVM (Debian:
 ``apt-get install libllvm19``; found automatically, or set ``DRJIT_LIBLLVM_PATH``).
 """
