@@ -36,8 +36,8 @@ all of them render one more rung at 4x the spp (two new seeds, interleaved), up 
 ``--extend-max-spp`` (1024) while the case's render time so far plus 4x its last rung's stays
 within ``--extend-budget`` (480 s). Cases that stay untrusted are marked. Uncertainty: per rung
 the standard error of the log relative MSE (first order, successive differences over pixels:
-:func:`seed_pair_estimate`),
-propagated to the times and the ratio (:func:`log_time_se`): the table's ``ratio ± 1 s.e.``.
+:func:`seed_pair_estimate`), propagated to the times and the ratio (:func:`log_time_se`): the
+table's ``ratio ± 1 s.e.``.
 
 Check (``--check``): for a few materials, a converged Mitsuba reference (``--check-spp`` spp in
 passes of at most 64 spp, two halves with their own seeds; its own noise is the halves'
@@ -61,9 +61,12 @@ machine at load 1-2 (the 6-material run, 12 cases with the check, took 249 s; a 
 20 s, the check about 20 s a material and map); ``--resolution 128`` takes about a quarter of
 that (the 2-material, 1-map, 128 px run without the check: 39-72 s at load 8-11). The
 extension adds, per heavy-tailed case, a 256- and a 1024-spp rung: about 2.5 min on a quiet
-machine at the samples/s of the last full run (ours 2 M/s, Mitsuba 5.5 M/s at 256 px), 7-8 min at
-load 4-5 (ilm_solo_m_68 / rooitou: 256 spp 33 s / 10 s a render, 1024 spp 107 s / 38 s, ours /
-Mitsuba); expect 4 such cases (ilm_solo_m_68 and chm_mint under both maps).
+machine at the samples/s of the last full run (ours 2 M/s, Mitsuba 5.5 M/s at 256 px), 6-8 min at
+load 4-7 (ilm_solo_m_68 / rooitou: 256 spp 26-33 s / 8-10 s a render, 1024 spp 97-107 s / 33-38 s,
+ours / Mitsuba); expect 4 such cases (ilm_solo_m_68 and chm_mint under both maps). Those two
+stay untrusted at 1024 spp under rooitou: their RMSE barely falls from 64 to 1024 spp (Mitsuba,
+ilm_solo_m_68: 0.72, 0.94, 0.80), the sign of rare events (the sun in a near-mirror lobe) not
+yet sampled often enough for N^-1/2; their ratio carries +-50-60 % (a lower bound).
 Mitsuba comes with the ``reference`` extra; its LLVM variant needs a shared libLLVM (Debian:
 ``apt-get install libllvm19``; found automatically, or set ``DRJIT_LIBLLVM_PATH``).
 """
