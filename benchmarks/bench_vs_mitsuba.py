@@ -692,7 +692,8 @@ def report(res: dict) -> str:
     if ext:
         rows = [[c["material"].removesuffix("_rgb"), c["map"], _top(c), c["extension"]["status"],
                  ", ".join(str(x["spp"]) for x in c["extension"]["rungs"]) or "–",
-                 _compact(c["extension"]["rungs"][0]["reasons"]) if c["extension"]["rungs"] else "–",
+                 _compact(c["extension"]["rungs"][0]["reasons"] if c["extension"]["rungs"]
+                          else c["extension"]["reasons"]),
                  _compact(c["extension"]["reasons"]) if c["extension"]["status"] != "trusted" else "–"]
                 for c in ext]
         L += ["### Extended or untrusted cases", "",
