@@ -25,6 +25,20 @@ from the last rung with RMSE proportional to N^-1/2 at that rung's samples/s
 d log RMSE / d log N between the last two rungs (-0.5 for independent samples; steeper means
 stratification still helps and the extrapolation is pessimistic for that renderer).
 
+Extension (issue 21, heavy-tailed cases; ``--no-extend`` turns it off): near-mirror materials
+under a small bright source (the sun of ``rooitou``) have fireflies, and a 64-spp seed-pair
+estimate is then dominated by the few that were drawn (relative RMSE 0.7-2.5, extrapolated over a
+factor 5000-60000 in time). After the base ladder a renderer's top rung is *untrusted* when its
+relative RMSE is above ``--extend-rmse`` (0.25), the standard error of its log MSE above
+``--extend-se`` (0.1), or its slope from the rung below outside [-1.1, -0.4]
+(:class:`ExtendRule`, :func:`untrusted`); while any renderer still above the target is untrusted,
+all of them render one more rung at 4x the spp (two new seeds, interleaved), up to
+``--extend-max-spp`` (1024) while the case's render time so far plus 4x its last rung's stays
+within ``--extend-budget`` (480 s). Cases that stay untrusted are marked. Uncertainty: per rung
+the standard error of the log relative MSE (first order, successive differences over pixels:
+:func:`seed_pair_estimate`), propagated to the times and the ratio (:func:`log_time_se`): the
+table's ``ratio ± 1 s.e.``.
+
 Check (``--check``): for a few materials, a converged Mitsuba reference (``--check-spp`` spp in
 passes of at most 64 spp, two halves with their own seeds; its own noise is the halves'
 difference) against the top rung of every renderer: the RMSE against the reference minus the
@@ -35,7 +49,8 @@ standard errors.
     python -m benchmarks.bench_vs_mitsuba [--quick] [--materials a b] [--maps studio rooitou]
         [--resolution 256] [--spp 4 16 64] [--ours rgl:mis-rgl measured:mis-tabulated]
         [--variant auto|llvm_ad_rgb|scalar_rgb] [--threads N] [--check 2] [--check-spp 1024]
-        [--json results/bench_vs_mitsuba.json] [--docs]
+        [--json results/bench_vs_mitsuba.json] [--docs] [--no-extend] [--extend-max-spp 1024]
+        [--extend-budget 480] [--extend-rmse 0.25] [--extend-se 0.1]
 
 ``--quick``: 2 materials, the studio map, 64 px, spp 4 16, check at 256 spp (the smoke test).
 ``--docs`` writes docs/bench_vs_mitsuba.md (generated; edits there are overwritten).
@@ -44,7 +59,14 @@ The full benchmark is the one command ``python -m benchmarks.bench_vs_mitsuba --
 256 px, spp 4 16 64, the check on 2 materials at 1024 spp. Estimated 15-20 min on the 2-core
 machine at load 1-2 (the 6-material run, 12 cases with the check, took 249 s; a case is about
 20 s, the check about 20 s a material and map); ``--resolution 128`` takes about a quarter of
-that (the 2-material, 1-map, 128 px run without the check: 39-72 s at load 8-11).
+that (the 2-material, 1-map, 128 px run without the check: 39-72 s at load 8-11). The
+extension adds, per heavy-tailed case, a 256- and a 1024-spp rung: about 2.5 min on a quiet
+machine at the samples/s of the last full run (ours 2 M/s, Mitsuba 5.5 M/s at 256 px), 6-8 min at
+load 4-7 (ilm_solo_m_68 / rooitou: 256 spp 26-33 s / 8-10 s a render, 1024 spp 97-107 s / 33-38 s,
+ours / Mitsuba); expect 4 such cases (ilm_solo_m_68 and chm_mint under both maps). Those two
+stay untrusted at 1024 spp under rooitou: their RMSE barely falls from 64 to 1024 spp (Mitsuba,
+ilm_solo_m_68: 0.72, 0.94, 0.80), the sign of rare events (the sun in a near-mirror lobe) not
+yet sampled often enough for N^-1/2; their ratio carries +-50-60 % (a lower bound).
 Mitsuba comes with the ``reference`` extra; its LLVM variant needs a shared libLLVM (Debian:
 ``apt-get install libllvm19``; found automatically, or set ``DRJIT_LIBLLVM_PATH``).
 """
@@ -52,6 +74,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import itertools
 import json
 import os
@@ -85,15 +108,42 @@ TARGETS = {"median_ratio": 3.0, "max_ratio": 10.0, "rate_ratio": 0.4}
 
 # --------------------------------------------------------------------------------------------
 # Error and time to the target
-def relative_rmse(x1: np.ndarray, x2: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
-    """(relative RMSE of one image, mean) from two independent renders ``x1``, ``x2``
-    (H, W, 3) of the same unbiased estimator: sqrt(mean((x1 - x2)^2) / 2) / mean((x1 + x2) / 2)
-    over the pixels of ``mask`` (H, W) and the 3 channels."""
+def seed_pair_estimate(x1: np.ndarray, x2: np.ndarray, mask: np.ndarray) -> tuple[float, float, float]:
+    """(relative RMSE of one render, mean, standard error of the log relative MSE) from two
+    independent renders ``x1``, ``x2`` (H, W, 3) of the same unbiased estimator, over the pixels
+    of ``mask`` (H, W) and the 3 channels.
+
+    Relative RMSE: sqrt(mean((x1 - x2)^2) / 2) / mean((x1 + x2) / 2). Its uncertainty: per pixel
+    v = mean over channels of (x1 - x2)^2 / 2 and m = mean over channels of (x1 + x2) / 2
+    (channels correlate, pixels are taken as independent); the relative MSE is mean(v) / mean(m)^2
+    = V / M^2 and, to first order, log(V / M^2) - its value = mean(z) with z = v / V - 2 m / M.
+    The variance of each z_p is estimated from successive differences along the mask's
+    row-major order, var(mean(z)) = sum((z_p+1 - z_p)^2) / 2 / P^2, which removes the image's
+    smooth variation of the per-pixel variance (a highlight's pixels have a larger variance
+    than the rest: structure, not noise; a plain or block bootstrap over pixels counts it and
+    overstates the error 4x on a synthetic highlight). It is the relative standard error of a
+    time to the target extrapolated from these renders (time ~ MSE). Large when a few pixels
+    (fireflies) carry the sum; for such heavy-tailed noise it is a lower bound (it sees only
+    the rare events that were drawn, and the log is nonlinear: 1.6-2.7x below the spread over
+    independent pairs on synthetic Pareto fireflies)."""
     a = np.asarray(x1, np.float64)[mask]
     b = np.asarray(x2, np.float64)[mask]
-    mean = float(np.mean(a + b) / 2)
-    mse = float(np.mean((a - b) ** 2) / 2)
-    return (np.sqrt(mse) / mean if mean > 0 else float("inf")), mean
+    v = ((a - b) ** 2 / 2).reshape(len(a), -1).mean(axis=1)      # (P,)
+    m = ((a + b) / 2).reshape(len(a), -1).mean(axis=1)
+    V, M = float(v.mean()), float(m.mean())
+    if not (M > 0) or len(v) < 2:
+        return float("inf"), M, float("inf")
+    rel = float(np.sqrt(V) / M)
+    if not (V > 0):
+        return rel, M, float("inf")
+    z = v / V - 2 * m / M
+    return rel, M, float(np.sqrt(np.sum(np.diff(z) ** 2) / 2) / len(z))
+
+
+def relative_rmse(x1: np.ndarray, x2: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
+    """(relative RMSE of one render, mean): the first two numbers of :func:`seed_pair_estimate`."""
+    rel, mean, _ = seed_pair_estimate(x1, x2, mask)
+    return rel, mean
 
 
 @dataclass
@@ -103,6 +153,7 @@ class Rung:
     rel_rmse: float         # of one render (seed-pair estimate)
     mean: float             # image mean over the mask (both renders)
     times: list = field(default_factory=list)
+    mse_se: float = 0.0     # standard error of log(rel_rmse^2) (seed_pair_estimate)
 
     @property
     def samples_per_s(self) -> float:
@@ -148,6 +199,104 @@ def last_slope(rungs: list[Rung]) -> float:
         return float("nan")
     a, b = rungs[-2], rungs[-1]
     return float(np.log(b.rel_rmse / a.rel_rmse) / np.log(b.spp / a.spp))
+
+
+def log_time_se(rungs: list[Rung], target: float, how=None) -> float:
+    """First-order standard error of log(time to ``target``) from the rungs' ``mse_se``:
+    sqrt(sum_i (d log t / d log MSE_i * mse_se_i)^2), the derivatives by finite differences of
+    ``how`` (:func:`time_to_target` by default, or :func:`time_to_target_slope`). For a time
+    extrapolated with N^-1/2 it is the top rung's ``mse_se``; timing noise is not included."""
+    how = how or time_to_target
+
+    def t_of(rs):
+        t = how(rs, target)
+        return t[0] if isinstance(t, tuple) else t
+
+    t0 = t_of(rungs)
+    if not (np.isfinite(t0) and t0 > 0):
+        return float("nan")
+    h = 1e-4
+    var = 0.0
+    for i, r in enumerate(rungs):
+        pert = list(rungs)
+        pert[i] = dataclasses.replace(r, rel_rmse=r.rel_rmse * np.exp(h / 2))   # MSE * e^h
+        d = (np.log(t_of(pert)) - np.log(t0)) / h
+        if abs(d) > 1e-9:
+            var += (d * r.mse_se) ** 2
+    return float(np.sqrt(var))
+
+
+# --------------------------------------------------------------------------------------------
+# Extending the ladder for cases whose estimate is not trustworthy
+@dataclass(frozen=True)
+class ExtendRule:
+    """When a case's ladder gets another rung (``factor`` x the top spp, every renderer still
+    above the target, interleaved as the base ladder). A renderer's top rung is *untrusted* when
+
+    - its relative RMSE exceeds ``max_rel_rmse``: the N^-1/2 extrapolation to the target would
+      span more than a factor (max_rel_rmse / target)^2 in spp (625 for 0.25 and 1 %), or
+    - the standard error of its log MSE (:func:`seed_pair_estimate`; = the relative standard
+      error of its extrapolated time) exceeds ``max_mse_se``, or
+    - its slope d log RMSE / d log N from the rung below lies outside ``slope_band``: an
+      unbiased estimator with finite variance converges between N^-1 (2-D stratification of a
+      smooth integrand) and N^-1/2 (independent samples), so a slope outside [-1, -0.5] by more
+      than the band's margin means the estimate is noise-dominated (a firefly at one rung and
+      not the other) or the case is not yet in its asymptotic regime.
+
+    The case is extended while any renderer still above the target is untrusted, unless the
+    next rung would exceed ``max_spp`` or the case's render time so far plus ``factor`` x its
+    last rung's time would exceed ``budget_s`` (then the case is reported as unresolved, with
+    the reasons). ``enabled=False`` (``--no-extend``) only reports."""
+
+    enabled: bool = True
+    max_rel_rmse: float = 0.25
+    max_mse_se: float = 0.10
+    slope_band: tuple[float, float] = (-1.1, -0.4)
+    max_spp: int = 1024
+    budget_s: float = 480.0
+    factor: int = 4
+
+
+def untrusted(rungs: dict[str, list[Rung]], target: float, rule: ExtendRule) -> list[str]:
+    """Why the top rungs of ``rungs`` (renderer label -> rungs, ascending spp) are not
+    trustworthy under ``rule`` (one line per renderer and failed test; empty: trusted).
+    Renderers already at or below ``target`` are trusted (interpolated, not extrapolated)."""
+    out = []
+    lo, hi = rule.slope_band
+    for label, rs in rungs.items():
+        if not rs:
+            continue
+        top = rs[-1]
+        if top.rel_rmse <= target:
+            continue
+        if not (top.rel_rmse <= rule.max_rel_rmse):
+            out.append(f"{label} rel. RMSE {top.rel_rmse:.3g} > {rule.max_rel_rmse:g} at {top.spp} spp")
+        if not (top.mse_se <= rule.max_mse_se):
+            out.append(f"{label} s.e. of log MSE {top.mse_se:.3g} > {rule.max_mse_se:g} at {top.spp} spp")
+        s = last_slope(rs)
+        if len(rs) >= 2 and not (lo <= s <= hi):
+            out.append(f"{label} slope {s:.3g} outside [{lo:g}, {hi:g}] at {rs[-2].spp}-{top.spp} spp")
+    return out
+
+
+def next_rung(rungs: dict[str, list[Rung]], target: float, rule: ExtendRule, spent_s: float,
+              last_rung_s: float) -> tuple[int | None, list[str], str]:
+    """The extension decision after the ladder's rungs so far: (next spp or None, reasons
+    (:func:`untrusted`), status). Status: "trusted" (nothing to do), "extend" (render the next
+    spp), "cap" (the next rung would pass ``rule.max_spp``), "budget" (``spent_s`` seconds of
+    rendering so far plus ``rule.factor`` x ``last_rung_s`` would pass ``rule.budget_s``) or
+    "off" (``rule.enabled`` is false)."""
+    reasons = untrusted(rungs, target, rule)
+    if not reasons:
+        return None, [], "trusted"
+    if not rule.enabled:
+        return None, reasons, "off"
+    nxt = rule.factor * max(rs[-1].spp for rs in rungs.values() if rs)
+    if nxt > rule.max_spp:
+        return None, reasons, "cap"
+    if spent_s + rule.factor * last_rung_s > rule.budget_s:
+        return None, reasons, "budget"
+    return nxt, reasons, "extend"
 
 
 # --------------------------------------------------------------------------------------------
@@ -224,18 +373,40 @@ class Mitsuba:
 
 
 # --------------------------------------------------------------------------------------------
-def run_case(material: str, path: Path, map_name: str, envmap: Path, a, mask, log) -> dict:
-    ours = [Ours(c, path, envmap, a.resolution, a.threads) for c in a.ours]
-    mit = Mitsuba(path, envmap, a.resolution, a.spp[0])
-    renderers = ours + [mit]
+def climb(renderers: list, ladder: list[int], target: float, rule: ExtendRule, mask: np.ndarray,
+          log=print) -> tuple[dict, dict, dict]:
+    """Render the ``ladder`` (spp, ascending) with every renderer, then extend it under ``rule``
+    (:func:`next_rung`). A renderer is an object with ``label`` and ``render(spp, seed) ->
+    (image (H, W, 3), seconds)``, and optionally ``warm(spp)`` (an untimed warm-up before each
+    of its rungs). Per rung: two seeds, the renderers interleaved render by render; a renderer
+    whose last rung is at or below ``target`` stops. Returns (label -> list of :class:`Rung`,
+    label -> the top rung's two images, the extension record: its rungs with their reasons,
+    the final status and reasons, the top spp, the case's render seconds)."""
     rungs = {r.label: [] for r in renderers}
     last_images = {}
-    for k, spp in enumerate(a.spp):
-        active = [r for r in renderers if not rungs[r.label] or rungs[r.label][-1].rel_rmse > a.target]
+    extension = {"rungs": [], "status": "trusted", "reasons": []}
+    t_case = time.perf_counter()
+    last_rung_s = 0.0
+    k = 0
+    while True:
+        if k < len(ladder):
+            spp = ladder[k]
+        else:   # the base ladder is done: extend while the estimate is not trustworthy
+            spp, reasons, status = next_rung(rungs, target, rule, time.perf_counter() - t_case, last_rung_s)
+            extension["status"], extension["reasons"] = status, reasons
+            if spp is None:
+                if reasons:
+                    log(f"  not extended ({status}): " + "; ".join(reasons))
+                break
+            extension["rungs"].append({"spp": spp, "reasons": reasons})
+            log(f"  extending to {spp} spp: " + "; ".join(reasons))
+        active = [r for r in renderers if not rungs[r.label] or rungs[r.label][-1].rel_rmse > target]
         if not active:
             break
-        if mit in active:
-            mit.warm(spp)
+        t_rung = time.perf_counter()
+        for r in active:
+            if hasattr(r, "warm"):
+                r.warm(spp)
         seeds = (1000 + 2 * k, 1001 + 2 * k)
         imgs = {r.label: [] for r in active}
         times = {r.label: [] for r in active}
@@ -245,11 +416,24 @@ def run_case(material: str, path: Path, map_name: str, envmap: Path, a, mask, lo
                 imgs[r.label].append(img)
                 times[r.label].append(dt)
         for r in active:
-            e, mean = relative_rmse(*imgs[r.label], mask)
-            rungs[r.label].append(Rung(spp, statistics.median(times[r.label]), e, mean, times[r.label]))
+            e, mean, se = seed_pair_estimate(*imgs[r.label], mask)
+            rungs[r.label].append(Rung(spp, statistics.median(times[r.label]), e, mean, times[r.label], se))
             last_images[r.label] = imgs[r.label]
+        last_rung_s = time.perf_counter() - t_rung
         log("  " + "  ".join(f"{r.label} {spp} spp {rungs[r.label][-1].seconds:.2f} s "
-                             f"rmse {rungs[r.label][-1].rel_rmse:.4f}" for r in active))
+                             f"rmse {rungs[r.label][-1].rel_rmse:.4f} (s.e. {rungs[r.label][-1].mse_se:.2g})"
+                             for r in active))
+        k += 1
+    extension["top_spp"] = max(rs[-1].spp for rs in rungs.values() if rs)
+    extension["render_s"] = time.perf_counter() - t_case
+    return rungs, last_images, extension
+
+
+def run_case(material: str, path: Path, map_name: str, envmap: Path, a, mask, log) -> dict:
+    ours = [Ours(c, path, envmap, a.resolution, a.threads) for c in a.ours]
+    mit = Mitsuba(path, envmap, a.resolution, a.spp[0])
+    renderers = ours + [mit]
+    rungs, last_images, extension = climb(renderers, list(a.spp), a.target, a.extend_rule, mask, log)
     npx = int(a.resolution) ** 2
     out = {"material": material, "map": map_name, "renderers": {}}
     for r in renderers:
@@ -258,15 +442,21 @@ def run_case(material: str, path: Path, map_name: str, envmap: Path, a, mask, lo
         out["renderers"][r.label] = {
             "setup_s": r.setup_s, "compile_s": r.compile_s, "time_to_target_s": t, "how": how,
             "time_to_target_slope_s": time_to_target_slope(rs, a.target),
+            "time_log_se": log_time_se(rs, a.target),
+            "time_slope_log_se": log_time_se(rs, a.target, time_to_target_slope),
             "slope": last_slope(rs), "samples_per_s": npx * rs[-1].samples_per_s,
             "rungs": [{"spp": x.spp, "seconds": x.seconds, "times": x.times, "rel_rmse": x.rel_rmse,
-                       "mean": x.mean} for x in rs]}
+                       "mean": x.mean, "mse_se": x.mse_se} for x in rs]}
     best = min((c for c in a.ours), key=lambda c: out["renderers"][c]["time_to_target_s"])
     out["best"] = best
     out["ratio"] = out["renderers"][best]["time_to_target_s"] / out["renderers"]["mitsuba"]["time_to_target_s"]
     out["ratio_slope"] = (out["renderers"][best]["time_to_target_slope_s"]
                           / out["renderers"]["mitsuba"]["time_to_target_slope_s"])
     out["rate_ratio"] = out["renderers"][best]["samples_per_s"] / out["renderers"]["mitsuba"]["samples_per_s"]
+    o, mi = out["renderers"][best], out["renderers"]["mitsuba"]
+    out["ratio_log_se"] = float(np.hypot(o["time_log_se"], mi["time_log_se"]))
+    out["ratio_slope_log_se"] = float(np.hypot(o["time_slope_log_se"], mi["time_slope_log_se"]))
+    out["extension"] = extension
     if material in a.check_materials:
         out["check"] = check(mit, last_images, rungs, a, mask, log)
     return out
@@ -317,7 +507,17 @@ def summarize(cases: list[dict]) -> dict:
              for c in cases])),
          "median_ratio_slope": float(np.median([c["ratio_slope"] for c in cases])),
          "max_ratio_slope": float(np.max([c["ratio_slope"] for c in cases])),
-         "median_samples_per_s": {}}
+         "median_samples_per_s": {},
+         "extended": [_case_name(c) for c in cases if c.get("extension", {}).get("rungs")],
+         "unresolved": [_case_name(c) for c in cases
+                        if c.get("extension", {}).get("status") in ("cap", "budget", "off")]}
+    if ratios:
+        worst = max((c for c in cases if np.isfinite(c["ratio"])), key=lambda c: c["ratio"])
+        s["max_ratio_case"] = _case_name(worst)
+        s["max_ratio_log_se"] = worst.get("ratio_log_se", float("nan"))
+    trusted = [c["ratio"] for c in cases if np.isfinite(c["ratio"]) and _case_name(c) not in s["unresolved"]]
+    s["max_ratio_trusted"] = float(np.max(trusted)) if trusted else float("nan")
+    s["median_ratio_trusted"] = float(np.median(trusted)) if trusted else float("nan")
     labels = sorted({k for c in cases for k in c["renderers"]})
     for k in labels:
         v = [c["renderers"][k]["samples_per_s"] for c in cases if k in c["renderers"]]
@@ -326,6 +526,37 @@ def summarize(cases: list[dict]) -> dict:
                     "max_ratio <= 10": s["max_ratio"] <= TARGETS["max_ratio"],
                     "samples/s >= 40 % of Mitsuba's (median)": s["median_rate_ratio"] >= TARGETS["rate_ratio"]}
     return s
+
+
+def _case_name(c: dict) -> str:
+    return f"{c['material'].removesuffix('_rgb')} / {c['map']}"
+
+
+def _pm(x: float, log_se: float) -> str:
+    """``x`` ± its first-order standard error (``log_se`` = standard error of log x)."""
+    if not np.isfinite(log_se):
+        return _f(x)
+    return f"{_f(x)} ± {_f(x * log_se, 2)}"
+
+
+def _top(c: dict) -> str:
+    """Top spp of a case: * extended, ! still untrusted where the extension stopped."""
+    e = c.get("extension", {})
+    mark = ("*" if e.get("rungs") else "") + ("!" if e.get("status") in ("cap", "budget", "off") else "")
+    return f"{e.get('top_spp', '–')}{mark}"
+
+
+def _compact(reasons: list[str]) -> str:
+    """:func:`untrusted`'s lines as "label: RMSE x, s.e. y, slope z; label: ..."."""
+    import re
+
+    per: dict[str, list[str]] = {}
+    for w in reasons:
+        m = re.match(r"(\S+) (rel\. RMSE|s\.e\. of log MSE|slope) (\S+)", w)
+        if m:
+            key = {"rel. RMSE": "RMSE", "s.e. of log MSE": "s.e."}.get(m.group(2), m.group(2))
+            per.setdefault(m.group(1), []).append(f"{key} {m.group(3)}")
+    return "; ".join(f"{k}: {', '.join(v)}" for k, v in per.items()) or "–"
 
 
 def _f(x, digits=3):
@@ -341,6 +572,45 @@ def md_table(rows, header) -> str:
     out = ["| " + " | ".join(header) + " |", "|" + "|".join(" --- " for _ in header) + "|"]
     out += ["| " + " | ".join(x if isinstance(x, str) else _f(x) for x in r) + " |" for r in rows]
     return "\n".join(out) + "\n"
+
+
+def _method_extension(a: dict) -> str:
+    """The Method paragraph on the ladder's extension and the ratios' uncertainty."""
+    e = ExtendRule(**{**dataclasses.asdict(ExtendRule()), **a.get("extend", {}),
+                      "slope_band": tuple(a.get("extend", {}).get("slope_band", ExtendRule.slope_band))})
+    lo, hi = e.slope_band
+    rule = (
+        f"**Ladder extension** ({'on' if e.enabled else 'off: `--no-extend`, untrusted cases only reported'}). "
+        "After the base ladder a renderer's top rung is *untrusted* when (a) its relative RMSE is above "
+        f"{e.max_rel_rmse:g} (the extrapolation to {100 * a['target']:g} % would span more than a factor "
+        f"{(e.max_rel_rmse / a['target']) ** 2:.0f} in N), (b) the standard error of its log MSE (below) is "
+        f"above {e.max_mse_se:g}, or (c) its slope from the rung below lies outside [{lo:g}, {hi:g}] (an "
+        "unbiased estimator of finite variance converges between N^−1, 2-D stratification of a smooth "
+        "integrand, and N^−1/2, independent samples: a slope outside [−1, −0.5] by more than 0.1 means "
+        "one of the two estimates is noise-dominated, e.g. fireflies at one rung and not the other, or "
+        "the case is not yet in its asymptotic regime). While a renderer still above the target has an "
+        f"untrusted top rung, every renderer still above the target renders one more rung at {e.factor}× "
+        "the spp (two new seeds, interleaved as above), up to "
+        f"{e.max_spp} spp and while the case's render time so far plus {e.factor}× its last rung's stays "
+        f"within {e.budget_s:g} s. More spp rather than more seeds at the top rung: at equal cost both "
+        "draw the same number of samples (the same chance to draw rare, large contributions), and more "
+        "spp also shortens the extrapolation and brings both renderers closer to their asymptotic "
+        "slope. *top spp*: the last rung (* extended; ! still untrusted where the cap or the budget "
+        "stopped it, reasons below the table).")
+    unc = (
+        "**Uncertainty** (the ± of the ratios, 1 σ, first order): per rung, the standard error of the "
+        "log of the seed-pair relative MSE to first order: per pixel the channel means v = (X1 − X2)²/2 "
+        "and m = (X1 + X2)/2, z = v/V − 2m/M (V, M their means over the P pixels), var(log MSE) = "
+        "var(mean z), each pixel's variance of z estimated from successive differences along mask "
+        "rows: Σ(z_{p+1} − z_p)² / 2 / P² (pixels independent; the image's smooth variation of the "
+        "per-pixel variance, e.g. a highlight, is structure, not noise, and cancels). It is "
+        "propagated through each renderer's time to the target (for an extrapolated time it is the "
+        "top rung's standard error) and combined over the two renderers in quadrature. It is large "
+        "when a few pixels carry the sum; it counts neither "
+        "timing noise nor the extrapolation's model error (the "
+        "two ratio columns bracket that), and it cannot see contributions rarer than the renders drew: "
+        "for a case still untrusted at its top rung (!) it is a lower bound.")
+    return rule + "\n\n" + unc
 
 
 def report(res: dict) -> str:
@@ -381,7 +651,8 @@ def report(res: dict) -> str:
          "Samples/s: camera samples (each: camera ray, environment sample, BSDF sample, two shadow rays) "
          "per second at the top rung. *variance ratio*: (ours / Mitsuba relative RMSE)² at the top rung "
          "(equal spp): with N^−1/2 extrapolation, ratio = variance ratio / samples/s ratio, so the two "
-         "columns say how much of the gap is noise per sample and how much is speed."), ""]
+         "columns say how much of the gap is noise per sample and how much is speed."), "",
+         _method_extension(a), ""]
     L += ["## Summary", "",
           f"Over {s['cases']} cases: time-to-{100 * a['target']:g} % ratio ours/Mitsuba median "
           f"**{_f(s['median_ratio'])}**, max **{_f(s['max_ratio'])}**, min {_f(s['min_ratio'])}; "
@@ -390,24 +661,47 @@ def report(res: dict) -> str:
           f"samples/s ours/Mitsuba median **{_f(s['median_rate_ratio'])}**, variance per sample at the top "
           f"rung ours/Mitsuba median {_f(s['median_variance_ratio'])} (median samples/s: "
           + ", ".join(f"{k} {v / 1e6:.3g} M" for k, v in s["median_samples_per_s"].items()) + ").", "",
+          (f"Ladder extended in {len(s.get('extended', []))} case(s)"
+           + (": " + ", ".join(s["extended"]) if s.get("extended") else "")
+           + f"; still untrusted at the top rung: {len(s.get('unresolved', []))}"
+           + (" (" + ", ".join(s["unresolved"]) + ")" if s.get("unresolved") else "")
+           + (f". Largest ratio: {s['max_ratio_case']}, {_pm(s['max_ratio'], s['max_ratio_log_se'])}"
+              if "max_ratio_case" in s else "")
+           + (f"; over the trusted cases only: median {_f(s['median_ratio_trusted'])}, max "
+              f"{_f(s['max_ratio_trusted'])}" if s.get("unresolved") else "") + "."), "",
           "Targets of the issue (for the run after the speed work): "
           + "; ".join(f"{k}: {'met' if v else 'not met'}" for k, v in s["targets"].items()) + ".", ""]
     rows = []
     for c in cases:
         o, mi = c["renderers"][c["best"]], c["renderers"]["mitsuba"]
-        rows.append([c["material"].removesuffix("_rgb"), c["map"], c["best"], o["time_to_target_s"],
-                     mi["time_to_target_s"], c["ratio"], c["ratio_slope"], o["samples_per_s"] / 1e6, mi["samples_per_s"] / 1e6,
+        rows.append([c["material"].removesuffix("_rgb"), c["map"], c["best"], _top(c), o["time_to_target_s"],
+                     mi["time_to_target_s"], _pm(c["ratio"], c.get("ratio_log_se", float("nan"))),
+                     _pm(c["ratio_slope"], c.get("ratio_slope_log_se", float("nan"))),
+                     o["samples_per_s"] / 1e6, mi["samples_per_s"] / 1e6,
                      c["rate_ratio"], (o["rungs"][-1]["rel_rmse"] / mi["rungs"][-1]["rel_rmse"]) ** 2,
                      o["rungs"][-1]["rel_rmse"], mi["rungs"][-1]["rel_rmse"],
                      f"{o['how'][:6]} / {mi['how'][:6]}", f"{_f(o['slope'])} / {_f(mi['slope'])}"])
-    top = a["spp"][-1]
     L += ["## Per material and map", "",
-          md_table(rows, ["material", "map", "ours", "ours s to 1 %", "Mitsuba s to 1 %", "ratio",
+          md_table(rows, ["material", "map", "ours", "top spp", "ours s to 1 %", "Mitsuba s to 1 %", "ratio",
                           "ratio (slopes)",
                           "ours M samples/s", "Mitsuba M samples/s", "samples/s ratio",
-                          f"variance ratio @{top}",
-                          f"ours rel. RMSE @{top}", f"Mitsuba rel. RMSE @{top}", "how (ours / Mi.)",
+                          "variance ratio @top",
+                          "ours rel. RMSE @top", "Mitsuba rel. RMSE @top", "how (ours / Mi.)",
                           "slope (ours / Mi.)"])]
+    ext = [c for c in cases if c.get("extension", {}).get("rungs") or c.get("extension", {}).get("reasons")]
+    if ext:
+        rows = [[c["material"].removesuffix("_rgb"), c["map"], _top(c), c["extension"]["status"],
+                 ", ".join(str(x["spp"]) for x in c["extension"]["rungs"]) or "–",
+                 _compact(c["extension"]["rungs"][0]["reasons"] if c["extension"]["rungs"]
+                          else c["extension"]["reasons"]),
+                 _compact(c["extension"]["reasons"]) if c["extension"]["status"] != "trusted" else "–"]
+                for c in ext]
+        L += ["### Extended or untrusted cases", "",
+              ("What made the base ladder's top rung untrusted, the extension rungs rendered, and what "
+               "was still untrusted where the extension stopped (status: trusted, cap, budget or off; "
+               "every reason of every rung is in the JSON)."), "",
+              md_table(rows, ["material", "map", "top spp", "status", "extension rungs (spp)",
+                              "untrusted at the base ladder's top", "untrusted at the top"])]
     if len(a["ours"]) > 1:
         rows = [[c["material"].removesuffix("_rgb"), c["map"]]
                 + [c["renderers"][k]["time_to_target_s"] / c["renderers"]["mitsuba"]["time_to_target_s"]
@@ -495,6 +789,17 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1, help="threads of both renderers")
     ap.add_argument("--check", type=int, help="check this many of CHECK_MATERIALS (default 2; --quick 1)")
     ap.add_argument("--check-spp", type=int, help="spp of the check's reference (default 1024; --quick 256)")
+    d = ExtendRule()
+    ap.add_argument("--no-extend", action="store_true",
+                    help="never extend the ladder (untrusted cases are still reported)")
+    ap.add_argument("--extend-max-spp", type=int, default=d.max_spp,
+                    help=f"no extension rung above this spp (default {d.max_spp})")
+    ap.add_argument("--extend-budget", type=float, default=d.budget_s,
+                    help=f"render seconds per case the extension may reach (default {d.budget_s:g})")
+    ap.add_argument("--extend-rmse", type=float, default=d.max_rel_rmse,
+                    help=f"extend while a top rung's relative RMSE is above this (default {d.max_rel_rmse:g})")
+    ap.add_argument("--extend-se", type=float, default=d.max_mse_se,
+                    help=f"extend while a top rung's s.e. of log MSE is above this (default {d.max_mse_se:g})")
     ap.add_argument("--quick", action="store_true", help="2 materials, the studio map, 64 px, spp 4 16")
     ap.add_argument("--json", help="write the raw results here")
     ap.add_argument("--docs", action="store_true", help="write docs/bench_vs_mitsuba.md")
@@ -513,6 +818,14 @@ def main(argv=None):
     a.spp = sorted(a.spp or ([4, 16] if a.quick else [4, 16, 64]))
     a.check = (1 if a.quick else 2) if a.check is None else a.check
     a.check_spp = a.check_spp or (256 if a.quick else 1024)
+    for flag, v in (("--extend-max-spp", a.extend_max_spp), ("--extend-budget", a.extend_budget),
+                    ("--extend-rmse", a.extend_rmse), ("--extend-se", a.extend_se)):
+        if not (np.isfinite(v) and v > 0):
+            ap.error(f"{flag} {v}: expected a positive number")
+    if min(a.spp) < 1:
+        ap.error(f"--spp {min(a.spp)}: expected positive sample counts")
+    a.extend_rule = ExtendRule(enabled=not a.no_extend, max_rel_rmse=a.extend_rmse, max_mse_se=a.extend_se,
+                               max_spp=a.extend_max_spp, budget_s=a.extend_budget)
     sel = [m for m in CHECK_MATERIALS if m in a.materials] or a.materials[:1]
     a.check_materials = sel[:a.check]
     for c in a.ours:
@@ -549,7 +862,9 @@ def main(argv=None):
             cases.append(c)
             o, mi = c["renderers"][c["best"]], c["renderers"]["mitsuba"]
             print(f"  -> to {100 * a.target:g} %: ours ({c['best']}) {o['time_to_target_s']:.3g} s "
-                  f"({o['how']}), Mitsuba {mi['time_to_target_s']:.3g} s ({mi['how']}); ratio {c['ratio']:.3g}; "
+                  f"({o['how']}), Mitsuba {mi['time_to_target_s']:.3g} s ({mi['how']}); ratio {c['ratio']:.3g} "
+                  f"± {100 * c['ratio_log_se']:.2g} % (top {c['extension']['top_spp']} spp, "
+                  f"{c['extension']['status']}); "
                   f"samples/s {o['samples_per_s'] / 1e6:.3g} M vs {mi['samples_per_s'] / 1e6:.3g} M")
     info["loadavg_end"] = _loadavg()
     res = {"command": "python -m benchmarks.bench_vs_mitsuba "
@@ -558,7 +873,7 @@ def main(argv=None):
            "machine": info, "mask_pixels": int(mask.sum()),
            "args": {"materials": a.materials, "maps": a.maps, "resolution": a.resolution, "spp": a.spp,
                     "target": a.target, "ours": a.ours, "threads": a.threads, "check_spp": a.check_spp,
-                    "check_materials": a.check_materials},
+                    "check_materials": a.check_materials, "extend": dataclasses.asdict(a.extend_rule)},
            "cases": cases, "summary": summarize(cases)}
     s = res["summary"]
     print(f"{s['cases']} cases: ratio ours/Mitsuba median {s['median_ratio']:.3g}, max {s['max_ratio']:.3g}; "

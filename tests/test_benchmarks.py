@@ -77,15 +77,22 @@ def test_bench_vs_mitsuba_smoke(tmp_path):
     out = tmp_path / "b.json"
     assert B.main(["--materials", "paper_white_rgb", "--maps", "studio", "--resolution", "48",
                    "--spp", "4", "16", "--variant", MR.VARIANT, "--check", "1", "--check-spp", "512",
-                   "--json", str(out)]) == 0
+                   "--extend-rmse", "0.05", "--extend-max-spp", "256", "--json", str(out)]) == 0
     res = json.loads(out.read_text())
     (case,) = res["cases"]
     assert case["best"] == "rgl:mis-rgl" and set(case["renderers"]) == {"rgl:mis-rgl", "mitsuba"}
+    # --extend-rmse 0.05: the 16-spp rung (relative RMSE ~0.1) is extended once, both renderers;
+    # at 64 spp (~0.035) the estimate is trusted
+    ext = case["extension"]
+    assert [x["spp"] for x in ext["rungs"]] == [64] and ext["top_spp"] == 64
+    assert ext["status"] == "trusted" and all("rel. RMSE" in w for w in ext["rungs"][0]["reasons"])
     for r in case["renderers"].values():
-        assert [x["spp"] for x in r["rungs"]] == [4, 16]
+        assert [x["spp"] for x in r["rungs"]] == [4, 16, 64]
         assert r["time_to_target_s"] > 0 and r["samples_per_s"] > 0 and r["how"] == "extrapolated"
-        assert r["rungs"][1]["rel_rmse"] < r["rungs"][0]["rel_rmse"]
+        assert r["rungs"][2]["rel_rmse"] < r["rungs"][1]["rel_rmse"] < r["rungs"][0]["rel_rmse"]
+        assert 0 < r["rungs"][2]["mse_se"] < 0.1
     assert np.isfinite(case["ratio"]) and case["ratio"] > 0
+    assert 0 < case["ratio_log_se"] < 0.1
     chk = case["check"]["renderers"]
     for label in ("rgl:mis-rgl", "mitsuba"):
         assert 0.8 < chk[label]["ratio"] < 1.25, (label, chk[label])   # estimate == error vs reference
