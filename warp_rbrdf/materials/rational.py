@@ -8,13 +8,23 @@ pieces) and a leaf record per single-box piece (flags, per-variable box and map,
 mode and step-7 range, and the six numerators and denominators of its channels packed as one
 group of Chebyshev polynomials, :mod:`warp_rbrdf.chebyshev`). One Warp function,
 :func:`rational_eval`, evaluates every fit: it follows the file's
-recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles -> the piece
+recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles -> (moved onto
+the measured domain, below) -> the piece
 (``x <= edge`` picks the lower piece) -> clamp onto the piece's box -> input transform
 (identity / sqrt) -> map onto [-1, 1] -> Chebyshev sums -> P/Q per channel -> value transform
 (linear / log) -> ``max(y, min)``, ``min(y, max)`` -> the step-7 range; 0 below the horizon.
 The polynomial part runs in float64 (Chebyshev sums can cancel); the angles come from the
 float32 shading frame. The kernels' source does not depend on the coefficients: a new fit
 compiles nothing (the kernel cache serves the same code for every fit).
+
+**Where the fit has no data.** A 2-D fit made from a median projection with a grazing cut-off c
+(the file's ``fit.grazing_cutoff_deg``, 79 deg) has data only in the clusters with
+``cos theta_h cos theta_d >= cos c`` (:func:`onto_measured_domain`); beyond, the cut-off left the
+clusters empty and the fit extrapolates, bounded only by its whole piece's range (on the
+fidelity study's fits up to 4400 /sr where the measurement is below 1: rim rings). The renderer
+evaluates such a fit at the edge of its measured domain at the same theta_h (a domain record at
+the root of the packed fit; :func:`measured_domain`), as the fits already do beyond their last
+theta_d. Fits that record no cut-off, and version-3 fits, are evaluated by the recipe alone.
 
 **What the fit does not vouch for.** A piece whose record flags a channel as not within its
 intervals (:func:`fit.rational.brdf_model.flagged_regions`: the core when no core was met, a
@@ -27,7 +37,7 @@ grazing cut-off, empty clusters filled from the nearest measured cluster), clamp
 measured range of that piece; the table goes into ``Materials.tables`` and ``Materials.param``
 holds its start. With ``unvouched = "refuse"`` loading fails with one line naming the material,
 the file and what is flagged. A fit without a flagged piece packs exactly as before the table
-existed (no channel reads a table).
+existed (no channel reads a table; only the domain record above).
 """
 from __future__ import annotations
 
