@@ -275,12 +275,6 @@ def evaluate_at_angles(model, table=None, cutoff_deg=None):
     return evaluate
 
 
-def evaluate_with_table(model, table):
-    """:func:`evaluate_at_angles` with a fallback table and the model's own measured domain
-    (:func:`measured_domain`)."""
-    return evaluate_at_angles(model, table, measured_domain(model))
-
-
 def values_with_table(model, table, x) -> np.ndarray:
     """rho (1/sr) ``(..., 3)`` at Rusinkiewicz angles ``x`` ``(..., 2)`` (theta_h, theta_d,
     radians) of a model with a fallback table ``(90 * 90, 3)`` or ``(90, 90, 3)``: the model,
