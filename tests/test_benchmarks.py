@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from conftest import data_file, require_mitsuba
 
-BENCHMARKS = ("bench_convert", "bench_env_sampling", "bench_fit", "bench_fit_accuracy", "bench_projection", "bench_render", "bench_rgl", "bench_samplers",
+BENCHMARKS = ("bench_convert", "bench_env_sampling", "bench_fit", "bench_fit_accuracy", "bench_projection", "bench_rational_domain", "bench_render", "bench_rgl", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba")
 
 

@@ -309,7 +309,7 @@ def test_a_new_fit_compiles_nothing():
         assert _hashes(r) == _hashes(first)
         r.compile()
         got = r.eval_material("m", wi, wo)
-        np.testing.assert_allclose(got, model.evaluate(wi, wo), rtol=2e-4, atol=1e-6)
+        np.testing.assert_allclose(got, r.material_data.loaded[0].evaluate(wi, wo), rtol=2e-4, atol=1e-6)
     assert _cache_entries() == before
 
 

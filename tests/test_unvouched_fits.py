@@ -193,10 +193,12 @@ def test_warp_uses_the_projected_table_where_flagged_and_the_fit_elsewhere(fitte
 
 def test_values_never_leave_the_regions_measured_range(fitted, renderer):
     """Grazing, data-free corners, theta_d beyond the box: blue in the band stays within the
-    band's measured blue range, where the raw fit reaches far outside it."""
+    band's measured blue range, where the raw fit reaches far outside it. (The band: the pairs
+    whose angles, moved onto the measured domain, are in it; tests/test_rational_domain.py.)"""
     wi, wo = _pairs(40000, seed=7)
-    _, _, td, _ = directions_to_half_diff(wi, wo)
-    band = td > np.radians(BAND_DEG) + 1e-5
+    th, _, td, _ = directions_to_half_diff(wi, wo)
+    x = rational.onto_measured_domain(np.stack([th, td], -1), 79.0)
+    band = x[:, 1] > np.radians(BAND_DEG) + 1e-5
     model = load_coefficients(fitted[0] / "spiky.json")
     lo, hi = model.pieces[1].function_info[2]["measured_range"]
     got = renderer.eval_material("flagged", wi, wo)[band, 2]
@@ -206,16 +208,18 @@ def test_values_never_leave_the_regions_measured_range(fitted, renderer):
 
 
 def test_unflagged_fit_is_unchanged(renderer):
-    """A fit without a flagged piece loads as before: its own NumPy evaluation, no table, no log
-    line, and the packed data the renderer had before this feature (no table channel, no clamp)."""
+    """A fit without a flagged piece loads as before: its own evaluation (on its measured domain,
+    tests/test_rational_domain.py), no table, no log line, and the packed data the renderer had
+    before this feature (no table channel, no clamp)."""
     from warp_rbrdf.paths import PACKAGE_DATA
 
     model = load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json")
     assert flagged_regions(model) == []
     lm = rational.load(MaterialSpec(name="s", type="rational", data=model))
     assert lm.fallback_table is None and lm.notes == () and lm.data is model
-    packed = rational.pack_model(model)
-    assert all(np.array_equal(a, b) for a, b in zip(packed, rational.pack_model(model, table=False)))
+    cut = rational.measured_domain(model)
+    packed = rational.pack_model(model, cutoff_deg=cut)
+    assert all(np.array_equal(a, b) for a, b in zip(packed, rational.pack_model(model, False, cut)))
     assert all(np.array_equal(a, b) for a, b in zip(packed, lm.coefficients))
     leaves = [q for p in model.pieces for q in getattr(p, "pieces", [p])]
     assert all(rational.channel_modes(leaf, table=True) == [(False, None)] * 3 for leaf in leaves)
@@ -352,6 +356,6 @@ def test_real_rgl_fit_with_a_tiny_degree_limit(tmp_path, monkeypatch):
     got = r.eval_material("paper", wi, wo)
     ref = md.loaded[0].evaluate(wi, wo)
     assert np.isclose(got, ref, rtol=1e-5, atol=1e-7).all(axis=1).mean() > 0.999
-    _, _, td, _ = directions_to_half_diff(wi, wo)
-    band = td > np.radians(60.0) + 1e-5
+    th, _, td, _ = directions_to_half_diff(wi, wo)
+    band = (td > np.radians(60.0) + 1e-5) & (np.cos(th) * np.cos(td) > np.cos(np.radians(79.0)) * (1 + 1e-4))
     np.testing.assert_allclose(got[band], fit.model.evaluate(wi[band], wo[band]), rtol=2e-4, atol=1e-6)

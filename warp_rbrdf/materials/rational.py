@@ -8,13 +8,23 @@ pieces) and a leaf record per single-box piece (flags, per-variable box and map,
 mode and step-7 range, and the six numerators and denominators of its channels packed as one
 group of Chebyshev polynomials, :mod:`warp_rbrdf.chebyshev`). One Warp function,
 :func:`rational_eval`, evaluates every fit: it follows the file's
-recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles -> the piece
+recipe exactly (see :mod:`fit.rational.coefficient_file`): Rusinkiewicz angles -> (moved onto
+the measured domain, below) -> the piece
 (``x <= edge`` picks the lower piece) -> clamp onto the piece's box -> input transform
 (identity / sqrt) -> map onto [-1, 1] -> Chebyshev sums -> P/Q per channel -> value transform
 (linear / log) -> ``max(y, min)``, ``min(y, max)`` -> the step-7 range; 0 below the horizon.
 The polynomial part runs in float64 (Chebyshev sums can cancel); the angles come from the
 float32 shading frame. The kernels' source does not depend on the coefficients: a new fit
 compiles nothing (the kernel cache serves the same code for every fit).
+
+**Where the fit has no data.** A 2-D fit made from a median projection with a grazing cut-off c
+(the file's ``fit.grazing_cutoff_deg``, 79 deg) has data only in the clusters with
+``cos theta_h cos theta_d >= cos c`` (:func:`onto_measured_domain`); beyond, the cut-off left the
+clusters empty and the fit extrapolates, bounded only by its whole piece's range (on the
+fidelity study's fits up to 4400 /sr where the measurement is below 1: rim rings). The renderer
+evaluates such a fit at the edge of its measured domain at the same theta_h (a domain record at
+the root of the packed fit; :func:`measured_domain`), as the fits already do beyond their last
+theta_d. Fits that record no cut-off, and version-3 fits, are evaluated by the recipe alone.
 
 **What the fit does not vouch for.** A piece whose record flags a channel as not within its
 intervals (:func:`fit.rational.brdf_model.flagged_regions`: the core when no core was met, a
@@ -27,7 +37,7 @@ grazing cut-off, empty clusters filled from the nearest measured cluster), clamp
 measured range of that piece; the table goes into ``Materials.tables`` and ``Materials.param``
 holds its start. With ``unvouched = "refuse"`` loading fails with one line naming the material,
 the file and what is flagged. A fit without a flagged piece packs exactly as before the table
-existed (no channel reads a table).
+existed (no channel reads a table; only the domain record above).
 """
 from __future__ import annotations
 
@@ -81,10 +91,12 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
             raise SceneError(scene_file, f"{key}.file", f"cannot read coefficient file ({e})") from None
     check_model(model, scene_file, key)
     regions = flagged_regions(model)
+    cut = measured_domain(model)
     if not regions:
-        evaluate = (partial(evaluate_directions, model) if is_3d(model) else model.evaluate)
+        evaluate = (partial(evaluate_directions, model) if is_3d(model) else
+                    model.evaluate if cut is None else evaluate_at_angles(model, None, cut))
         return LoadedMaterial(spec, model, scaled(evaluate, spec.scale), scale=spec.scale,
-                              coefficients=_packed(model, False, scene_file, key))
+                              coefficients=_packed(model, False, scene_file, key, cut))
     what = describe_regions(model, regions)
     fit_name = spec.file.name if spec.file is not None else f"(in memory, {model.name!r})"
     head = f"material {spec.name!r}: rational fit {fit_name} is not within its bound for {what}"
@@ -120,16 +132,60 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     table = fallback_table(p)
     note = (f"rational fit not within its bound for {what}: using the projected table there "
             f"(median projection of {src.name}, clamped to each region's measured range)")
-    return LoadedMaterial(spec, model, scaled(evaluate_with_table(model, table), spec.scale),
+    return LoadedMaterial(spec, model, scaled(evaluate_at_angles(model, table, cut), spec.scale),
                           scale=spec.scale, fallback_table=table, notes=(note,),
-                          coefficients=_packed(model, True, scene_file, key))
+                          coefficients=_packed(model, True, scene_file, key, cut))
 
 
-def _packed(model, table, scene_file, key) -> tuple:
+def _packed(model, table, scene_file, key, cutoff_deg=None) -> tuple:
     try:
-        return pack_model(model, table)
+        return pack_model(model, table, cutoff_deg)
     except ValueError as e:
         raise SceneError(scene_file, f"{key}.file", f"cannot render this rational fit ({e})") from None
+
+
+# --------------------------------------------------------------------------------------------
+# The measured domain: where the fit's data are
+# --------------------------------------------------------------------------------------------
+def measured_domain(model):
+    """The grazing cut-off (degrees) of the projection a 2-D (theta_h, theta_d) fit was made
+    from (``fit_info["grazing_cutoff_deg"]``: samples with max(theta_i, theta_o) above it were
+    dropped), or None: a fit that records none (a model built by hand, a file written before the
+    record), or a fit in other variables (version-3 fits of (theta_h, theta_d, |phi_d|) carry
+    their own domain, :mod:`fit.rational.variables3d`). :func:`onto_measured_domain` says what
+    the cut-off means for the fit's inputs."""
+    if [v.name for v in model.variables] != ["theta_h", "theta_d"]:
+        return None
+    cut = (getattr(model, "fit_info", None) or {}).get("grazing_cutoff_deg")
+    if cut is None:
+        return None
+    cut = float(cut)
+    if not 0.0 < cut < 90.0:
+        return None          # no cut-off (90 keeps every sample): the whole quadrant is measured
+    return cut
+
+
+def onto_measured_domain(x, cutoff_deg: float) -> np.ndarray:
+    """Rusinkiewicz angles ``x`` ``(..., 2)`` (theta_h, theta_d, radians) moved onto the measured
+    domain of a projection with grazing cut-off ``cutoff_deg``; float64, same shape.
+
+    A (theta_h, theta_d) cluster holds data iff one of its phi_d samples has both directions
+    within the cut-off c. Since cos theta_i + cos theta_o = 2 cos theta_h cos theta_d and the two
+    cosines are equal at phi_d = +-90 deg, the largest min(cos theta_i, cos theta_o) over phi_d is
+    cos theta_h cos theta_d: the measured domain is ``cos theta_h cos theta_d >= cos c``, and
+    every pair with both directions within c lies in it. Outside it (both directions grazing on
+    average; the cut-off leaves these clusters empty) the fit has no data and extrapolates
+    freely, up to the whole piece's vouched range (a specular peak's value off the peak). There
+    the value is the fit's at the domain's edge at the same theta_h: theta_h is clamped to c,
+    then theta_d to ``arccos(cos c / cos theta_h)`` -- the rule the fits already apply beyond
+    their last theta_d (the value at the cut-off). Inside the domain nothing changes."""
+    x = np.array(x, dtype=np.float64)
+    cut = np.radians(float(cutoff_deg))
+    th = np.minimum(x[..., 0], cut)
+    tdmax = np.arccos(np.minimum(np.cos(cut) / np.cos(th), 1.0))
+    x[..., 0] = th
+    x[..., 1] = np.minimum(x[..., 1], tdmax)
+    return x
 
 
 def source_dirs(spec, scene_file) -> list:
@@ -199,15 +255,20 @@ def fallback_table(p) -> np.ndarray:
     return np.nan_to_num(v, nan=0.0).astype(np.float32)
 
 
-def evaluate_with_table(model, table):
-    """NumPy reference of :func:`rational_eval` with a fallback table: :func:`values_with_table`
-    at the directions' Rusinkiewicz angles; 0 below the horizon."""
-    tab = np.asarray(table, np.float32).astype(np.float64)
+def evaluate_at_angles(model, table=None, cutoff_deg=None):
+    """NumPy reference of :func:`rational_eval` for a 2-D fit: ``evaluate(wi, wo) -> (..., 3)``,
+    rho (1/sr) at the directions' Rusinkiewicz angles moved onto the measured domain
+    (:func:`onto_measured_domain`; ``cutoff_deg`` None: not moved), from the model, or with a
+    fallback table ``table`` from :func:`values_with_table`; 0 below the horizon."""
+    tab = None if table is None else np.asarray(table, np.float32).astype(np.float64)
 
     def evaluate(wi, wo):
         wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
         th, _, td, _ = directions_to_half_diff(wi, wo)
-        out = values_with_table(model, tab, np.stack(np.broadcast_arrays(th, td), axis=-1))
+        x = np.stack(np.broadcast_arrays(th, td), axis=-1)
+        if cutoff_deg is not None:
+            x = onto_measured_domain(x, cutoff_deg)
+        out = np.asarray(model(x), np.float64) if tab is None else values_with_table(model, tab, x)
         above = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
         return np.where(above[..., None], out, 0.0)
 
@@ -251,7 +312,10 @@ def check_model(model, file="<scene>", key="materials"):
 # --------------------------------------------------------------------------------------------
 # The fit as data (Materials.coef_i / coef_f / coef_q) and the one Warp function that evaluates it
 # --------------------------------------------------------------------------------------------
-NODE_LEAF, NODE_SPLIT = 0, 1
+NODE_LEAF, NODE_SPLIT, NODE_DOMAIN = 0, 1, 2
+# domain record (ints), only at the root of a fit with a measured domain (:func:`measured_domain`):
+# kind, float offset of (cos c, c) (c: the grazing cut-off, radians), the fit's int offset
+DOMAIN_FLOATS, DOMAIN_CHILD = 1, 2
 # split record (ints): kind, variable (SUPPORTED_VARIABLES), pieces K, float offset of its K - 1
 # inner edges, then the K children's int offsets
 SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4
@@ -277,14 +341,22 @@ def channel_modes(model, table: bool = False) -> list:
     return [(bool(table and flagged(i)), output_clamp(i)) for i in model.function_info]
 
 
-def pack_model(model, table: bool = False) -> tuple:
+def pack_model(model, table: bool = False, cutoff_deg: float | None = None) -> tuple:
     """``(ints int32, floats float64, rows float64 (n, 6))``: a
     :class:`~fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`
     (nested pieces included) as the records :func:`rational_eval` walks, the root at int 0;
     offsets are relative to the material's starts. ``table``: flagged channels read the
-    fallback table (module docstring)."""
+    fallback table (module docstring). ``cutoff_deg``: the angles are first moved onto the
+    measured domain of that grazing cut-off (:func:`onto_measured_domain`; a domain record at
+    the root); None (default): the file's recipe alone."""
     fd = FlatData(6)
-    _pack_node(fd, model, table)
+    if cutoff_deg is None:
+        _pack_node(fd, model, table)
+    else:
+        cut = np.radians(float(cutoff_deg))
+        n = fd.add_ints([NODE_DOMAIN, 0, 0])
+        fd.ints[n + DOMAIN_FLOATS] = fd.add_floats([np.cos(cut), cut])
+        fd.ints[n + DOMAIN_CHILD] = _pack_node(fd, model, table)
     return fd.arrays()
 
 
@@ -375,6 +447,15 @@ def _channel(cf: wp.array(dtype=wp.float64), mode: int, h: int, flags: int, c: i
 
 
 @wp.func
+def _onto_domain(a: wp.vec3, cos_cut: wp.float64, cut: wp.float64) -> wp.vec3:
+    """Rusinkiewicz angles ``a`` (theta_h, theta_d, phi_d) moved onto the measured domain
+    ``cos theta_h cos theta_d >= cos_cut`` (:func:`onto_measured_domain`, in float64)."""
+    th = wp.min(wp.float64(a[0]), cut)
+    lim = wp.acos(wp.min(cos_cut / wp.cos(th), wp.float64(1.0)))
+    return wp.vec3(float(th), float(wp.min(wp.float64(a[1]), lim)), a[2])
+
+
+@wp.func
 def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     """rho (1/sr) of rational material ``m``: its packed fit (:func:`pack_model`, ints from
     ``coef_i[3 m]``, floats from ``coef_i[3 m + 1]``, coefficient rows from ``coef_i[3 m + 2]``)
@@ -387,12 +468,16 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     fb = ci[3 * m + 1]
     a = F.half_diff(wi, wo)
     n = ib
+    if ci[n] == NODE_DOMAIN:       # no extrapolation beyond the measured domain
+        d = fb + ci[n + DOMAIN_FLOATS]
+        a = _onto_domain(a, cf[d], cf[d + 1])
+        n = ib + ci[n + DOMAIN_CHILD]
     while ci[n] == NODE_SPLIT:     # piece k: the first with x <= edge k + 1
         x = wp.float64(a[ci[n + SPLIT_VAR]])
         if ci[n + SPLIT_VAR] == 2:
             x = wp.abs(x)
         e = fb + ci[n + SPLIT_EDGES]
-        k = int(0)
+        k = int(0)      # noqa: UP018, RUF046 - Warp: a dynamic int (a literal is constant in the loop)
         for j in range(ci[n + SPLIT_N] - 1):
             if x > cf[e + j]:
                 k = j + 1

@@ -34,7 +34,7 @@ from fit.sampling.table import CDFTable, tabulate
 from ..paths import PACKAGE_DATA
 
 #: Bump when a material kind's evaluation changes what the same file and spec mean.
-VERSION = 1
+VERSION = 2    # 2: rational fits evaluated on their measured domain (materials/rational.py)
 SHIPPED = PACKAGE_DATA / "tables"
 _SPEC_FIELDS = ("albedo", "statistic", "scale", "incident", "unvouched")
 _ARRAYS = ("theta_v", "cdf_theta", "cdf_phi", "row_fallback", "albedo")
