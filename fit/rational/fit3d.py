@@ -264,18 +264,23 @@ def _secant_weights(base):
 
 
 def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6, max_tol=64.0,
-                 objective=None, relax=1.0):
+                 objective=None, relax=1.0, start=None):
     """One channel of one piece: ``(RationalFunction, record)``; ``U`` transformed inputs, ``y``
     the values, ``scale`` the per-point error unit (``max(rho, noise) * g``, module docstring).
 
-    Tolerances ``tol, tol * step, ...`` are tried until one is met (the LP is exact only for
-    feasibility: a least-violation LP solution can hide large errors where Q is small), then one
-    geometric bisection step below it if time is left. The stated tolerance is the error
-    measured at every point afterwards (at most the tolerance met)."""
+    Tolerances ``start, start * step, ...`` (``start`` >= ``tol``, default ``tol``; e.g. a step
+    below another channel's result) are tried until one is met (the LP is exact only for
+    feasibility: a least-violation LP solution can hide large errors where Q is small); when the
+    first is met and above ``tol``, one step down is tried. One-stage fits (no ``objective``)
+    then take one geometric bisection step if time is left. Two-stage fits solve the second
+    stage (:func:`fit.rational.refine.refine`) within ``relax`` times the tolerance met. The
+    stated tolerance is the error measured at every point afterwards (at most the tolerance met,
+    times ``relax`` for a two-stage fit)."""
     t0 = time.perf_counter()
     fitter = _TolFitter(domain=domain, max_iter=40, q_grid=7)
     tried, res, t_ok, t_bad = [], None, None, None
-    t = float(tol)
+    two_stage = objective is not None and relax > 1.0
+    t = max(float(tol), float(start or tol))
     while t <= max_tol:
         r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
         tried.append([t, r is not None])
@@ -288,7 +293,15 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6
             step = step * step      # out of time: larger steps to any feasible level
     if res is None:
         raise RuntimeError(f"no fit within {max_tol:g} x the error unit at degrees {degrees}")
-    if t_bad is not None and time.perf_counter() - t0 < 0.6 * time_limit:
+    if t_bad is None and t_ok > tol * (1 + 1e-9):      # started above tol and met at once: one step down
+        t = max(t_ok / step, float(tol))
+        r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
+        tried.append([t, r is not None])
+        if r is not None:
+            res, t_ok = r, t
+        else:
+            t_bad = t
+    if not two_stage and t_bad is not None and time.perf_counter() - t0 < 0.6 * time_limit:
         t = float(np.sqrt(t_ok * t_bad))
         r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
         tried.append([t, r is not None])
@@ -298,13 +311,13 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6
     cert = res.certificate
     minimax = float(np.max(np.abs(np.maximum(np.exp(f(U)) - offset, 0.0) - y) / scale))
     stage = {"kind": "minimax"}
-    if objective is not None and relax > 1.0:
+    if two_stage:
         # second stage: the smallest weighted squared error of the value within relax * t_ok
         Uo, yo, wo = objective
         to = np.log(yo + offset)
         f2, info = refine(f, U, *_intervals(y, scale, offset, relax * t_ok), Uo, to, wo * (yo + offset) ** 2,
                           reweight=_secant_weights(wo))
-        stage = {"kind": "two-stage", "relax": float(relax), "minimax_tolerance": minimax,
+        stage = {"kind": "two-stage", "relax": float(relax), "minimax_tolerance": minimax, "minimax_met": t_ok,
                  "objective_points": len(yo), "qp_solves": int(info.get("qp", 0))}
         if f2 is not None:
             f, cert = f2, info["certificate"]
@@ -369,8 +382,9 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
             scale = np.maximum(np.maximum(rho[sel, c], noise[c]), channel_floor * rho[sel].max(axis=1)) * g[sel]
             if objective is not None:
                 obj = (Uo, np.maximum(ro[so, c], 0.0), wo[so])
+            start = min(r["stage"].get("minimax_met", r["tolerance_met"]) for r in infos) / 1.6 if infos else None
             f, rec = _fit_channel(U, rho[sel, c], scale, offset, domain, tol, deg, share, objective=obj,
-                                  relax=relax)
+                                  relax=relax, start=start)
             rec["noise"] = float(noise[c])
             funcs.append(f)
             infos.append(rec)
