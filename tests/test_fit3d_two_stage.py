@@ -130,3 +130,10 @@ def test_refine_reports_infeasible_intervals():
     U = np.array([[0.0], [1.0]])
     f, info = refine(f0, U, np.array([0.0, 1.0]), np.array([0.1, 1.1]), U, np.array([0.05, 1.05]), np.ones(2))
     assert f is None and "reason" in info
+
+
+def test_refine_without_objective_weight_keeps_the_first_stage():
+    _, _, f0, _ = _minimax_1d()
+    U = np.linspace(0, 1, 5)[:, None]
+    f, info = refine(f0, U, -np.ones(5), np.ones(5), U, np.zeros(5), np.zeros(5))
+    assert f is None and "no objective point" in info["reason"]

@@ -44,7 +44,7 @@ from .basis import chebyshev_basis
 from .bernstein import subdivision_matrix
 from .function import RationalFunction
 
-try:   # the same HiGHS bindings as fit.rational.lp
+try:   # the same HiGHS bindings as fit.rational.lp (the fallback QP solver only)
     import highspy as _hs
 except ImportError:  # pragma: no cover
     _hs = None
@@ -100,11 +100,23 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
     ``U`` ``(N, n_vars)`` data points (the variables ``f0`` reads), ``lo``/``hi`` ``(N,)`` their
     intervals (values of ``R``); ``V`` ``(M, n_vars)`` objective points, ``t`` ``(M,)`` targets,
     ``w`` ``(M,)`` weights; ``reweight(R(V), t) -> w`` (optional) between iterations.
-    Returns ``(function, info)``: ``function`` None when the stage fails (``info["reason"]``)."""
-    if not available:
-        return None, {"reason": "HiGHS bindings not available"}
+    ``iterations``: Sanathanan-Koerner iterations; ``max_rounds``: constraint-generation rounds
+    per iteration; ``qp_time``: seconds of the HiGHS fallback per QP; ``margin``: see the module
+    docstring. Returns ``(function, info)``: ``function`` None when the stage fails
+    (``info["reason"]``; the caller keeps ``f0``)."""
     U, V = np.asarray(U, np.float64), np.asarray(V, np.float64)
     lo, hi, t, w = (np.asarray(a, np.float64).reshape(-1) for a in (lo, hi, t, w))
+    if len(t) == 0 or not np.sum(np.maximum(w, 0.0)) > 0:
+        return None, {"reason": "no objective point with a positive weight"}
+    try:
+        return _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds, qp_time,
+                       certify_depth, margin)
+    except np.linalg.LinAlgError as e:
+        return None, {"reason": f"linear algebra: {e}"}
+
+
+def _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds, qp_time,
+            certify_depth, margin):
     Ep, Eq, dom = f0.num_exponents, f0.den_exponents, f0.domain
     npv, nqv = len(Ep), len(Eq)
     k0 = int(np.flatnonzero(np.all(Eq == 0, axis=1))[0])
@@ -144,7 +156,7 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
             G = solve_triangular(Rm, C[:, free].T, trans="T").T         # C_f R^-1
             hh = lo_r - C[:, fixed] + G @ c
             y = _least_distance_nnls(G, hh)
-            if isinstance(y, str) or np.any(G @ y < hh - 1e-9 * (1.0 + np.abs(hh))):
+            if available and (isinstance(y, str) or np.any(G @ y < hh - 1e-9 * (1.0 + np.abs(hh)))):
                 y = _least_distance(G, hh, qp_time)      # HiGHS when NNLS fails or is inexact
             info["qp"] += 1
             if isinstance(y, str):
