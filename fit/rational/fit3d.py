@@ -372,7 +372,9 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
     ``(N, 3)`` (1/sr): pieces along theta_h at ``theta_h_edges`` (inner edges), each channel a
     rational function of total degrees ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol``
     (module docstring: the stated bound is what is met). ``time_limit`` (s) is shared by the
-    whole fit."""
+    whole fit. ``objective`` = ``(Xo (M, 3), rho_o (M, 3), w (M,))`` (:func:`objective_points`
+    and the values there) turns on the second stage within ``relax`` times the tolerance met
+    (module docstring); without it (or ``relax <= 1``) the fit is the minimax one."""
     t0 = time.perf_counter()
     X = np.asarray(X, np.float64)
     rho = np.maximum(np.asarray(rho, np.float64), 0.0)
@@ -470,7 +472,9 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     the sampled domain). Without it, a fit of satin_purple within 21 % at its 19,000 points reached
     94 /sr against 0.4 in a spike between them (relative RMSE 1.35 on the benchmark's pairs).
     ``fit_info`` records the last verification (``verify_points``, ``verify_max_ratio``: the
-    largest error over the stated bound there, ``verified``: <= 1)."""
+    largest error over the stated bound there, ``verified``: <= 1). ``n_objective`` objective
+    points per piece (:func:`objective_points`, evaluated on the RGL reference) drive the second
+    stage (``relax`` in ``options``, default 2; ``n_objective=0`` or ``relax=1``: one stage)."""
     t0 = time.perf_counter()
     X, rho, tm = sample_rgl(brdf, grid, n_random, theta_fit_deg)
     src = {"file": str(getattr(brdf, "source", "") or ""), "sha256": str(getattr(brdf, "source_sha256", "") or "")}
