@@ -236,6 +236,10 @@ def markdown(rows: list, meta: dict) -> str:
     L.append(f"Pairs: {meta['pairs']:,} cosine-distributed (ωi, ωo), seed {meta['seed']}; truth: the RGL "
              f"reference evaluation (negatives clamped); 3-D options `{meta['fit3d_options']}`; "
              f"run {meta['date']} in {meta['wall_s']:.0f} s.")
+    if meta.get("merged"):
+        mg = meta["merged"]
+        L.append(f"Merged (`--merge`): the rows of {', '.join(mg['materials'])} are from the run of {mg['date']} "
+                 f"({mg['wall_s']:.0f} s, `{mg['file']}`), the others from this run.")
     L.append("")
     L.append("Relative RMSE of ρ·cosθi·cosθo (mean of R, G, B); in brackets the coefficients "
              "(three channels, all pieces). Target: below the neural column with < 675 coefficients.")
@@ -382,6 +386,9 @@ def main(argv=None) -> int:
     ap.add_argument("--render-maps", nargs="+", default=["studio", "rooitou"])
     ap.add_argument("--render-res", type=int, default=64)
     ap.add_argument("--render-spp", type=int, default=64)
+    ap.add_argument("--merge", default=None, metavar="RESULTS_JSON",
+                    help="keep the rows of an earlier run's results.json (same --pairs and --seed) for the materials "
+                         "not run now; the table says which rows are merged and from which run")
     ap.add_argument("--docs", action="store_true", help="write docs/fit_accuracy.md's table")
     args = ap.parse_args(argv)
     try:
@@ -389,6 +396,24 @@ def main(argv=None) -> int:
     except BenchError as e:
         print(f"bench_fit_accuracy: {e}", file=sys.stderr)
         return 2
+
+
+def _merge_rows(args, mats):
+    """``(meta, rows)`` of ``--merge``'s results.json for the materials not in ``mats``, or None."""
+    if args.merge is None:
+        return None
+    try:
+        d = json.loads(Path(args.merge).read_text())
+        meta, rows = d["meta"], [r for r in d["rows"] if r["material"] not in mats]
+        same = meta["pairs"] == args.pairs and meta["seed"] == args.seed
+        if not all(isinstance(r["fit3d"]["rel_rmse"], float) for r in rows):
+            raise TypeError("fit3d.rel_rmse is not a number")
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"--merge {args.merge}: not a results.json of this benchmark ({e})") from None
+    if not same:
+        raise BenchError(f"--merge {args.merge}: made with --pairs {meta['pairs']} --seed {meta['seed']}, "
+                         f"not {args.pairs} / {args.seed}")
+    return meta, rows
 
 
 def _run(args) -> int:
@@ -450,6 +475,7 @@ def _run(args) -> int:
         raise BenchError(f"--degrees {args.degrees!r} / --edges {args.edges!r} / --grid {args.grid!r} / --random "
                          f"{args.random!r}: expected 'M,N' (0..12), radians in (0, 1.5) separated by commas, "
                          "'NH,ND,NP' (3..200 each), 0..1000000") from None
+    merged = _merge_rows(args, mats)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -464,6 +490,11 @@ def _run(args) -> int:
         rows.append(r)
     meta = {"pairs": args.pairs, "seed": args.seed, "fit3d_options": _jsonable(opts),
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "wall_s": time.perf_counter() - t0}
+    if merged is not None:
+        old_meta, old_rows = merged
+        meta["merged"] = {"file": str(args.merge), "date": old_meta.get("date"), "wall_s": old_meta.get("wall_s"),
+                          "materials": [r["material"] for r in old_rows]}
+        rows = sorted(rows + old_rows, key=lambda r: r["material"])
     from fit.outputs import atomic_write
 
     with atomic_write(out / "results.json") as f:
