@@ -23,10 +23,11 @@ Representations (columns):
 * ``2-D 5 %``: the project's 2-D rational fit at 5 % (``<stem>_tol0p05_cli.json`` in
   ``--fits-2d``, default ``results/fits`` of the main checkout; evaluated by the file's recipe,
   :meth:`fit.rational.model.RationalModel.evaluate`); ``n/a`` when no file is there;
-* ``3-D``: the 3-D fit of :mod:`fit.rational.fit3d`, fitted in this run (seconds measured here,
-  one process; run under ``taskset -c 0`` with ``OMP_NUM_THREADS=1`` for one core) and saved to
-  ``--out``; its stated bound (every data point of the whole measured domain within
-  ``rho +- tol max(rho, noise)``) is reported with it;
+* ``3-D``: the 3-D fit of :mod:`fit.rational.fit3d` (two-stage: the smallest tolerance the
+  interval LP meets, then the least-squares fit of this metric within twice it), fitted in this
+  run (seconds measured here, one process; run under ``taskset -c 0`` with ``OMP_NUM_THREADS=1``
+  for one core) and saved to ``--out``; its stated bound (every data point of the whole measured
+  domain within ``rho +- tol s``) and the fresh-point verification ratio are reported with it;
 * ``neural``: the published neural BRDF (Sztrajman et al. 2021, 675 weights) relative RMSE as
   quoted in the issue (six materials; not re-measured here).
 
@@ -34,6 +35,10 @@ The render ΔE2000 column of the issue is not computed here (see docs/fit_accura
 
     OMP_NUM_THREADS=1 taskset -c 0 python -m benchmarks.bench_fit_accuracy --docs
     python -m benchmarks.bench_fit_accuracy --materials satin_rosaline --pairs 20000
+    python -m benchmarks.bench_fit_accuracy --materials paper_blue --merge results/fit_accuracy/results.json
+
+``--merge`` keeps an earlier run's rows (same pairs and seed) for the materials not run now; the
+table names the merged rows and their run.
 """
 from __future__ import annotations
 
