@@ -532,12 +532,16 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
 #: one piece of degrees (7, 3) (420: the diffuse materials, whose error is spread over the whole
 #: domain; paper_white 0.0098 against 0.020 with the four pieces, both two-stage, 50,000 pairs).
 #: ``"if_rmse_below"`` (not a fit_rgl argument): the layout is tried only when the best validation
-#: RMSE so far is below it (the one piece lost where the four pieces were above 0.04: satin_rosaline
-#: 0.085 against 0.063; it won below: paper_white 0.0097 against 0.0196, colodur_napoli_4f 0.020
-#: against 0.024), which leaves glossy materials the time for the verification.
+#: RMSE so far is below it, which leaves the glossiest materials the time for the verification.
+#: Measured (validation RMSE of the four pieces -> relative RMSE, four pieces / one piece): it won
+#: on 6 of the 7 materials below 0.04 (paper_white 0.0196 -> 0.0097; vch_ultra_pink 0.0317 ->
+#: 0.0327 kept the four pieces) and on ilm_l3_37_matte (0.062: 0.050 / 0.040) and
+#: acrylic_felt_pink (0.042: 0.041 / 0.032); it lost on satin_purple (0.0545: 0.051 / 0.067) and
+#: satin_rosaline (0.063: 0.063 / 0.085); the glossy films above 0.065 (cc_ibiza_sunset,
+#: cc_iris_purple_gem, cm_toxic_green, chm_mint) do not try it.
 VARIANTS = (
     {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
-    {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.04},
+    {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.065},
 )
 
 
