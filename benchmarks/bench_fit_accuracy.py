@@ -241,10 +241,14 @@ def markdown(rows: list, meta: dict) -> str:
     L.append(f"Pairs: {meta['pairs']:,} cosine-distributed (ωi, ωo), seed {meta['seed']}; truth: the RGL "
              f"reference evaluation (negatives clamped); 3-D options `{meta['fit3d_options']}`; "
              f"run {meta['date']} in {meta['wall_s']:.0f} s.")
-    if meta.get("merged"):
-        mg = meta["merged"]
-        L.append(f"Merged (`--merge`): the rows of {', '.join(mg['materials'])} are from the run of {mg['date']} "
-                 f"({mg['wall_s']:.0f} s, `{mg['file']}`), the others from this run.")
+    mg, first = meta.get("merged"), True
+    while mg:       # an earlier run may itself have merged rows: name each run's own rows
+        inner = mg.get("merged") or {}
+        own = [m for m in mg["materials"] if m not in inner.get("materials", [])]
+        L.append(("Merged (`--merge`): the rows of " if first else "Of those, the rows of ") + ", ".join(own)
+                 + f" are from the run of {mg['date']} ({mg['wall_s']:.0f} s, `{mg['file']}`)"
+                 + (", the others from this run." if first else "."))
+        mg, first = mg.get("merged"), False
     L.append("")
     L.append("Relative RMSE of ρ·cosθi·cosθo (mean of R, G, B); in brackets the coefficients "
              "(three channels, all pieces). Target: below the neural column with < 675 coefficients.")
@@ -498,7 +502,7 @@ def _run(args) -> int:
     if merged is not None:
         old_meta, old_rows = merged
         meta["merged"] = {"file": str(args.merge), "date": old_meta.get("date"), "wall_s": old_meta.get("wall_s"),
-                          "materials": [r["material"] for r in old_rows]}
+                          "materials": [r["material"] for r in old_rows], "merged": old_meta.get("merged")}
         rows = sorted(rows + old_rows, key=lambda r: r["material"])
     from fit.outputs import atomic_write
 
