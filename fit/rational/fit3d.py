@@ -543,6 +543,11 @@ VARIANTS = (
     {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
     {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.065},
 )
+#: A later layout replaces the one chosen so far only when its validation RMSE is lower by this
+#: fraction: vch_golden_yellow's one piece (0.0439 against 0.0441) was chosen without it, and
+#: it was 0.045 against 0.043 on the benchmark's pairs and 52.6 against 9.2 times its bound at
+#: the fresh points (a spike between the data points); every other switch was by more than 20 %.
+SELECT_MARGIN = 0.05
 
 
 def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
@@ -592,7 +597,7 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_sha
         v_rmse = validation_rmse(brdf, res.model)
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
                     "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse, "time_s": res.time_s})
-        if res.valid and (best is None or v_rmse < best.info["validation_rmse"]):
+        if res.valid and (best is None or v_rmse < (1.0 - SELECT_MARGIN) * best.info["validation_rmse"]):
             best = res
             best.info["validation_rmse"] = v_rmse
             best.info["variant"] = k
