@@ -241,14 +241,17 @@ def markdown(rows: list, meta: dict) -> str:
     L.append(f"Pairs: {meta['pairs']:,} cosine-distributed (ωi, ωo), seed {meta['seed']}; truth: the RGL "
              f"reference evaluation (negatives clamped); 3-D options `{meta['fit3d_options']}`; "
              f"run {meta['date']} in {meta['wall_s']:.0f} s.")
-    mg, first = meta.get("merged"), True
-    while mg:       # an earlier run may itself have merged rows: name each run's own rows
-        inner = mg.get("merged") or {}
-        own = [m for m in mg["materials"] if m not in inner.get("materials", [])]
-        L.append(("Merged (`--merge`): the rows of " if first else "Of those, the rows of ") + ", ".join(own)
-                 + f" are from the run of {mg['date']} ({mg['wall_s']:.0f} s, `{mg['file']}`)"
-                 + (", the others from this run." if first else "."))
-        mg, first = mg.get("merged"), False
+    mg = meta.get("merged")
+    if mg:          # an earlier run may itself have merged rows: name each run's own rows still shown
+        parts = ["this run: " + ", ".join(r["material"] for r in rows if r["material"] not in mg["materials"])]
+        alive = set(mg["materials"])
+        while mg:
+            inner = mg.get("merged") or {}
+            own = [m for m in mg["materials"] if m in alive and m not in inner.get("materials", [])]
+            alive &= set(inner.get("materials", []))
+            parts.append(f"the run of {mg['date']} ({mg['wall_s']:.0f} s, `{mg['file']}`): {', '.join(own)}")
+            mg = mg.get("merged")
+        L.append("Rows by run (`--merge`, same pairs and seed): " + "; ".join(parts) + ".")
     L.append("")
     L.append("Relative RMSE of ρ·cosθi·cosθo (mean of R, G, B); in brackets the coefficients "
              "(three channels, all pieces). Target: below the neural column with < 675 coefficients.")

@@ -60,7 +60,8 @@ def test_merge_keeps_earlier_rows(tmp_path, capsys):
     res = json.loads((b / "results.json").read_text())
     assert [r["material"] for r in res["rows"]] == ["colodur_napoli_4f", "paper_white"]
     assert res["meta"]["merged"]["materials"] == ["paper_white"]
-    assert "Merged (`--merge`): the rows of paper_white" in capsys.readouterr().out
+    assert "Rows by run (`--merge`, same pairs and seed): this run: colodur_napoli_4f; the run of" in (
+        capsys.readouterr().out)
     # another metric (pairs) cannot be merged: one line, exit status 2, nothing written
     c = tmp_path / "c"
     bad = ["--data", str(data), "--materials", "colodur_napoli_4f", "--out", str(c), "--merge", str(a / "results.json")]
