@@ -277,7 +277,7 @@ def markdown(rows: list, meta: dict) -> str:
         fresh = "" if fresh is None else f" (fresh {fresh:.2f})"
         L.append(f"| {r['material']} | {_f(t and t['rel_rmse'])} | "
                  f"{_f(f2 and f2['rel_rmse'])}{c2} | "
-                 f"{f3['rel_rmse']:.3f} ({f3['coefficients']}) | "
+                 f"{f3['rel_rmse']:.{4 if f3['rel_rmse'] < 0.02 else 3}f} ({f3['coefficients']}) | "
                  f"{100 * f3['bound']:.0f} % of s{'' if f3['valid'] else ' (NOT valid)'}{fresh} | "
                  f"{_f(nn and nn['rel_rmse'])} | {met} |")
     L.append("")
