@@ -574,7 +574,8 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_sha
                    verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, **common) -> Fit3D:
     """Fit every layout of ``variants`` (each :func:`fit_rgl` keyword arguments, updated with
     ``common``) within ``time_limit`` seconds in all, and return the one with the lowest
-    :func:`validation_rmse`; ``info["variants"]`` logs what each achieved (coefficients, stated
+    :func:`validation_rmse` (a later layout must be :data:`SELECT_MARGIN` lower to replace an
+    earlier one; a layout with ``"if_rmse_below"`` is tried only below that RMSE); ``info["variants"]`` logs what each achieved (coefficients, stated
     bound, validation RMSE, seconds). Variants that no longer fit in the time left are skipped
     (logged as such): the selection stops starting variants after ``select_share`` of the time;
     the chosen fit is then verified and refitted (:func:`verify_and_refit`) in the rest.
