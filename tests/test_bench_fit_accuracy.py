@@ -46,3 +46,26 @@ def test_smoke_run_and_bad_input(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and words in err
     assert not (tmp_path / "o2" / "results.json").exists()
+
+
+def test_merge_keeps_earlier_rows(tmp_path, capsys):
+    data = data_file("rgl/paper_white_rgb.bsdf").parents[1]
+    data_file("rgl/colodur_napoli_4f_rgb.bsdf")
+    small = ["--pairs", "400", "--albedo-samples", "300", "--no-table", "--fits-2d", str(tmp_path), "--degrees", "3,1",
+             "--edges", "", "--grid", "8,7,5", "--random", "200", "--verify", "0"]
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert B.main(["--data", str(data), "--materials", "paper_white", "--out", str(a)] + small) == 0
+    assert B.main(["--data", str(data), "--materials", "colodur_napoli_4f", "--out", str(b),
+                   "--merge", str(a / "results.json")] + small) == 0
+    res = json.loads((b / "results.json").read_text())
+    assert [r["material"] for r in res["rows"]] == ["colodur_napoli_4f", "paper_white"]
+    assert res["meta"]["merged"]["materials"] == ["paper_white"]
+    assert "Rows by run (`--merge`, same pairs and seed): this run: colodur_napoli_4f; the run of" in (
+        capsys.readouterr().out)
+    # another metric (pairs) cannot be merged: one line, exit status 2, nothing written
+    c = tmp_path / "c"
+    bad = ["--data", str(data), "--materials", "colodur_napoli_4f", "--out", str(c), "--merge", str(a / "results.json")]
+    assert B.main(bad + [v if v != "400" else "500" for v in small]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--merge" in err and "--pairs 400" in err
+    assert not (c / "results.json").exists()
