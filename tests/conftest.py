@@ -25,14 +25,19 @@ RGL_MATERIALS = (
 )
 
 
+def missing(msg: str):
+    """Something a test needs is not there: skip locally, fail under CI (``CI=true``), where the
+    shared data, the ``test`` extra and the system tools are installed."""
+    if IN_CI:
+        pytest.fail(msg)
+    pytest.skip(msg)
+
+
 def data_file(relative: str) -> Path:
     """Path of a shared data file; skip (locally) or fail (CI) if it is missing."""
     p = DATA / relative
     if not p.exists():
-        msg = f"shared data file missing: {p} (set RBRDF_DATA)"
-        if IN_CI:
-            pytest.fail(msg)
-        pytest.skip(msg)
+        missing(f"shared data file missing: {p} (set RBRDF_DATA)")
     return p
 
 
@@ -42,10 +47,7 @@ def require_mitsuba():
     from warp_rbrdf import mitsuba_reference as MR
 
     if not MR.available():
-        msg = f"Mitsuba 3 is not installed ({MR.INSTALL_HINT})"
-        if IN_CI:
-            pytest.fail(msg)
-        pytest.skip(msg)
+        missing(f"Mitsuba 3 is not installed ({MR.INSTALL_HINT})")
     return MR
 
 

@@ -25,7 +25,7 @@ import textwrap
 
 import numpy as np
 import pytest
-from conftest import IN_CI, data_file
+from conftest import data_file, missing
 
 from fit.cli import main as cli_main
 from fit.convert import convert
@@ -42,10 +42,7 @@ def _need(module: str):
     try:
         return __import__(module)
     except ImportError:
-        msg = f"{module} is not installed (the test extra installs it)"
-        if IN_CI:
-            pytest.fail(msg)
-        pytest.skip(msg)
+        missing(f"{module} is not installed (the test extra installs it)")
 
 
 def _delta_e2000(a, b):

@@ -26,7 +26,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import IN_CI, ROOT, data_file, require_mitsuba
+from conftest import ROOT, data_file, missing, require_mitsuba
 
 from fit.cli import main as cli_main
 from fit.export import to_brdf_explorer, to_c, to_glsl, to_hlsl, to_mitsuba_plugin
@@ -45,10 +45,7 @@ ENVMAP = "envmaps/studio_small_03_1k.hdr"
 def need(tool: str) -> str:
     path = shutil.which(tool)
     if path is None:
-        msg = f"{tool} not found (Debian: apt-get install glslang-tools / a C compiler)"
-        if IN_CI:
-            pytest.fail(msg)
-        pytest.skip(msg)
+        missing(f"{tool} not found (Debian: apt-get install glslang-tools / a C compiler)")
     return path
 
 
@@ -201,9 +198,7 @@ def test_c_frame_function_and_cpp(tmp_path):
     assert np.allclose(vals[:3], ref, rtol=1e-6) and np.allclose(vals[3:], ref, rtol=1e-6), (vals, ref)
     cxx = shutil.which("c++") or shutil.which("g++")
     if cxx is None:
-        if IN_CI:
-            pytest.fail("no C++ compiler")
-        pytest.skip("no C++ compiler")
+        missing("no C++ compiler")
     r = subprocess.run([cxx, "-x", "c++", "-Wall", "-Werror", "-fsyntax-only", str(h)], check=False, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-2000:]
 
