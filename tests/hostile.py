@@ -20,6 +20,9 @@ import numpy as np
 
 from fit.cli import main
 
+#: failure classes of the hostile-input cases (docs/robustness.md)
+CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
+
 
 def run(capsys, argv) -> tuple:
     """``(status, stdout, stderr)`` of ``rbrdf-fit argv`` run in this process."""

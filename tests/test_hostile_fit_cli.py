@@ -14,6 +14,7 @@ import os
 
 import pytest
 from hostile import (
+    CLASSES,
     assert_bad_input,
     assert_unchanged,
     lambert_merl,
@@ -22,8 +23,6 @@ from hostile import (
     snapshot,
     write_json,
 )
-
-CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 
 
 @pytest.fixture(scope="module")

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from conftest import data_file
 from hostile import (
+    CLASSES,
     assert_bad_input,
     assert_one_line,
     assert_unchanged,
@@ -39,7 +40,6 @@ from fit.formats.tensor_file import read_tensor_file, write_tensor_file
 from fit.rational.coefficient_file import load as load_rational
 from fit.sampling.cdf_file import load as load_cdf
 
-CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 N = int(np.prod(MERL_SHAPE))
 
 

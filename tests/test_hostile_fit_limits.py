@@ -21,10 +21,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import data_file
-from hostile import lambert_merl, small_cdf_dict, small_rational_dict
+from hostile import CLASSES, lambert_merl, small_cdf_dict, small_rational_dict
 
 ROOT = Path(__file__).resolve().parents[1]
-CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 # (id, class) of every case in this module, for docs/robustness.md
 CASES = [("fifo-merl", "hang"), ("fifo-rgl", "hang"), ("fifo-rational", "hang"), ("fifo-cdf", "hang"),
          ("fifo-npz", "hang"), ("fifo-cli-info", "hang"), ("fifo-cli-plot-cdf", "hang"),

@@ -7,7 +7,7 @@ place, and asserts the project principle: exit status 2, one stderr line naming 
 and the problem, no traceback or warning, nothing on stdout, existing files unchanged. Files
 are checked when the scene is built, before any kernel is compiled. Texel policy: NaN,
 infinite, negative or absurd (> ``MAX_ENV_TEXEL``) texels are refused, never zeroed or
-clamped. ``CLASSES`` as in test_hostile_render_scene.py.
+clamped. ``CLASSES``: tests/hostile.py.
 """
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ import struct
 import numpy as np
 import pytest
 from hostile import (
+    CLASSES,
     QUAD_F,
     QUAD_V,
     TINY_SCENE,
@@ -29,8 +30,6 @@ from hostile import (
     snapshot,
     write_image_file,
 )
-
-CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 
 MESH_SHAPE = '\n[[shapes]]\ntype = "mesh"\nmaterial = "m"\nfile = "{name}"\n'
 ENV_LIGHT = 'type = "envmap"\nfile = "{name}"\n'

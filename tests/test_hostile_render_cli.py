@@ -17,6 +17,7 @@ import os
 import numpy as np
 import pytest
 from hostile import (
+    CLASSES,
     TINY_SCENE,
     assert_bad_input,
     assert_unchanged,
@@ -24,8 +25,6 @@ from hostile import (
     render_work_folder,
     snapshot,
 )
-
-CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 
 
 @pytest.fixture

@@ -15,6 +15,7 @@ import os
 
 import pytest
 from hostile import (
+    CLASSES,
     TINY_SCENE,
     assert_bad_input,
     assert_unchanged,
@@ -22,8 +23,6 @@ from hostile import (
     render_work_folder,
     snapshot,
 )
-
-CLASSES = ("lost", "hang", "memory", "silent", "traceback", "unclear")
 
 
 def sub(old: str, new: str):
