@@ -37,11 +37,13 @@ MIN_JACOBIAN = 1.0e-6
 
 
 @wp.func
-def _incidence(mats: Materials, h: int, wt: wp.vec3) -> wp.vec3:
-    """(t0, w1, phi_t) of the tensors' incident direction ``wt``: its theta_i slice interval
-    (``t0`` as a float) and azimuth."""
-    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], mats.rgl_i[h + R.RGL_N_THETA], R.elevation(wt))
-    return wp.vec3(tw[0], tw[1], fmath.atan2(wt[1], wt[0]))
+def _incidence(mats: Materials, h: int, wt: wp.vec3) -> wp.vec4:
+    """(t0, w1, phi_t, theta_t) of the tensors' incident direction ``wt``: its theta_i slice
+    interval (``t0`` as a float, ``w1`` the weight of slice ``t0 + 1``), azimuth and elevation
+    (radians)."""
+    theta_t = R.elevation(wt)
+    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], mats.rgl_i[h + R.RGL_N_THETA], theta_t)
+    return wp.vec4(tw[0], tw[1], fmath.atan2(wt[1], wt[0]), theta_t)
 
 
 @wp.func
@@ -145,12 +147,12 @@ def sample_f(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2):
     h = mats.offset[m]
     if mats.rgl_i[h + R.RGL_VIEW_INCIDENT] == 0:
         return wp.vec4(0.0), wp.vec3(0.0), 1
-    theta_t = R.elevation(wo)
-    phi_t = fmath.atan2(wo[1], wo[0])
+    inc = _incidence(mats, h, wo)
+    t0 = int(inc[0])
+    w1 = inc[1]
+    phi_t = inc[2]
+    theta_t = inc[3]
     n = mats.rgl_i[h + R.RGL_N_THETA]
-    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
-    t0 = int(tw[0])
-    w1 = tw[1]
     wi, pdf_s, ok, u, s, phi_m = _draw(mats, h, n, t0, w1, phi_t, wo, xi)
     if ok == 0:
         return wp.vec4(0.0), wp.vec3(0.0), 1
@@ -172,12 +174,12 @@ def eval_pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3):
         return wp.vec3(0.0), 0.0, 1
     sv = wi + wo
     wm = sv / wp.length(sv)
-    theta_t = R.elevation(wo)
-    phi_t = fmath.atan2(wo[1], wo[0])
+    inc = _incidence(mats, h, wo)
+    t0 = int(inc[0])
+    w1 = inc[1]
+    phi_t = inc[2]
+    theta_t = inc[3]
     n = mats.rgl_i[h + R.RGL_N_THETA]
-    tw = theta_interval(mats, mats.rgl_i[h + R.RGL_THETA], n, theta_t)
-    t0 = int(tw[0])
-    w1 = tw[1]
     umx = R.theta_to_u(R.elevation(wm))
     umy = R.phi_to_u(fmath.atan2(wm[1], wm[0]) - phi_t)
     sw = warp_invert(mats, mats.rgl_i[h + R.RGL_VNDF_DATA], mats.rgl_i[h + R.RGL_VNDF_COND],
