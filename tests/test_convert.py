@@ -136,15 +136,9 @@ def test_rgl_nodes_reproduce_the_source_exactly(tmp_path):
     n = SMALL["n_rgb"]
     bits = np.unpackbits(r.valid_bits).reshape(-1, n, n).astype(bool)
     assert int(bits.sum()) == b.n_below_horizon > 0
-    s = np.linspace(0, 1, n)
-    sy, sx = np.meshgrid(s, s, indexing="ij")
     worst = 0.0
     for k, th in enumerate(r.theta_i[:-1]):        # the 90 deg slice has wt on the horizon
-        ux, uy, _ = r.vndf_sample(sx, sy, np.full(sx.shape, th))
-        tm, pm = ux ** 2 * np.pi / 2, (2 * uy - 1) * np.pi
-        m = np.stack([np.sin(tm) * np.cos(pm), np.sin(tm) * np.sin(pm), np.cos(tm)], -1)
-        wt = np.array([np.sin(th), 0.0, np.cos(th)])
-        wx = 2 * (m @ wt)[..., None] * m - wt
+        wt, wx = _node_directions(r, n, th)
         assert np.array_equal(wx[..., 2] <= 0, bits[k])
         ok = wx[..., 2] > 1e-2
         wt_ok = np.broadcast_to(wt, wx.shape)[ok]
@@ -154,20 +148,26 @@ def test_rgl_nodes_reproduce_the_source_exactly(tmp_path):
     assert worst < 2e-4, worst
 
 
+def _node_directions(r, n, th):
+    """``(wt, wx (n, n, 3))``: the incidence ``th`` (radians, phi = 0) and the directions the
+    file's n x n rgb nodes stand for (their VNDF-warped micro-normals reflecting ``wt``)."""
+    s = np.linspace(0, 1, n)
+    sy, sx = np.meshgrid(s, s, indexing="ij")
+    ux, uy, _ = r.vndf_sample(sx, sy, np.full(sx.shape, th))
+    tm, pm = ux ** 2 * np.pi / 2, (2 * uy - 1) * np.pi
+    m = np.stack([np.sin(tm) * np.cos(pm), np.sin(tm) * np.sin(pm), np.cos(tm)], -1)
+    wt = np.array([np.sin(th), 0.0, np.cos(th)])
+    return wt, 2 * (m @ wt)[..., None] * m - wt
+
+
 def test_valid_bits_follow_the_rgl_files_convention():
     """The convention the writer follows, checked on a real file: the bits of 'valid' are set
     exactly where the node's reflected direction lies at or below the horizon."""
     r = read_rgl(data_file("rgl/satin_rosaline_rgb.bsdf"))
     n = r.rgb.shape[2]
     bits = np.unpackbits(r.valid_bits).reshape(-1, n, n).astype(bool)
-    s = np.linspace(0, 1, n)
-    sy, sx = np.meshgrid(s, s, indexing="ij")
     for k, th in enumerate(r.theta_i):
-        ux, uy, _ = r.vndf_sample(sx, sy, np.full(sx.shape, th))
-        tm, pm = ux ** 2 * np.pi / 2, (2 * uy - 1) * np.pi
-        m = np.stack([np.sin(tm) * np.cos(pm), np.sin(tm) * np.sin(pm), np.cos(tm)], -1)
-        wt = np.array([np.sin(th), 0.0, np.cos(th)])
-        wx = 2 * (m @ wt)[..., None] * m - wt
+        _, wx = _node_directions(r, n, th)
         assert np.array_equal(wx[..., 2] <= 0, bits[k])
 
 
