@@ -1,4 +1,5 @@
-"""Inline replacements for libm functions the render kernels call per sample (issue 21).
+"""Inline replacements for libm functions the render kernels call per sample (issue 21):
+:func:`atan2` and :func:`sincos`.
 
 ``wp.atan2`` compiles to a call of libm's ``atan2f``: 8 % of a shaded sample's time on the
 reference sphere with an ``rgl`` material (``python -m benchmarks.profile_render``; each sample
@@ -63,3 +64,58 @@ def atan2_numpy(y, x) -> np.ndarray:
     r = np.where(ay > ax, np.float32(np.pi / 2) - r, r)
     r = np.where(x < 0, np.float32(np.pi) - r, r)
     return np.where(y < 0, -r, r).astype(np.float32)
+
+
+# --- sincos -----------------------------------------------------------------------------------
+#: pi/2 in three float32 parts (Cody-Waite): the first two have few enough bits that k * part is
+#: exact for |k| < 2^10, so r = x - k pi/2 loses nothing for |x| < 1000
+_PIO2 = (1.5703125, 4.837512969970703125e-4, 7.54978995489188216e-8)
+#: minimax polynomials on [-pi/4, pi/4] (Cephes ``sinf`` / ``cosf``): sin r = r + r^3 S(r^2),
+#: cos r = 1 - r^2 / 2 + r^4 C(r^2)
+SIN_COEFFS = (-1.6666654611e-1, 8.3321608736e-3, -1.9515295891e-4)
+COS_COEFFS = (4.166664568298827e-2, -1.388731625493765e-3, 2.443315711809948e-5)
+#: |x| up to which :func:`sincos` keeps its stated error (radians)
+SINCOS_RANGE = 1000.0
+
+
+@wp.func
+def sincos(x: float) -> wp.vec2:
+    """(sin x, cos x) for |x| <= SINCOS_RANGE (radians), within 2.4e-7 of the exact values
+    (``tests/test_fastmath.py``): the quadrant ``k = round(2x / pi)``, ``r = x - k pi/2`` by
+    Cody-Waite, two polynomials, a swap and sign by ``k mod 4``. Inline, no libm call."""
+    k = wp.floor(x * 0.6366197723675814 + 0.5)
+    r = x - k * wp.static(_PIO2[0])
+    r = r - k * wp.static(_PIO2[1])
+    r = r - k * wp.static(_PIO2[2])
+    z = r * r
+    sp = wp.static(SIN_COEFFS[2])
+    sp = sp * z + wp.static(SIN_COEFFS[1])
+    sp = sp * z + wp.static(SIN_COEFFS[0])
+    sr = r + r * z * sp
+    cp = wp.static(COS_COEFFS[2])
+    cp = cp * z + wp.static(COS_COEFFS[1])
+    cp = cp * z + wp.static(COS_COEFFS[0])
+    cr = 1.0 - 0.5 * z + z * z * cp
+    q = int(k) & 3
+    sn = wp.where(q == 0, sr, wp.where(q == 1, cr, wp.where(q == 2, -sr, -cr)))
+    cs = wp.where(q == 0, cr, wp.where(q == 1, -sr, wp.where(q == 2, -cr, sr)))
+    return wp.vec2(sn, cs)
+
+
+def sincos_numpy(x) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`sincos` in NumPy float32 (the same operations, for tests)."""
+    x = np.asarray(x, np.float32)
+    f = np.float32
+    k = np.floor(x * f(0.6366197723675814) + f(0.5))
+    r = x - k * f(_PIO2[0])
+    r = r - k * f(_PIO2[1])
+    r = r - k * f(_PIO2[2])
+    z = r * r
+    sp = (f(SIN_COEFFS[2]) * z + f(SIN_COEFFS[1])) * z + f(SIN_COEFFS[0])
+    sr = r + r * z * sp
+    cp = (f(COS_COEFFS[2]) * z + f(COS_COEFFS[1])) * z + f(COS_COEFFS[0])
+    cr = f(1.0) - f(0.5) * z + z * z * cp
+    q = k.astype(np.int64) & 3
+    sn = np.select([q == 0, q == 1, q == 2], [sr, cr, -sr], -cr)
+    cs = np.select([q == 0, q == 1, q == 2], [cr, -sr, -cr], sr)
+    return sn.astype(np.float32), cs.astype(np.float32)

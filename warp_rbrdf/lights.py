@@ -625,7 +625,8 @@ def env_dir_to_uv(env: EnvMap, d: wp.vec3) -> wp.vec2:
         u = u + 1.0
     if u >= 1.0:
         u = u - 1.0
-    v = wp.acos(wp.clamp(dl[1], -1.0, 1.0)) * (1.0 / wp.pi)
+    # acos(y) as atan2(|(x, z)|, y): inline (no libm call) and accurate at the poles
+    v = fmath.atan2(wp.sqrt(dl[0] * dl[0] + dl[2] * dl[2]), dl[1]) * (1.0 / wp.pi)
     return wp.vec2(u, v)
 
 
@@ -842,8 +843,10 @@ def _patch_mass(env: EnvMap, j: int, c: int) -> wp.float64:
 
 
 @wp.func
-def _sample_patch_uv(env: EnvMap, xi: wp.vec2) -> wp.vec2d:
-    """(u, v) of a sample of the marginal or hierarchical scheme, float64."""
+def _sample_patch_uv(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
+    """(u, v, lum) of a sample of the marginal or hierarchical scheme, float64: its map
+    coordinates and the bilinear luminance there (the lookup's own taps: the patch's four
+    texels with weights from the fractions ``t``, ``s``), so the pdf needs no second lookup."""
     H = env.height
     W = env.width
     one = wp.float64(1.0)
@@ -852,6 +855,7 @@ def _sample_patch_uv(env: EnvMap, xi: wp.vec2) -> wp.vec2d:
     c = int(0)
     t = zero
     s = zero
+    lum = zero
     y0 = wp.min(wp.float64(xi[0]), wp.float64(0.9999999999999999))
     y1 = wp.min(wp.float64(xi[1]), wp.float64(0.9999999999999999))
     if env.scheme == SCHEME_MARGINAL:
@@ -883,6 +887,7 @@ def _sample_patch_uv(env: EnvMap, xi: wp.vec2) -> wp.vec2d:
         if half > zero:
             ys = wp.clamp(rest / half, zero, one)
         s = _linear_inverse(g0, g1, ys)
+        lum = (one - s) * g0 + s * g1
     else:
         # levels >= 1: each stores its 2 x 2 children blocks contiguously (v00, v10, v01, v11)
         sx = y1
@@ -938,12 +943,15 @@ def _sample_patch_uv(env: EnvMap, xi: wp.vec2) -> wp.vec2d:
         L01 = wp.float64(env.lum[j + 1, c])
         L11 = wp.float64(env.lum[j + 1, cn])
         t = _solve_row_fraction(L00 + L10, L01 + L11, env, j, sy)
-        s = _linear_inverse((one - t) * L00 + t * L01, (one - t) * L10 + t * L11, sx)
+        g0 = (one - t) * L00 + t * L01
+        g1 = (one - t) * L10 + t * L11
+        s = _linear_inverse(g0, g1, sx)
+        lum = (one - s) * g0 + s * g1
     u = (wp.float64(c) + s + wp.float64(0.5)) / wp.float64(W)
     if u >= one:
         u = u - one
     v = (wp.float64(j) + t) / wp.float64(H - 1)
-    return wp.vec2d(u, v)
+    return wp.vec3d(u, v, lum)
 
 
 # --- the piecewise-constant scheme (before issue 21; benchmarks only) -------------------------
@@ -1001,23 +1009,25 @@ def _pc_sample_local(env: EnvMap, xi: wp.vec2) -> wp.vec3:
 
 @wp.func
 def env_sample_uv(env: EnvMap, xi: wp.vec2):
-    """:func:`env_sample` and the map coordinates of the sampled direction (``(vec4, vec2 uv)``,
-    uv as :func:`env_dir_to_uv` gives them), so its radiance (:func:`env_eval_uv`) needs no
-    second atan2 / acos."""
+    """:func:`env_sample` and the map coordinates of the sampled point (``(vec4, vec2 uv)``),
+    so its radiance (:func:`env_eval_uv`) needs no atan2. The pdf is the looked-up luminance
+    at the sampled (u, v) itself (the taps the patch inversion read), not at the map
+    coordinates recomputed from the float32 direction: radiance and pdf are taken at one point,
+    and :func:`env_pdf` of the returned direction agrees to float rounding of the direction."""
     if env.can_sample == 0:
         return wp.vec4(0.0, 1.0, 0.0, 0.0), wp.vec2(0.0)
-    dl = wp.vec3(0.0)
     if env.scheme == SCHEME_PIECEWISE_CONSTANT:
         dl = _pc_sample_local(env, xi)
-    else:
-        uv = _sample_patch_uv(env, xi)
-        phi = 2.0 * wp.pi * float(uv[0])
-        theta = wp.pi * float(uv[1])
-        st = wp.sin(theta)
-        dl = wp.vec3(wp.sin(phi) * st, wp.cos(theta), -wp.cos(phi) * st)
-    dw = env.rot * dl
-    uvw = env_dir_to_uv(env, dw)
-    return wp.vec4(dw[0], dw[1], dw[2], env_pdf_uv(env, uvw)), uvw
+        dw = env.rot * dl
+        uvw = env_dir_to_uv(env, dw)
+        return wp.vec4(dw[0], dw[1], dw[2], env_pdf_uv(env, uvw)), uvw
+    uvl = _sample_patch_uv(env, xi)
+    scp = fmath.sincos(2.0 * wp.pi * float(uvl[0]))
+    sct = fmath.sincos(wp.pi * float(uvl[1]))
+    st = sct[0]
+    dw = env.rot * wp.vec3(scp[0] * st, sct[1], -scp[1] * st)
+    pdf = float(uvl[2]) * env.pdf_scale
+    return wp.vec4(dw[0], dw[1], dw[2], pdf), wp.vec2(float(uvl[0]), float(uvl[1]))
 
 
 @wp.func
@@ -1047,3 +1057,13 @@ def env_eval_kernel(env: EnvMap, dirs: wp.array(dtype=wp.vec3), out: wp.array(dt
 def env_sample_kernel(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4)):
     i = wp.tid()
     out[i] = env_sample(env, xi[i])
+
+
+@wp.kernel
+def env_sample_patch_kernel(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec4),
+                            point: wp.array(dtype=wp.vec3d)):
+    """:func:`env_sample` and the float64 (u, v, looked-up luminance) of the sampled point
+    (marginal and hierarchical schemes)."""
+    i = wp.tid()
+    out[i] = env_sample(env, xi[i])
+    point[i] = _sample_patch_uv(env, xi[i])

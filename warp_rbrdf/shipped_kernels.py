@@ -58,7 +58,8 @@ ISA_FEATURES = frozenset({
 #: Warp 1.19's default CPU flags (``warp.config.cpu_compiler_flags``) with a fixed ISA level in
 #: place of ``-march=native`` (the flags go to Clang's ``cc1``, which takes ``-target-cpu``).
 PORTABLE_CPU_FLAGS = (f"-target-cpu {ISA_LEVEL} -mllvm=-inline-threshold=9000 "
-                      "-mllvm=-inline-cold-callsite-threshold=3000 -mllvm=-slp-recursion-max-depth=4")
+                      "-mllvm=-inline-cold-callsite-threshold=3000 -mllvm=-slp-recursion-max-depth=4 "
+                      "-ffp-contract=fast")
 MANIFEST = "manifest.json"
 ENV = "RBRDF_SHIPPED_KERNELS"
 

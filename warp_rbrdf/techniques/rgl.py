@@ -60,8 +60,10 @@ def _draw(mats: Materials, h: int, n: int, t0: int, w1: float, phi_t: float, wo:
                     mats.rgl_i[h + R.RGL_VNDF_NX], n, t0, w1, s[0], s[1])
     theta_m = u[0] * u[0] * wp.HALF_PI
     phi_m = (2.0 * u[1] - 1.0) * wp.pi + phi_t
-    st = wp.sin(theta_m)
-    wm = wp.vec3(wp.cos(phi_m) * st, wp.sin(phi_m) * st, wp.cos(theta_m))
+    sct = fmath.sincos(theta_m)
+    scp = fmath.sincos(phi_m)
+    st = sct[0]
+    wm = wp.vec3(scp[1] * st, scp[0] * st, sct[1])
     c = wp.dot(wm, wo)
     jac = wp.max(2.0 * wp.pi * wp.pi * u[0] * st, MIN_JACOBIAN) * 4.0 * c
     p = u[2] * s[2] / jac
