@@ -644,6 +644,13 @@ class BilinearTaps:
 
 
 @wp.func
+def _next_column(c: int, W: int) -> int:
+    """(c + 1) mod W for c in [0, W - 1], without an integer division (a division's latency
+    sits on the address of every tap)."""
+    return wp.where(c + 1 >= W, 0, c + 1)
+
+
+@wp.func
 def bilinear_taps(env: EnvMap, u: float, v: float) -> BilinearTaps:
     """Texels of the lookup at (u, v) in [0, 1]^2 (rows are not texel-centred: v = 0 and 1 are
     the first and last rows)."""
@@ -654,11 +661,16 @@ def bilinear_taps(env: EnvMap, u: float, v: float) -> BilinearTaps:
     xf = wp.floor(x)
     t = BilinearTaps()
     t.fx = x - xf
-    x0 = int(xf) % W
+    # wrap without an integer division (x0 is in [-1, W - 1] for u in [0, 1]; the clamp keeps a
+    # NaN direction's index inside the map)
+    x0 = int(xf)
     if x0 < 0:
         x0 = x0 + W
+    if x0 >= W:
+        x0 = x0 - W
+    x0 = wp.clamp(x0, 0, W - 1)
     t.x0 = x0
-    t.x1 = (x0 + 1) % W
+    t.x1 = _next_column(x0, W)
     yf = wp.floor(y)
     t.fy = y - yf
     t.y0 = wp.clamp(int(yf), 0, H - 1)
@@ -835,7 +847,7 @@ def _patch_mass(env: EnvMap, j: int, c: int) -> wp.float64:
     """Mass of patch (j, c) up to a common factor (0 outside the map)."""
     if j >= env.height - 1 or c >= env.width:
         return wp.float64(0.0)
-    cn = (c + 1) % env.width
+    cn = _next_column(c, env.width)
     k1 = env.row_trig[j, 4]
     k0 = env.row_trig[j, 3] - k1
     return (k0 * wp.float64(env.lum[j, c] + env.lum[j, cn])
@@ -879,7 +891,7 @@ def _sample_patch_uv(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
                 hi = mid
         c = lo
         rest = T - ((one - t) * env.col_prefix[j, c] + t * env.col_prefix[j + 1, c])
-        cn = (c + 1) % W
+        cn = _next_column(c, W)
         g0 = (one - t) * wp.float64(env.lum[j, c]) + t * wp.float64(env.lum[j + 1, c])
         g1 = (one - t) * wp.float64(env.lum[j, cn]) + t * wp.float64(env.lum[j + 1, cn])
         half = wp.float64(0.5) * (g0 + g1)
@@ -937,7 +949,7 @@ def _sample_patch_uv(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
             x = x + 1
         j = y
         c = x
-        cn = (c + 1) % W
+        cn = _next_column(c, W)
         L00 = wp.float64(env.lum[j, c])
         L10 = wp.float64(env.lum[j, cn])
         L01 = wp.float64(env.lum[j + 1, c])
