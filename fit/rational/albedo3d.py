@@ -92,7 +92,7 @@ def albedo_quadrature(angles_deg, n: int = DEFAULT_VIEWS) -> tuple:
     omega_h``), 0 where ``wo`` is not above the horizon. A uniform quadrature of ``wo`` put
     3-5 points in a grazing lobe and the correction fitted them, not the albedo (vch_golden_yellow
     at 75 deg: 2.8 % on its own views, 8.1 % on 65,536)."""
-    k = max(int(round(np.sqrt(n))), 2)
+    k = max(round(float(n) ** 0.5), 2)
     m = (np.arange(k) + 0.5) / k
     s, v = np.meshgrid(m, m, indexing="ij")
     s, v = s.reshape(-1), v.reshape(-1)

@@ -125,7 +125,7 @@ def _sum_rows(sums, z, npv, fixed, Wp, Wq, scale):
     """The rows of the objective's squared sums (``sums`` of :func:`refine`) at coefficients ``z``
     (slopes and ``Q_prev`` from ``z``), each times ``sqrt(weight * scale)``; None when a
     ``Q_prev`` is not positive."""
-    W, t2, groups, slope = sums
+    _, t2, groups, slope = sums
     qp = Wq @ z[npv:]
     if np.any(qp <= 0):
         return None
