@@ -410,6 +410,8 @@ def main(argv=None) -> int:
                          "not run now; the table says which rows are merged and from which run")
     ap.add_argument("--no-albedo", action="store_true",
                     help="3-D fits without the directional-albedo policy (fit.rational.albedo3d)")
+    ap.add_argument("--albedo-rmse-growth", type=float, default=None,
+                    help="the albedo policy's largest relative-RMSE growth per channel (default 0.10)")
     ap.add_argument("--docs", action="store_true", help="write docs/fit_accuracy.md's table")
     args = ap.parse_args(argv)
     try:
@@ -498,6 +500,10 @@ def _run(args) -> int:
                          "'NH,ND,NP' (3..200 each), 0..1000000") from None
     if args.no_albedo:
         opts["albedo"] = False
+    if args.albedo_rmse_growth is not None:
+        if not 0.0 <= args.albedo_rmse_growth <= 10.0:
+            raise BenchError(f"--albedo-rmse-growth {args.albedo_rmse_growth}: expected 0 to 10")
+        opts["albedo_rmse_growth"] = args.albedo_rmse_growth
     merged = _merge_rows(args, mats)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -139,6 +139,7 @@ DEFAULT_RELAX = 2.0               # second stage: intervals at this multiple of 
 DEFAULT_OBJECTIVE = 4000          # objective points of the second stage per theta_h piece
 DEFAULT_ALBEDO_TOL = 0.05         # directional-albedo tolerance of the policy (fit.rational.albedo3d)
 DEFAULT_ALBEDO_TIME = 15.0        # seconds the albedo correction may take at most
+DEFAULT_ALBEDO_RMSE_GROWTH = 0.10  # the albedo correction may raise a channel's relative RMSE by this fraction
 
 
 def sample_grid(theta_max: float, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM, seed: int = 7) -> np.ndarray:
@@ -490,7 +491,8 @@ def verification_ratio(res, X, rho) -> np.ndarray:
 def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
             theta_fit_deg: float = DEFAULT_THETA_FIT_DEG, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2,
             n_objective: int = DEFAULT_OBJECTIVE, albedo: bool = True, albedo_tol: float = DEFAULT_ALBEDO_TOL,
-            albedo_time: float = DEFAULT_ALBEDO_TIME, **options) -> Fit3D:
+            albedo_time: float = DEFAULT_ALBEDO_TIME, albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
+            **options) -> Fit3D:
     """:func:`fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by :func:`sample_rgl`
     (the sampling time counts in ``time_s``), then **verified between the data points**: the fit
     is evaluated at ``verify`` fresh points (half uniform in the variables, half cosine-distributed
@@ -504,7 +506,8 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     stage (``relax`` in ``options``, default 2; ``n_objective=0`` or ``relax=1``: one stage).
     ``albedo`` (default on): the directional-albedo policy last (:func:`_albedo_step`,
     :mod:`fit.rational.albedo3d`: measured at 0-75 deg and the last incidence, corrected where
-    outside ``albedo_tol`` within ``albedo_time`` seconds, what stays outside recorded in
+    outside ``albedo_tol`` within ``albedo_time`` seconds at a cost of at most
+    ``albedo_rmse_growth`` of a channel's relative RMSE, what stays outside recorded in
     ``fit_info["albedo"]``)."""
     t0 = time.perf_counter()
     X, rho, tm = sample_rgl(brdf, grid, n_random, theta_fit_deg)
@@ -521,7 +524,7 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     res.info["_refit"] = (X, rho, tm, src, options)
     res = verify_and_refit(brdf, res, verify, verify_rounds, limit - (time.perf_counter() - t0))
     if albedo:
-        _albedo_step(brdf, res, albedo_tol, albedo_time, verify)
+        _albedo_step(brdf, res, albedo_tol, albedo_time, verify, albedo_rmse_growth)
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s
     res.model.fit_info["grid"] = list(grid)
@@ -529,7 +532,8 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     return res
 
 
-def _albedo_step(brdf, res, albedo_tol: float, albedo_time: float, verify: int) -> None:
+def _albedo_step(brdf, res, albedo_tol: float, albedo_time: float, verify: int,
+                 rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH) -> None:
     """The albedo policy (:func:`fit.rational.albedo3d.albedo_policy`) on a fit of
     :func:`fit_rgl`; where it changed a function after the verification, the verification's
     largest ratio is measured again on the last round's fresh points (no refit), so that
@@ -539,7 +543,7 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time: float, verify: int) 
     from .albedo3d import albedo_policy
 
     res.info["model_before_albedo"] = copy.deepcopy(res.model)
-    rec = albedo_policy(brdf, res, tol=albedo_tol, time_limit=albedo_time)
+    rec = albedo_policy(brdf, res, tol=albedo_tol, time_limit=albedo_time, rmse_growth=rmse_growth)
     if rec["refitted"] and verify and "verify_max_ratio" in res.info:
         _, _, tm, _, _ = res.info["_refit"]
         Xv = sample_grid(tm, (1, 1, 1), verify // 2, seed=1000 + int(res.info.get("verify_round", 0)))
@@ -629,7 +633,7 @@ def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
 def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_share: float = 0.6,
                    verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, albedo: bool = True,
                    albedo_tol: float = DEFAULT_ALBEDO_TOL, albedo_time: float = DEFAULT_ALBEDO_TIME,
-                   **common) -> Fit3D:
+                   albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH, **common) -> Fit3D:
     """Fit every layout of ``variants`` (each :func:`fit_rgl` keyword arguments, updated with
     ``common``) within ``time_limit`` seconds in all, and return the one with the lowest
     :func:`validation_rmse` (a later layout must be :data:`SELECT_MARGIN` lower to replace an
@@ -669,7 +673,7 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_sha
         best.info[key] = chosen[key]
     best.info["validation_rmse"] = validation_rmse(brdf, best.model)
     if albedo:
-        _albedo_step(brdf, best, albedo_tol, albedo_time, verify)
+        _albedo_step(brdf, best, albedo_tol, albedo_time, verify, albedo_rmse_growth)
         v_after = validation_rmse(brdf, best.model) if best.info["albedo"]["refitted"] else best.info["validation_rmse"]
         best.info["albedo"]["validation_rmse_before"] = best.info["validation_rmse"]
         best.info["albedo"]["validation_rmse"] = v_after
