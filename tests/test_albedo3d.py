@@ -8,7 +8,9 @@
   largest albedo error measured on a finer quadrature than its own (it does not fit its own
   points only), keeps every data point within the tolerance its channel met before (the
   stated bound does not grow) with Q > 0 certified, and records the errors before and after and
-  every (incidence, channel) still outside; ``albedo=False`` leaves the fit as it is.
+  every (incidence, channel) still outside; ``albedo=False`` leaves the fit as it is;
+* a correction over the RMSE allowance is put back (the fit stays the pre-policy one, function
+  for function) and the miss is recorded.
 """
 from __future__ import annotations
 
@@ -137,3 +139,22 @@ def test_policy_records_what_stays_outside(corrected):
 def test_policy_off_leaves_the_fit():
     res = fit_rgl(Synthetic(), albedo=False, **FIT)
     assert "albedo" not in res.model.fit_info and "albedo" not in res.info
+
+
+def test_a_correction_that_costs_too_much_is_put_back_and_the_miss_recorded():
+    """With no RMSE allowance at all (``rmse_growth`` < 0) every round is put back: the fit is
+    the one before the policy, function for function, and every (incidence, channel) outside the
+    tolerance is listed with its error."""
+    from fit.rational.albedo3d import albedo_policy
+
+    res = fit_rgl(Synthetic(), albedo=False, **FIT)
+    before = [[f.num_coef.copy() for f in p.functions] for p in res.model.pieces]
+    rec = albedo_policy(Synthetic(), res, tol=TOL, rmse_growth=-1.0)
+    assert rec["refitted"] == [] and rec["rejected"], rec["rejected"]
+    for p, coefs in zip(res.model.pieces, before):
+        for f, c in zip(p.functions, coefs):
+            np.testing.assert_array_equal(f.num_coef, c)
+    err = np.array(rec["error"])
+    np.testing.assert_array_equal(err, np.array(rec["error_before"]))
+    assert not rec["within"] and len(rec["outside"]) == int(np.sum(err > TOL)) > 0
+    assert res.model.fit_info["albedo"] is rec
