@@ -158,3 +158,14 @@ def test_a_correction_that_costs_too_much_is_put_back_and_the_miss_recorded():
     np.testing.assert_array_equal(err, np.array(rec["error_before"]))
     assert not rec["within"] and len(rec["outside"]) == int(np.sum(err > TOL)) > 0
     assert res.model.fit_info["albedo"] is rec
+
+
+def test_policy_on_a_one_piece_fit():
+    """The one-piece layout (a plain RationalModel, fit_rgl_select's (7, 3) variant) is corrected
+    the same way."""
+    res = fit_rgl(Synthetic(), albedo=True, albedo_tol=TOL, **dict(FIT, theta_h_edges=[], degrees=(5, 2)))
+    rec = res.model.fit_info["albedo"]
+    assert not hasattr(res.model, "pieces")
+    assert rec["max_error_before"] > TOL and rec["refitted"]
+    assert rec["max_error"] < 0.5 * rec["max_error_before"]
+    assert res.valid and all(r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9) for r in res.records)
