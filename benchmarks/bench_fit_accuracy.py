@@ -28,6 +28,10 @@ Representations (columns):
   run (seconds measured here, one process; run under ``taskset -c 0`` with ``OMP_NUM_THREADS=1``
   for one core) and saved to ``--out``; its stated bound (every data point of the whole measured
   domain within ``rho +- tol s``) and the fresh-point verification ratio are reported with it;
+  the fit ends with the directional-albedo policy (:mod:`fit.rational.albedo3d`; ``--no-albedo``
+  turns it off, ``--albedo-rmse-growth`` sets its RMSE allowance): where the policy changed the
+  fit, the same fit before it is measured too (``fit3d_before_albedo`` in results.json, printed
+  as "before the albedo policy") and the policy's record is ``fit3d.albedo_policy``;
 * ``neural``: the published neural BRDF (Sztrajman et al. 2021, 675 weights) relative RMSE as
   quoted in the issue (six materials; not re-measured here).
 
