@@ -28,6 +28,10 @@ Representations (columns):
   run (seconds measured here, one process; run under ``taskset -c 0`` with ``OMP_NUM_THREADS=1``
   for one core) and saved to ``--out``; its stated bound (every data point of the whole measured
   domain within ``rho +- tol s``) and the fresh-point verification ratio are reported with it;
+  the fit ends with the directional-albedo policy (:mod:`fit.rational.albedo3d`; ``--no-albedo``
+  turns it off, ``--albedo-rmse-growth`` sets its RMSE allowance): where the policy changed the
+  fit, the same fit before it is measured too (``fit3d_before_albedo`` in results.json, printed
+  as "before the albedo policy") and the policy's record is ``fit3d.albedo_policy``;
 * ``neural``: the published neural BRDF (Sztrajman et al. 2021, 675 weights) relative RMSE as
   quoted in the issue (six materials; not re-measured here).
 
@@ -222,6 +226,13 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
                         pieces=len(res.info["edges"]) - 1, options=_jsonable(fit_options),
                         variant=res.info.get("variant"), variants=_jsonable(res.info.get("variants")),
                         verified=res.info.get("verified"), verify_max_ratio=res.info.get("verify_max_ratio"))
+    before = res.info.get("model_before_albedo")
+    if before is not None and res.info.get("albedo", {}).get("refitted"):
+        # the same fit before the albedo policy changed it (fit.rational.albedo3d)
+        row["fit3d_before_albedo"] = measure(lambda a, b: evaluate_directions(before, a, b), truth, wi, wo,
+                                             truth_eval, albedo_n)
+    if res.info.get("albedo") is not None:
+        row["fit3d"]["albedo_policy"] = _jsonable(res.info["albedo"])
     if name in NEURAL:
         row["neural"] = {"rel_rmse": NEURAL[name], "coefficients": NEURAL_WEIGHTS, "source": "published (issue 25)"}
     return row
@@ -401,6 +412,10 @@ def main(argv=None) -> int:
     ap.add_argument("--merge", default=None, metavar="RESULTS_JSON",
                     help="keep the rows of an earlier run's results.json (same --pairs and --seed) for the materials "
                          "not run now; the table says which rows are merged and from which run")
+    ap.add_argument("--no-albedo", action="store_true",
+                    help="3-D fits without the directional-albedo policy (fit.rational.albedo3d)")
+    ap.add_argument("--albedo-rmse-growth", type=float, default=None,
+                    help="the albedo policy's largest relative-RMSE growth per channel (default 0.10)")
     ap.add_argument("--docs", action="store_true", help="write docs/fit_accuracy.md's table")
     args = ap.parse_args(argv)
     try:
@@ -487,6 +502,12 @@ def _run(args) -> int:
         raise BenchError(f"--degrees {args.degrees!r} / --edges {args.edges!r} / --grid {args.grid!r} / --random "
                          f"{args.random!r}: expected 'M,N' (0..12), radians in (0, 1.5) separated by commas, "
                          "'NH,ND,NP' (3..200 each), 0..1000000") from None
+    if args.no_albedo:
+        opts["albedo"] = False
+    if args.albedo_rmse_growth is not None:
+        if not 0.0 <= args.albedo_rmse_growth <= 10.0:
+            raise BenchError(f"--albedo-rmse-growth {args.albedo_rmse_growth}: expected 0 to 10")
+        opts["albedo_rmse_growth"] = args.albedo_rmse_growth
     merged = _merge_rows(args, mats)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -499,6 +520,11 @@ def _run(args) -> int:
         print(f"{m}: table {_f(r.get('table', {}).get('rel_rmse'))}  2-D {_f(r.get('fit2d', {}).get('rel_rmse'))}  "
               f"3-D {f3['rel_rmse']:.3f} ({f3['coefficients']} coef., bound {100 * f3['bound']:.0f} %, "
               f"{f3['fit_s']:.1f} s)  neural {_f(r.get('neural', {}).get('rel_rmse'))}", flush=True)
+        if "fit3d_before_albedo" in r:
+            b = r["fit3d_before_albedo"]
+            print(f"  before the albedo policy: 3-D {b['rel_rmse']:.3f}, albedo err "
+                  + " / ".join(f"{100 * a:.1f} %" for a in b["albedo_err"]) + "; after: "
+                  + " / ".join(f"{100 * a:.1f} %" for a in f3["albedo_err"]), flush=True)
         rows.append(r)
     meta = {"pairs": args.pairs, "seed": args.seed, "fit3d_options": _jsonable(opts),
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "wall_s": time.perf_counter() - t0}

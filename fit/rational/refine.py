@@ -93,7 +93,7 @@ def _least_distance(G, h, time_limit):
 
 def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, reweight=None,
            q_min: float = 1e-4, bernstein_split: int = 2, max_rounds: int = 12, qp_time: float = 5.0,
-           certify_depth: int = 12, margin: float = 1e-5):
+           certify_depth: int = 12, margin: float = 1e-5, sums=None):
     """The weighted-least-squares function inside ``[lo, hi]`` (module docstring).
 
     ``f0``: first-stage function (its exponents and domain are kept; Q > 0 on the box);
@@ -102,7 +102,13 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
     ``w`` ``(M,)`` weights; ``reweight(R(V), t) -> w`` (optional) between iterations.
     ``iterations``: Sanathanan-Koerner iterations; ``max_rounds``: constraint-generation rounds
     per iteration; ``qp_time``: seconds of the HiGHS fallback per QP; ``margin``: see the module
-    docstring. Returns ``(function, info)``: ``function`` None when the stage fails
+    docstring. ``sums`` (optional): squared **sums** of residuals added to the objective (e.g. a
+    directional albedo, :mod:`fit.rational.albedo3d`), ``(W, t2, groups, slope)``: points ``W``
+    ``(K, n_vars)`` with targets ``t2`` ``(K,)``, ``groups`` a list of ``(idx, coef, const,
+    weight)`` each adding ``weight * (sum_j coef_j slope_j (P(W_j) - t2_j Q(W_j)) / Q_prev(W_j)
+    + const)^2`` (linearised ``sum_j coef_j (value_j - target_j) + const``; ``weight`` in the
+    units of ``w``), ``slope(R, t2)`` the value's slope per unit of ``R`` (a secant), taken at the
+    previous iterate. Returns ``(function, info)``: ``function`` None when the stage fails
     (``info["reason"]``; the caller keeps ``f0``)."""
     U, V = np.asarray(U, np.float64), np.asarray(V, np.float64)
     lo, hi, t, w = (np.asarray(a, np.float64).reshape(-1) for a in (lo, hi, t, w))
@@ -110,18 +116,40 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
         return None, {"reason": "no objective point with a positive weight"}
     try:
         return _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds, qp_time,
-                       certify_depth, margin)
+                       certify_depth, margin, sums)
     except np.linalg.LinAlgError as e:
         return None, {"reason": f"linear algebra: {e}"}
 
 
+def _sum_rows(sums, z, npv, fixed, Wp, Wq, scale):
+    """The rows of the objective's squared sums (``sums`` of :func:`refine`) at coefficients ``z``
+    (slopes and ``Q_prev`` from ``z``), each times ``sqrt(weight * scale)``; None when a
+    ``Q_prev`` is not positive."""
+    _, t2, groups, slope = sums
+    qp = Wq @ z[npv:]
+    if np.any(qp <= 0):
+        return None
+    sl = slope((Wp @ z[:npv]) / qp, t2)
+    rows = []
+    for idx, coef, const, weight in groups:
+        idx = np.asarray(idx, np.intp)
+        cj = (np.asarray(coef, np.float64) * sl[idx] / qp[idx])[:, None]
+        row = np.concatenate([np.sum(cj * Wp[idx], axis=0), -np.sum(cj * t2[idx, None] * Wq[idx], axis=0)])
+        row[fixed] += float(const)
+        rows.append(np.sqrt(max(float(weight), 0.0) * scale) * row)
+    return np.array(rows).reshape(len(rows), len(z))
+
+
 def _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds, qp_time,
-            certify_depth, margin):
+            certify_depth, margin, sums=None):
     Ep, Eq, dom = f0.num_exponents, f0.den_exponents, f0.domain
     npv, nqv = len(Ep), len(Eq)
     k0 = int(np.flatnonzero(np.all(Eq == 0, axis=1))[0])
     Bp, Bq = chebyshev_basis(U, Ep, dom), chebyshev_basis(U, Eq, dom)
     Vp, Vq = chebyshev_basis(V, Ep, dom), chebyshev_basis(V, Eq, dom)
+    if sums is not None:
+        sums = (np.asarray(sums[0], np.float64), np.asarray(sums[1], np.float64).reshape(-1)) + tuple(sums[2:])
+        Wp, Wq = chebyshev_basis(sums[0], Ep, dom), chebyshev_basis(sums[0], Eq, dom)
     M = subdivision_matrix(Eq, bernstein_split)               # Bernstein coefficients of Q (rows, nqv)
     qrows = np.hstack([np.zeros((len(M), npv)), M])
     width = np.maximum(hi - lo, 1e-300)
@@ -141,8 +169,14 @@ def _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split
     for it in range(max(int(iterations), 1)):
         if np.any(q_prev <= 0):
             return None, dict(info, reason="Q_prev not positive at an objective point")
-        wn = np.maximum(w, 0.0) / max(float(np.mean(np.maximum(w, 0.0))), 1e-300)   # scale-free objective
+        wscale = 1.0 / max(float(np.mean(np.maximum(w, 0.0))), 1e-300)
+        wn = np.maximum(w, 0.0) * wscale                                           # scale-free objective
         A = np.hstack([Vp, -t[:, None] * Vq]) * (np.sqrt(wn) / q_prev)[:, None]
+        if sums is not None:
+            S = _sum_rows(sums, z, npv, fixed, Wp, Wq, wscale)
+            if S is None:
+                return None, dict(info, reason="Q_prev not positive at a point of a sum")
+            A = np.vstack([A, S])
         # whiten: |A z|^2 = |R z_f + c|^2 + const with z_f the free coefficients (q_0 = 1 fixed),
         # y = R z_f + c; a ridge of 1e-10 of the mean squared column norm keeps R invertible
         lam = 1e-10 * float(np.sum(A[:, free] ** 2)) / len(free)
