@@ -174,11 +174,17 @@ def table_evaluator(brdf):
 
 
 def load_2d(stem: str, fits_dir: Path):
-    """The 2-D 5 % fit of ``stem`` in ``fits_dir`` or None."""
+    """The 2-D 5 % fit of ``stem``: ``fits_dir``'s cached ``rbrdf-fit brdf`` file, else a file
+    of that tolerance shipped in ``warp_rbrdf/data/`` (the studies' order,
+    :mod:`studies.fits`), else None."""
     from fit.rational.coefficient_file import load
+    from studies.fits import shipped_model
 
     p = Path(fits_dir) / f"{stem}_tol0p05_cli.json"
-    return load(p) if p.is_file() else None
+    if p.is_file():
+        return load(p)
+    shipped = shipped_model(stem, 0.05)
+    return shipped[0] if shipped is not None else None
 
 
 def fit_3d(brdf, out_dir: Path | None, options: dict):

@@ -57,6 +57,23 @@ def _tag(tol: float) -> str:
     return f"{tol:g}".replace(".", "p")
 
 
+def shipped_model(stem: str, tol: float):
+    """``(model, path)`` of a coefficient file shipped in ``warp_rbrdf/data/`` for the material
+    file stem ``stem`` (e.g. ``paper_white_rgb``) whose ``fit.tolerance`` equals ``tol``, or
+    None."""
+    from fit.rational.coefficient_file import load
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    for p in sorted(PACKAGE_DATA.glob(f"{stem}*.json")) if PACKAGE_DATA.is_dir() else []:
+        try:
+            m = load(p)
+        except Exception:  # noqa: BLE001
+            continue
+        if abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12:
+            return m, p
+    return None
+
+
 def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, allow_direct: bool = False,
                    fit_dir: Path | None = None, fit_options: dict | None = None,
                    direct_stride: int = 3, direct_max_degree: int = 8, allow_infeasible: bool = False):
@@ -87,15 +104,10 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
                 return None, dict(info, source=None, file=str(p),
                                   error=f"cached fit {p.name} is flagged: its core misses the tolerance")
             return m, dict(info, source=f"{src} (cached)", file=str(p), fit_seconds=m.fit_info.get("time_s"))
-    from warp_rbrdf.paths import PACKAGE_DATA
-
-    for p in sorted(PACKAGE_DATA.glob(f"{stem}*.json")) if PACKAGE_DATA.is_dir() else []:
-        try:
-            m = load(p)
-        except Exception:  # noqa: BLE001
-            continue
-        if abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12:
-            return m, dict(info, source="shipped", file=str(p), fit_seconds=m.fit_info.get("time_s"))
+    shipped = shipped_model(stem, tol)
+    if shipped is not None:
+        m, p = shipped
+        return m, dict(info, source="shipped", file=str(p), fit_seconds=m.fit_info.get("time_s"))
     errors = []
     if allow_fit:
         ok, why = brdf_fit_available()

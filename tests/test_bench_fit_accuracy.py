@@ -69,3 +69,19 @@ def test_merge_keeps_earlier_rows(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--merge" in err and "--pairs 400" in err
     assert not (c / "results.json").exists()
+
+
+def test_load_2d_takes_the_cached_fit_else_the_shipped_one(tmp_path):
+    """The 2-D column: the cached ``rbrdf-fit brdf`` file where there is one, else the 5 % fit
+    shipped in warp_rbrdf/data (paper_white has one), else nothing."""
+    from fit.rational.coefficient_file import load, save
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    shipped = B.load_2d("paper_white_rgb", tmp_path)           # empty cache: the shipped fit
+    assert shipped is not None
+    assert shipped.fit_info["tolerance"] == 0.05
+    m = load(PACKAGE_DATA / "paper_white_rgb.json")
+    m.name = "cached copy"
+    save(m, tmp_path / "paper_white_rgb_tol0p05_cli.json")
+    assert B.load_2d("paper_white_rgb", tmp_path).name == "cached copy"
+    assert B.load_2d("no_such_material_rgb", tmp_path) is None
