@@ -1045,8 +1045,9 @@ def env_sample_uv(env: EnvMap, xi: wp.vec2):
 @wp.func
 def env_sample(env: EnvMap, xi: wp.vec2) -> wp.vec4:
     """Importance-sample a world direction from uniforms ``xi`` in [0, 1)^2 (``xi[0]`` drives v,
-    ``xi[1]`` u); returns (dx, dy, dz, pdf), pdf in 1/sr and equal to ``env_pdf`` of the returned
-    direction; pdf = 0 if impossible. :func:`env_sample_uv` without the map coordinates."""
+    ``xi[1]`` u); returns (dx, dy, dz, pdf), pdf in 1/sr: the density at the sampled point, equal to
+    ``env_pdf`` of the returned direction up to the float32 rounding of the direction (see
+    :func:`env_sample_uv`); pdf = 0 if impossible. :func:`env_sample_uv` without the map coordinates."""
     s, _uv = env_sample_uv(env, xi)
     return s
 
