@@ -2,7 +2,7 @@
 Warp functions it inlines (issue 21, "profile where the time goes").
 
     python -m benchmarks.profile_render [--material cc_ibiza_sunset_rgb] [--envmap rooitou_park_1k]
-                                        [--spp 256] [--resolution 128] [--json FILE]
+                                        [--spp 256] [--resolution 128] [--json FILE] [--lines]
 
 How: the reference sphere scene of :mod:`warp_rbrdf.mitsuba_reference` (the scene of
 ``benchmarks/bench_vs_mitsuba.py``) is rendered on one thread under Linux ``perf record``. Its
@@ -20,7 +20,9 @@ start-up and the kernel's compilation are left out) per Warp function, *inclusiv
 inside the function and everything inlined into it) and *exclusive* (the innermost Warp
 function), the share per component (tracing, environment sampling, environment lookups, BSDF
 sampling, BSDF evaluation, sample generation), and the libm functions the kernel calls
-(``atan2f``, ``sincosf``, ...; not inlined, so not in the kernel's own samples).
+(``atan2f``, ``sincosf``, ...; not inlined, so not in the kernel's own samples). With ``--lines``
+also per Warp source statement: each sample's innermost line of the generated C++, named by
+the comment Warp's code generator writes above each statement (``// a = mats.rgl_f[i]  <L 87>``).
 
 Needs ``perf`` (with access to user-space samples: ``kernel.perf_event_paranoid`` <= 2),
 ``objdump`` and ``addr2line`` (binutils); without them it says so in one line and exits 2.
@@ -122,6 +124,44 @@ def parse_addr2line(text: str) -> dict[int, list[str]]:
     return out
 
 
+def innermost_cpp_lines(text: str) -> dict[int, int]:
+    """``addr2line -a -f -i`` output -> {offset: line of the generated ``.cpp``}: the first
+    ``.cpp`` file:line of each address's inline chain (the innermost line of the kernel's own
+    source; Warp's headers and unknown lines ``?`` are skipped)."""
+    out, cur = {}, None
+    for line in text.splitlines():
+        if line.startswith("0x"):
+            cur = int(line, 16)
+            continue
+        if cur is None or cur in out:
+            continue
+        m = re.match(r"^(.*\.cpp):(\d+)", line.strip())
+        if m:
+            out[cur] = int(m.group(2))
+    return out
+
+
+def warp_statement(cpp: list[str], line: int, reach: int = 60) -> str:
+    """The Warp source statement generated C++ line ``line`` (1-based) belongs to: the nearest
+    comment at or above it that Warp's code generator writes before each statement (``// x =
+    f(y)  <L 12>``), whitespace collapsed; ``"?"`` if none within ``reach`` lines."""
+    for j in range(min(line, len(cpp)) - 1, max(line - 1 - reach, -1), -1):
+        t = cpp[j].strip()
+        if t.startswith("//") and "<L " in t:
+            return " ".join(t[2:].split())
+    return "?"
+
+
+def attribute_lines(counts: dict[int, int], lines: dict[int, int], cpp: list[str]) -> collections.Counter:
+    """Samples per Warp source statement (:func:`warp_statement` of each sample's innermost
+    generated line)."""
+    out = collections.Counter()
+    for off, n in counts.items():
+        ln = lines.get(off)
+        out[warp_statement(cpp, ln) if ln else "?"] += n
+    return out
+
+
 def attribute(counts: dict[int, int], chains: dict[int, list[str]]):
     """``(inclusive, exclusive, components)`` Counters of samples: per Warp function name
     (inclusive: every function of a sample's inline chain; exclusive: the innermost), per
@@ -217,11 +257,16 @@ def profile(a) -> dict:
                    stdin_text="\n".join(hex(o) for o in inside))
         chains = parse_addr2line(a2l)
         inc, exc, comp = attribute(inside, chains)
+        by_line = collections.Counter()
+        if getattr(a, "lines", False):
+            cpps = sorted((tmp / "cache").rglob("*render_tile*.cpp"))
+            if cpps:
+                by_line = attribute_lines(inside, innermost_cpp_lines(a2l), cpps[-1].read_text().splitlines())
     return {"material": a.material, "envmap": a.envmap, "spp": a.spp, "resolution": a.resolution,
                 "samples": total, "kernel_samples": sum(inside.values()), "aligned_share": share,
                 "libm_samples": sum(libm.values()), "libm": dict(libm.most_common()),
                 "inclusive": dict(inc.most_common()), "exclusive": dict(exc.most_common()),
-                "components": dict(comp.most_common())}
+                "components": dict(comp.most_common()), "lines": dict(by_line.most_common())}
 
 
 def report(res: dict, top: int = 25) -> str:
@@ -242,6 +287,10 @@ def report(res: dict, top: int = 25) -> str:
     out += [f"  {pct(n)}  {name}" for name, n in list(res["exclusive"].items())[:top]]
     out += ["", "libm"]
     out += [f"  {pct(n)}  {name}" for name, n in list(res["libm"].items())[:10]]
+    if res.get("lines"):
+        out += ["", "Warp source statement (of each sample's innermost generated line; a load's wait shows "
+                "on the statement that uses it)"]
+        out += [f"  {pct(n)}  {name}" for name, n in list(res["lines"].items())[:top]]
     return "\n".join(out)
 
 
@@ -254,6 +303,8 @@ def main(argv=None) -> int:
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--frequency", type=int, default=4000, help="perf sampling frequency (Hz)")
     ap.add_argument("--json", default=None, help="also write the numbers to this file")
+    ap.add_argument("--lines", action="store_true",
+                    help="also attribute the samples to Warp source statements (the generated C++ line's comment)")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.spp < 1 or a.resolution < 8:

@@ -100,3 +100,31 @@ def test_missing_tool_is_one_line_exit_2(monkeypatch, capsys):
     assert PR.main(["--spp", "4"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "perf not found" in err[0]
+
+
+CPP = """// header
+    // a = mats.rgl_f[i]  <L 87>
+    var_1 = wp::address(var_2, var_i);
+    var_4 = wp::load(var_1);
+    // return a + w1 * (b - a)  <L 90>
+    var_11 = wp::sub(var_12, var_3);
+""".splitlines()
+
+
+def test_innermost_cpp_line_skips_headers_and_unknown_lines():
+    text = ("0x0000000000000004\nf\n/x/array.h:444\ng\n/x/k.cpp:?\nh\n/x/k.cpp:3\nk\n/x/k.cpp:99\n"
+            "0x0000000000000008\nf\n/x/k.cpp:6\n0x000000000000000c\nf\n/x/builtin.h:1\n")
+    assert PR.innermost_cpp_lines(text) == {4: 3, 8: 6}
+
+
+def test_samples_are_named_by_the_warp_statement_above_their_line():
+    assert PR.warp_statement(CPP, 3) == "a = mats.rgl_f[i] <L 87>"
+    assert PR.warp_statement(CPP, 4) == "a = mats.rgl_f[i] <L 87>"
+    assert PR.warp_statement(CPP, 6) == "return a + w1 * (b - a) <L 90>"
+    assert PR.warp_statement(CPP, 1) == "?"
+    by = PR.attribute_lines({4: 5, 8: 2, 12: 1}, {4: 3, 8: 6}, CPP)
+    assert by == {"a = mats.rgl_f[i] <L 87>": 5, "return a + w1 * (b - a) <L 90>": 2, "?": 1}
+    res = {"material": "m", "envmap": "e", "resolution": 8, "spp": 1, "samples": 10, "kernel_samples": 8,
+           "aligned_share": 1.0, "libm_samples": 0, "libm": {}, "inclusive": {}, "exclusive": {},
+           "components": {}, "lines": dict(by.most_common())}
+    assert "62.5 %  a = mats.rgl_f[i] <L 87>" in PR.report(res)
