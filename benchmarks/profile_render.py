@@ -288,8 +288,8 @@ def report(res: dict, top: int = 25) -> str:
     out += ["", "libm"]
     out += [f"  {pct(n)}  {name}" for name, n in list(res["libm"].items())[:10]]
     if res.get("lines"):
-        out += ["", "Warp source statement (of each sample's innermost generated line; a load's wait shows "
-                "on the statement that uses it)"]
+        out += ["", ("Warp source statement (of each sample's innermost generated line; a load's wait shows "
+                     "on the statement that uses it)")]
         out += [f"  {pct(n)}  {name}" for name, n in list(res["lines"].items())[:top]]
     return "\n".join(out)
 
