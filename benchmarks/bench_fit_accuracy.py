@@ -85,14 +85,10 @@ class BenchError(Exception):
 def cosine_pairs(n: int, seed: int = 0):
     """``(wi, wo)``: ``n`` pairs of independent cosine-distributed unit directions ``(n, 3)``
     (float64, local frame, z = normal)."""
+    from fit.formats.angles import cosine_directions
+
     rng = np.random.default_rng(seed)
-
-    def dirs():
-        u, v = rng.random(n), rng.random(n)
-        r, p = np.sqrt(u), 2 * np.pi * v
-        return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - u, 0))], -1)
-
-    return dirs(), dirs()
+    return cosine_directions(rng, n), cosine_directions(rng, n)
 
 
 def relative_rmse(fit_rho, true_rho, wi, wo) -> np.ndarray:

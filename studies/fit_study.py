@@ -53,14 +53,10 @@ DOCS = dict(name="fit", title="Fit study: coefficients vs tolerance vs ΔE2000 v
 
 def random_pairs(n: int, seed: int = 0):
     """``n`` pairs of cosine-distributed local directions (upper hemisphere)."""
+    from fit.formats.angles import cosine_directions
+
     rng = np.random.default_rng(seed)
-
-    def cos_dirs():
-        u, v = rng.random(n), rng.random(n)
-        r, p = np.sqrt(u), 2 * np.pi * v
-        return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - u, 0))], -1).astype(np.float32)
-
-    return cos_dirs(), cos_dirs()
+    return (cosine_directions(rng, n).astype(np.float32), cosine_directions(rng, n).astype(np.float32))
 
 
 def eval_ns(renderer, wi, wo, reps: int = 5) -> float:

@@ -26,6 +26,14 @@ HALF_PI = 0.5 * np.pi
 _EPS = 1e-12
 
 
+def cosine_directions(rng: np.random.Generator, n: int) -> np.ndarray:
+    """``(n, 3)`` unit directions distributed as cos(theta) over the upper hemisphere (z = normal,
+    float64), from two draws of ``rng``: ``u`` then ``v``, ``r = sqrt(u)``, ``phi = 2 pi v``."""
+    u, v = rng.random(n), rng.random(n)
+    r, p = np.sqrt(u), 2 * np.pi * v
+    return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - u, 0))], -1)
+
+
 def _normalize(v: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, _EPS)

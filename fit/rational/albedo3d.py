@@ -72,6 +72,8 @@ import time
 
 import numpy as np
 
+from ..formats.angles import cosine_directions
+
 ANGLES_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0)
 DEFAULT_ALBEDO_TOL = 0.05
 DEFAULT_VIEWS = 9216
@@ -89,12 +91,6 @@ RULE = ("directional albedo sum_j w_j rho(wi, wo_j) on a fixed half-vector quadr
         "outside is listed in 'outside'")
 
 
-def _cos_dirs(rng, n):
-    u, p = rng.random(n), 2 * np.pi * rng.random(n)
-    r = np.sqrt(u)
-    return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - u, 0.0))], -1)
-
-
 def albedo_angles(theta_measured_deg=None, angles=ANGLES_DEG) -> list:
     """The angles (degrees) the albedo is measured at: ``angles`` and the last measured incidence
     when it lies beyond the largest of them (by more than 0.5 deg)."""
@@ -106,10 +102,7 @@ def albedo_angles(theta_measured_deg=None, angles=ANGLES_DEG) -> list:
 
 def cosine_views(n: int, seed: int = 0) -> np.ndarray:
     """``(n, 3)`` seeded cosine-distributed unit directions (z = normal)."""
-    rng = np.random.default_rng(seed)
-    u, p = rng.random(n), 2 * np.pi * rng.random(n)
-    r = np.sqrt(u)
-    return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - u, 0.0))], -1)
+    return cosine_directions(np.random.default_rng(seed), n)
 
 
 def albedo_quadrature(angles_deg, n: int = DEFAULT_VIEWS) -> tuple:
@@ -171,6 +164,13 @@ def albedo_errors(fit_eval, truth_eval, angles_deg=ANGLES_DEG, n: int = DEFAULT_
 
 def _pieces(model) -> list:
     return list(model.pieces) if hasattr(model, "pieces") else [model]
+
+
+def _channel_values(piece, f, U, offset: float) -> np.ndarray:
+    """rho (1/sr) of one channel function ``f`` of a log-value ``piece`` at its RF inputs ``U``
+    (``piece.rf_inputs``): ``exp(f(U)) - offset`` clamped to ``[0, value_max]``."""
+    vmax = piece.value_max if piece.value_max is not None else np.inf
+    return np.clip(np.exp(f(U)) - offset, 0.0, vmax)
 
 
 def _piece_of(model, X) -> np.ndarray:
@@ -238,22 +238,17 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
         # more than rmse_growth is put back (a refit can spike between its data points: one of
         # cc_iris_purple_gem went from 0.071 to 70.7 on the benchmark's pairs without it)
         rng = np.random.default_rng(12345)
-        vi, vo = _cos_dirs(rng, n_check), _cos_dirs(rng, n_check)
+        vi, vo = cosine_directions(rng, n_check), cosine_directions(rng, n_check)
         cc = (vi[:, 2] * vo[:, 2])[:, None]
         tv = np.maximum(np.asarray(brdf.evaluate(vi, vo), np.float64), 0.0) * cc
         Xv = half_diff_3d(vi, vo)
-
         kv = _piece_of(model, Xv)
-        Uv = np.stack([np.sqrt(Xv[:, 0]), Xv[:, 1], Xv[:, 2]], axis=1)
+        Uv = [p.rf_inputs(Xv[kv == k]) for k, p in enumerate(pieces)]
 
         def channel_rmse(c):
             f = np.zeros(len(Xv))
             for k, p in enumerate(pieces):
-                sel = kv == k
-                lo_r = [v.rf_domain[0] for v in p.variables]
-                hi_r = [v.rf_domain[1] for v in p.variables]
-                vmax = p.value_max if p.value_max is not None else np.inf
-                f[sel] = np.clip(np.exp(p.functions[c](np.clip(Uv[sel], lo_r, hi_r))) - offset, 0.0, vmax)
+                f[kv == k] = _channel_values(p, p.functions[c], Uv[k], offset)
             e = f * cc[:, 0] - tv[:, c]
             return float(np.sqrt(np.mean(e ** 2)) / max(float(np.sqrt(np.mean(tv[:, c] ** 2))), 1e-300))
 
@@ -302,9 +297,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     to = np.log(yo + offset)
                     w0 = wobj[so] * (yo + offset) ** 2
                     main = float(np.sum(w0))          # the piece's relative squared metric's denominator
-                    lo_b, hi_b = piece.variables[0].domain
-                    W = np.stack([np.sqrt(np.clip(Xa[ina, 0], lo_b, hi_b)), Xa[ina, 1], Xa[ina, 2]], axis=1)
-                    W = np.clip(W, [v.rf_domain[0] for v in piece.variables], [v.rf_domain[1] for v in piece.variables])
+                    W = piece.rf_inputs(Xa[ina])
                     t2 = np.log(rt[ina, c] + offset)
                     groups = []
                     angle_of, qj = ina // nv, qw.reshape(-1)[ina]
@@ -329,12 +322,9 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     # 39,455 /sr against 2.7 in its peak piece without this check)
                     ck = np.flatnonzero(kc == k)
                     if len(ck):
-                        Uc = np.stack([np.sqrt(np.clip(Xc[ck, 0], lo_b, hi_b)), Xc[ck, 1], Xc[ck, 2]], axis=1)
-                        Uc = np.clip(Uc, [v.rf_domain[0] for v in piece.variables],
-                                     [v.rf_domain[1] for v in piece.variables])
-                        vmax = piece.value_max if piece.value_max is not None else np.inf
-                        old_v = np.clip(np.exp(orig[(k, c)](Uc)) - offset, 0.0, vmax)
-                        new_v = np.clip(np.exp(f2(Uc)) - offset, 0.0, vmax)
+                        Uc = piece.rf_inputs(Xc[ck])
+                        old_v = _channel_values(piece, orig[(k, c)], Uc, offset)
+                        new_v = _channel_values(piece, f2, Uc, offset)
                         s_old = np.maximum(np.maximum(old_v, noise[c]), cfloor * oc[ck].max(axis=1)) * gc[ck]
                         jump = float(np.max(np.abs(new_v - old_v) / s_old))
                         if jump > spike_factor * T:
@@ -357,8 +347,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     upd["stage"] = stage
                     piece.functions[c] = f2
                     piece.function_info[c] = dict(piece.function_info[c], **upd)
-                    vmax = piece.value_max if piece.value_max is not None else np.inf
-                    rf[ina, c] = np.clip(np.exp(f2(W)) - offset, 0.0, vmax)
+                    rf[ina, c] = _channel_values(piece, f2, W, offset)
                     r0.update(upd)
                 new = relative_errors(albedo_from_values(rf, qw), at, floor_frac)
                 r_new = channel_rmse(c)

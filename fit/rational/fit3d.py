@@ -126,7 +126,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..formats.angles import cos_theta_i_o, half_diff_to_directions
+from ..formats.angles import cos_theta_i_o, cosine_directions, half_diff_to_directions
 from .fitter import IntervalRationalFitter
 from .model import PiecewiseRationalModel, RationalModel, Variable
 from .refine import refine
@@ -163,13 +163,7 @@ def sample_grid(theta_max: float, grid=DEFAULT_GRID, n_random: int = DEFAULT_RAN
     if n_random:
         u = rng.random((n_random, 3))
         parts.append(np.stack([theta_max * u[:, 0] ** 2, theta_max * u[:, 1], np.pi * u[:, 2]], axis=1))
-
-        def cos_dirs(n):
-            a, b = rng.random(n), rng.random(n)
-            r, p = np.sqrt(a), 2 * np.pi * b
-            return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - a, 0))], -1)
-
-        parts.append(half_diff_3d(cos_dirs(n_random), cos_dirs(n_random)))
+        parts.append(half_diff_3d(cosine_directions(rng, n_random), cosine_directions(rng, n_random)))
     X = np.concatenate(parts)
     wi, wo = half_diff_to_directions(X[:, 0], 0.0, X[:, 1], X[:, 2])
     cmin = np.cos(theta_max) - 1e-9
@@ -624,13 +618,7 @@ def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
     from .variables3d import evaluate_directions
 
     rng = np.random.default_rng(seed)
-
-    def dirs():
-        a, b = rng.random(n), rng.random(n)
-        r, p = np.sqrt(a), 2 * np.pi * b
-        return np.stack([r * np.cos(p), r * np.sin(p), np.sqrt(np.maximum(1 - a, 0))], -1)
-
-    wi, wo = dirs(), dirs()
+    wi, wo = cosine_directions(rng, n), cosine_directions(rng, n)
     c = (wi[:, 2] * wo[:, 2])[:, None]
     t = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0) * c
     f = evaluate_directions(model, wi, wo) * c
