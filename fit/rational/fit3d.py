@@ -537,19 +537,17 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time: float, verify: int,
                  rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH) -> None:
     """The albedo policy (:func:`fit.rational.albedo3d.albedo_policy`) on a fit of
     :func:`fit_rgl`; where it changed a function after the verification, the verification's
-    largest ratio is measured again on the last round's fresh points (no refit), so that
-    ``verify_max_ratio`` describes the fit that is returned (``verify_after_albedo``)."""
+    largest ratio is measured again on the last round's fresh points (no refit; the points and
+    their reference values as :func:`verify_and_refit` kept them), so that ``verify_max_ratio``
+    describes the fit that is returned (``verify_after_albedo``)."""
     import copy
 
     from .albedo3d import albedo_policy
 
     res.info["model_before_albedo"] = copy.deepcopy(res.model)
     rec = albedo_policy(brdf, res, tol=albedo_tol, time_limit=albedo_time, rmse_growth=rmse_growth)
-    if rec["refitted"] and verify and "verify_max_ratio" in res.info:
-        _, _, tm, _, _ = res.info["_refit"]
-        Xv = sample_grid(tm, (1, 1, 1), verify // 2, seed=1000 + int(res.info.get("verify_round", 0)))
-        wi, wo = half_diff_to_directions(Xv[:, 0], 0.0, Xv[:, 1], Xv[:, 2])
-        rv = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
+    if rec["refitted"] and verify and "_verify_last" in res.info:
+        Xv, rv = res.info["_verify_last"]
         ratio_max = float(verification_ratio(res, Xv, rv).max())
         res.model.fit_info.update(verify_max_ratio=ratio_max, verified=bool(ratio_max <= 1.0),
                                   verify_after_albedo=True)
@@ -570,6 +568,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
         ratio = verification_ratio(res, Xv, rv)
         ratio_max = float(ratio.max())
         res.info["verify_round"] = rnd
+        res.info["_verify_last"] = (Xv, rv)    # the fresh points the returned fit was checked at
         bad = np.flatnonzero(ratio > 1.0)
         left = limit - (time.perf_counter() - t0)
         if len(bad) == 0 or rnd == verify_rounds or left < res.time_s:
@@ -678,6 +677,7 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_sha
     best.model.fit_info.update(time_s=best.time_s, variant=best.info["variant"], variants=log,
                                validation_rmse=best.info["validation_rmse"])
     best.info.pop("_refit", None)
+    best.info.pop("_verify_last", None)
     return best
 
 
