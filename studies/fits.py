@@ -2,8 +2,11 @@
 
 Order of preference (the first that works):
 
-1. ``results/fits/<material>_tol<t>_cli.json`` made earlier by this module;
-2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t``;
+1. ``results/fits/<material>_tol<t>_cli.json`` made earlier by this module with the same
+   interval options (:func:`made_with`; one made with others is fitted again and replaced);
+2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t`` and
+   whose interval options are the requested ones (the shipped satin_rosaline fit keeps
+   ``band_intervals="tol+spread"``, so the studies fit it again);
 3. the project's fitter, called in this process: :func:`fit.rational.brdf_fit.fit_brdf` on the
    measured file with the options ``rbrdf-fit brdf`` passes by default (:data:`FIT_OPTIONS`),
    saved with :func:`fit.rational.coefficient_file.save`: the same fit and file as
@@ -39,7 +42,7 @@ FIT_DIR = C.ROOT / "results" / "fits"
 #: The options ``rbrdf-fit brdf`` passes to :func:`fit.rational.brdf_fit.fit_brdf` by default
 #: (``fit/cli/brdf.py``: --intervals, --core-theta-d, --band-intervals, --theta-h, --value,
 #: --max-degree, --max-den-degree, --floor-frac), as fit_brdf's keyword arguments.
-FIT_OPTIONS = dict(intervals="tol", core_theta_d_deg="auto", band_intervals="tol+spread",
+FIT_OPTIONS = dict(intervals="tol", core_theta_d_deg="auto", band_intervals="tol",
                    theta_h_transform="sqrt", value_transform="log", max_degree=12, max_den_degree=6,
                    floor_frac=1.0)
 
@@ -57,10 +60,30 @@ def _tag(tol: float) -> str:
     return f"{tol:g}".replace(".", "p")
 
 
-def shipped_model(stem: str, tol: float):
+#: The options a coefficient file records in its ``fit`` block (``fit.rational.brdf_model``)
+#: that must equal the requested ones for a cached or shipped file to stand for a new fit.
+RECORDED_OPTIONS = ("intervals", "band_intervals")
+
+
+def made_with(model, options: dict | None = None) -> bool:
+    """Whether ``model``'s recorded fit options (:data:`RECORDED_OPTIONS`; a file that records
+    none of them passes) are those of :data:`FIT_OPTIONS` updated with ``options``. A fit made
+    with other intervals (e.g. a ``band_intervals="tol+spread"`` band, the default before the
+    fidelity study) is a different fit and is not reused for this one. A one-function fit
+    (version 1) records ``band_intervals`` None: it has no band, so that option cannot differ."""
+    want = dict(FIT_OPTIONS, **(options or {}))
+    fi = getattr(model, "fit_info", None) or {}
+    for k in RECORDED_OPTIONS:
+        if fi.get(k) is not None and k in want and fi[k] != want[k]:
+            return False
+    return True
+
+
+def shipped_model(stem: str, tol: float, options: dict | None = None, any_options: bool = True):
     """``(model, path)`` of a coefficient file shipped in ``warp_rbrdf/data/`` for the material
-    file stem ``stem`` (e.g. ``paper_white_rgb``) whose ``fit.tolerance`` equals ``tol``, or
-    None."""
+    file stem ``stem`` (e.g. ``paper_white_rgb``) whose ``fit.tolerance`` equals ``tol`` (and,
+    unless ``any_options``, that was made with :data:`FIT_OPTIONS` updated with ``options``,
+    :func:`made_with`), or None."""
     from fit.rational.coefficient_file import load
     from warp_rbrdf.paths import PACKAGE_DATA
 
@@ -69,7 +92,7 @@ def shipped_model(stem: str, tol: float):
             m = load(p)
         except Exception:  # noqa: BLE001
             continue
-        if abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12:
+        if abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12 and (any_options or made_with(m, options)):
             return m, p
     return None
 
@@ -100,11 +123,13 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
         p = fit_dir / name
         if p.exists() and (src == "cli" or allow_direct):
             m = load(p)
+            if src == "cli" and not made_with(m, fit_options):
+                continue          # made with other options: fitted again below (and replaced)
             if src == "cli" and not allow_infeasible and not model_summary(m)["core_guaranteed"]:
                 return None, dict(info, source=None, file=str(p),
                                   error=f"cached fit {p.name} is flagged: its core misses the tolerance")
             return m, dict(info, source=f"{src} (cached)", file=str(p), fit_seconds=m.fit_info.get("time_s"))
-    shipped = shipped_model(stem, tol)
+    shipped = shipped_model(stem, tol, fit_options, any_options=False)
     if shipped is not None:
         m, p = shipped
         return m, dict(info, source="shipped", file=str(p), fit_seconds=m.fit_info.get("time_s"))

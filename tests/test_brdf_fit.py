@@ -60,7 +60,7 @@ def test_model_policy_and_file(lobe_fit, tmp_path):
     assert d["domain_policy"]["outside"] == "clamp" and d["fit"]["tolerance"] == 0.05
     assert d["version"] == 2 and d["split"]["edges"][1] == pytest.approx(np.deg2rad(60.0))
     assert d["domain_policy"]["guaranteed_theta_d_max_deg"] == 60.0
-    assert [p["info"]["intervals"] for p in d["pieces"]] == ["tol", "tol+spread"]
+    assert [p["info"]["intervals"] for p in d["pieces"]] == ["tol", "tol"]       # the band: pure tolerance too
     assert all(p["info"]["guaranteed"] for p in d["pieces"])
 
 

@@ -464,6 +464,7 @@ def test_rational_model_caches_a_new_fit_and_refuses_a_flagged_one(tmp_path, mon
     from warp_rbrdf.paths import PACKAGE_DATA
 
     m = load(sorted(PACKAGE_DATA.glob("paper_white*.json"))[0])
+    m.fit_info["band_intervals"] = F.FIT_OPTIONS["band_intervals"]     # as a new fit records it
     outcome = {"valid": False}
     calls = []
 
@@ -488,6 +489,44 @@ def test_rational_model_caches_a_new_fit_and_refuses_a_flagged_one(tmp_path, mon
     assert (tmp_path / "b" / "paper_white_rgb_tol0p3_cli.json").is_file()
 
 
+def test_rational_model_does_not_reuse_a_fit_made_with_other_intervals(tmp_path, monkeypatch):
+    """A cached or shipped file made with other interval options (the shipped satin_rosaline fit's
+    band is ``tol+spread``, the default before the fidelity study) does not stand for a fit with
+    today's options: it is fitted again, and the cache file replaced."""
+    from fit.rational.coefficient_file import load, save
+    from studies import fits as F
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    shipped = load(PACKAGE_DATA / "satin_rosaline_rgb.json")
+    assert shipped.fit_info["band_intervals"] == "tol+spread" != F.FIT_OPTIONS["band_intervals"] == "tol"
+    assert not F.made_with(shipped) and F.made_with(shipped, {"band_intervals": "tol+spread"})
+    assert F.shipped_model("satin_rosaline_rgb", 0.05) is not None                  # the benchmarks' fallback
+    assert F.shipped_model("satin_rosaline_rgb", 0.05, any_options=False) is None
+    new = load(PACKAGE_DATA / "paper_white_rgb.json")
+    new.fit_info["band_intervals"] = "tol"
+    calls = []
+
+    def fake_fit(material, tol, **options):
+        calls.append(options)
+        return _brdf_fit([_piece((0.0, 60.0), True), _piece((60.0, 78.5), False)], seconds=1.5, model=new)
+
+    monkeypatch.setattr(F, "fit_material", fake_fit)
+    # nothing cached: the shipped tol+spread file is not taken, a new fit is made
+    got, info = F.rational_model("satin", 0.05, fit_dir=tmp_path)
+    assert got is new and info["source"] == "cli" and len(calls) == 1
+    # a cached tol+spread file is fitted again and replaced; then the new file is reused
+    save(shipped, tmp_path / "satin_rosaline_rgb_tol0p05_cli.json")
+    got, info = F.rational_model("satin", 0.05, fit_dir=tmp_path)
+    assert info["source"] == "cli" and len(calls) == 2
+    assert load(tmp_path / "satin_rosaline_rgb_tol0p05_cli.json").fit_info["band_intervals"] == "tol"
+    got, info = F.rational_model("satin", 0.05, fit_dir=tmp_path)
+    assert info["source"] == "cli (cached)" and len(calls) == 2
+    # asked for with its own options, the cached old-style file is what it is
+    save(shipped, tmp_path / "satin_rosaline_rgb_tol0p05_cli.json")
+    got, info = F.rational_model("satin", 0.05, fit_dir=tmp_path, fit_options={"band_intervals": "tol+spread"})
+    assert info["source"] == "cli (cached)" and len(calls) == 2
+
+
 def test_model_summary_core_guarantee_follows_the_fitters_record(tmp_path):
     """``core_guaranteed`` comes from the coefficient file's per-channel ``valid`` (the core), so a
     fit whose band alone failed is "core", and one whose core failed is not."""
@@ -498,6 +537,7 @@ def test_model_summary_core_guarantee_follows_the_fitters_record(tmp_path):
     from warp_rbrdf.paths import PACKAGE_DATA
 
     m = load(sorted(PACKAGE_DATA.glob("paper_white*.json"))[0])
+    m.fit_info["band_intervals"] = F.FIT_OPTIONS["band_intervals"]
     s = F.model_summary(m)
     assert s["feasible_all"] and s["core_guaranteed"]
     bad = copy.deepcopy(m)

@@ -359,3 +359,34 @@ def test_real_rgl_fit_with_a_tiny_degree_limit(tmp_path, monkeypatch):
     th, _, td, _ = directions_to_half_diff(wi, wo)
     band = (td > np.radians(60.0) + 1e-5) & (np.cos(th) * np.cos(td) > np.cos(np.radians(79.0)) * (1 + 1e-4))
     np.testing.assert_allclose(got[band], fit.model.evaluate(wi[band], wo[band]), rtol=2e-4, atol=1e-6)
+
+
+def _rough_band(wi, wo):
+    """A glossy lobe whose grazing band (theta_d > 62 deg) varies by +-40 % over phi_d and
+    whose phi_d median jitters by +-15 % from cluster to cluster: the band is inside
+    ``tol+spread`` intervals (the spread covers the jitter) but no smooth function is within 5 %
+    of its medians."""
+    v = np.array(glossy_lobe(exponent=10.0, kd=(0.3, 0.25, 0.2), ks=(0.3, 0.3, 0.3))(wi, wo), float)
+    th, _, td, pd = directions_to_half_diff(wi, wo)
+    band = td > np.radians(62.0)
+    f = 1.0 + 0.4 * np.cos(2.0 * pd) + 0.15 * np.sin(40.0 * th) * np.sin(40.0 * td)
+    return v * np.where(band, f, 1.0)[..., None]
+
+
+def test_default_band_intervals_flag_a_band_vouched_only_by_its_spread(tmp_path):
+    """The band's default intervals are the pure tolerance (``band_intervals="tol"``): a band
+    that only ``tol+spread`` intervals call valid is flagged (and shown with the projected table
+    by the renderer, tested above); with ``tol+spread`` asked for explicitly it is valid, as it
+    was by default before (the fidelity study's cc_ibiza_sunset: 130 rim pixels above the
+    reference's range with the old default, 12 with the new)."""
+    write_merl(MeasuredBRDF.from_function(_rough_band, name="rough"), tmp_path / "rough.binary")
+    brdf = read_merl(tmp_path / "rough.binary")
+    new = fit_brdf(brdf, tol=0.05, max_degree=4, max_den_degree=2, core_theta_d_deg=60.0)
+    old = fit_brdf(brdf, tol=0.05, max_degree=4, max_den_degree=2, core_theta_d_deg=60.0,
+                   band_intervals="tol+spread")
+    assert new.valid and old.valid                              # the core is guaranteed either way
+    assert old.all_valid                                        # the spread vouches for the band ...
+    assert not new.all_valid                                    # ... the tolerance does not
+    assert new.model.fit_info["band_intervals"] == "tol"
+    assert flagged_regions(new.model) and not flagged_regions(old.model)
+    assert describe_regions(new.model).startswith("theta_d > 60 deg")

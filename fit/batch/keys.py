@@ -33,7 +33,7 @@ class BrdfOptions:
     tol: float = 0.05
     intervals: str = "tol"
     core_theta_d_deg: object = "auto"      # "auto" or degrees
-    band_intervals: str = "tol+spread"
+    band_intervals: str = "tol"
     theta_h_transform: str = "sqrt"
     value_transform: str = "log"
     floor_frac: float = 1.0

@@ -106,7 +106,7 @@ def register(sub) -> None:
     g.add_argument("--intervals", choices=INTERVALS, default="tol")
     g.add_argument("--core-theta-d", dest="core_theta_d", default="auto", metavar="DEG|auto",
                    type=core_angle(MIN_CORE_THETA_D_DEG, THETA_D_MAX_DEG))
-    g.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default="tol+spread")
+    g.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default="tol")
     g.add_argument("--theta-h", dest="theta_h", choices=("sqrt", "identity"), default="sqrt")
     g.add_argument("--value", choices=("log", "linear"), default="log")
     g.add_argument("--floor-frac", dest="floor_frac", type=number(0.0, MAX_FLOOR_FRAC), default=1.0)

@@ -99,8 +99,11 @@ def register(subparsers) -> None:
                    help="theta_d (deg) up to which the tolerance is guaranteed; the grazing band above "
                         "it, up to 78.5 deg, gets its own functions; in [5, 78.5]. 'auto' (default): the "
                         "largest of 60, 50, 40 that every channel meets; 78.5: one function per channel")
-    p.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default="tol+spread",
-                   help="interval policy of the grazing band (default tol+spread)")
+    p.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default="tol",
+                   help="interval policy of the grazing band: 'tol' (default), the core's pure tolerance, "
+                        "flagged where not met (the renderer then shows the projected table there); "
+                        "'tol+spread' also widens to the cluster's phi_d spread (met more often, vouches "
+                        "for less)")
     p.add_argument("--theta-h", dest="theta_h", choices=("sqrt", "identity"), default="sqrt",
                    help="input transform of theta_h (default sqrt)")
     p.add_argument("--value", choices=("log", "linear"), default="log", help="value transform (default log)")
