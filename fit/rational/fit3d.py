@@ -561,7 +561,7 @@ def verification_ratio(res, X, rho, per_channel: bool = False) -> np.ndarray:
 
 def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
             theta_fit_deg: float = DEFAULT_THETA_FIT_DEG, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2,
-            n_objective: int = DEFAULT_OBJECTIVE, albedo: bool = True, albedo_tol: float = DEFAULT_ALBEDO_TOL,
+            verify_above: float = 1.0, n_objective: int = DEFAULT_OBJECTIVE, albedo: bool = True, albedo_tol: float = DEFAULT_ALBEDO_TOL,
             albedo_time=DEFAULT_ALBEDO_TIME, albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
             albedo_refits: int = DEFAULT_ALBEDO_REFITS, **options) -> Fit3D:
     """:func:`fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by :func:`sample_rgl`
@@ -599,7 +599,7 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
         options["objective"] = (Xo, ro, wo)
     res = fit_samples(X, rho, theta_max=tm, source=src, ceiling=ceiling, **options)
     res.info["_refit"] = (X, rho, tm, src, options)
-    res = verify_and_refit(brdf, res, verify, verify_rounds, ceiling=ceiling)
+    res = verify_and_refit(brdf, res, verify, verify_rounds, ceiling=ceiling, refit_above=verify_above)
     if albedo:
         _albedo_step(brdf, res, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
                      refits=albedo_refits)
@@ -635,11 +635,12 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time, verify: int,
 
 
 def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, time_limit=None,
-                     ceiling=None, refit_all: bool = False):
+                     ceiling=None, refit_all: bool = False, refit_above: float = 1.0):
     """The verification of :func:`fit_rgl` on a fit made by it (its data in ``res.info``):
     returns the fit after at most ``verify_rounds`` refits (the budget: a count). A refit adds
-    the worst (at most 2,000) fresh points outside the stated bound to the data and fits again
-    only the functions (piece, channel) that are outside their bound at one of them (the others
+    the worst (at most 2,000) fresh points more than ``refit_above`` times outside the stated
+    bound (1: any; 4: spikes only) to the data and fits again only the functions (piece,
+    channel) that are so far outside their bound at one of them (the others
     are kept, their records measured again on the enlarged data; ``refit_all``: every function),
     with the noise levels of the first fit; ``fit_info["verify_refitted"]`` lists them per round.
     ``time_limit`` (s; None: none) or a caller's ``ceiling`` (:class:`Ceiling`) is only the
@@ -658,7 +659,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
         ratio_max = float(ratio.max())
         res.info["verify_round"] = rnd
         res.info["_verify_last"] = (Xv, rv)    # the fresh points the returned fit was checked at
-        bad = np.flatnonzero(ratio > 1.0)
+        bad = np.flatnonzero(ratio > refit_above)
         if len(bad) == 0 or rnd == verify_rounds or ceiling.out("verification"):
             break
         worst = bad[np.argsort(-ratio[bad])[:2000]]
@@ -670,7 +671,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
         for k in range(len(edges) - 1):
             inside = (Xv[worst, 0] >= edges[k] - 1e-12) & (Xv[worst, 0] <= edges[k + 1] + 1e-12)
             for c in range(3):
-                if refit_all or np.any(ratio_c[worst[inside], c] > 1.0):
+                if refit_all or np.any(ratio_c[worst[inside], c] > refit_above):
                     redo.add((k, c))
         keep = {(r["piece"], "RGB".index(r["channel"])): (None, r) for r in res.records}
         for (k, c), (_, r) in keep.items():
@@ -684,7 +685,8 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
         res.model.fit_info.update(verify_points=int(verify // 2 * 2), verify_max_ratio=ratio_max,
                                   verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
         res.info.update(verify_max_ratio=ratio_max, verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
-    res.model.fit_info.update(verify_rounds=int(verify_rounds), verify_refitted=refitted)
+    res.model.fit_info.update(verify_rounds=int(verify_rounds), verify_refit_above=float(refit_above),
+                              verify_refitted=refitted)
     ceiling.record(res.model.fit_info)
     res.info["verify_s"] = time.perf_counter() - t0
     return res
@@ -705,7 +707,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
 #: cc_iris_purple_gem, cm_toxic_green, chm_mint) do not try it.
 VARIANTS = (
     {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
-    {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.065},
+    {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.065, "verify_rounds": 1, "verify_above": 4.0},
 )
 #: A later layout replaces the one chosen so far only when its validation RMSE is lower by this
 #: fraction: vch_golden_yellow's one piece (0.0439 against 0.0441) was chosen without it, and
@@ -753,6 +755,7 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
         v = dict(v)
         below = v.pop("if_rmse_below", None)
         rounds = v.pop("verify_rounds", verify_rounds)
+        above = v.pop("verify_above", 1.0)
         opts = dict(common, **v)
         if max_variants is not None and k >= int(max_variants):
             log.append({"variant": k, "options": _plain(opts), "skipped": "budget"})
@@ -772,10 +775,12 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
             best.info["validation_rmse"] = v_rmse
             best.info["variant"] = k
             best.info["verify_rounds_budget"] = int(rounds)
+            best.info["verify_above"] = float(above)
     if best is None:
         raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
     chosen = best.info
-    best = verify_and_refit(brdf, best, verify, chosen["verify_rounds_budget"], ceiling=ceiling)
+    best = verify_and_refit(brdf, best, verify, chosen["verify_rounds_budget"], ceiling=ceiling,
+                            refit_above=chosen["verify_above"])
     for key in ("validation_rmse", "variant"):
         best.info[key] = chosen[key]
     best.info["validation_rmse"] = validation_rmse(brdf, best.model)
