@@ -81,6 +81,7 @@ def test_same_inputs_give_identical_coefficients(normal):
     again = select()
     assert np.array_equal(coefficients(again), coefficients(normal))
     assert again.model.fit_info["verify_points_added"] > 0, "no verification refit: the test does not reach it"
+    assert again.valid and again.model.fit_info["valid"]      # kept functions are within the bound they met
     assert again.model.fit_info["stopped"] is None
     assert again.info["albedo"]["refitted"], "the albedo policy corrected nothing: the test does not reach it"
 

@@ -79,8 +79,9 @@ within ``rho +- tol_c s`` and Q > 0 is certified on each piece's box (exact Bern
 coefficients); the record says so (``valid``, ``tolerance``, ``intervals``, ``stage``). The bound
 holds at the data points; between them the fit is bounded by its ``vouched_range`` (step 7 of the
 file's recipe), checked at 40,000 fresh points by :func:`fit_rgl` (violators join the data and
-the fit is made again: constraint generation over the sampled domain; ``fit_info.verified``,
-``verify_max_ratio`` say how far that got within the time) and measured by
+the functions outside their bound there are fitted again: constraint generation over the sampled
+domain; ``fit_info.verified``, ``verify_max_ratio`` say how far that got within the refit budget)
+and measured by
 ``benchmarks/bench_fit_accuracy.py``. :func:`fit_rgl_select` fits a few layouts
 (:data:`VARIANTS`) and keeps the one with the lowest relative RMSE on validation pairs.
 
@@ -98,8 +99,9 @@ relative albedo errors of every angle added to its objective (weights on a ladde
 intervals unchanged: the stated bound does not grow, Q > 0 certified again), kept only where
 the channel's largest albedo error drops, no refitted function moves more than 4 T from its
 pre-policy self at 200,000 fresh points (a spike guard) and the channel's relative RMSE on
-100,000 check pairs grows by at most ``albedo_rmse_growth`` (10 %), within ``albedo_time``
-seconds (15 s; it took 0.1-8 s on the six materials of the issue). Measured there (benchmark,
+100,000 check pairs grows by at most ``albedo_rmse_growth`` (10 %), with at most
+``albedo_refits`` (27) channel corrections (the ladder's 9 weights for three channels; 0.1-17
+s on the 20 RGL materials, see "Budgets"). Measured (before the budgets; benchmark,
 largest albedo error over angles and channels on the policy's quadrature, before -> after):
 paper_white, colodur_napoli_4f, satin_rosaline within 5 % untouched (0.5 / 2.9 / 2.6 %);
 cc_ibiza_sunset 14.5 -> 7.4 % (relative RMSE 0.0700 -> 0.0710), vch_golden_yellow 40.0 ->
@@ -115,8 +117,52 @@ Pieces
 ``theta_h_edges`` splits the box along ``theta_h`` (a specular-peak piece, its shoulder and the
 rest, where one function cannot follow the lobe); each piece is fitted to its own points (points
 on an edge go to both sides) and the file is a piecewise model whose variables are the 3-D ones.
-``time_limit`` is shared by the whole fit: a channel out of its share takes larger tolerance
-steps.
+
+Budgets
+=======
+No rule of a fit reads the clock: every loop stops on a count, so the same inputs give the same
+coefficients, bit for bit, whatever the machine's load (``tests/test_fit3d_budget.py``: a clock
+that jumps 10 s at every reading changes nothing). Before, the loops stopped on wall-clock
+seconds: vch_golden_yellow's fresh-point ratio was 11.03 on a quiet machine and 9.17 under load,
+and a material took 60.2 s under load. The budgets:
+
+* the tolerance ladder (:func:`_fit_channel`): after ``ladder_steps`` (12,
+  :data:`DEFAULT_LADDER_STEPS`) infeasible tolerances the step is squared at every further one
+  (a channel would have to fail 0.01 ... 0.01 x 1.6^11 = 1.8 first); a one-stage fit always takes
+  its bisection step; the interval LP's constraint generation makes at most 40 rounds;
+* the second stage (:func:`fit.rational.refine.refine`): 3 Sanathanan-Koerner iterations of at
+  most 12 constraint-generation rounds, NNLS at most ``20 n`` iterations, the HiGHS QP fallback at
+  most ``qp_iterations`` (20,000);
+* the layouts (:func:`fit_rgl_select`): every layout of :data:`VARIANTS` (``max_variants``: all),
+  the one-piece one only below its validation RMSE (``if_rmse_below``);
+* the verification (:func:`verify_and_refit`): ``verify_rounds`` refits (2), each adding the
+  worst fresh points outside the bound and refitting only the functions (piece, channel) outside
+  it there, with the first fit's noise levels. The one-piece (7, 3) layout's own entry: one
+  refit, only for spikes (fresh points more than 4 times outside the bound, ``verify_above``):
+  its refit of three channels costs 20-26 s (the four pieces' 1-5 s), and without any,
+  acrylic_felt_purple was 10.7 times outside at a fresh point (1.53 after one refit of its red
+  and blue, 14 s; the other nine one-piece fits stay below 4 and are not refitted);
+* the albedo policy (:mod:`fit.rational.albedo3d`): the 9 weights of its ladder, at most
+  ``albedo_refits`` (27, :data:`DEFAULT_ALBEDO_REFITS`) channel corrections.
+
+``time_limit`` (default :data:`DEFAULT_TIME_LIMIT` = 120 s for a whole :func:`fit_rgl` or
+:func:`fit_rgl_select`, :func:`fit_samples` and :func:`verify_and_refit` alike) is only a
+last-resort safety net (:class:`Ceiling`), never reached in normal runs: once it is passed the
+ladder squares its steps and no layout (past ``select_share`` of it), refit or albedo round is
+started; ``fit_info["stopped"] = "time"`` and ``stopped_at`` (where) record it (``stopped`` is
+None otherwise). ``albedo_time`` (default None) adds a ceiling of the albedo step's own.
+
+Measured with these budgets (``benchmarks/bench_fit_accuracy.py`` defaults, i.e.
+:func:`fit_rgl_select` with ``tol=0.01``; the 20 RGL materials one at a time, one thread, on
+this 2-core machine with the other core busy, 2026-11-24): 12.7-42.2 s per material, layout
+selection, verification and albedo policy included (acrylic_felt_purple 42.2 s with its spike
+refit, ilm_solo_m_68 41.1 s, vch_golden_yellow 39.8 s; the other diffuse materials, both
+layouts fitted, 24-33 s); two runs of all 20 gave the same coefficients, bit for bit, and times
+up to 5 s apart. Before: 15-60 s under load, 51-60 s for the diffuse materials (their one-piece
+fit refitted once in full when the clock allowed). Relative RMSE on the six materials of the
+issue: paper_white 0.0098, colodur_napoli_4f 0.0196, satin_rosaline 0.0555, cc_ibiza_sunset
+0.0710, cc_iris_purple_gem 0.0775, vch_golden_yellow 0.0427 (before: 0.0099, 0.0197, 0.0555,
+0.0710, 0.0774, 0.0427; docs/fit_accuracy.md has all 20).
 """
 from __future__ import annotations
 
@@ -460,8 +506,9 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
     (module docstring); without it (or ``relax <= 1``) the fit is the minimax one. ``noise``:
     the noise levels (default :func:`noise_levels` of ``rho``); ``keep`` (a refit of
     :func:`verify_and_refit`, with the earlier fit's ``noise``): ``{(piece, channel): (function,
-    record)}`` of functions kept as they are (their records measured again on this data), the
-    others fitted with their tolerance ladder started one step below the earlier record's
+    record)}`` of functions kept as they are (their records measured again on this data; one that
+    is no longer within the tolerance it met, or not certified, is fitted again), the others
+    fitted with their tolerance ladder started one step below the earlier record's
     ``minimax_met``."""
     t0 = time.perf_counter()
     if ceiling is None:
@@ -495,9 +542,12 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
             if objective is not None:
                 obj = (Uo, np.maximum(ro[so, c], 0.0), wo[so])
             start = min(r["stage"].get("minimax_met", r["tolerance_met"]) for r in infos) / 1.6 if infos else None
+            f = None
             if (k, c) in keep and keep[(k, c)][0] is not None:
                 f, rec = _kept_channel(*keep[(k, c)], U, rho[sel, c], scale, offset)
-            else:
+                if not rec["valid"]:        # outside the tolerance it met at a new point: fitted again
+                    f = None
+            if f is None:
                 if (k, c) in keep:      # refitted: its ladder starts one step below the tolerance it met before
                     old = keep[(k, c)][1]
                     start = old["stage"].get("minimax_met", old["tolerance_met"]) / 1.6
@@ -640,7 +690,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
     returns the fit after at most ``verify_rounds`` refits (the budget: a count). A refit adds
     the worst (at most 2,000) fresh points more than ``refit_above`` times outside the stated
     bound (1: any; 4: spikes only) to the data and fits again only the functions (piece,
-    channel) that are so far outside their bound at one of them (the others
+    channel) that are outside their bound at one of them (the others
     are kept, their records measured again on the enlarged data; ``refit_all``: every function),
     with the noise levels of the first fit; ``fit_info["verify_refitted"]`` lists them per round.
     ``time_limit`` (s; None: none) or a caller's ``ceiling`` (:class:`Ceiling`) is only the
@@ -671,7 +721,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
         for k in range(len(edges) - 1):
             inside = (Xv[worst, 0] >= edges[k] - 1e-12) & (Xv[worst, 0] <= edges[k + 1] + 1e-12)
             for c in range(3):
-                if refit_all or np.any(ratio_c[worst[inside], c] > refit_above):
+                if refit_all or np.any(ratio_c[worst[inside], c] > 1.0):
                     redo.add((k, c))
         keep = {(r["piece"], "RGB".index(r["channel"])): (None, r) for r in res.records}
         for (k, c), (_, r) in keep.items():
@@ -698,7 +748,9 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
 #: one piece of degrees (7, 3) (420: the diffuse materials, whose error is spread over the whole
 #: domain; paper_white 0.0098 against 0.020 with the four pieces, both two-stage, 50,000 pairs).
 #: ``"if_rmse_below"`` (not a fit_rgl argument): the layout is tried only when the best validation
-#: RMSE so far is below it, which leaves the glossiest materials the time for the verification.
+#: RMSE so far is below it, which spares the glossiest materials a 20-26 s fit they would not
+#: keep. ``"verify_rounds"``, ``"verify_above"``: the layout's own verification budget when it is
+#: chosen (module docstring, "Budgets": one refit, for spikes only).
 #: Measured (validation RMSE of the four pieces -> relative RMSE, four pieces / one piece): it won
 #: on 6 of the 7 materials below 0.04 (paper_white 0.0196 -> 0.0097; vch_ultra_pink 0.0317 ->
 #: 0.0327 kept the four pieces) and on ilm_l3_37_matte (0.062: 0.050 / 0.040) and
