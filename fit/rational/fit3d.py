@@ -79,8 +79,9 @@ within ``rho +- tol_c s`` and Q > 0 is certified on each piece's box (exact Bern
 coefficients); the record says so (``valid``, ``tolerance``, ``intervals``, ``stage``). The bound
 holds at the data points; between them the fit is bounded by its ``vouched_range`` (step 7 of the
 file's recipe), checked at 40,000 fresh points by :func:`fit_rgl` (violators join the data and
-the fit is made again: constraint generation over the sampled domain; ``fit_info.verified``,
-``verify_max_ratio`` say how far that got within the time) and measured by
+the functions outside their bound there are fitted again: constraint generation over the sampled
+domain; ``fit_info.verified``, ``verify_max_ratio`` say how far that got within the refit budget)
+and measured by
 ``benchmarks/bench_fit_accuracy.py``. :func:`fit_rgl_select` fits a few layouts
 (:data:`VARIANTS`) and keeps the one with the lowest relative RMSE on validation pairs.
 
@@ -98,8 +99,9 @@ relative albedo errors of every angle added to its objective (weights on a ladde
 intervals unchanged: the stated bound does not grow, Q > 0 certified again), kept only where
 the channel's largest albedo error drops, no refitted function moves more than 4 T from its
 pre-policy self at 200,000 fresh points (a spike guard) and the channel's relative RMSE on
-100,000 check pairs grows by at most ``albedo_rmse_growth`` (10 %), within ``albedo_time``
-seconds (15 s; it took 0.1-8 s on the six materials of the issue). Measured there (benchmark,
+100,000 check pairs grows by at most ``albedo_rmse_growth`` (10 %), with at most
+``albedo_refits`` (27) channel corrections (the ladder's 9 weights for three channels; 0.1-17
+s on the 20 RGL materials, see "Budgets"). Measured (before the budgets; benchmark,
 largest albedo error over angles and channels on the policy's quadrature, before -> after):
 paper_white, colodur_napoli_4f, satin_rosaline within 5 % untouched (0.5 / 2.9 / 2.6 %);
 cc_ibiza_sunset 14.5 -> 7.4 % (relative RMSE 0.0700 -> 0.0710), vch_golden_yellow 40.0 ->
@@ -115,8 +117,52 @@ Pieces
 ``theta_h_edges`` splits the box along ``theta_h`` (a specular-peak piece, its shoulder and the
 rest, where one function cannot follow the lobe); each piece is fitted to its own points (points
 on an edge go to both sides) and the file is a piecewise model whose variables are the 3-D ones.
-``time_limit`` is shared by the whole fit: a channel out of its share takes larger tolerance
-steps.
+
+Budgets
+=======
+No rule of a fit reads the clock: every loop stops on a count, so the same inputs give the same
+coefficients, bit for bit, whatever the machine's load (``tests/test_fit3d_budget.py``: a clock
+that jumps 10 s at every reading changes nothing). Before, the loops stopped on wall-clock
+seconds: vch_golden_yellow's fresh-point ratio was 11.03 on a quiet machine and 9.17 under load,
+and a material took 60.2 s under load. The budgets:
+
+* the tolerance ladder (:func:`_fit_channel`): after ``ladder_steps`` (12,
+  :data:`DEFAULT_LADDER_STEPS`) infeasible tolerances the step is squared at every further one
+  (a channel would have to fail 0.01 ... 0.01 x 1.6^11 = 1.8 first); a one-stage fit always takes
+  its bisection step; the interval LP's constraint generation makes at most 40 rounds;
+* the second stage (:func:`fit.rational.refine.refine`): 3 Sanathanan-Koerner iterations of at
+  most 12 constraint-generation rounds, NNLS at most ``20 n`` iterations, the HiGHS QP fallback at
+  most ``qp_iterations`` (20,000);
+* the layouts (:func:`fit_rgl_select`): every layout of :data:`VARIANTS` (``max_variants``: all),
+  the one-piece one only below its validation RMSE (``if_rmse_below``);
+* the verification (:func:`verify_and_refit`): ``verify_rounds`` refits (2), each adding the
+  worst fresh points outside the bound and refitting only the functions (piece, channel) outside
+  it there, with the first fit's noise levels. The one-piece (7, 3) layout's own entry: one
+  refit, only for spikes (fresh points more than 4 times outside the bound, ``verify_above``):
+  its refit of three channels costs 20-26 s (the four pieces' 1-5 s), and without any,
+  acrylic_felt_purple was 10.7 times outside at a fresh point (1.53 after one refit of its red
+  and blue, 14 s; the other nine one-piece fits stay below 4 and are not refitted);
+* the albedo policy (:mod:`fit.rational.albedo3d`): the 9 weights of its ladder, at most
+  ``albedo_refits`` (27, :data:`DEFAULT_ALBEDO_REFITS`) channel corrections.
+
+``time_limit`` (default :data:`DEFAULT_TIME_LIMIT` = 120 s for a whole :func:`fit_rgl` or
+:func:`fit_rgl_select`, :func:`fit_samples` and :func:`verify_and_refit` alike) is only a
+last-resort safety net (:class:`Ceiling`), never reached in normal runs: once it is passed the
+ladder squares its steps and no layout (past ``select_share`` of it), refit or albedo round is
+started; ``fit_info["stopped"] = "time"`` and ``stopped_at`` (where) record it (``stopped`` is
+None otherwise). ``albedo_time`` (default None) adds a ceiling of the albedo step's own.
+
+Measured with these budgets (``benchmarks/bench_fit_accuracy.py`` defaults, i.e.
+:func:`fit_rgl_select` with ``tol=0.01``; the 20 RGL materials one at a time, one thread, on
+this 2-core machine with the other core busy, 2026-11-24): 12.7-42.2 s per material, layout
+selection, verification and albedo policy included (acrylic_felt_purple 42.2 s with its spike
+refit, ilm_solo_m_68 41.1 s, vch_golden_yellow 39.8 s; the other diffuse materials, both
+layouts fitted, 24-33 s); two runs of all 20 gave the same coefficients, bit for bit, and times
+up to 5 s apart. Before: 15-60 s under load, 51-60 s for the diffuse materials (their one-piece
+fit refitted once in full when the clock allowed). Relative RMSE on the six materials of the
+issue: paper_white 0.0098, colodur_napoli_4f 0.0196, satin_rosaline 0.0555, cc_ibiza_sunset
+0.0710, cc_iris_purple_gem 0.0775, vch_golden_yellow 0.0427 (before: 0.0099, 0.0197, 0.0555,
+0.0710, 0.0774, 0.0427; docs/fit_accuracy.md has all 20).
 """
 from __future__ import annotations
 
@@ -145,7 +191,10 @@ DEFAULT_RANDOM = 8000             # random points of each of the two kinds
 DEFAULT_RELAX = 2.0               # second stage: intervals at this multiple of the smallest tolerance met
 DEFAULT_OBJECTIVE = 4000          # objective points of the second stage per theta_h piece
 DEFAULT_ALBEDO_TOL = 0.05         # directional-albedo tolerance of the policy (fit.rational.albedo3d)
-DEFAULT_ALBEDO_TIME = 15.0        # seconds the albedo correction may take at most
+DEFAULT_ALBEDO_TIME = None        # the albedo step's own wall-clock safety net (s); None: the fit's (time_limit)
+DEFAULT_ALBEDO_REFITS = 27        # channel corrections the albedo policy may try (9 weights x 3 channels)
+DEFAULT_TIME_LIMIT = 120.0        # wall-clock safety net of a whole fit (s): never reached in normal runs
+DEFAULT_LADDER_STEPS = 12         # infeasible tolerances at step 1.6 before the ladder squares its step
 DEFAULT_ALBEDO_RMSE_GROWTH = 0.10  # the albedo correction may raise a channel's relative RMSE by this fraction
 
 
@@ -271,6 +320,32 @@ def _variables(box) -> list:
             Variable("phi_d", "rad", "identity", (p0, p1))]
 
 
+class Ceiling:
+    """The last-resort wall-clock safety net of a fit (``time_limit`` seconds from its creation;
+    None: none). No rule of the fit reads the clock otherwise: every loop stops on a count
+    (module docstring, "Budgets"). :meth:`out` answers whether the ceiling is passed and, when it
+    is, remembers where it was noticed (``hits``; the fit records ``stopped = "time"`` and
+    ``stopped_at``)."""
+
+    def __init__(self, time_limit=DEFAULT_TIME_LIMIT):
+        self.time_limit = None if time_limit is None else float(time_limit)
+        self.t0 = time.perf_counter()
+        self.hits: list = []
+
+    def out(self, where: str, share: float = 1.0) -> bool:
+        if self.time_limit is None or time.perf_counter() - self.t0 <= share * self.time_limit:
+            return False
+        if where not in self.hits:
+            self.hits.append(where)
+        return True
+
+    def record(self, fit_info: dict) -> None:
+        fit_info["time_limit"] = self.time_limit
+        fit_info["stopped"] = "time" if self.hits else None
+        if self.hits:
+            fit_info["stopped_at"] = list(self.hits)
+
+
 class _TolFitter(IntervalRationalFitter):
     """The interval fitter at fixed degrees, answering one question per tolerance: is there a
     fit within these intervals (constraint generation, fast rejection on a subset), and if so
@@ -312,16 +387,19 @@ def _secant_weights(base):
     return reweight
 
 
-def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6, max_tol=64.0,
-                 objective=None, relax=1.0, start=None):
+def _fit_channel(U, y, scale, offset, domain, tol, degrees, ladder_steps=DEFAULT_LADDER_STEPS, step=1.6,
+                 max_tol=64.0, objective=None, relax=1.0, start=None, ceiling=None):
     """One channel of one piece: ``(RationalFunction, record)``; ``U`` transformed inputs, ``y``
     the values, ``scale`` the per-point error unit (``max(rho, noise) * g``, module docstring).
 
     Tolerances ``start, start * step, ...`` (``start`` >= ``tol``, default ``tol``; e.g. a step
     below another channel's result) are tried until one is met (the LP is exact only for
     feasibility: a least-violation LP solution can hide large errors where Q is small); when the
-    first is met and above ``tol``, one step down is tried. One-stage fits (no ``objective``)
-    then take one geometric bisection step if time is left. Two-stage fits solve the second
+    first is met and above ``tol``, one step down is tried. After ``ladder_steps`` infeasible
+    tolerances (a count: the same ladder on any machine) the step is squared at every further
+    one (larger steps to any feasible level; also when the fit's safety :class:`Ceiling` is
+    passed). One-stage fits (no ``objective``) then take one geometric bisection step (not when
+    the ceiling is passed). Two-stage fits solve the second
     stage (:func:`fit.rational.refine.refine`) within ``relax`` times the tolerance met. The
     stated tolerance is the error measured at every point afterwards (at most the tolerance met,
     times ``relax`` for a two-stage fit)."""
@@ -330,6 +408,7 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6
     tried, res, t_ok, t_bad = [], None, None, None
     two_stage = objective is not None and relax > 1.0
     t = max(float(tol), float(start or tol))
+    n_bad = 0
     while t <= max_tol:
         r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
         tried.append([t, r is not None])
@@ -337,9 +416,10 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6
             res, t_ok = r, t
             break
         t_bad = t
+        n_bad += 1
         t *= step
-        if time.perf_counter() - t0 > time_limit and t_bad is not None:
-            step = step * step      # out of time: larger steps to any feasible level
+        if n_bad >= ladder_steps or (ceiling is not None and ceiling.out("tolerance ladder")):
+            step = step * step      # out of budget: larger steps to any feasible level
     if res is None:
         raise RuntimeError(f"no fit within {max_tol:g} x the error unit at degrees {degrees}")
     if t_bad is None and t_ok > tol * (1 + 1e-9):      # started above tol and met at once: one step down
@@ -350,7 +430,7 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6
             res, t_ok = r, t
         else:
             t_bad = t
-    if not two_stage and t_bad is not None and time.perf_counter() - t0 < 0.6 * time_limit:
+    if not two_stage and t_bad is not None and not (ceiling is not None and ceiling.out("bisection")):
         t = float(np.sqrt(t_ok * t_bad))
         r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
         tried.append([t, r is not None])
@@ -392,22 +472,52 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, time_limit, step=1.6
     return f, rec
 
 
+def _kept_channel(f, old, U, y, scale, offset):
+    """A function kept by a refit (:func:`fit_samples`'s ``keep``) and its record measured again on
+    the refit's data (stated tolerance, errors, ranges; valid where Q > 0 was certified and every
+    point is within the tolerance it met)."""
+    fit = np.maximum(np.exp(f(U)) - offset, 0.0)
+    err = np.abs(fit - y) / scale
+    stated = float(np.max(err))
+    t_ok = float(old["tolerance_met"])
+    rec = dict(old, tolerance=stated, max_rel_error=stated, rms_rel_error=float(np.sqrt(np.mean(err ** 2))),
+               n_points=len(y), time_s=0.0, kept=True,
+               valid=bool(old["q_certificate"]["certified"] and stated <= t_ok * (1 + 1e-9)),
+               measured_range=[float(y.min()), float(y.max())],
+               vouched_range=[float(np.maximum(y - stated * scale, 0.0).min()), float((y + stated * scale).max())])
+    for key in ("piece", "channel", "noise"):
+        rec.pop(key, None)
+    return f, rec
+
+
 def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFAULT_DEGREES,
                 theta_h_edges=None, piece_degrees=None, noise_frac=DEFAULT_NOISE_FRAC,
-                grazing_cos=DEFAULT_GRAZING_COS, channel_floor=DEFAULT_CHANNEL_FLOOR, time_limit=60.0,
-                source=None, objective=None, relax=DEFAULT_RELAX) -> Fit3D:
+                grazing_cos=DEFAULT_GRAZING_COS, channel_floor=DEFAULT_CHANNEL_FLOOR, time_limit=DEFAULT_TIME_LIMIT,
+                source=None, objective=None, relax=DEFAULT_RELAX, ladder_steps=DEFAULT_LADDER_STEPS,
+                ceiling=None, noise=None, keep=None) -> Fit3D:
     """3-D fit of data ``X`` ``(N, 3)`` (theta_h, theta_d, |phi_d|, radians) with values ``rho``
     ``(N, 3)`` (1/sr): pieces along theta_h at ``theta_h_edges`` (inner edges), each channel a
     rational function of total degrees ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol``
-    (module docstring: the stated bound is what is met). ``time_limit`` (s) is shared by the
-    whole fit. ``objective`` = ``(Xo (M, 3), rho_o (M, 3), w (M,))`` (:func:`objective_points`
+    (module docstring: the stated bound is what is met). ``ladder_steps``: the tolerance ladder's
+    budget (:func:`_fit_channel`). ``time_limit`` (s): the wall-clock safety net only (a
+    :class:`Ceiling`; ``ceiling`` shares one with a caller), recorded as ``stopped`` in
+    ``fit_info`` when it is passed. ``objective`` = ``(Xo (M, 3), rho_o (M, 3), w (M,))`` (:func:`objective_points`
     and the values there) turns on the second stage within ``relax`` times the tolerance met
-    (module docstring); without it (or ``relax <= 1``) the fit is the minimax one."""
+    (module docstring); without it (or ``relax <= 1``) the fit is the minimax one. ``noise``:
+    the noise levels (default :func:`noise_levels` of ``rho``); ``keep`` (a refit of
+    :func:`verify_and_refit`, with the earlier fit's ``noise``): ``{(piece, channel): (function,
+    record)}`` of functions kept as they are (their records measured again on this data; one that
+    is no longer within the tolerance it met, or not certified, is fitted again), the others
+    fitted with their tolerance ladder started one step below the earlier record's
+    ``minimax_met``."""
     t0 = time.perf_counter()
+    if ceiling is None:
+        ceiling = Ceiling(time_limit)
     X = np.asarray(X, np.float64)
     rho = np.maximum(np.asarray(rho, np.float64), 0.0)
     tm = float(theta_max if theta_max is not None else max(X[:, 0].max(), X[:, 1].max()))
-    noise = noise_levels(rho, noise_frac)
+    noise = noise_levels(rho, noise_frac) if noise is None else np.asarray(noise, np.float64)
+    keep = keep or {}
     g = grazing_weight(X, grazing_cos)
     offset = float(noise.min())
     edges = [0.0] + sorted(float(e) for e in (theta_h_edges or [])) + [tm]
@@ -428,14 +538,21 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
             Uo = np.stack([np.sqrt(Xo[so, 0]), Xo[so, 1], Xo[so, 2]], axis=1)
         funcs, infos = [], []
         for c in range(3):
-            left = max(time_limit - (time.perf_counter() - t0), 1.0)
-            share = left / ((n_pieces - k) * 3 - c)
             scale = np.maximum(np.maximum(rho[sel, c], noise[c]), channel_floor * rho[sel].max(axis=1)) * g[sel]
             if objective is not None:
                 obj = (Uo, np.maximum(ro[so, c], 0.0), wo[so])
             start = min(r["stage"].get("minimax_met", r["tolerance_met"]) for r in infos) / 1.6 if infos else None
-            f, rec = _fit_channel(U, rho[sel, c], scale, offset, domain, tol, deg, share, objective=obj,
-                                  relax=relax, start=start)
+            f = None
+            if (k, c) in keep and keep[(k, c)][0] is not None:
+                f, rec = _kept_channel(*keep[(k, c)], U, rho[sel, c], scale, offset)
+                if not rec["valid"]:        # outside the tolerance it met at a new point: fitted again
+                    f = None
+            if f is None:
+                if (k, c) in keep:      # refitted: its ladder starts one step below the tolerance it met before
+                    old = keep[(k, c)][1]
+                    start = old["stage"].get("minimax_met", old["tolerance_met"]) / 1.6
+                f, rec = _fit_channel(U, rho[sel, c], scale, offset, domain, tol, deg, ladder_steps, objective=obj,
+                                      relax=relax, start=start, ceiling=ceiling)
             rec["noise"] = float(noise[c])
             funcs.append(f)
             infos.append(rec)
@@ -454,10 +571,11 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
                 "start_tolerance": tol, "noise": noise.tolist(), "noise_frac": noise_frac,
                 "theta_max_deg": float(np.degrees(tm)), "n_points": len(X), "time_s": elapsed,
                 "fitter": "fit.rational.fit3d (interval LP, constraint generation, fixed degrees)",
-                "theta_h_edges": edges[1:-1], "valid": valid,
+                "theta_h_edges": edges[1:-1], "valid": valid, "ladder_steps": int(ladder_steps),
                 "guarantee": "every data point (theta_i, theta_o <= theta_max: the whole measured domain and the "
                              "file's own extrapolation beyond its last incidence up to theta_max) "
                              f"within {INTERVALS}; Q > 0 certified on every piece"}
+    ceiling.record(fit_info)
     src = source or {"file": "", "sha256": ""}
     if n_pieces == 1:
         model = pieces[0]
@@ -470,11 +588,12 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
                  {"edges": edges})
 
 
-def verification_ratio(res, X, rho) -> np.ndarray:
+def verification_ratio(res, X, rho, per_channel: bool = False) -> np.ndarray:
     """Per point of ``X`` ``(N, 3)`` with values ``rho`` ``(N, 3)``: the largest over R, G, B of
     ``|fit - rho| / (s * tol_piece_channel)`` (``s`` the error unit of :func:`fit_samples` with the
     fit's noise levels and policies, ``tol`` the stated tolerance of the piece and channel that
-    evaluates the point); <= 1 where the fit is within its stated bound."""
+    evaluates the point); <= 1 where the fit is within its stated bound. ``per_channel``: the
+    ``(N, 3)`` ratios of R, G, B instead of their largest."""
     fi = res.model.fit_info
     noise = np.asarray(res.noise)
     g = grazing_weight(X, float(fi.get("grazing_cos", DEFAULT_GRAZING_COS)))
@@ -486,14 +605,15 @@ def verification_ratio(res, X, rho) -> np.ndarray:
     for r in res.records:
         tol[r["piece"], "RGB".index(r["channel"])] = r["tolerance"]
     err = np.abs(res.model(X) - rho) / s
-    return np.max(err / np.maximum(tol[k], 1e-12), axis=1)
+    ratio = err / np.maximum(tol[k], 1e-12)
+    return ratio if per_channel else np.max(ratio, axis=1)
 
 
 def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
             theta_fit_deg: float = DEFAULT_THETA_FIT_DEG, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2,
-            n_objective: int = DEFAULT_OBJECTIVE, albedo: bool = True, albedo_tol: float = DEFAULT_ALBEDO_TOL,
-            albedo_time: float = DEFAULT_ALBEDO_TIME, albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
-            **options) -> Fit3D:
+            verify_above: float = 1.0, n_objective: int = DEFAULT_OBJECTIVE, albedo: bool = True, albedo_tol: float = DEFAULT_ALBEDO_TOL,
+            albedo_time=DEFAULT_ALBEDO_TIME, albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
+            albedo_refits: int = DEFAULT_ALBEDO_REFITS, **options) -> Fit3D:
     """:func:`fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by :func:`sample_rgl`
     (the sampling time counts in ``time_s``), then **verified between the data points**: the fit
     is evaluated at ``verify`` fresh points (half uniform in the variables, half cosine-distributed
@@ -507,25 +627,33 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     stage (``relax`` in ``options``, default 2; ``n_objective=0`` or ``relax=1``: one stage).
     ``albedo`` (default on): the directional-albedo policy last (:func:`_albedo_step`,
     :mod:`fit.rational.albedo3d`: measured at 0-75 deg and the last incidence, corrected where
-    outside ``albedo_tol`` within ``albedo_time`` seconds at a cost of at most
+    outside ``albedo_tol`` with at most ``albedo_refits`` channel corrections at a cost of at most
     ``albedo_rmse_growth`` of a channel's relative RMSE, what stays outside recorded in
-    ``fit_info["albedo"]``)."""
+    ``fit_info["albedo"]``). Every step stops on a count (module docstring, "Budgets");
+    ``time_limit`` (in ``options``, default :data:`DEFAULT_TIME_LIMIT` = 120 s) is only the
+    wall-clock safety net of the whole fit (``albedo_time``: an extra one of the albedo step),
+    recorded as ``fit_info["stopped"] = "time"`` when it is passed."""
     t0 = time.perf_counter()
+    ceiling = options.pop("ceiling", None)
+    limit = options.pop("time_limit", DEFAULT_TIME_LIMIT)
+    if ceiling is None:
+        ceiling = Ceiling(limit)
     X, rho, tm = sample_rgl(brdf, grid, n_random, theta_fit_deg)
     src = {"file": str(getattr(brdf, "source", "") or ""), "sha256": str(getattr(brdf, "source_sha256", "") or "")}
     options.setdefault("name", f"{brdf.name}_3d")
-    limit = float(options.pop("time_limit", 60.0))
     if n_objective and options.get("relax", DEFAULT_RELAX) > 1.0:
         edges = [0.0] + sorted(float(e) for e in (options.get("theta_h_edges") or [])) + [tm]
         Xo, wo = objective_points(tm, edges, n_objective)
         wi, wo_dir = half_diff_to_directions(Xo[:, 0], 0.0, Xo[:, 1], Xo[:, 2])
         ro = np.maximum(np.asarray(brdf.evaluate(wi, wo_dir), np.float64), 0.0)
         options["objective"] = (Xo, ro, wo)
-    res = fit_samples(X, rho, theta_max=tm, source=src, time_limit=limit, **options)
+    res = fit_samples(X, rho, theta_max=tm, source=src, ceiling=ceiling, **options)
     res.info["_refit"] = (X, rho, tm, src, options)
-    res = verify_and_refit(brdf, res, verify, verify_rounds, limit - (time.perf_counter() - t0))
+    res = verify_and_refit(brdf, res, verify, verify_rounds, ceiling=ceiling, refit_above=verify_above)
     if albedo:
-        _albedo_step(brdf, res, albedo_tol, albedo_time, verify, albedo_rmse_growth)
+        _albedo_step(brdf, res, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
+                     refits=albedo_refits)
+    ceiling.record(res.model.fit_info)
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s
     res.model.fit_info["grid"] = list(grid)
@@ -533,8 +661,9 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     return res
 
 
-def _albedo_step(brdf, res, albedo_tol: float, albedo_time: float, verify: int,
-                 rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH) -> None:
+def _albedo_step(brdf, res, albedo_tol: float, albedo_time, verify: int,
+                 rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH, ceiling=None,
+                 refits: int = DEFAULT_ALBEDO_REFITS) -> None:
     """The albedo policy (:func:`fit.rational.albedo3d.albedo_policy`) on a fit of
     :func:`fit_rgl`; where it changed a function after the verification, the verification's
     largest ratio is measured again on the last round's fresh points (no refit; the points and
@@ -545,7 +674,8 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time: float, verify: int,
     from .albedo3d import albedo_policy
 
     res.info["model_before_albedo"] = copy.deepcopy(res.model)
-    rec = albedo_policy(brdf, res, tol=albedo_tol, time_limit=albedo_time, rmse_growth=rmse_growth)
+    rec = albedo_policy(brdf, res, tol=albedo_tol, time_limit=albedo_time, rmse_growth=rmse_growth,
+                        max_refits=refits, ceiling=ceiling)
     if rec["refitted"] and verify and "_verify_last" in res.info:
         Xv, rv = res.info["_verify_last"]
         ratio_max = float(verification_ratio(res, Xv, rv).max())
@@ -554,34 +684,60 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time: float, verify: int,
         res.info.update(verify_max_ratio=ratio_max, verified=bool(ratio_max <= 1.0))
 
 
-def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, time_limit: float = 60.0):
+def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, time_limit=None,
+                     ceiling=None, refit_all: bool = False, refit_above: float = 1.0):
     """The verification of :func:`fit_rgl` on a fit made by it (its data in ``res.info``):
-    returns the fit after at most ``verify_rounds`` refits, within ``time_limit`` seconds."""
+    returns the fit after at most ``verify_rounds`` refits (the budget: a count). A refit adds
+    the worst (at most 2,000) fresh points more than ``refit_above`` times outside the stated
+    bound (1: any; 4: spikes only) to the data and fits again only the functions (piece,
+    channel) that are outside their bound at one of them (the others
+    are kept, their records measured again on the enlarged data; ``refit_all``: every function),
+    with the noise levels of the first fit; ``fit_info["verify_refitted"]`` lists them per round.
+    ``time_limit`` (s; None: none) or a caller's ``ceiling`` (:class:`Ceiling`) is only the
+    wall-clock safety net: once passed, no further refit is started (``fit_info["stopped"]``)."""
     t0 = time.perf_counter()
+    if ceiling is None:
+        ceiling = Ceiling(time_limit)
     X, rho, tm, src, options = res.info["_refit"]
-    limit = time_limit
-    ratio_max, n_added = None, 0
+    ratio_max, n_added, refitted = None, 0, []
     for rnd in range(verify_rounds + 1 if verify else 0):
         Xv = sample_grid(tm, (1, 1, 1), verify // 2, seed=1000 + rnd)
         wi, wo = half_diff_to_directions(Xv[:, 0], 0.0, Xv[:, 1], Xv[:, 2])
         rv = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
-        ratio = verification_ratio(res, Xv, rv)
+        ratio_c = verification_ratio(res, Xv, rv, per_channel=True)
+        ratio = np.max(ratio_c, axis=1)
         ratio_max = float(ratio.max())
         res.info["verify_round"] = rnd
         res.info["_verify_last"] = (Xv, rv)    # the fresh points the returned fit was checked at
-        bad = np.flatnonzero(ratio > 1.0)
-        left = limit - (time.perf_counter() - t0)
-        if len(bad) == 0 or rnd == verify_rounds or left < res.time_s:
+        bad = np.flatnonzero(ratio > refit_above)
+        if len(bad) == 0 or rnd == verify_rounds or ceiling.out("verification"):
             break
         worst = bad[np.argsort(-ratio[bad])[:2000]]
         X, rho = np.concatenate([X, Xv[worst]]), np.concatenate([rho, rv[worst]])
         n_added += len(worst)
-        res = fit_samples(X, rho, theta_max=tm, source=src, time_limit=max(left, 5.0), **options)
+        edges = res.info["edges"]
+        pieces = list(res.model.pieces) if hasattr(res.model, "pieces") else [res.model]
+        redo = set()
+        for k in range(len(edges) - 1):
+            inside = (Xv[worst, 0] >= edges[k] - 1e-12) & (Xv[worst, 0] <= edges[k + 1] + 1e-12)
+            for c in range(3):
+                if refit_all or np.any(ratio_c[worst[inside], c] > 1.0):
+                    redo.add((k, c))
+        keep = {(r["piece"], "RGB".index(r["channel"])): (None, r) for r in res.records}
+        for (k, c), (_, r) in keep.items():
+            if (k, c) not in redo:
+                keep[(k, c)] = (pieces[k].functions[c], r)
+        refitted.append([f"{k}{'RGB'[c]}" for k, c in sorted(redo)])
+        res = fit_samples(X, rho, theta_max=tm, source=src, ceiling=ceiling, noise=res.noise, keep=keep,
+                          **options)
         res.info["_refit"] = (X, rho, tm, src, options)
     if ratio_max is not None:
         res.model.fit_info.update(verify_points=int(verify // 2 * 2), verify_max_ratio=ratio_max,
                                   verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
         res.info.update(verify_max_ratio=ratio_max, verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
+    res.model.fit_info.update(verify_rounds=int(verify_rounds), verify_refit_above=float(refit_above),
+                              verify_refitted=refitted)
+    ceiling.record(res.model.fit_info)
     res.info["verify_s"] = time.perf_counter() - t0
     return res
 
@@ -592,7 +748,9 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
 #: one piece of degrees (7, 3) (420: the diffuse materials, whose error is spread over the whole
 #: domain; paper_white 0.0098 against 0.020 with the four pieces, both two-stage, 50,000 pairs).
 #: ``"if_rmse_below"`` (not a fit_rgl argument): the layout is tried only when the best validation
-#: RMSE so far is below it, which leaves the glossiest materials the time for the verification.
+#: RMSE so far is below it, which spares the glossiest materials a 20-26 s fit they would not
+#: keep. ``"verify_rounds"``, ``"verify_above"``: the layout's own verification budget when it is
+#: chosen (module docstring, "Budgets": one refit, for spikes only).
 #: Measured (validation RMSE of the four pieces -> relative RMSE, four pieces / one piece): it won
 #: on 6 of the 7 materials below 0.04 (paper_white 0.0196 -> 0.0097; vch_ultra_pink 0.0317 ->
 #: 0.0327 kept the four pieces) and on ilm_l3_37_matte (0.062: 0.050 / 0.040) and
@@ -601,7 +759,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
 #: cc_iris_purple_gem, cm_toxic_green, chm_mint) do not try it.
 VARIANTS = (
     {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
-    {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.065},
+    {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.065, "verify_rounds": 1, "verify_above": 4.0},
 )
 #: A later layout replaces the one chosen so far only when its validation RMSE is lower by this
 #: fraction: vch_golden_yellow's one piece (0.0439 against 0.0441) was chosen without it, and
@@ -624,34 +782,43 @@ def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
     return float(np.mean(np.sqrt(np.mean((f - t) ** 2, axis=0)) / np.maximum(np.sqrt(np.mean(t ** 2, axis=0)), 1e-300)))
 
 
-def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_share: float = 0.6,
+def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, select_share: float = 0.6,
                    verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, albedo: bool = True,
-                   albedo_tol: float = DEFAULT_ALBEDO_TOL, albedo_time: float = DEFAULT_ALBEDO_TIME,
-                   albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH, **common) -> Fit3D:
+                   albedo_tol: float = DEFAULT_ALBEDO_TOL, albedo_time=DEFAULT_ALBEDO_TIME,
+                   albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
+                   albedo_refits: int = DEFAULT_ALBEDO_REFITS, max_variants=None, **common) -> Fit3D:
     """Fit every layout of ``variants`` (each :func:`fit_rgl` keyword arguments, updated with
-    ``common``) within ``time_limit`` seconds in all, and return the one with the lowest
-    :func:`validation_rmse` (a later layout must be :data:`SELECT_MARGIN` lower to replace an
-    earlier one; a layout with ``"if_rmse_below"`` is tried only below that RMSE); ``info["variants"]`` logs what each achieved (coefficients, stated
-    bound, validation RMSE, seconds). Variants that no longer fit in the time left are skipped
-    (logged as such): the selection stops starting variants after ``select_share`` of the time;
-    the chosen fit is then verified and refitted (:func:`verify_and_refit`) in the rest, and
-    the albedo policy applied last (``albedo``, as in :func:`fit_rgl`).
-    ``time_s`` is the whole selection."""
+    ``common``) and return the one with the lowest :func:`validation_rmse` (a later layout must
+    be :data:`SELECT_MARGIN` lower to replace an earlier one; a layout with ``"if_rmse_below"`` is
+    tried only below that RMSE); ``info["variants"]`` logs what each achieved (coefficients,
+    stated bound, validation RMSE, seconds). The budgets are counts (module docstring,
+    "Budgets"): at most ``max_variants`` layouts are fitted (None: all; later ones are logged as
+    skipped, "budget"); the chosen fit is then verified with at most ``verify_rounds`` refits
+    (:func:`verify_and_refit`; a layout's own ``"verify_rounds"`` entry overrides it) and the
+    albedo policy applied last with at most ``albedo_refits`` channel corrections (``albedo``, as in :func:`fit_rgl`).
+    ``time_limit`` (s; default 120; None: none) is only the wall-clock safety net of the whole
+    selection: past ``select_share`` of it no further layout is started (logged as skipped,
+    "time"), past it no refit and no albedo round; ``fit_info["stopped"] = "time"`` and
+    ``stopped_at`` record it. ``time_s`` is the whole selection."""
     t0 = time.perf_counter()
+    ceiling = Ceiling(time_limit)
     best, log = None, []
     for k, v in enumerate(variants):
-        left = time_limit - (time.perf_counter() - t0)
         v = dict(v)
         below = v.pop("if_rmse_below", None)
+        rounds = v.pop("verify_rounds", verify_rounds)
+        above = v.pop("verify_above", 1.0)
         opts = dict(common, **v)
-        if k and (best is None or left - (1 - select_share) * time_limit < 1.2 * best.time_s):
+        if max_variants is not None and k >= int(max_variants):
+            log.append({"variant": k, "options": _plain(opts), "skipped": "budget"})
+            continue
+        if k and (best is None or ceiling.out("selection", select_share)):
             log.append({"variant": k, "options": _plain(opts), "skipped": "time"})
             continue
         if below is not None and best is not None and best.info["validation_rmse"] >= below:
             log.append({"variant": k, "options": _plain(opts), "skipped": f"validation RMSE >= {below:g}"})
             continue
-        opts["time_limit"] = max(left, 5.0) if k == 0 else max(left - (1 - select_share) * time_limit, 5.0)
-        res = fit_rgl(brdf, verify=0, albedo=False, **opts)
+        res = fit_rgl(brdf, verify=0, albedo=False, ceiling=ceiling, **opts)
         v_rmse = validation_rmse(brdf, res.model)
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
                     "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse, "time_s": res.time_s})
@@ -659,15 +826,19 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_sha
             best = res
             best.info["validation_rmse"] = v_rmse
             best.info["variant"] = k
+            best.info["verify_rounds_budget"] = int(rounds)
+            best.info["verify_above"] = float(above)
     if best is None:
         raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
     chosen = best.info
-    best = verify_and_refit(brdf, best, verify, verify_rounds, time_limit - (time.perf_counter() - t0))
+    best = verify_and_refit(brdf, best, verify, chosen["verify_rounds_budget"], ceiling=ceiling,
+                            refit_above=chosen["verify_above"])
     for key in ("validation_rmse", "variant"):
         best.info[key] = chosen[key]
     best.info["validation_rmse"] = validation_rmse(brdf, best.model)
     if albedo:
-        _albedo_step(brdf, best, albedo_tol, albedo_time, verify, albedo_rmse_growth)
+        _albedo_step(brdf, best, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
+                     refits=albedo_refits)
         v_after = validation_rmse(brdf, best.model) if best.info["albedo"]["refitted"] else best.info["validation_rmse"]
         best.info["albedo"]["validation_rmse_before"] = best.info["validation_rmse"]
         best.info["albedo"]["validation_rmse"] = v_after
@@ -675,7 +846,11 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit: float = 60.0, select_sha
     best.info["variants"] = log
     best.time_s = time.perf_counter() - t0
     best.model.fit_info.update(time_s=best.time_s, variant=best.info["variant"], variants=log,
-                               validation_rmse=best.info["validation_rmse"])
+                               validation_rmse=best.info["validation_rmse"],
+                               budgets={"max_variants": max_variants, "verify_rounds": chosen["verify_rounds_budget"],
+                                        "albedo_refits": int(albedo_refits),
+                                        "ladder_steps": int(common.get("ladder_steps", DEFAULT_LADDER_STEPS))})
+    ceiling.record(best.model.fit_info)
     best.info.pop("_refit", None)
     best.info.pop("_verify_last", None)
     return best

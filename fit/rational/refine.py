@@ -25,9 +25,12 @@ units of Q) inside so that the solver's feasibility tolerance cannot put a point
 How the QP is solved: the objective is whitened (QR of the weighted objective matrix with a ridge
 of 1e-10, ``y = R z + c``), so that it reads ``min |y|^2`` under linear rows, a least-distance
 problem, solved as one non-negative least-squares problem (Lawson and Hanson, *Solving Least
-Squares Problems*, ch. 23; :func:`scipy.optimize.nnls`), with HiGHS's QP solver as the fallback.
-HiGHS's active-set QP on the raw Hessian stalled (57 s, then a time limit or a solve error, on
-pieces of satin_rosaline); the NNLS form takes 0.02-0.15 s per solve there.
+Squares Problems*, ch. 23; :func:`scipy.optimize.nnls`, at most ``20 n`` iterations), with HiGHS's
+QP solver as the fallback (at most ``qp_iterations`` QP iterations, a count, so that the result
+does not depend on the machine's load; its ``qp_time`` seconds remain only as a last-resort
+safety net). HiGHS's active-set QP on the raw Hessian stalled (57 s, then a time limit or a solve
+error, on pieces of satin_rosaline); the NNLS form takes 0.02-0.15 s per solve there. Every loop
+here stops on a count (``iterations``, ``max_rounds``, the NNLS and QP iteration limits).
 
 Result: a :class:`fit.rational.function.RationalFunction` of the same exponents, or None when
 the QP did not end optimal, a data point is still outside its interval after the rounds, or
@@ -70,13 +73,16 @@ def _least_distance_nnls(G, h):
     return -r[:-1] / r[-1]
 
 
-def _least_distance(G, h, time_limit):
+def _least_distance(G, h, iteration_limit, time_limit=60.0):
     """``argmin |y|^2`` s.t. ``G y >= h`` (HiGHS QP with the identity Hessian: the objective is
     whitened by the caller, which keeps the active-set solver well conditioned), or the model
-    status (str) when it does not end optimal within ``time_limit`` seconds."""
+    status (str) when it does not end optimal within ``iteration_limit`` QP iterations (the
+    rule: a count, the same on any machine) or, as a last-resort safety net only,
+    ``time_limit`` seconds."""
     m, n = G.shape
     hs = _hs.Highs()
     hs.setOptionValue("output_flag", False)
+    hs.setOptionValue("qp_iteration_limit", int(iteration_limit))
     hs.setOptionValue("time_limit", float(time_limit))
     hs.addVars(n, np.full(n, -np.inf), np.full(n, np.inf))
     G = np.ascontiguousarray(G, np.float64)
@@ -92,8 +98,8 @@ def _least_distance(G, h, time_limit):
 
 
 def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, reweight=None,
-           q_min: float = 1e-4, bernstein_split: int = 2, max_rounds: int = 12, qp_time: float = 5.0,
-           certify_depth: int = 12, margin: float = 1e-5, sums=None):
+           q_min: float = 1e-4, bernstein_split: int = 2, max_rounds: int = 12, qp_time: float = 60.0,
+           certify_depth: int = 12, margin: float = 1e-5, sums=None, qp_iterations: int = 20000):
     """The weighted-least-squares function inside ``[lo, hi]`` (module docstring).
 
     ``f0``: first-stage function (its exponents and domain are kept; Q > 0 on the box);
@@ -101,7 +107,9 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
     intervals (values of ``R``); ``V`` ``(M, n_vars)`` objective points, ``t`` ``(M,)`` targets,
     ``w`` ``(M,)`` weights; ``reweight(R(V), t) -> w`` (optional) between iterations.
     ``iterations``: Sanathanan-Koerner iterations; ``max_rounds``: constraint-generation rounds
-    per iteration; ``qp_time``: seconds of the HiGHS fallback per QP; ``margin``: see the module
+    per iteration; ``qp_iterations``: QP iterations of the HiGHS fallback per QP (the budget);
+    ``qp_time``: its wall-clock safety net per QP (seconds; not a rule: a QP that reaches it
+    fails, ``info["reason"]`` says so); ``margin``: see the module
     docstring. ``sums`` (optional): squared **sums** of residuals added to the objective (e.g. a
     directional albedo, :mod:`fit.rational.albedo3d`), ``(W, t2, groups, slope)``: points ``W``
     ``(K, n_vars)`` with targets ``t2`` ``(K,)``, ``groups`` a list of ``(idx, coef, const,
@@ -115,8 +123,8 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
     if len(t) == 0 or not np.sum(np.maximum(w, 0.0)) > 0:
         return None, {"reason": "no objective point with a positive weight"}
     try:
-        return _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds, qp_time,
-                       certify_depth, margin, sums)
+        return _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds,
+                       (int(qp_iterations), float(qp_time)), certify_depth, margin, sums)
     except np.linalg.LinAlgError as e:
         return None, {"reason": f"linear algebra: {e}"}
 
@@ -140,7 +148,7 @@ def _sum_rows(sums, z, npv, fixed, Wp, Wq, scale):
     return np.array(rows).reshape(len(rows), len(z))
 
 
-def _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds, qp_time,
+def _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds, qp_limits,
             certify_depth, margin, sums=None):
     Ep, Eq, dom = f0.num_exponents, f0.den_exponents, f0.domain
     npv, nqv = len(Ep), len(Eq)
@@ -191,7 +199,7 @@ def _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split
             hh = lo_r - C[:, fixed] + G @ c
             y = _least_distance_nnls(G, hh)
             if available and (isinstance(y, str) or np.any(G @ y < hh - 1e-9 * (1.0 + np.abs(hh)))):
-                y = _least_distance(G, hh, qp_time)      # HiGHS when NNLS fails or is inexact
+                y = _least_distance(G, hh, *qp_limits)      # HiGHS when NNLS fails or is inexact
             info["qp"] += 1
             if isinstance(y, str):
                 return None, dict(info, reason=f"QP not optimal ({y})")

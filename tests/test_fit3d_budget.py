@@ -1,0 +1,112 @@
+"""Deterministic work budgets of the 3-D fits (:mod:`fit.rational.fit3d`,
+:mod:`fit.rational.albedo3d`, :mod:`fit.rational.refine`): no rule reads the wall clock.
+
+* the same selection (two layouts, verification with refits, the albedo policy) run twice gives
+  the same coefficients, bit for bit;
+* with a wall clock that jumps 10 s at every reading (below the safety ceiling's trigger), the
+  coefficients are those of the normal clock: time is no longer a stopping rule (before the
+  budgets, the albedo policy stopped after its 15 s and the fit came out different);
+* the wall-clock safety ceiling, when it is passed, is recorded (``stopped = "time"``, where) and
+  stops the selection, the verification and the albedo policy.
+"""
+from __future__ import annotations
+
+import time as _time
+
+import numpy as np
+import pytest
+
+from fit.rational import albedo3d, fit3d
+from fit.rational.fit3d import fit_rgl_select
+from fit.rational.variables3d import half_diff_3d
+
+
+def lobe_brdf(wi, wo):
+    """A synthetic glossy RGB BRDF (1/sr) of directions (tests/test_albedo3d.py's)."""
+    X = half_diff_3d(wi, wo)
+    th, td, pd = X[..., 0], X[..., 1], X[..., 2]
+    spec = 4.0 * np.exp(-(th / 0.12) ** 2) * (1.0 + 0.35 * np.cos(pd)) * (1.0 + 2.0 * np.sin(td) ** 4)
+    base = np.array([0.08, 0.12, 0.2])
+    out = base * (1.0 + 0.3 * (np.cos(pd) * np.sin(td))[..., None]) + spec[..., None] * [1.0, 0.9, 0.8]
+    above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
+    return np.where(above[..., None], out, 0.0)
+
+
+class Synthetic:
+    name = "glossy_lobe"
+    source = ""
+    source_sha256 = ""
+    theta_i_max = np.radians(80.0)
+
+    def evaluate(self, wi, wo):
+        return lobe_brdf(wi, wo)
+
+
+#: two small layouts, a verification with refits and the albedo policy at a tight tolerance (it
+#: corrects on this lobe): every loop that used to stop on time runs
+VARIANTS = ({"theta_h_edges": [0.15], "degrees": (4, 2)}, {"theta_h_edges": [], "degrees": (4, 2)})
+FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "tol": 0.01, "verify": 4000,
+       "verify_rounds": 2, "albedo_tol": 0.01}
+
+
+def select(**kw):
+    return fit_rgl_select(Synthetic(), variants=VARIANTS, **dict(FIT, **kw))
+
+
+def coefficients(res) -> np.ndarray:
+    pieces = list(res.model.pieces) if hasattr(res.model, "pieces") else [res.model]
+    return np.concatenate([np.concatenate([f.num_coef, f.den_coef]) for p in pieces for f in p.functions])
+
+
+class JumpingClock:
+    """A ``time`` module whose ``perf_counter`` advances ``step`` seconds more at every reading."""
+
+    def __init__(self, step):
+        self.step, self.n = float(step), 0
+
+    def perf_counter(self):
+        self.n += 1
+        return _time.perf_counter() + self.n * self.step
+
+    def __getattr__(self, name):
+        return getattr(_time, name)
+
+
+@pytest.fixture(scope="module")
+def normal():
+    return select()
+
+
+def test_same_inputs_give_identical_coefficients(normal):
+    again = select()
+    assert np.array_equal(coefficients(again), coefficients(normal))
+    assert again.model.fit_info["verify_points_added"] > 0, "no verification refit: the test does not reach it"
+    assert again.valid and again.model.fit_info["valid"]      # kept functions are within the bound they met
+    assert again.model.fit_info["stopped"] is None
+    assert again.info["albedo"]["refitted"], "the albedo policy corrected nothing: the test does not reach it"
+
+
+def test_a_slow_clock_changes_nothing(normal, monkeypatch):
+    clock = JumpingClock(10.0)
+    monkeypatch.setattr(fit3d, "time", clock)
+    monkeypatch.setattr(albedo3d, "time", clock)
+    slow = select(time_limit=1e7)       # the ceiling far beyond the clock's jumps: only the budgets stop
+    assert clock.n > 10                  # the clock was read, and ran ahead by minutes
+    assert np.array_equal(coefficients(slow), coefficients(normal))
+    assert slow.info["verify_max_ratio"] == normal.info["verify_max_ratio"]
+    assert slow.info["variants"] == [dict(v, time_s=w["time_s"]) if "time_s" in v else v
+                                     for v, w in zip(normal.info["variants"], slow.info["variants"])]
+    assert slow.model.fit_info["stopped"] is None
+
+
+def test_the_safety_ceiling_is_recorded(monkeypatch):
+    clock = JumpingClock(1.0)
+    monkeypatch.setattr(fit3d, "time", clock)
+    monkeypatch.setattr(albedo3d, "time", clock)
+    res = select(time_limit=2.0)
+    fi = res.model.fit_info
+    assert fi["stopped"] == "time" and fi["time_limit"] == 2.0
+    assert "tolerance ladder" in fi["stopped_at"] and "selection" in fi["stopped_at"]
+    assert [v.get("skipped") for v in res.info["variants"]] == [None, "time"]
+    assert fi["verify_points_added"] == 0           # no refit started past the ceiling
+    assert res.info["albedo"]["stopped"] == "time" and res.info["albedo"]["rounds"] == 0
