@@ -110,3 +110,31 @@ def test_the_safety_ceiling_is_recorded(monkeypatch):
     assert [v.get("skipped") for v in res.info["variants"]] == [None, "time"]
     assert fi["verify_points_added"] == 0           # no refit started past the ceiling
     assert res.info["albedo"]["stopped"] == "time" and res.info["albedo"]["rounds"] == 0
+
+
+def test_the_file_says_what_is_guaranteed_on_the_whole_domain_and_why_not_more():
+    """``fit_info["domain"]`` (issue 25: the guarantee on the whole measured domain "or the reason it
+    cannot be, per material, in the file"): proved at the data points only, with the fit's own
+    fresh-point ratio in the reason; written to the coefficient file and read back."""
+    import json
+
+    from fit.rational.coefficient_file import load, save
+
+    res = select()
+    fi = res.model.fit_info
+    d = fi["domain"]
+    assert d["proved"] is False and d["proved_at"] == "data points"
+    assert d["n_points"] == fi["n_points"] and d["fresh_points"] == fi["verify_points"] > 0
+    assert d["fresh_max_ratio"] == fi["verify_max_ratio"]
+    assert f"{fi['verify_max_ratio']:.3g} x the bound" in d["reason"]
+    assert f"{fi['n_points']} data points" in d["reason"]
+    assert ("not within it between them" in d["reason"]) == (fi["verify_max_ratio"] > 1.0)
+    assert fit3d.domain_record({"n_points": 10, "theta_max_deg": 89.0, "verify_points": 40,
+                                "verify_max_ratio": 0.5})["reason"].count("checked, not proved") == 1
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as t:
+        save(res.model, Path(t) / "f.json")
+        assert json.loads((Path(t) / "f.json").read_text())["fit"]["domain"] == json.loads(json.dumps(d))
+        assert load(Path(t) / "f.json").fit_info["domain"]["reason"] == d["reason"]

@@ -654,6 +654,7 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
         _albedo_step(brdf, res, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
                      refits=albedo_refits)
     ceiling.record(res.model.fit_info)
+    domain_record(res.model.fit_info)
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s
     res.model.fit_info["grid"] = list(grid)
@@ -851,9 +852,46 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
                                         "albedo_refits": int(albedo_refits),
                                         "ladder_steps": int(common.get("ladder_steps", DEFAULT_LADDER_STEPS))})
     ceiling.record(best.model.fit_info)
+    domain_record(best.model.fit_info)
     best.info.pop("_refit", None)
     best.info.pop("_verify_last", None)
     return best
+
+
+def domain_record(fit_info: dict) -> dict:
+    """``fit_info["domain"]``: what the fit guarantees on the whole measured domain (theta_i,
+    theta_o <= ``theta_max_deg``), and why not more, from its own record (issue 25 asks for the
+    guarantee there "or the reason it cannot be, per material, in the file and the report").
+
+    The bound is *proved* at every data point (an LP certificate of each point, exactly
+    re-measured in float64) and Q > 0 on every piece's box (exact Bernstein coefficients); the
+    fit is bounded by its ``vouched_range`` everywhere. Between the data points it is only
+    *checked*: at ``verify_points`` fresh points, the largest error over the bound is
+    ``verify_max_ratio``. A proof there would need bounds on the derivatives of the measurement's
+    interpolant and of the fit on every cell; the RGL format's interpolant (bilinear in warped
+    coordinates, warps built from the data) has none that is stated, and a Lipschitz bound of the
+    fit alone, at a lobe's peak, is orders of magnitude wider than the bound itself. ``proved``
+    is therefore False for every fit, and ``reason`` says so with the material's numbers."""
+    n = fit_info.get("n_points")
+    tm = fit_info.get("theta_max_deg")
+    ratio = fit_info.get("verify_max_ratio")
+    m = fit_info.get("verify_points")
+    if ratio is None:
+        checked = "not checked between the data points (no verification)"
+    elif ratio <= 1.0:
+        checked = (f"checked, not proved, between them: within the bound at all {m} fresh points "
+                   f"(largest error {ratio:.3g} x the bound)")
+    else:
+        checked = (f"not within it between them: at {m} fresh points the largest error is "
+                   f"{ratio:.3g} x the bound")
+    rec = {"proved": False, "proved_at": "data points", "n_points": n, "theta_max_deg": tm,
+           "fresh_points": m, "fresh_max_ratio": ratio,
+           "reason": (f"bound proved at the {n} data points (theta_i, theta_o <= {tm:.4g} deg) and Q > 0 "
+                      f"on every piece; {checked}. No proof between data points: the measurement's "
+                      "interpolant states no derivative bound, and the fit's own, at the peak, is far "
+                      "wider than the bound")}
+    fit_info["domain"] = rec
+    return rec
 
 
 def _plain(d: dict) -> dict:
