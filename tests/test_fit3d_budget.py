@@ -18,28 +18,7 @@ import pytest
 
 from fit.rational import albedo3d, fit3d
 from fit.rational.fit3d import fit_rgl_select
-from fit.rational.variables3d import half_diff_3d
-
-
-def lobe_brdf(wi, wo):
-    """A synthetic glossy RGB BRDF (1/sr) of directions (tests/test_albedo3d.py's)."""
-    X = half_diff_3d(wi, wo)
-    th, td, pd = X[..., 0], X[..., 1], X[..., 2]
-    spec = 4.0 * np.exp(-(th / 0.12) ** 2) * (1.0 + 0.35 * np.cos(pd)) * (1.0 + 2.0 * np.sin(td) ** 4)
-    base = np.array([0.08, 0.12, 0.2])
-    out = base * (1.0 + 0.3 * (np.cos(pd) * np.sin(td))[..., None]) + spec[..., None] * [1.0, 0.9, 0.8]
-    above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
-    return np.where(above[..., None], out, 0.0)
-
-
-class Synthetic:
-    name = "glossy_lobe"
-    source = ""
-    source_sha256 = ""
-    theta_i_max = np.radians(80.0)
-
-    def evaluate(self, wi, wo):
-        return lobe_brdf(wi, wo)
+from test_albedo3d import Synthetic  # the synthetic glossy lobe as an RGL-like object
 
 
 #: two small layouts, a verification with refits and the albedo policy at a tight tolerance (it
