@@ -169,3 +169,21 @@ def test_policy_on_a_one_piece_fit():
     assert rec["max_error_before"] > TOL and rec["refitted"]
     assert rec["max_error"] < 0.5 * rec["max_error_before"]
     assert res.valid and all(r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9) for r in res.records)
+
+
+def test_the_fit_wide_cost_limit_binds_where_the_channel_limit_would_not():
+    """``total_growth`` bounds the fit's relative RMSE (the mean over R, G, B on the check pairs):
+    with the per-channel allowance wide open and no fit-wide allowance, nothing that raises the
+    fit's RMSE is kept, and each refused round records the fit's RMSE it would have had; with both
+    open (the test above), the same lobe is corrected."""
+    from fit.rational.albedo3d import albedo_policy
+
+    res = fit_rgl(Synthetic(), albedo=False, **FIT)
+    rec = albedo_policy(Synthetic(), res, tol=TOL, rmse_growth=10.0, total_growth=0.0)
+    r0, r1 = np.array(rec["channel_rmse_before"]), np.array(rec["channel_rmse"])
+    assert r1.mean() <= r0.mean() * (1 + 1e-12)
+    assert rec["rejected"] and all(r["fit_rmse"] > r0.mean() for r in rec["rejected"])
+    assert rec["total_growth"] == 0.0 and rec["rmse_growth"] == 10.0
+    wide = albedo_policy(Synthetic(), fit_rgl(Synthetic(), albedo=False, **FIT), tol=TOL, rmse_growth=10.0,
+                         total_growth=10.0)
+    assert wide["refitted"] and wide["max_error"] < rec["max_error"]

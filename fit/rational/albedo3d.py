@@ -45,9 +45,18 @@ the function is kept). Two guards, both sampled (nothing is proved between the d
   between its data points (benchmark relative RMSE 70.7);
 * **bounded cost**: a channel's new functions are kept only where they lower that channel's
   largest albedo error over the angles **and** raise its relative RMSE of ``rho cos cos`` on
-  100,000 cosine pairs (seed 12345, the layout selection's) by at most ``rmse_growth`` (10 %);
-  otherwise they are put back, and after a too costly round the channel stops (a larger weight
-  costs more): its miss is recorded.
+  100,000 cosine pairs (seed 12345, the layout selection's) by at most ``rmse_growth`` (50 %)
+  **and** the fit's (the mean over R, G, B, the benchmark's metric) by at most
+  ``total_growth`` (15 %) over the pre-policy fit; otherwise they are put back, and after a too
+  costly round the channel stops (a larger weight costs more): its miss is recorded. Measured
+  on the three glossy films of issue 25 (benchmark, 200,000 pairs; largest albedo error, fit
+  relative RMSE): with one per-channel limit of 10 % (the rule before) cc_ibiza_sunset stayed
+  7.4 % and vch_golden_yellow 8.3 % off at 75 deg; a per-channel 30 % brought ibiza within
+  (3.7 %, RMSE 0.070 -> 0.074; its green correction costs 10.07 % of the fit's RMSE on the
+  check pairs), 50 % vch (4.5 %, 0.043 -> 0.046) but also let cc_iris_purple_gem's red at
+  0 deg (an albedo of 0.010 against 0.32 in blue) be corrected at +16 % of the fit's RMSE on
+  the check pairs and +34 % on the benchmark's (0.104, above the neural BRDF's 0.096), while
+  still 10 % off. The fit-wide 15 % keeps the first two and refuses the third.
 
 The correction's budget is a count: the rounds of the weight ladder and at most
 ``max_refits`` channel corrections (a channel's pieces refitted at one weight; 27 =
@@ -55,8 +64,8 @@ The correction's budget is a count: the rounds of the weight ladder and at most
 = "budget" when they run out). The wall clock is only a safety net (the fit's
 :class:`fit.rational.fit3d.Ceiling` and ``time_limit``, None by default; ``stopped`` = "time").
 On the 20 RGL materials the policy took 0.1-17 s (chm_mint 24 corrections, 15.8 s; ilm_solo_m_68
-26, 16.9 s; before, both were cut by a 15 s wall-clock limit). It costs average error (at most the 10 % per channel on its check pairs; measured in
-docs/fit_accuracy.md).
+26, 16.9 s; before, both were cut by a 15 s wall-clock limit). It costs average error (at most 15 % of the fit's relative RMSE on its check pairs, 50 % of
+a channel's; measured in docs/fit_accuracy.md).
 
 **What is recorded.** ``fit_info["albedo"]``: the rule, the tolerance, the angles, the
 quadrature, the truth's albedo, the errors before and after (per angle and channel), ``within``
@@ -83,7 +92,8 @@ ANGLES_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0)
 DEFAULT_ALBEDO_TOL = 0.05
 DEFAULT_VIEWS = 9216
 FLOOR_FRAC = 0.05
-DEFAULT_RMSE_GROWTH = 0.10         # a correction may raise a channel's relative RMSE by at most this fraction
+DEFAULT_RMSE_GROWTH = 0.50         # a correction may raise a channel's relative RMSE by at most this fraction ...
+DEFAULT_TOTAL_GROWTH = 0.15        # ... and the fit's (the mean over R, G, B) by at most this one
 DEFAULT_SPIKE_FACTOR = 4.0         # a refitted function may move at most this many times T from the old one
 DEFAULT_MAX_REFITS = 27            # channel corrections (a channel's pieces refitted at one weight) at most
 WEIGHTS = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)   # lam, rounds while outside
@@ -92,7 +102,8 @@ RULE = ("directional albedo sum_j w_j rho(wi, wo_j) on a fixed half-vector quadr
         "a_true); where outside albedo_tol, every piece of that channel is refitted by its second stage with the "
         "squared relative albedo errors of every angle added (weight lam = 0.01 ... 100 x the piece's relative "
         "metric, rounds while outside), data intervals unchanged (the stated bound does not grow); kept only where "
-        "the channel's largest albedo error drops, its relative RMSE on 100,000 check pairs grows by at most 10 % and "
+        "the channel's largest albedo error drops, its relative RMSE on 100,000 check pairs grows by at most "
+        "rmse_growth (default 50 %), the fit's (the mean over R, G, B) by at most total_growth (default 15 %), and "
         "no refitted function moves more than 4 T from the pre-policy one at 200,000 fresh points; what stays "
         "outside is listed in 'outside'")
 
@@ -187,7 +198,8 @@ def _piece_of(model, X) -> np.ndarray:
 
 def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = DEFAULT_VIEWS,
                   time_limit=None, weights=WEIGHTS, floor_frac: float = FLOOR_FRAC,
-                  rmse_growth: float = DEFAULT_RMSE_GROWTH, n_check: int = 100_000,
+                  rmse_growth: float = DEFAULT_RMSE_GROWTH, total_growth: float = DEFAULT_TOTAL_GROWTH,
+                  n_check: int = 100_000,
                   spike_factor: float = DEFAULT_SPIKE_FACTOR, n_spike: int = 200_000,
                   max_refits: int = DEFAULT_MAX_REFITS, ceiling=None) -> dict:
     """Measure and, where it is outside ``tol``, correct the directional albedo of a
@@ -278,8 +290,8 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
         rec["spikes"] = []
         orig = {(k, c): p.functions[c] for k, p in enumerate(pieces) for c in range(3)}   # before any round
         rmse = rmse0.copy()
-        rec.update(rmse_growth=float(rmse_growth), check_pairs=int(n_check), channel_rmse_before=rmse0.tolist(),
-                   rejected=[])
+        rec.update(rmse_growth=float(rmse_growth), total_growth=float(total_growth), check_pairs=int(n_check),
+                   channel_rmse_before=rmse0.tolist(), rejected=[])
         stop = set()
         for lam in weights:
             if out_of_time():
@@ -372,7 +384,8 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     r0.update(upd)
                 new = relative_errors(albedo_from_values(rf, qw), at, floor_frac)
                 r_new = channel_rmse(c)
-                grown = r_new > (1.0 + rmse_growth) * rmse0[c]
+                total = (rmse.sum() - rmse[c] + r_new) / 3.0     # the fit's relative RMSE, the benchmark's mean
+                grown = r_new > (1.0 + rmse_growth) * rmse0[c] or total > (1.0 + total_growth) * rmse0.mean()
                 if new[:, c].max() < err[:, c].max() and not grown:
                     err[:, c] = new[:, c]
                     rmse[c] = r_new
@@ -382,6 +395,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     if grown:                  # a larger weight would cost more: the channel stops here
                         stop.add(c)
                         rec["rejected"].append({"channel": "RGB"[c], "weight": float(lam), "channel_rmse": float(r_new),
+                                                "fit_rmse": float(total),
                                                 "albedo_error": float(new[:, c].max())})
                     for p, (f, inf) in zip(pieces, saved):
                         p.functions[c] = f
