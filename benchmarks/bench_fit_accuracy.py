@@ -21,8 +21,9 @@ Representations (columns):
   resampling (:meth:`RGLBRDF.to_measured`, :func:`fit.projection.project.project`), nearest
   cluster, empty clusters from the nearest filled one: the ceiling of every 2-D fit;
 * ``2-D 5 %``: the project's 2-D rational fit at 5 % (``<stem>_tol0p05_cli.json`` in
-  ``--fits-2d``, default ``results/fits`` of the main checkout; evaluated by the file's recipe,
-  :meth:`fit.rational.model.RationalModel.evaluate`); ``n/a`` when no file is there;
+  ``--fits-2d``, default ``results/fits`` of the main checkout, else the shipped file of that
+  tolerance), evaluated as the renderer shows it (:func:`rendered_2d`: on its measured domain,
+  and with the projected table where the fitter flagged a piece); ``n/a`` when no file is there;
 * ``3-D``: the 3-D fit of :mod:`fit.rational.fit3d` (two-stage: the smallest tolerance the
   interval LP meets, then the least-squares fit of this metric within twice it), fitted in this
   run (seconds measured here, one process; run under ``taskset -c 0`` with ``OMP_NUM_THREADS=1``
@@ -183,6 +184,21 @@ def load_2d(stem: str, fits_dir: Path):
     return shipped[0] if shipped is not None else None
 
 
+def rendered_2d(model, source: Path):
+    """``evaluate(wi, wo)``: a 2-D fit as the renderer shows it, the NumPy reference of
+    :func:`warp_rbrdf.materials.rational.load`: on its measured domain (the grazing cut-off's edge
+    beyond it) and, where the fitter flagged a piece and channel (not within its bound), the
+    projected table of its source measurement ``source`` (the ``.bsdf`` file) clamped to the
+    region's measured range, as the renderer's default ``unvouched = "projected"`` does. The
+    file's raw recipe would put a flagged band's best effort into the numbers, which no render
+    shows (satin_rosaline with its band flagged: 0.308 raw)."""
+    from warp_rbrdf.materials import rational
+    from warp_rbrdf.scene import MaterialSpec
+
+    lm = rational.load(MaterialSpec(name="fit2d", type="rational", data=model), scene_file=str(source))
+    return lm.evaluate
+
+
 def fit_3d(brdf, out_dir: Path | None, options: dict):
     """``(Fit3D, file or None)``: the 3-D fit of ``brdf``, saved to ``out_dir`` when given."""
     from fit.rational.coefficient_file import save
@@ -218,7 +234,7 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
                             fit_s=secs)
     m2 = load_2d(f"{name}_rgb", fits_2d)
     if m2 is not None:
-        row["fit2d"] = dict(measure(m2.evaluate, truth, wi, wo, truth_eval, albedo_n),
+        row["fit2d"] = dict(measure(rendered_2d(m2, path), truth, wi, wo, truth_eval, albedo_n),
                             coefficients=int(m2.n_coefficients), fit_s=m2.fit_info.get("time_s"))
     res, fpath = fit_3d(brdf, out_dir, fit_options)
     row["fit3d"] = dict(measure(lambda a, b: evaluate_directions(res.model, a, b), truth, wi, wo, truth_eval,

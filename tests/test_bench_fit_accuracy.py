@@ -85,3 +85,35 @@ def test_load_2d_takes_the_cached_fit_else_the_shipped_one(tmp_path):
     save(m, tmp_path / "paper_white_rgb_tol0p05_cli.json")
     assert B.load_2d("paper_white_rgb", tmp_path).name == "cached copy"
     assert B.load_2d("no_such_material_rgb", tmp_path) is None
+
+
+def test_the_2d_column_is_the_fit_as_the_renderer_shows_it():
+    """``rendered_2d``: where a piece and channel are flagged, the projected table of the source
+    (the renderer's default), elsewhere the fit on its measured domain; the raw recipe would put
+    a flagged band's best effort into the 2-D column, which no render shows."""
+    import copy
+
+    from fit.formats.angles import directions_to_half_diff
+    from fit.rational.coefficient_file import load
+    from warp_rbrdf.materials import rational
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    path = data_file("rgl/satin_rosaline_rgb.bsdf")
+    m = load(PACKAGE_DATA / "satin_rosaline_rgb.json")
+    flagged = copy.deepcopy(m)
+    band = flagged.pieces[-1]
+    band.function_info[2] = dict(band.function_info[2], valid=False)         # blue of the grazing band
+    wi, wo = B.cosine_pairs(20_000, 1)
+    plain, shown = B.rendered_2d(m, path)(wi, wo), B.rendered_2d(flagged, path)(wi, wo)
+    angles = np.stack(directions_to_half_diff(wi, wo)[::2], -1)          # theta_h, theta_d
+    x = rational.onto_measured_domain(angles, 79.0)
+    lo = band.variables[1].domain[0]
+    in_band = x[:, 1] > lo + 1e-6
+    assert in_band.sum() > 300
+    np.testing.assert_array_equal(shown[:, :2], plain[:, :2])                 # red, green: the fit
+    np.testing.assert_array_equal(shown[~in_band, 2], plain[~in_band, 2])     # blue outside the band
+    assert np.abs(shown[in_band, 2] - plain[in_band, 2]).max() > 1e-3         # blue in it: the table
+    raw = m.evaluate(wi, wo)
+    on = np.all(x == angles, axis=1)                   # on the measured domain: the file's recipe itself
+    assert (~on).sum() > 20
+    np.testing.assert_allclose(plain[on], raw[on], rtol=1e-12, atol=0)
