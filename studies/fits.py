@@ -6,7 +6,9 @@ Order of preference (the first that works):
    interval options (:func:`made_with`; one made with others is fitted again and replaced);
 2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t`` and
    whose interval options are the requested ones (the shipped satin_rosaline fit keeps
-   ``band_intervals="tol+spread"``, so the studies fit it again);
+   ``band_intervals="tol+spread"``, so the studies fit it again), or, where no new fit may be
+   made (``allow_fit=False``), one made with other options (source ``"shipped (other interval
+   options)"``);
 3. the project's fitter, called in this process: :func:`fit.rational.brdf_fit.fit_brdf` on the
    measured file with the options ``rbrdf-fit brdf`` passes by default (:data:`FIT_OPTIONS`),
    saved with :func:`fit.rational.coefficient_file.save`: the same fit and file as
@@ -129,10 +131,16 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
                 return None, dict(info, source=None, file=str(p),
                                   error=f"cached fit {p.name} is flagged: its core misses the tolerance")
             return m, dict(info, source=f"{src} (cached)", file=str(p), fit_seconds=m.fit_info.get("time_s"))
+    # a shipped file made with other interval options stands in only where no new fit may be made
+    # (``allow_fit=False``: the studies' --no-fit and smoke runs), and says so in its source
     shipped = shipped_model(stem, tol, fit_options, any_options=False)
+    other = shipped is None and not allow_fit
+    if other:
+        shipped = shipped_model(stem, tol)
     if shipped is not None:
         m, p = shipped
-        return m, dict(info, source="shipped", file=str(p), fit_seconds=m.fit_info.get("time_s"))
+        return m, dict(info, source="shipped (other interval options)" if other else "shipped", file=str(p),
+                       fit_seconds=m.fit_info.get("time_s"))
     errors = []
     if allow_fit:
         ok, why = brdf_fit_available()

@@ -502,6 +502,9 @@ def test_rational_model_does_not_reuse_a_fit_made_with_other_intervals(tmp_path,
     assert not F.made_with(shipped) and F.made_with(shipped, {"band_intervals": "tol+spread"})
     assert F.shipped_model("satin_rosaline_rgb", 0.05) is not None                  # the benchmarks' fallback
     assert F.shipped_model("satin_rosaline_rgb", 0.05, any_options=False) is None
+    # where no new fit may be made (the studies' --no-fit and smoke runs), the shipped file stands in
+    got, info = F.rational_model("satin", 0.05, allow_fit=False, fit_dir=tmp_path / "none")
+    assert got is not None and info["source"] == "shipped (other interval options)"
     new = load(PACKAGE_DATA / "paper_white_rgb.json")
     new.fit_info["band_intervals"] = "tol"
     calls = []
