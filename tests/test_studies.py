@@ -290,7 +290,8 @@ def test_fidelity_smoke(tmp_path):
         assert (row["checks"]["measured"] == "met") == met and row["checks"]["measured"] in ("met", "missed", "unresolved")
         if mitsuba:
             assert all(0.8 < v < 1.25 for v in c["mitsuba"]["ratio"]) and row["mitsuba_floor"]["de_mean"] > 0
-    assert {f["source"] for f in r["meta"]["fits"].values()} <= {"shipped", "cli (cached)"}
+    assert {f["source"] for f in r["meta"]["fits"].values()} <= {"shipped", "shipped (other interval options)",
+                                                                 "cli (cached)"}
     data = json.loads((tmp_path / "fidelity.json").read_text())
     assert set(data) == {"meta", "summary", "rows"} and len(data["rows"]) == 2
     assert data["rows"][0]["compare"]["measured"]["de_mean"] == r["rows"][0]["compare"]["measured"]["de_mean"]
