@@ -64,8 +64,9 @@ The correction's budget is a count: the rounds of the weight ladder and at most
 = "budget" when they run out). The wall clock is only a safety net (the fit's
 :class:`fit.rational.fit3d.Ceiling` and ``time_limit``, None by default; ``stopped`` = "time").
 On the 20 RGL materials the policy took 0.1-17 s (chm_mint 24 corrections, 15.8 s; ilm_solo_m_68
-26, 16.9 s; before, both were cut by a 15 s wall-clock limit). It costs average error (at most 15 % of the fit's relative RMSE on its check pairs, 50 % of
-a channel's; measured in docs/fit_accuracy.md).
+26, 16.9 s; before, both were cut by a 15 s wall-clock limit). It costs average error (at
+most 15 % of the fit's relative RMSE on its check pairs, 50 % of a channel's; measured in
+docs/fit_accuracy.md).
 
 **What is recorded.** ``fit_info["albedo"]``: the rule, the tolerance, the angles, the
 quadrature, the truth's albedo, the errors before and after (per angle and channel), ``within``
