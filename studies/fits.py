@@ -133,11 +133,9 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
             return m, dict(info, source=f"{src} (cached)", file=str(p), fit_seconds=m.fit_info.get("time_s"))
     # a shipped file made with other interval options stands in only where no new fit may be made
     # (``allow_fit=False``: the studies' --no-fit and smoke runs), and says so in its source
-    shipped = shipped_model(stem, tol, fit_options, any_options=False)
-    other = shipped is None and not allow_fit
-    if other:
-        shipped = shipped_model(stem, tol)
-    if shipped is not None:
+    shipped = shipped_model(stem, tol)
+    other = shipped is not None and not made_with(shipped[0], fit_options)
+    if shipped is not None and not (other and allow_fit):
         m, p = shipped
         return m, dict(info, source="shipped (other interval options)" if other else "shipped", file=str(p),
                        fit_seconds=m.fit_info.get("time_s"))
