@@ -12,7 +12,9 @@ OUT.py``) that needs only Mitsuba: ``import OUT; OUT.register()`` registers the 
 ``rbrdf_<name>``.
 
 What it evaluates: exactly the NumPy evaluation (:meth:`fit.rational.model.RationalModel.evaluate`)
--- the recipe of :mod:`fit.rational.coefficient_file` with its clamps, 0 below the horizon,
+-- the recipe of :mod:`fit.rational.coefficient_file` with its clamps, on the fit's measured
+domain when it records its grazing cut-off (:func:`fit.rational.domain.onto_measured_domain`,
+as the renderer's NumPy reference ``evaluate_at_angles``), 0 below the horizon,
 flagged functions clamped to their measured range (the renderer's projected table is not
 exported) -- times ``cos(theta_o)`` as Mitsuba's ``eval`` includes it; property ``scale``
 (float, default 1) multiplies it. Sampling: cosine-weighted (``pdf = cos(theta_o) / pi``), or,
@@ -25,10 +27,12 @@ the variant's Float (float32).
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 
+from ..rational.domain import measured_domain
 from ..rational.model import output_clamp
 from . import _mitsuba_runtime
 from .emitter import check_exportable, identifier
@@ -89,8 +93,12 @@ def plan(model, cdf=None) -> dict:
                           "max": None if m.value_max is None else float(m.value_max)},
                 "functions": funcs}
 
-    return {"name": str(model.name), "box": [list(map(float, v.domain)) for v in model.variables],
-            "root": node(model), "cdf": cdf_plan(cdf)}
+    out = {"name": str(model.name), "box": [list(map(float, v.domain)) for v in model.variables],
+           "root": node(model), "cdf": cdf_plan(cdf)}
+    cut = measured_domain(model)
+    if cut is not None:                  # a plan without it is what it was before the rule
+        out["cutoff_deg"] = cut
+    return out
 
 
 def plugin_name(model, name: str | None = None) -> str:
@@ -128,6 +136,16 @@ def evaluate(fit, wi, wo):
     return np.array(v, np.float64).T
 
 
+def without_domain(runtime: str) -> str:
+    """The runtime's text without its measured-domain code (the lines marked ``# [measured
+    domain]`` and the block from ``# [measured domain {]`` to ``# [} measured domain]`` with the
+    blank lines after it): what a plan without ``"cutoff_deg"`` never runs."""
+    runtime = re.sub(r"# \[measured domain \{\][^\n]*\n.*?# \[\} measured domain\]\n\n*", "", runtime,
+                     flags=re.S)
+    return "".join(line for line in runtime.splitlines(keepends=True)
+                   if not line.rstrip().endswith("# [measured domain]"))
+
+
 def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
     """A standalone Python module (the runtime's text, the fit's plan, ``register(name)``) that
     needs only Mitsuba 3 and Dr.Jit; ``cdf``: an ``rbrdf-cdf`` file or fit whose tables it
@@ -140,7 +158,11 @@ def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
            f"    import {identifier(pname)}  # this file\n    {identifier(pname)}.register()   # plugin "
            f"{pname!r}\n    bsdf = mi.load_dict({{'type': {pname!r}}})\n\n"
            "rho in 1/sr times cos(theta_o); 0 below the horizon; angles clamped onto the fitted\n"
-           "domain, values to the fit's clamps and per-function ranges; sampling: "
+           "domain, values to the fit's clamps and per-function ranges; "
+           + ("" if p.get("cutoff_deg") is None else
+              f"angles first moved onto\nthe measured domain (grazing cut-off c = {p['cutoff_deg']:.6g} deg: "
+              "cos theta_h cos theta_d >= cos c); ")
+           + "sampling: "
            f"{'tabulated inverse CDFs' if p['cdf'] else 'cosine'}.\n"
            'Property ``scale`` (float) multiplies it."""\n')
     tail = (f"\n\nPLAN = json.loads({json.dumps(json.dumps(p))})\nNAME = {pname!r}\n\n\n"
@@ -150,4 +172,6 @@ def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
             "    cls = bsdf_class(mi, dr)\n"
             "    mi.register_bsdf(name, lambda props: cls(props, PLAN))\n    return name\n")
     body = runtime.split('"""', 2)[2]          # drop the runtime's own docstring
+    if p.get("cutoff_deg") is None:            # no measured domain: the module as before the rule
+        body = without_domain(body)
     return doc + "import json\n" + body.rstrip("\n") + tail
