@@ -1,7 +1,8 @@
 """The exports (:mod:`fit.export`) on a fit's measured domain (:mod:`fit.rational.domain`): a 2-D
 fit that records its grazing cut-off c (both shipped fits: 79 deg) has data only where
-cos theta_h cos theta_d >= cos c; beyond, the file's recipe extrapolates (satin_rosaline_rgb: up
-to 47 /sr at both directions 80-89 deg where the domain's edge gives 0.6-1.7). Every export
+cos theta_h cos theta_d >= cos c; beyond, the file's recipe extrapolates (satin_rosaline_rgb,
+both directions at 80-89 deg: red up to 494 /sr, the fit's maximum, at theta_h 23 deg where
+the domain's edge gives 0.54). Every export
 moves the angles onto the domain first, as the renderer does, so the compiled C (double and
 float) and the Mitsuba plugin's runtime agree with the renderer's NumPy reference
 ``warp_rbrdf.materials.rational.evaluate_at_angles(model, None, cutoff)`` at grazing pairs
