@@ -31,14 +31,13 @@ import math
 
 def _rho(mi, dr, plan, th, td):
     """rho (1/sr) as three Float64 at Rusinkiewicz angles (Float64, radians)."""
-    if plan.get("cutoff_deg") is not None:                                 # [measured domain]
-        th, td = _onto_measured_domain(dr, plan["cutoff_deg"], th, td)     # [measured domain]
+    if plan.get("cutoff_deg") is not None:
+        th, td = _onto_measured_domain(dr, plan["cutoff_deg"], th, td)
     (hl, hh), (dl, dh) = plan["box"]
     x = [dr.clip(th, hl, hh), dr.clip(td, dl, dh)]
     return _node(mi, dr, plan["root"], x)
 
 
-# [measured domain {] (left out of the standalone module of a plan without "cutoff_deg")
 def _onto_measured_domain(dr, cutoff_deg, th, td):
     """(theta_h, theta_d) (Float64, radians) moved onto the measured domain of grazing cut-off
     ``cutoff_deg`` (degrees): cos theta_h cos theta_d >= cos c (module docstring)."""
@@ -46,7 +45,6 @@ def _onto_measured_domain(dr, cutoff_deg, th, td):
     th = dr.minimum(th, c)
     td = dr.minimum(td, dr.acos(dr.minimum(math.cos(c) / dr.cos(th), 1.0)))
     return th, td
-# [} measured domain]
 
 
 def _node(mi, dr, node, x):

@@ -27,7 +27,6 @@ the variant's Float (float32).
 from __future__ import annotations
 
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -136,16 +135,6 @@ def evaluate(fit, wi, wo):
     return np.array(v, np.float64).T
 
 
-def without_domain(runtime: str) -> str:
-    """The runtime's text without its measured-domain code (the lines marked ``# [measured
-    domain]`` and the block from ``# [measured domain {]`` to ``# [} measured domain]`` with the
-    blank lines after it): what a plan without ``"cutoff_deg"`` never runs."""
-    runtime = re.sub(r"# \[measured domain \{\][^\n]*\n.*?# \[\} measured domain\]\n\n*", "", runtime,
-                     flags=re.S)
-    return "".join(line for line in runtime.splitlines(keepends=True)
-                   if not line.rstrip().endswith("# [measured domain]"))
-
-
 def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
     """A standalone Python module (the runtime's text, the fit's plan, ``register(name)``) that
     needs only Mitsuba 3 and Dr.Jit; ``cdf``: an ``rbrdf-cdf`` file or fit whose tables it
@@ -172,6 +161,4 @@ def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
             "    cls = bsdf_class(mi, dr)\n"
             "    mi.register_bsdf(name, lambda props: cls(props, PLAN))\n    return name\n")
     body = runtime.split('"""', 2)[2]          # drop the runtime's own docstring
-    if p.get("cutoff_deg") is None:            # no measured domain: the module as before the rule
-        body = without_domain(body)
     return doc + "import json\n" + body.rstrip("\n") + tail
