@@ -36,6 +36,7 @@ from fit.export.emitter import Emitter, ExportError, flagged_summary, glsl_liter
 from fit.export.glsl import GLSL
 from fit.rational import model as M
 from fit.rational.coefficient_file import load
+from fit.rational.domain import measured_domain
 
 FITS = [ROOT / "warp_rbrdf" / "data" / "paper_white_rgb.json",
         ROOT / "warp_rbrdf" / "data" / "satin_rosaline_rgb.json"]
@@ -91,6 +92,16 @@ def single_linear_model():
 
 MODELS = {"paper_white": lambda: load(FITS[0]), "satin": lambda: load(FITS[1]), "tricky": tricky_model,
           "single_linear": single_linear_model}
+
+
+def reference(model):
+    """What every export computes, ``f(wi, wo) -> rho (..., 3)``: the renderer's NumPy reference
+    (``warp_rbrdf.materials.rational.evaluate_at_angles``): the file's recipe, on the fit's
+    measured domain when it records its grazing cut-off (fit.rational.domain: paper_white,
+    satin and tricky record 79 deg; single_linear, a piece, records none)."""
+    from warp_rbrdf.materials.rational import evaluate_at_angles
+
+    return evaluate_at_angles(model, None, measured_domain(model))
 
 
 def directions(n, seed=0):
@@ -161,15 +172,15 @@ def test_c_matches_numpy(tmp_path, which, real):
     f = compile_c(model, tmp_path, real)
     wi, wo = directions(20000)
     got, a, b = f(wi, wo)
-    ref = model.evaluate(a, b)           # at the directions as C saw them
+    ref = reference(model)(a, b)         # at the directions as C saw them
     below = (a[:, 2] <= 0) | (b[:, 2] <= 0)
     assert below.sum() > 1000 and np.all(got[below] == 0.0)
     rel, absmax = agreement(got, ref, 1e-2 if real == "float" else 1e-3)
     print(f"{which} {real}: max rel {rel:.3g} (above 1e-2/1e-3 of max), max abs/max {absmax:.3g}")
     if real == "double":
         assert rel < 1e-7 and absmax < 1e-9, (rel, absmax)
-    elif real == "double-expf":          # the GLSL double variant's arithmetic
-        assert rel < 1e-5 and absmax < 1e-6, (rel, absmax)
+    elif real == "double-expf":          # the GLSL double variant's arithmetic: float exp, and
+        assert rel < 1e-4 and absmax < 1e-6, (rel, absmax)    # float cos / acos of the domain edge
     else:
         assert rel < 1e-2 and absmax < 3e-3, (rel, absmax)
 
@@ -194,7 +205,7 @@ def test_c_frame_function_and_cpp(tmp_path):
                         str(prog), "-lm"], check=False, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr[-2000:]
     vals = np.array(subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split(), float)
-    ref = model.evaluate(np.array([0.3, 0.1, 0.9486833]), np.array([-0.2, -0.1, 0.9746794]))
+    ref = reference(model)(np.array([0.3, 0.1, 0.9486833]), np.array([-0.2, -0.1, 0.9746794]))
     assert np.allclose(vals[:3], ref, rtol=1e-6) and np.allclose(vals[3:], ref, rtol=1e-6), (vals, ref)
     cxx = shutil.which("c++") or shutil.which("g++")
     if cxx is None:
@@ -209,7 +220,8 @@ def c_to_glsl(line: str) -> str:
     """A C statement of the emitter rewritten with GLSL's names and literals."""
     line = re.sub(r"RBRDF_K\(([0-9.eE+-]+)\)", lambda m: glsl_literal(float(m.group(1))), line)
     for c, g in (("RBRDF_REAL", "float"), ("RBRDF_MIN", "min"), ("RBRDF_MAX", "max"),
-                 ("rbrdf_clamp_", "clamp"), ("RBRDF_SQRT", "sqrt"), ("RBRDF_EXP", "exp")):
+                 ("rbrdf_clamp_", "clamp"), ("RBRDF_SQRT", "sqrt"), ("RBRDF_EXP", "exp"),
+                 ("RBRDF_ACOS", "acos"), ("RBRDF_COS", "cos")):
         line = line.replace(c, g)
     return line
 
@@ -338,7 +350,7 @@ def test_mitsuba_plugin_eval_matches_numpy():
     bsdf = mi.load_dict({"type": name})
     wi, wo = directions(400, seed=3)
     a, b = wi.astype(np.float32).astype(float), wo.astype(np.float32).astype(float)
-    ref = model.evaluate(a, b)
+    ref = reference(model)(a, b)
     got = MP.evaluate(model, a, b)
     rel, absmax = agreement(got, ref)
     print(f"plugin vs NumPy: max rel {rel:.3g}, max abs/max {absmax:.3g}")
@@ -355,7 +367,7 @@ def test_mitsuba_plugin_eval_matches_numpy():
         if b[k, 2] > 0:
             wx = np.array(bs.wo, float)
             assert np.isclose(bs.pdf, wx[2] / np.pi, rtol=1e-5)
-            assert np.allclose(np.array(w, float), model.evaluate(wx, b[k]) * np.pi, rtol=1e-4, atol=1e-7)
+            assert np.allclose(np.array(w, float), reference(model)(wx, b[k]) * np.pi, rtol=1e-4, atol=1e-7)
     MR.set_variant(MR.VARIANT)
 
 
@@ -398,7 +410,7 @@ def test_mitsuba_plugin_samples_with_the_cdf_tables(small_cdf):
         assert np.isclose(bs.pdf, pdf[k], rtol=1e-5), (k, bs.pdf, pdf[k])
         assert np.isclose(float(bsdf.pdf(ctx, si, bs.wo)), bs.pdf, rtol=1e-3)
         if wo[2] > 0:
-            f = model.evaluate(wo, wi[k]) * wo[2] / pdf[k]
+            f = reference(model)(wo, wi[k]) * wo[2] / pdf[k]
             assert np.allclose(np.array(w, float), f, rtol=1e-3, atol=1e-7)
 
 
@@ -433,7 +445,7 @@ def test_standalone_plugin_module(tmp_path):
         si = mi.SurfaceInteraction3f()
         si.wi = mi.Vector3f(*b)
         e = np.array(bsdf.eval(ctx, si, mi.Vector3f(*a)), float)
-        assert np.allclose(e, model.evaluate(a, b) * max(a[2], 0.0), rtol=1e-4, atol=1e-7)
+        assert np.allclose(e, reference(model)(a, b) * max(a[2], 0.0), rtol=1e-4, atol=1e-7)
 
 
 @pytest.fixture(scope="module")
@@ -550,7 +562,7 @@ def test_cli_export_plugin_with_cdf(tmp_path, small_cdf):
     pdf = small_cdf.table.sample(np.arccos(0.9486833), 0.4, 0.6)[2]
     assert np.isclose(bs.pdf, pdf, rtol=1e-5)
     wo = np.array(bs.wo, float)
-    f = 2.0 * MODELS["satin"]().evaluate(wo, np.array([0.3, 0.1, 0.9486833])) * wo[2] / pdf
+    f = 2.0 * reference(MODELS["satin"]())(wo, np.array([0.3, 0.1, 0.9486833])) * wo[2] / pdf
     assert np.allclose(np.array(w, float), f, rtol=1e-3)          # property scale = 2
     assert cli_main(["export", str(FITS[1]), str(tmp_path / "p.glsl"), "--cdf", str(cdf)]) == 2
     assert cli_main(["export", str(FITS[1]), str(tmp_path / "q.py"), "--cdf", str(FITS[0])]) == 2

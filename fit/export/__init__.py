@@ -10,8 +10,11 @@
   (:mod:`fit.export.mitsuba_plugin`): a Mitsuba 3 BSDF plugin (Python, ``mi.register_bsdf``).
 
 The GLSL, HLSL and C code come from one statement emitter (:mod:`fit.export.emitter`) that follows
-the file's evaluation recipe; the domain and clamp policy of every export is in its header and
-in docs/exports.md, with the measured agreement against the NumPy evaluation.
+the file's evaluation recipe, on the fit's measured domain when it records the grazing cut-off
+of its projection (:mod:`fit.rational.domain`, the renderer's rule: no extrapolation where the
+fit has no data; fits without a recorded cut-off export as before); the Mitsuba plugin's
+runtime does the same in Dr.Jit. The domain and clamp policy of every export is in its header
+and in docs/exports.md, with the measured agreement against the NumPy evaluation.
 """
 from __future__ import annotations
 

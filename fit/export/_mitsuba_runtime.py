@@ -8,7 +8,11 @@ A *plan* is the JSON-able form of a fit that :func:`fit.export.mitsuba_plugin.pl
 ``{"box", "transforms": [t_h, t_d], "value": {"transform", "offset", "min", "max"},
 "functions": [{"domain", "num": [[e_h, e_d, c], ...], "den": [...], "range": [lo, hi] | None}
 x 3]}``: the recipe of :mod:`fit.rational.coefficient_file` with each function's step-7 range
-already chosen (vouched range if valid, measured range if flagged).
+already chosen (vouched range if valid, measured range if flagged). A fit that records the
+grazing cut-off of its projection adds ``"cutoff_deg": c``: the angles are moved onto its
+measured domain first (:func:`fit.rational.domain.onto_measured_domain`: ``theta_h = min(theta_h,
+c)``, then ``theta_d = min(theta_d, acos(min(cos c / cos theta_h, 1)))``); without the key they
+are not moved.
 
 Evaluation is vectorised Dr.Jit arithmetic (every piece is evaluated and the right one
 selected), in ``Float64`` for the polynomial part; it works in every variant (scalar or JIT).
@@ -27,9 +31,20 @@ import math
 
 def _rho(mi, dr, plan, th, td):
     """rho (1/sr) as three Float64 at Rusinkiewicz angles (Float64, radians)."""
+    if plan.get("cutoff_deg") is not None:
+        th, td = _onto_measured_domain(dr, plan["cutoff_deg"], th, td)
     (hl, hh), (dl, dh) = plan["box"]
     x = [dr.clip(th, hl, hh), dr.clip(td, dl, dh)]
     return _node(mi, dr, plan["root"], x)
+
+
+def _onto_measured_domain(dr, cutoff_deg, th, td):
+    """(theta_h, theta_d) (Float64, radians) moved onto the measured domain of grazing cut-off
+    ``cutoff_deg`` (degrees): cos theta_h cos theta_d >= cos c (module docstring)."""
+    c = math.radians(cutoff_deg)
+    th = dr.minimum(th, c)
+    td = dr.minimum(td, dr.acos(dr.minimum(math.cos(c) / dr.cos(th), 1.0)))
+    return th, td
 
 
 def _node(mi, dr, node, x):

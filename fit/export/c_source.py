@@ -12,15 +12,20 @@ Emitted functions (``N`` = :func:`fit.export.emitter.identifier` of the name), a
 
 Same meaning as the GLSL functions (:mod:`fit.export.glsl`; the statements come from the same
 :class:`~fit.export.emitter.Emitter`): rho in 1/sr, radians, local frame with z = normal, 0
-below the horizon, the fit's clamps. Needs ``<math.h>`` (link with ``-lm``).
+below the horizon, the fit's clamps, and for a fit that records its grazing cut-off the angles
+moved onto its measured domain first (:mod:`fit.export.emitter`, step 0; ``cos`` and ``acos``
+through ``RBRDF_COS`` / ``RBRDF_ACOS``, defined by a second guarded prelude only in such
+files; with ``-DRBRDF_EXP_FLOAT`` they run in float as well, as GLSL's double variant does).
+Needs ``<math.h>`` (link with ``-lm``).
 """
 from __future__ import annotations
 
+from ..rational.domain import measured_domain
 from .emitter import Emitter, Language, c_literal, identifier, policy_text
 
 C = Language(real="RBRDF_REAL", literal=c_literal,
              funcs={"min": "RBRDF_MIN", "max": "RBRDF_MAX", "clamp": "rbrdf_clamp_",
-                    "sqrt": "RBRDF_SQRT", "exp": "RBRDF_EXP"})
+                    "sqrt": "RBRDF_SQRT", "exp": "RBRDF_EXP", "cos": "RBRDF_COS", "acos": "RBRDF_ACOS"})
 
 PRELUDE = r"""#include <math.h>
 
@@ -58,6 +63,24 @@ static inline RBRDF_REAL rbrdf_clamp_(RBRDF_REAL x, RBRDF_REAL lo, RBRDF_REAL hi
 #endif
 """
 
+# only in files of fits with a measured domain (the files of other fits are as they were)
+DOMAIN_PRELUDE = r"""#ifndef RBRDF_DOMAIN_PRELUDE_
+#define RBRDF_DOMAIN_PRELUDE_
+#ifdef RBRDF_REAL_DOUBLE
+#ifdef RBRDF_EXP_FLOAT  /* GLSL has no double cos / acos either */
+#define RBRDF_COS(x) ((double)cosf((float)(x)))
+#define RBRDF_ACOS(x) ((double)acosf((float)(x)))
+#else
+#define RBRDF_COS cos
+#define RBRDF_ACOS acos
+#endif
+#else
+#define RBRDF_COS cosf
+#define RBRDF_ACOS acosf
+#endif
+#endif
+"""
+
 
 def function_name(model, name: str | None = None) -> str:
     return "rbrdf_" + identifier(name or model.name)
@@ -80,7 +103,8 @@ def to_c(model, name: str | None = None, header: bool = True) -> str:
         out += [f"#ifndef {guard}", f"#define {guard}"]
     else:
         out += ["#ifndef RBRDF_API", "#define RBRDF_API", "#endif"]
-    out += [PRELUDE, "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
+    out += [PRELUDE] + ([DOMAIN_PRELUDE] if measured_domain(model) is not None else []) + [
+            "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
             f"RBRDF_API void {fn}_angles({R} theta_h, {R} theta_d, {R} rho[3])", "{",
             f"    {R} rho0 = RBRDF_K(0.0);", f"    {R} rho1 = RBRDF_K(0.0);", f"    {R} rho2 = RBRDF_K(0.0);"]
     out += body

@@ -2,11 +2,18 @@
 (:class:`fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`,
 nested pieces included) as straight-line statements in the C-like subset common to GLSL and
 C99 (declarations, ``if``/``else``, ``+=``, calls of ``min``/``max``/``clamp``/``sqrt``/``exp``
-through a per-language name table).
+and, for the measured domain, ``cos``/``acos``, through a per-language name table).
 
 The statements follow the evaluation recipe of :mod:`fit.rational.coefficient_file` step by
 step, as :meth:`RationalModel.__call__` does in NumPy:
 
+0. for a fit that records the grazing cut-off c of its projection
+   (:func:`fit.rational.domain.measured_domain`), move the angles onto its measured domain
+   ``cos theta_h cos theta_d >= cos c`` as the renderer does
+   (:func:`fit.rational.domain.onto_measured_domain`): ``theta_h = min(theta_h, c)``, then
+   ``theta_d = min(theta_d, acos(min(cos c / cos theta_h, 1)))`` (the value at the domain's edge
+   at the same theta_h; beyond it the fit has no data and would extrapolate). Fits that record
+   no cut-off get no such statements (their output is what it was before the rule existed);
 1. clamp ``theta_h`` and ``theta_d`` (radians) onto the model's box; pick the piece
    (``x <= edge`` selects the lower piece at a shared edge, recursively for nested splits) and
    clamp onto the piece's box;
@@ -31,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..rational.domain import measured_domain
 from ..rational.model import flagged, output_clamp
 
 VARIABLES = ("theta_h", "theta_d")
@@ -46,7 +54,7 @@ class Language:
 
     real: str                         # scalar type
     literal: callable                 # float -> source literal
-    funcs: dict = field(default_factory=dict)   # min, max, clamp, sqrt, exp -> names
+    funcs: dict = field(default_factory=dict)   # min, max, clamp, sqrt, exp, cos, acos -> names
 
     def call(self, f: str, *args) -> str:
         return f"{self.funcs.get(f, f)}({', '.join(args)})"
@@ -145,12 +153,30 @@ class Emitter:
         check_exportable(model)
         L, R = self.lang, self.lang.real
         pad = self.ind * depth
+        lines = []
+        cut = measured_domain(model)
+        if cut is not None:
+            lines, th, td = self.onto_measured_domain(cut, th, td, depth)
         xh, xd = self._fresh("xh"), self._fresh("xd")
         (hl, hh), (dl, dh) = (v.domain for v in model.variables)
-        lines = [f"{pad}{R} {xh} = {L.call('clamp', th, self.lit(hl), self.lit(hh))};",
-                 f"{pad}{R} {xd} = {L.call('clamp', td, self.lit(dl), self.lit(dh))};"]
+        lines += [f"{pad}{R} {xh} = {L.call('clamp', th, self.lit(hl), self.lit(hh))};",
+                  f"{pad}{R} {xd} = {L.call('clamp', td, self.lit(dl), self.lit(dh))};"]
         lines += self._node(model, xh, xd, out, depth)
         return lines
+
+    def onto_measured_domain(self, cutoff_deg: float, th: str, td: str, depth: int = 1):
+        """``(lines, theta_h name, theta_d name)``: statements moving ``th``, ``td`` (radians)
+        onto the measured domain of grazing cut-off ``cutoff_deg`` (degrees), the rule of
+        :func:`fit.rational.domain.onto_measured_domain` (``cos c`` as a literal)."""
+        L, R = self.lang, self.lang.real
+        pad = self.ind * depth
+        mh, md = "theta_h_m", "theta_d_m"     # not counted: the statements after are numbered as without
+        c = float(np.radians(float(cutoff_deg)))
+        tdmax = L.call("acos", L.call("min", f"{self.lit(np.cos(c))} / {L.call('cos', mh)}", self.lit(1.0)))
+        return ([f"{pad}/* measured domain (grazing cut-off {float(cutoff_deg):.6g} deg): "
+                 "cos(theta_h) cos(theta_d) >= cos(cut-off) */",
+                 f"{pad}{R} {mh} = {L.call('min', th, self.lit(c))};",
+                 f"{pad}{R} {md} = {L.call('min', td, tdmax)};"], mh, md)
 
     def _node(self, model, xh, xd, out, depth) -> list:
         pieces = getattr(model, "pieces", None)
@@ -265,6 +291,15 @@ def policy_text(model, prefix: str = " * ") -> list:
         "vouched range (valid functions) or measured range (flagged ones): never negative, never",
         "above what the data of its piece vouch for.",
     ]
+    cut = measured_domain(model)
+    if cut is not None:
+        lines += [
+            f"Measured domain: the fit was made from a projection with grazing cut-off c = {cut:.6g} deg",
+            "and has data only where cos(theta_h) cos(theta_d) >= cos(c). Beyond it (both directions",
+            "grazing) the angles are moved onto its edge first: theta_h = min(theta_h, c), then",
+            "theta_d = min(theta_d, acos(min(cos(c) / cos(theta_h), 1))), as warp-rbrdf's renderer",
+            "does (fit.rational.domain); the fit is not extrapolated there.",
+        ]
     fl = flagged_summary(model)
     if fl:
         lines.append("FLAGGED pieces (the fit is not within its tolerance there; the renderer of")

@@ -5,7 +5,8 @@ double variant needs 4.00).
 Emitted functions (``N`` = :func:`fit.export.emitter.identifier` of the name):
 
 * ``vec3 rbrdf_N_angles(float theta_h, float theta_d)``: rho (1/sr) at Rusinkiewicz angles
-  (radians), the fit's recipe with its clamps (:mod:`fit.export.emitter`);
+  (radians), the fit's recipe with its clamps (:mod:`fit.export.emitter`), on the fit's
+  measured domain when it records its grazing cut-off (emitter step 0);
 * ``vec3 rbrdf_N(vec3 wi, vec3 wo)``: rho at unit directions of the local shading frame (z =
   normal, both pointing away from the surface); ``vec3(0)`` below the horizon;
 * ``vec3 rbrdf_N_frame(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)``: the same with world-space
@@ -19,6 +20,7 @@ built with ``RBRDF_REAL=float`` runs the same statements and measures what float
 """
 from __future__ import annotations
 
+from ..rational.domain import measured_domain
 from .emitter import (
     Emitter,
     ExportError,
@@ -30,7 +32,8 @@ from .emitter import (
 )
 
 GLSL = Language(real="float", literal=glsl_literal,
-                funcs={"min": "min", "max": "max", "clamp": "clamp", "sqrt": "sqrt", "exp": "exp"})
+                funcs={"min": "min", "max": "max", "clamp": "clamp", "sqrt": "sqrt", "exp": "exp",
+                       "cos": "cos", "acos": "acos"})
 
 
 def function_name(model, name: str | None = None) -> str:
@@ -48,7 +51,8 @@ def to_glsl(model, name: str | None = None, header: bool = True, precision: str 
     """GLSL source (no ``#version`` line: it is meant to be pasted or included) of ``model``'s
     three functions (module docstring); ``name`` overrides the fit's name in the identifiers.
     ``precision="double"``: the recipe in ``double`` (GLSL 4.00 / ``GL_ARB_gpu_shader_fp64``;
-    ``exp`` in float, GLSL has no double ``exp``): the statements of the C double build."""
+    ``exp`` in float, GLSL has no double ``exp``; likewise ``cos`` and ``acos`` of the measured
+    domain): the statements of the C double build."""
     fn = function_name(model, name)
     if precision == "float":
         lang, pre, conv = GLSL, [], ""
@@ -56,6 +60,10 @@ def to_glsl(model, name: str | None = None, header: bool = True, precision: str 
         lang = Language(real="double", literal=glsl_double_literal,
                         funcs=dict(GLSL.funcs, exp=f"{fn}_exp_"))
         pre = [f"double {fn}_exp_(double x)", "{", "    return double(exp(float(x)));", "}", ""]
+        if measured_domain(model) is not None:
+            lang.funcs.update(cos=f"{fn}_cos_", acos=f"{fn}_acos_")
+            for f in ("cos", "acos"):
+                pre += [f"double {fn}_{f}_(double x)", "{", f"    return double({f}(float(x)));", "}", ""]
         conv = "double"
     else:
         raise ExportError(f"precision {precision!r}: expected 'float' or 'double'")

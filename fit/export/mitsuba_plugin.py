@@ -12,7 +12,9 @@ OUT.py``) that needs only Mitsuba: ``import OUT; OUT.register()`` registers the 
 ``rbrdf_<name>``.
 
 What it evaluates: exactly the NumPy evaluation (:meth:`fit.rational.model.RationalModel.evaluate`)
--- the recipe of :mod:`fit.rational.coefficient_file` with its clamps, 0 below the horizon,
+-- the recipe of :mod:`fit.rational.coefficient_file` with its clamps, on the fit's measured
+domain when it records its grazing cut-off (:func:`fit.rational.domain.onto_measured_domain`,
+as the renderer's NumPy reference ``evaluate_at_angles``), 0 below the horizon,
 flagged functions clamped to their measured range (the renderer's projected table is not
 exported) -- times ``cos(theta_o)`` as Mitsuba's ``eval`` includes it; property ``scale``
 (float, default 1) multiplies it. Sampling: cosine-weighted (``pdf = cos(theta_o) / pi``), or,
@@ -29,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..rational.domain import measured_domain
 from ..rational.model import output_clamp
 from . import _mitsuba_runtime
 from .emitter import check_exportable, identifier
@@ -89,8 +92,12 @@ def plan(model, cdf=None) -> dict:
                           "max": None if m.value_max is None else float(m.value_max)},
                 "functions": funcs}
 
-    return {"name": str(model.name), "box": [list(map(float, v.domain)) for v in model.variables],
-            "root": node(model), "cdf": cdf_plan(cdf)}
+    out = {"name": str(model.name), "box": [list(map(float, v.domain)) for v in model.variables],
+           "root": node(model), "cdf": cdf_plan(cdf)}
+    cut = measured_domain(model)
+    if cut is not None:                  # a plan without it is what it was before the rule
+        out["cutoff_deg"] = cut
+    return out
 
 
 def plugin_name(model, name: str | None = None) -> str:
@@ -140,7 +147,11 @@ def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
            f"    import {identifier(pname)}  # this file\n    {identifier(pname)}.register()   # plugin "
            f"{pname!r}\n    bsdf = mi.load_dict({{'type': {pname!r}}})\n\n"
            "rho in 1/sr times cos(theta_o); 0 below the horizon; angles clamped onto the fitted\n"
-           "domain, values to the fit's clamps and per-function ranges; sampling: "
+           "domain, values to the fit's clamps and per-function ranges; "
+           + ("" if p.get("cutoff_deg") is None else
+              f"angles first moved onto\nthe measured domain (grazing cut-off c = {p['cutoff_deg']:.6g} deg: "
+              "cos theta_h cos theta_d >= cos c); ")
+           + "sampling: "
            f"{'tabulated inverse CDFs' if p['cdf'] else 'cosine'}.\n"
            'Property ``scale`` (float) multiplies it."""\n')
     tail = (f"\n\nPLAN = json.loads({json.dumps(json.dumps(p))})\nNAME = {pname!r}\n\n\n"
