@@ -993,3 +993,91 @@ def test_fidelity_explains_rational_misses_by_the_projection_ceiling():
     assert "On 1 the table meets it and the fit does not" in text and "b/studio." in text
     assert "c/studio (7 px; projected 0)" in text and "d/studio" not in text
     assert explain_rational([rows[-1]], 0.05) == ""
+
+
+# --------------------------------------------------------------------------------------------
+# The limb study (studies.limb)
+def test_limb_regions_follow_the_sun(tmp_path):
+    """The sun is the map's brightest texel, in the lights' conventions; the sphere's pixel normals
+    are unit vectors facing the camera at the centre; the lit and unlit rims split the rim band by
+    the sign of n . s, and swap when the sun moves to the opposite side."""
+    from studies import fidelity as FI
+    from studies import limb
+    from warp_rbrdf import lights
+    from warp_rbrdf import mitsuba_reference as MR
+    from warp_rbrdf.image_io import write_exr
+
+    H, W = 32, 64
+    img = np.full((H, W, 3), 0.1, np.float32)
+    j, i = 10, 48                      # a sun off to one side, above the horizon
+    img[j, i] = 1e4
+    env = tmp_path / "sun.exr"
+    write_exr(env, img)
+    s = limb.sun_direction(env)
+    assert np.allclose(s, lights.uv_to_direction((i + 0.5) / W, (j + 0.5) / H)) and abs(np.linalg.norm(s) - 1) < 1e-9
+    scene = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), env, spp=2, resolution=64)
+    n = limb.pixel_normals(scene)
+    hit = np.isfinite(n).all(axis=-1)
+    assert np.allclose(np.linalg.norm(n[hit], axis=-1), 1.0) and n[32, 32, 2] > 0.99
+    assert not hit[0, 0]                                      # a corner ray misses the sphere
+    mask = MR.sphere_mask(64)
+    band = FI.rim_band(64, mask)
+    r = limb.regions(scene, mask, band, env)
+    assert not (r["lit_rim"] & r["unlit_rim"]).any() and ((r["lit_rim"] | r["unlit_rim"]) == band).all()
+    assert (r["inside"] == (mask & ~band)).all() and r["lit_rim"].any() and r["unlit_rim"].any()
+    assert (n[r["lit_rim"]] @ s > 0).all() and (n[r["unlit_rim"]] @ s <= 0).all()
+    img2 = np.full((H, W, 3), 0.1, np.float32)
+    img2[H - 1 - j, (i + W // 2) % W] = 1e4                    # the antipodal texel
+    env2 = tmp_path / "sun2.exr"
+    write_exr(env2, img2)
+    r2 = limb.regions(scene, mask, band, env2)
+    swapped = r2["lit_rim"] & r["lit_rim"]
+    assert swapped.sum() < 0.1 * r["lit_rim"].sum()
+
+
+def test_limb_region_stats():
+    """Luminance ratio and ΔE per region: an image scaled by 0.8 in one region only."""
+    from studies import limb
+
+    ref = np.full((8, 8, 3), 0.5)
+    img = ref.copy()
+    a = np.zeros((8, 8), bool)
+    a[:4] = True
+    img[a] *= 0.8
+    s = limb.region_stats(img, ref, {"a": a, "b": ~a, "none": np.zeros_like(a)}, exposure=1.0)
+    assert abs(s["a"]["y_ratio"] - 0.8) < 1e-12 and abs(s["b"]["y_ratio"] - 1.0) < 1e-12
+    assert s["a"]["de_mean"] > 1 and s["b"]["de_mean"] == 0 and "none" not in s
+    assert s["a"]["pixels"] == 32
+
+
+def test_limb_smoke(tmp_path):
+    """The limb study's smoke configuration (paper_white, rooitou, 32 px, 8 spp, no new fit, no
+    3-D fit folder): every available representation paired with rgl, per region, its files and
+    its block's table."""
+    from studies import limb
+
+    data_file("rgl/paper_white_rgb.bsdf")
+    data_file("envmaps/rooitou_park_1k.hdr")
+    r = limb.run("smoke", tmp_path, fits3d=str(tmp_path / "no-3d-fits"), quiet=True)
+    (row,) = r["rows"]
+    assert (row["material"], row["map"]) == ("paper_white", "rooitou")
+    st = row["stats"]
+    # the shipped 5 % fit stands in for the 2-D fit; no 3-D fit in the folder: said in a note
+    assert set(st) == {"measured", "projected", "projected-mean", "rational"}
+    assert any(n.startswith("rational-3d: no 3-D fit") for n in row["notes"])
+    for rep, regs in st.items():
+        assert "inside" in regs
+        for reg in regs.values():
+            assert 0.5 < reg["y_ratio"] < 2 and 0 <= reg["de_mean"] < 60 and reg["pixels"] > 0
+    # the two tables are different projections of the same file
+    assert st["projected"]["inside"] != st["projected-mean"]["inside"]
+    # the 3-D table is the closest to the file
+    assert st["measured"]["inside"]["de_mean"] < st["projected"]["inside"]["de_mean"]
+    data = json.loads((tmp_path / "limb.json").read_text())
+    assert set(data) == {"meta", "summary", "rows"} and data["rows"][0]["stats"] == json.loads(json.dumps(st))
+    assert (tmp_path / "limb.md").read_text() == r["markdown"] and _png_size(tmp_path / "limb.png")[1] > 0
+    t = limb.block_table(r).splitlines()
+    assert t[0] == "| representation | cases | inside | lit rim | unlit rim |"
+    c = _cells(t[2])
+    assert c[0] == "measured" and c[1] == "1"
+    _num(re.match(r"(\S+) ", c[2]).group(1), st["measured"]["inside"]["y_ratio"])
