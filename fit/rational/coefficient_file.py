@@ -149,6 +149,7 @@ from ..limits import (
     MAX_SPLIT_DEPTH,
 )
 from .bernstein import certify_positive
+from .fallback import table_from_record
 from .function import RationalFunction
 from .model import (
     INPUT_TRANSFORMS,
@@ -177,6 +178,8 @@ def to_dict(model) -> dict:
     d = _piecewise_to_dict(model) if isinstance(model, PiecewiseRationalModel) else _model_to_dict(model)
     if _is_3d(model):
         d["version"] = VERSION_3D
+    if getattr(model, "fallback", None) is not None:    # only flagged 2-D fits: others as before
+        d["fallback"] = jsonable(model.fallback)
     return d
 
 
@@ -528,6 +531,9 @@ def from_dict(d: dict, path=None, certify: bool = True):
         if ver == VERSION_PIECEWISE and "split" not in d:
             raise F.Invalid("split", "missing (a version-2 file is piecewise)")
         model = _model(d, path, "", 0, budget, three_d=ver == VERSION_3D)
+        if "fallback" in d:       # optional (flagged 2-D fits): checked whole, kept as written
+            table_from_record(d["fallback"], model, "fallback")
+            model.fallback = d["fallback"]
     except F.Invalid as e:
         raise BRDFFileError(path, f"invalid {FORMAT} {label}coefficient file: {e}") from None
     except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as e:
