@@ -31,11 +31,17 @@ intervals (:func:`fit.rational.brdf_model.flagged_regions`: the core when no cor
 best-effort grazing band, a search stopped at its degree limit) is never rendered from its
 fitted function. With the scene key ``unvouched = "projected"`` (default) that channel of that
 piece is taken from the ``projected`` table of the measurement the fit was made from (the
-file's ``source``, found next to the coefficient file, next to the scene or in
-``$RBRDF_DATA`` and checked against its sha256; the fit's own median projection with its
-grazing cut-off, empty clusters filled from the nearest measured cluster), clamped to the
-measured range of that piece; the table goes into ``Materials.tables`` and ``Materials.param``
-holds its start. With ``unvouched = "refuse"`` loading fails with one line naming the material,
+fit's own median projection with its grazing cut-off, empty clusters filled from the nearest
+measured cluster, :func:`fit.rational.fallback.fallback_table`), clamped to the measured range
+of that piece; the table goes into ``Materials.tables`` and ``Materials.param`` holds its start.
+The fitter embeds the part of that table read here in the coefficient file (its ``fallback``
+key, :mod:`fit.rational.fallback`), so such a fit renders without its source measurement, with
+the same values bit for bit; the table is checked against the fit (shape, dtype, cut-off,
+coverage of the flagged pieces and channels, finite values >= 0; a bad one is a one-line
+:class:`SceneError` naming the file and the key). Files written before the table was embedded
+take it from the source measurement (the file's ``source``, found next to the coefficient file,
+next to the scene or in ``$RBRDF_DATA`` and checked against its sha256; a one-line error naming
+it when it is not found). The load note says which. With ``unvouched = "refuse"`` loading fails with one line naming the material,
 the file and what is flagged. A fit without a flagged piece packs exactly as before the table
 existed (no channel reads a table; only the domain record above).
 """
