@@ -5,10 +5,12 @@ Order of preference (the first that works):
 1. ``results/fits/<material>_tol<t>_cli.json`` made earlier by this module with the same
    interval options (:func:`made_with`; one made with others is fitted again and replaced);
 2. a shipped ``warp_rbrdf/data/<material>*.json`` whose ``fit.tolerance`` equals ``t`` and
-   whose interval options are the requested ones (the shipped satin_rosaline fit keeps
-   ``band_intervals="tol+spread"``, so the studies fit it again), or, where no new fit may be
-   made (``allow_fit=False``), one made with other options (source ``"shipped (other interval
-   options)"``);
+   whose interval options are the requested ones (the shipped fits are made with
+   :data:`FIT_OPTIONS`; a flagged one carries its fallback table, :mod:`fit.rational.fallback`),
+   or, where no new fit may be made (``allow_fit=False``), one made with other options (source
+   ``"shipped (other interval options)"``: none of the shipped files today, but a shipped file
+   is any file in ``warp_rbrdf/data/``, e.g. satin_rosaline's, which kept a ``tol+spread``
+   band until its file could carry its fallback table);
 3. the project's fitter, called in this process: :func:`fit.rational.brdf_fit.fit_brdf` on the
    measured file with the options ``rbrdf-fit brdf`` passes by default (:data:`FIT_OPTIONS`),
    saved with :func:`fit.rational.coefficient_file.save`: the same fit and file as

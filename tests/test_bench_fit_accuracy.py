@@ -99,10 +99,12 @@ def test_the_2d_column_is_the_fit_as_the_renderer_shows_it():
     from warp_rbrdf.paths import PACKAGE_DATA
 
     path = data_file("rgl/satin_rosaline_rgb.bsdf")
-    m = load(PACKAGE_DATA / "satin_rosaline_rgb.json")
-    flagged = copy.deepcopy(m)
+    flagged = load(PACKAGE_DATA / "satin_rosaline_rgb.json")      # the shipped fit: its band's blue flagged
     band = flagged.pieces[-1]
-    band.function_info[2] = dict(band.function_info[2], valid=False)         # blue of the grazing band
+    assert [r["channels"] for r in rational.flagged_regions(flagged)] == [(2,)]
+    m = copy.deepcopy(flagged)                                    # the same coefficients, vouched
+    m.fallback = None
+    m.pieces[-1].function_info[2] = dict(band.function_info[2], valid=True, feasible=True)
     wi, wo = B.cosine_pairs(20_000, 1)
     plain, shown = B.rendered_2d(m, path)(wi, wo), B.rendered_2d(flagged, path)(wi, wo)
     angles = np.stack(directions_to_half_diff(wi, wo)[::2], -1)          # theta_h, theta_d

@@ -491,14 +491,24 @@ def test_rational_model_caches_a_new_fit_and_refuses_a_flagged_one(tmp_path, mon
 
 
 def test_rational_model_does_not_reuse_a_fit_made_with_other_intervals(tmp_path, monkeypatch):
-    """A cached or shipped file made with other interval options (the shipped satin_rosaline fit's
-    band is ``tol+spread``, the default before the fidelity study) does not stand for a fit with
-    today's options: it is fitted again, and the cache file replaced."""
+    """A cached or shipped file made with other interval options (e.g. a ``tol+spread`` band, the
+    default before the fidelity study, as the shipped satin_rosaline fit had until its file could
+    carry its fallback table) does not stand for a fit with today's options: it is fitted again,
+    and the cache file replaced."""
     from fit.rational.coefficient_file import load, save
     from studies import fits as F
+    from warp_rbrdf import paths
     from warp_rbrdf.paths import PACKAGE_DATA
 
-    shipped = load(PACKAGE_DATA / "satin_rosaline_rgb.json")
+    assert F.made_with(load(PACKAGE_DATA / "satin_rosaline_rgb.json"))     # shipped: today's options
+    assert F.shipped_model("satin_rosaline_rgb", 0.05, any_options=False) is not None
+    # a shipped file made with the old band intervals (the same coefficients, recorded tol+spread)
+    old = json.loads((PACKAGE_DATA / "satin_rosaline_rgb.json").read_text())
+    old["fit"]["band_intervals"] = "tol+spread"
+    (tmp_path / "pkg").mkdir()
+    (tmp_path / "pkg" / "satin_rosaline_rgb.json").write_text(json.dumps(old))
+    monkeypatch.setattr(paths, "PACKAGE_DATA", tmp_path / "pkg")
+    shipped = load(tmp_path / "pkg" / "satin_rosaline_rgb.json")
     assert shipped.fit_info["band_intervals"] == "tol+spread" != F.FIT_OPTIONS["band_intervals"] == "tol"
     assert not F.made_with(shipped) and F.made_with(shipped, {"band_intervals": "tol+spread"})
     assert F.shipped_model("satin_rosaline_rgb", 0.05) is not None                  # the benchmarks' fallback

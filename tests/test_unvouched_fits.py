@@ -39,6 +39,7 @@ from fit.rational.brdf_model import (
 )
 from fit.rational.coefficient_file import load as load_coefficients
 from fit.rational.coefficient_file import save as save_coefficients
+from fit.rational.coefficient_file import to_dict
 from warp_rbrdf.errors import SceneError
 from warp_rbrdf.materials import rational
 from warp_rbrdf.materials.build import build_material_data
@@ -210,10 +211,10 @@ def test_values_never_leave_the_regions_measured_range(fitted, renderer):
 def test_unflagged_fit_is_unchanged(renderer):
     """A fit without a flagged piece loads as before: its own evaluation (on its measured domain,
     tests/test_rational_domain.py), no table, no log line, and the packed data the renderer had
-    before this feature (no table channel, no clamp)."""
+    before this feature (no table channel)."""
     from warp_rbrdf.paths import PACKAGE_DATA
 
-    model = load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json")
+    model = load_coefficients(PACKAGE_DATA / "paper_white_rgb.json")
     assert flagged_regions(model) == []
     lm = rational.load(MaterialSpec(name="s", type="rational", data=model))
     assert lm.fallback_table is None and lm.notes == () and lm.data is model
@@ -222,7 +223,7 @@ def test_unflagged_fit_is_unchanged(renderer):
     assert all(np.array_equal(a, b) for a, b in zip(packed, rational.pack_model(model, False, cut)))
     assert all(np.array_equal(a, b) for a, b in zip(packed, lm.coefficients))
     leaves = [q for p in model.pieces for q in getattr(p, "pieces", [p])]
-    assert all(rational.channel_modes(leaf, table=True) == [(False, None)] * 3 for leaf in leaves)
+    assert not any(t for leaf in leaves for t, _ in rational.channel_modes(leaf, table=True))
     # vouched coefficients: exactly the fit (the scene's 'vouched' material gets no table)
     lm = renderer.material_data.loaded[renderer.material_index("vouched")]
     assert lm.fallback_table is None and renderer.material_data.param[renderer.material_index("vouched")] == 0
@@ -242,7 +243,7 @@ def test_load_log_says_what_happened(fitted):
     md = build_material_data(sc, log=lines.append)
     assert lines == [("material 'satin': rational fit not within its bound for theta_d > 60 deg (blue "
                       "channel): using the projected table there (median projection of spiky.binary, "
-                      "clamped to each region's measured range)")]
+                      "embedded in spiky.json, clamped to each region's measured range)")]
     assert md.tables.shape == (90 * 90, 3) and md.param[0] == 0
 
 
@@ -265,12 +266,21 @@ def test_scene_key_is_checked(fitted):
         parse_scene('[materials.m]\ntype = "lambert"\nunvouched = "refuse"\n')
 
 
+def _without_fallback(src, dst):
+    """``src`` written to ``dst`` as the fitter wrote flagged fits before it embedded the table."""
+    data = json.loads(src.read_text())
+    data.pop("fallback")
+    dst.write_text(json.dumps(data))
+
+
 def test_missing_or_different_source_is_an_error_naming_it(fitted, tmp_path, monkeypatch):
+    """A flagged file without an embedded table (written before the fitter embedded it) needs
+    its source measurement."""
     d, _ = fitted
     monkeypatch.setenv("RBRDF_DATA", str(tmp_path / "data"))
     (tmp_path / "data" / "merl").mkdir(parents=True)
     (tmp_path / "fits").mkdir()
-    shutil.copy(d / "spiky.json", tmp_path / "fits" / "spiky.json")
+    _without_fallback(d / "spiky.json", tmp_path / "fits" / "spiky.json")
     text = _scene_text(tmp_path, file="fits/spiky.json")
     with pytest.raises(SceneError) as e:
         build_material_data(parse_scene(text, path=tmp_path / "scene.toml"), log=lambda s: None)
@@ -285,7 +295,7 @@ def test_missing_or_different_source_is_an_error_naming_it(fitted, tmp_path, mon
     shutil.copy(d / "spiky.binary", tmp_path / "data" / "merl" / "spiky.binary")
     lines = []
     build_material_data(parse_scene(text, path=tmp_path / "scene.toml"), log=lines.append)
-    assert len(lines) == 1 and "using the projected table" in lines[0]
+    assert len(lines) == 1 and "using the projected table" in lines[0] and "embedded" not in lines[0]
 
 
 def test_files_without_recorded_range_get_it_from_the_source(fitted, tmp_path):
@@ -293,10 +303,11 @@ def test_files_without_recorded_range_get_it_from_the_source(fitted, tmp_path):
     computes the range from the source measurement (the same numbers the fitter records)."""
     d, _ = fitted
     data = json.loads((d / "spiky.json").read_text())
+    data.pop("fallback")             # files written before the table was embedded ...
     for piece in data["pieces"]:
         for f in piece["functions"]:
             f.pop("measured_range")
-            f.pop("vouched_range")   # files written before either was recorded
+            f.pop("vouched_range")   # ... or either range was recorded
     (tmp_path / "old.json").write_text(json.dumps(data))
     shutil.copy(d / "spiky.binary", tmp_path / "spiky.binary")
     old = load_coefficients(tmp_path / "old.json")
@@ -326,6 +337,8 @@ def test_round_trip_keeps_the_record(fitted, tmp_path):
     assert a["version"] == b["version"] == 2
     assert [f["measured_range"] for p in a["pieces"] for f in p["functions"]] == \
         [f["measured_range"] for p in b["pieces"] for f in p["functions"]]
+    assert a["fallback"] == b["fallback"]
+    assert (tmp_path / "again.json").read_bytes() == (d / "spiky.json").read_bytes()
 
 
 @pytest.mark.slow
@@ -389,4 +402,140 @@ def test_default_band_intervals_flag_a_band_vouched_only_by_its_spread(tmp_path)
     assert not new.all_valid                                    # ... the tolerance does not
     assert new.model.fit_info["band_intervals"] == "tol"
     assert flagged_regions(new.model) and not flagged_regions(old.model)
+    # only the flagged fit carries a fallback table; the valid one is written as before
+    assert new.model.fallback is not None and old.model.fallback is None
+    assert "fallback" in to_dict(new.model) and "fallback" not in to_dict(old.model)
     assert describe_regions(new.model).startswith("theta_d > 60 deg")
+
+
+# The embedded fallback table (fit.rational.fallback): a flagged fit renders without its source
+def test_flagged_fit_embeds_the_table_the_renderer_reads(fitted):
+    """The fitter writes the part of the projected table the renderer reads: the flagged band's
+    clusters (one more on each side) in blue, float32 of the source-based table bit for bit."""
+    from fit.rational.fallback import KIND, fallback_table, region_blocks, table_from_record
+
+    d, fit = fitted
+    rec = json.loads((d / "spiky.json").read_text())["fallback"]
+    assert rec["kind"] == KIND and rec["shape"] == [90, 90, 3] and rec["dtype"] == "<f4"
+    assert rec["grazing_cutoff_deg"] == 79.0 == fit.model.fit_info["grazing_cutoff_deg"]
+    assert rec["source"] == fit.model.source
+    assert [(b["theta_h_index"], b["theta_d_index"], b["channels"]) for b in rec["blocks"]] == \
+        [([0, 89], [59, 79], [2])]
+    model = load_coefficients(d / "spiky.json")
+    assert model.fallback == rec
+    emb = table_from_record(rec, model)
+    src = fallback_table(project_for_fit(read_merl(d / "spiky.binary")))
+    assert emb.dtype == np.float32 and emb.shape == (90, 90, 3)
+    for (i0, i1), (j0, j1), chans in region_blocks(model):
+        sl = (slice(i0, i1 + 1), slice(j0, j1 + 1), list(chans))
+        np.testing.assert_array_equal(emb[sl], src[sl])
+        assert emb[sl].tobytes() == src[sl].tobytes()
+
+
+def test_embedded_table_renders_without_the_source_as_the_source_does(fitted, tmp_path, monkeypatch):
+    """Only the coefficient file, no measurement anywhere ($RBRDF_DATA empty): the fit loads
+    from its embedded table, and its NumPy reference, packed data and Warp values equal those of
+    the same file without the table next to its source measurement, bit for bit."""
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.testing import top_down_camera
+
+    d, _ = fitted
+    monkeypatch.setenv("RBRDF_DATA", str(tmp_path / "empty"))
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "alone").mkdir()
+    (tmp_path / "old").mkdir()
+    shutil.copy(d / "spiky.json", tmp_path / "alone" / "spiky.json")
+    _without_fallback(d / "spiky.json", tmp_path / "old" / "spiky.json")
+    shutil.copy(d / "spiky.binary", tmp_path / "old" / "spiky.binary")
+    emb = rational.load(MaterialSpec(name="e", type="rational", file=tmp_path / "alone" / "spiky.json"))
+    src = rational.load(MaterialSpec(name="s", type="rational", file=tmp_path / "old" / "spiky.json"))
+    assert emb.notes == (("rational fit not within its bound for theta_d > 60 deg (blue channel): using the "
+                          "projected table there (median projection of spiky.binary, embedded in spiky.json, "
+                          "clamped to each region's measured range)"),)
+    assert src.notes == (("rational fit not within its bound for theta_d > 60 deg (blue channel): using the "
+                          "projected table there (median projection of spiky.binary, clamped to each "
+                          "region's measured range)"),)
+    wi, wo = _pairs(20000, seed=13)
+    np.testing.assert_array_equal(emb.evaluate(wi, wo), src.evaluate(wi, wo))
+    assert all(np.array_equal(a, b) for a, b in zip(emb.coefficients, src.coefficients))
+    # the in-memory fit (spec.data) carries the same table
+    mem = rational.load(MaterialSpec(name="m", type="rational", data=load_coefficients(d / "spiky.json")))
+    assert mem.notes[0].endswith("(median projection of spiky.binary, carried by the fit, clamped to each "
+                                 "region's measured range)")
+    np.testing.assert_array_equal(mem.evaluate(wi, wo), src.evaluate(wi, wo))
+    # Warp: one scene, both materials
+    specs = {"e": MaterialSpec(name="e", type="rational", file=tmp_path / "alone" / "spiky.json"),
+             "s": MaterialSpec(name="s", type="rational", file=tmp_path / "old" / "spiky.json")}
+    sc = Scene(camera=top_down_camera(4), materials=specs,
+               shapes=[ShapeSpec(type="sphere", material=n, center=(3.0 * i, -10.0, 0.0), radius=0.5)
+                       for i, n in enumerate(specs)])
+    r = Renderer(sc)
+    got = r.eval_material("e", wi, wo)
+    np.testing.assert_array_equal(got, r.eval_material("s", wi, wo))
+    assert np.isclose(got, emb.evaluate(wi, wo), rtol=1e-5, atol=1e-7).all(axis=1).mean() > 0.999
+
+
+def _corrupt_cases():
+    def data(rec, f):
+        raw = np.frombuffer(__import__("base64").b64decode(rec["blocks"][0]["data"]), "<f4").copy()
+        rec["blocks"][0]["data"] = __import__("base64").b64encode(f(raw).astype("<f4").tobytes()).decode()
+
+    def nan(r):
+        r[5] = np.nan
+        return r
+
+    return {
+        "wrong length": (lambda rec: data(rec, lambda r: r[:-3]), "fallback.blocks[0].data", "bytes, expected"),
+        "wrong shape": (lambda rec: rec.update(shape=[90, 90, 4]), "fallback.shape", "expected [90, 90, 3]"),
+        "non-finite": (lambda rec: data(rec, nan), "fallback.blocks[0].data", "not finite"),
+        "negative": (lambda rec: data(rec, lambda r: -r), "fallback.blocks[0].data", "below 0"),
+        "not base64": (lambda rec: rec["blocks"][0].update(data="@@@@"), "fallback.blocks[0].data", "base64"),
+        "other cut-off": (lambda rec: rec.update(grazing_cutoff_deg=80.0), "fallback.grazing_cutoff_deg",
+                          "not the fit's grazing cut-off 79"),
+        "too small": (lambda rec: rec["blocks"][0].update(theta_d_index=[60, 79]), "fallback.blocks[0].data",
+                      "bytes, expected"),
+        "not covering": (lambda rec: rec["blocks"][0].update(channels=[1]), "fallback.blocks",
+                         "do not cover flagged piece 1"),
+        "index range": (lambda rec: rec["blocks"][0].update(theta_h_index=[0, 90]),
+                        "fallback.blocks[0].theta_h_index", "not a range inside [0, 89]"),
+        "not an object": (lambda rec: rec.clear() or rec.update(kind=3), "fallback.kind", "expected a string"),
+        "dtype": (lambda rec: rec.update(dtype=">f4"), "fallback.dtype", "little-endian float32"),
+    }
+
+
+@pytest.mark.parametrize("case", list(_corrupt_cases()))
+def test_corrupt_embedded_table_is_one_line_naming_file_and_key(fitted, tmp_path, case):
+    d, _ = fitted
+    change, key, problem = _corrupt_cases()[case]
+    data = json.loads((d / "spiky.json").read_text())
+    change(data["fallback"])
+    (tmp_path / "bad.json").write_text(json.dumps(data))
+    text = _scene_text(tmp_path, file="bad.json")
+    with pytest.raises(SceneError) as e:
+        build_material_data(parse_scene(text, path=tmp_path / "scene.toml"), log=lambda s: None)
+    msg = str(e.value)
+    assert "\n" not in msg and "materials.satin.file" in msg and "bad.json" in msg
+    assert f"key {key}:" in msg and problem in msg, msg
+
+
+def test_corrupt_table_of_an_in_memory_fit_is_one_line(fitted):
+    d, _ = fitted
+    model = copy.deepcopy(load_coefficients(d / "spiky.json"))
+    model.fallback = dict(model.fallback, shape=[90, 90])
+    with pytest.raises(SceneError) as e:
+        rational.load(MaterialSpec(name="m", type="rational", data=model))
+    msg = str(e.value)
+    assert "\n" not in msg and "embedded fallback table unusable (key fallback.shape: expected [90, 90, 3]" in msg
+
+
+def test_valid_file_is_written_as_before(tmp_path):
+    """A fit without a flagged piece has no fallback key: saving the shipped paper_white fit
+    (valid) again gives its file byte for byte."""
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    src = PACKAGE_DATA / "paper_white_rgb.json"
+    model = load_coefficients(src)
+    assert not flagged_regions(model) and model.fallback is None
+    save_coefficients(model, tmp_path / "again.json")
+    assert "fallback" not in json.loads(src.read_text())
+    assert (tmp_path / "again.json").read_bytes() == src.read_bytes()

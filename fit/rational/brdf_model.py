@@ -128,14 +128,21 @@ def brdf_model(p, name, pieces, kw, intervals, band_intervals, total, source_fil
                 "valid": [all(bool(pc.results[c].valid) for pc in core_pcs) for c in range(3)]}
     source = {"file": source_file or (p.source.split("/")[-1] if p.source else ""), "sha256": p.source_sha256}
     if len(models) == 1:
-        m = models[0]
-        m.domain_policy, m.fit_info, m.source = policy, fit_info, source
-        return m
-    return PiecewiseRationalModel(
-        name=name, variables=[Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
-                              Variable("theta_d", "rad", "identity", (0.0, float(np.deg2rad(THETA_D_MAX_DEG))))],
-        split_variable="theta_d", edges=[float(np.deg2rad(x)) for x in (0.0, core, THETA_D_MAX_DEG)],
-        pieces=models, kind="brdf", domain_policy=policy, fit_info=fit_info, piece_info=infos, source=source)
+        model = models[0]
+        model.domain_policy, model.fit_info, model.source = policy, fit_info, source
+    else:
+        model = PiecewiseRationalModel(
+            name=name, variables=[Variable("theta_h", "rad", kw["theta_h_transform"], (0.0, THETA_H_MAX)),
+                                  Variable("theta_d", "rad", "identity",
+                                           (0.0, float(np.deg2rad(THETA_D_MAX_DEG))))],
+            split_variable="theta_d", edges=[float(np.deg2rad(x)) for x in (0.0, core, THETA_D_MAX_DEG)],
+            pieces=models, kind="brdf", domain_policy=policy, fit_info=fit_info, piece_info=infos, source=source)
+    # a flagged fit carries the part of its projected table the renderer shows there (from the
+    # projection ``p`` it was fitted to), so that it renders without its source measurement
+    from .fallback import fallback_record
+
+    model.fallback = fallback_record(p, model)
+    return model
 
 
 # What a fit does not vouch for ---------------------------------------------------------------

@@ -42,7 +42,8 @@ A UTF-8 JSON object. Keys (all required unless marked optional)::
                         "grazing": "text", "theta_d_max_deg": 80.0},
       "fit": {"tolerance": 0.05, "tolerance_kind": "relative", "abs_floor": 1e-3,
               "time_s": 3.1, "fitter": "...", ...},          # informative
-      "source": {"file": "satin_rosaline_rgb.bsdf", "sha256": "hex" }   # "" when built in memory
+      "source": {"file": "satin_rosaline_rgb.bsdf", "sha256": "hex" },  # "" when built in memory
+      "fallback": {...}                      # optional: the projected table of a flagged 2-D fit
     }
 
 Evaluating one output (e.g. a BRDF channel at Rusinkiewicz angles theta_h, theta_d in radians)::
@@ -73,6 +74,27 @@ changes no value at a data point, and bounds the fit in its piece's data-free cl
 the intervals do not constrain (a valid 5 % fit of cc_iris_purple_gem reached 919 /sr there
 against <= 0.25 measured around them). All three keys are optional and ignored by older readers:
 the version numbers are unchanged.
+
+**Fallback table** (optional top-level key ``fallback``, any version with the 2-D BRDF
+variables; :mod:`fit.rational.fallback`): written by the fitter only when a function is flagged,
+it holds the part of the fit's projected median table (90 x 90 MERL grid, 3 channels, float32)
+the renderer shows in place of the flagged functions, so the file renders without its source
+measurement::
+
+      "fallback": {"kind": "projected median table", "grid": "merl 90x90: ...",
+                   "grazing_cutoff_deg": 79.0,          # = fit.grazing_cutoff_deg
+                   "shape": [90, 90, 3], "dtype": "<f4", "encoding": "base64", "fill": 0.0,
+                   "blocks": [{"theta_h_index": [i0, i1], "theta_d_index": [j0, j1],  # inclusive
+                               "channels": [2], "data": "<base64 of the float32 block, C order>"}],
+                   "source": {"file": "...", "sha256": "hex"}}
+
+One block per flagged piece: its box's clusters (one more on each side) in its flagged
+channels; other clusters are ``fill`` and never read. The reader checks it whole (kind, shape,
+dtype, cut-off equal to the fit's, index ranges, base64 and byte length, finite values >= 0,
+every flagged piece and channel covered and recording its ``measured_range``). Files without the
+key are read as before; a fit with no flagged function is written without it (unchanged bytes).
+Readers ignore top-level keys they do not know (this one and the earlier ones), so the version
+numbers are unchanged: an older reader reads such a file and needs the source measurement.
 
 For a BRDF the variables are exactly ``theta_h`` then ``theta_d`` (radians, Rusinkiewicz 1998,
 as in conventions.md) and rho is in 1/sr without the cosine; rho = 0 when the light or view
@@ -149,6 +171,7 @@ from ..limits import (
     MAX_SPLIT_DEPTH,
 )
 from .bernstein import certify_positive
+from .fallback import table_from_record
 from .function import RationalFunction
 from .model import (
     INPUT_TRANSFORMS,
@@ -177,6 +200,8 @@ def to_dict(model) -> dict:
     d = _piecewise_to_dict(model) if isinstance(model, PiecewiseRationalModel) else _model_to_dict(model)
     if _is_3d(model):
         d["version"] = VERSION_3D
+    if getattr(model, "fallback", None) is not None:    # only flagged 2-D fits: others as before
+        d["fallback"] = jsonable(model.fallback)
     return d
 
 
@@ -528,6 +553,9 @@ def from_dict(d: dict, path=None, certify: bool = True):
         if ver == VERSION_PIECEWISE and "split" not in d:
             raise F.Invalid("split", "missing (a version-2 file is piecewise)")
         model = _model(d, path, "", 0, budget, three_d=ver == VERSION_3D)
+        if "fallback" in d:       # optional (flagged 2-D fits): checked whole, kept as written
+            table_from_record(d["fallback"], model, "fallback")
+            model.fallback = d["fallback"]
     except F.Invalid as e:
         raise BRDFFileError(path, f"invalid {FORMAT} {label}coefficient file: {e}") from None
     except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as e:

@@ -168,6 +168,9 @@ class RationalModel(_BRDFEvaluation):
     fit_info: dict = field(default_factory=dict)
     function_info: list = field(default_factory=list)   # per-output dicts (errors, certificate)
     source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
+    #: the file's optional "fallback" record (fit.rational.fallback: the projected table of a
+    #: flagged 2-D fit, so that it renders without its source measurement); None: none
+    fallback: dict | None = None
 
     def __post_init__(self):
         self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]
@@ -263,6 +266,7 @@ class PiecewiseRationalModel(_BRDFEvaluation):
     fit_info: dict = field(default_factory=dict)
     piece_info: list = field(default_factory=list)
     source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
+    fallback: dict | None = None         # as RationalModel.fallback
 
     def __post_init__(self):
         self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]

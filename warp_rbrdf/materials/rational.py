@@ -31,11 +31,17 @@ intervals (:func:`fit.rational.brdf_model.flagged_regions`: the core when no cor
 best-effort grazing band, a search stopped at its degree limit) is never rendered from its
 fitted function. With the scene key ``unvouched = "projected"`` (default) that channel of that
 piece is taken from the ``projected`` table of the measurement the fit was made from (the
-file's ``source``, found next to the coefficient file, next to the scene or in
-``$RBRDF_DATA`` and checked against its sha256; the fit's own median projection with its
-grazing cut-off, empty clusters filled from the nearest measured cluster), clamped to the
-measured range of that piece; the table goes into ``Materials.tables`` and ``Materials.param``
-holds its start. With ``unvouched = "refuse"`` loading fails with one line naming the material,
+fit's own median projection with its grazing cut-off, empty clusters filled from the nearest
+measured cluster, :func:`fit.rational.fallback.fallback_table`), clamped to the measured range
+of that piece; the table goes into ``Materials.tables`` and ``Materials.param`` holds its start.
+The fitter embeds the part of that table read here in the coefficient file (its ``fallback``
+key, :mod:`fit.rational.fallback`), so such a fit renders without its source measurement, with
+the same values bit for bit; the table is checked against the fit (shape, dtype, cut-off,
+coverage of the flagged pieces and channels, finite values >= 0; a bad one is a one-line
+:class:`SceneError` naming the file and the key). Files written before the table was embedded
+take it from the source measurement (the file's ``source``, found next to the coefficient file,
+next to the scene or in ``$RBRDF_DATA`` and checked against its sha256; a one-line error naming
+it when it is not found). The load note says which. With ``unvouched = "refuse"`` loading fails with one line naming the material,
 the file and what is flagged. A fit without a flagged piece packs exactly as before the table
 existed (no channel reads a table; only the domain record above).
 """
@@ -51,20 +57,18 @@ import warp as wp
 from fit.formats.angles import directions_to_half_diff
 from fit.formats.grid import (
     N_THETA_D,
-    theta_d_centres,
     theta_d_index,
-    theta_h_centres,
     theta_h_index,
 )
 from fit.formats.measured import file_sha256
 from fit.rational.brdf_model import (
-    GRAZING_CUTOFF_DEG,
     describe_regions,
     flagged_regions,
     region_measured_range,
 )
 from fit.rational.coefficient_file import load as load_coefficients
 from fit.rational.domain import measured_domain, onto_measured_domain  # noqa: F401 - re-exported
+from fit.rational.fallback import fallback_table, fit_cutoff_deg, table_from_record
 from fit.rational.model import flagged, measured_range, output_clamp
 from fit.rational.variables3d import evaluate_directions, is_3d
 
@@ -111,13 +115,28 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     if [v.name for v in model.variables] != ["theta_h", "theta_d"]:
         raise SceneError(scene_file, f"{key}.file", f"{head}; a projected table can replace only a fit "
                                                     f"in (theta_h, theta_d)")
+    cut = fit_cutoff_deg(model)     # the flagged pieces' table: the fit's projection and cut-off
+    if getattr(model, "fallback", None) is not None:
+        # the table the fitter wrote into the file (fit.rational.fallback): no measurement needed
+        try:
+            table = table_from_record(model.fallback, model)
+        except ValueError as e:       # fit.jsonfields.Invalid names the key; one line
+            raise SceneError(scene_file, f"{key}.file", f"{head}; {fit_name}: embedded fallback table "
+                                                        f"unusable ({e})") from None
+        src_name = str((model.source or {}).get("file") or "") or "its source measurement"
+        where = f"embedded in {fit_name}" if spec.file is not None else "carried by the fit"
+        note = (f"rational fit not within its bound for {what}: using the projected table there "
+                f"(median projection of {src_name}, {where}, clamped to each region's measured range)")
+        return LoadedMaterial(spec, model, scaled(evaluate_at_angles(model, table, cut), spec.scale),
+                              scale=spec.scale, fallback_table=table, notes=(note,),
+                              coefficients=_packed(model, True, scene_file, key, cut))
     src = find_source(model, spec, scene_file, key, head)
-    # the measurement (and the fitter's projection policy) only for a flagged fit
+    # the measurement (and the fitter's projection policy) only for a flagged fit without an
+    # embedded table (files written before the fitter embedded it)
     from fit.formats import load_measured
     from fit.rational.brdf_fit import project_for_fit
 
     try:
-        cut = float(model.fit_info.get("grazing_cutoff_deg") or GRAZING_CUTOFF_DEG)
         p = project_for_fit(load_measured(src), grazing_cutoff_deg=cut)
     except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line
         raise SceneError(scene_file, f"{key}.file", f"{head}; cannot read its source measurement {src} "
@@ -191,25 +210,6 @@ def find_source(model, spec, scene_file, key, head) -> Path:
                      f"{head}; the projected table that replaces it there needs its source measurement "
                      f"{name!r}" + (f" (sha256 {sha[:12]}...)" if sha else "") +
                      f", not found in {where}{found}")
-
-
-def fallback_table(p) -> np.ndarray:
-    """The (90, 90, 3) float32 table of a projection (values below 0 as 0) with every empty
-    cluster given the value of the nearest (in theta_h, theta_d radians) non-empty cluster of
-    the same channel: beyond the fit's grazing cut-off many clusters are empty, and 0 there
-    would be a black rim, not a measurement."""
-    from scipy.spatial import cKDTree
-
-    v = np.maximum(np.array(p.value, dtype=np.float64), 0.0)
-    th, td = np.meshgrid(theta_h_centres(), theta_d_centres(), indexing="ij")
-    pts = np.stack([th, td], axis=-1)
-    for c in range(v.shape[-1]):
-        ch = v[..., c]
-        bad = ~np.isfinite(ch)
-        if bad.any() and (~bad).any():
-            _, idx = cKDTree(pts[~bad]).query(pts[bad])
-            ch[bad] = ch[~bad][idx]
-    return np.nan_to_num(v, nan=0.0).astype(np.float32)
 
 
 def evaluate_at_angles(model, table=None, cutoff_deg=None):
