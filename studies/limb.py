@@ -25,9 +25,9 @@ alone:
   writes them), when the folder has one.
 
 Regions (pixels fully covered by the sphere, as the fidelity study): the **inside** (the disc
-without its rim band), the **lit rim** (the rim band's pixels whose surface normal faces the
-map's brightest texel, the sun: n . s > 0) and the **unlit rim** (the rest of the band: the sun
-below the local horizon, only sky and ground light it). Per region and
+without its rim band), the **grazing-sun rim** (the rim band's pixels where the map's brightest
+texel, the sun, is within 17.5 deg of the local horizon: |n . s| < 0.3; there the view and the
+sun are both grazing) and the **other rim** (the rest of the band). Per region and
 representation: the luminance ratio (mean Rec.709 luminance over the ``rgl`` render's) and the
 ΔE2000 mean at the fidelity study's exposure (99th-percentile luminance of the reference ->
 L* = 100).
@@ -49,7 +49,8 @@ from studies import metrics as M
 from studies import publish as P
 
 REPS = ("measured", "projected", "projected-mean", "rational", "rational-3d")
-REGIONS = ("inside", "lit_rim", "unlit_rim")
+REGIONS = ("inside", "grazing_sun_rim", "other_rim")
+SUN_GRAZING = 0.3                # |n . s| below it: the sun within 17.5 deg of the local horizon
 FIT_TIME_LIMIT_S = 300.0         # a new 2-D fit (``--fit``), as the fidelity study bounds it
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 DOCS = dict(name="limb", title="The limb of the 2-D representations (median, mean, 2-D and 3-D fits)",
@@ -90,8 +91,8 @@ def pixel_normals(scene) -> np.ndarray:
 
 def regions(scene, mask, band, envmap) -> dict:
     """Boolean (H, W) masks of :data:`REGIONS` (module docstring)."""
-    lit = (pixel_normals(scene) @ sun_direction(envmap)) > 0.0
-    return {"inside": mask & ~band, "lit_rim": band & lit, "unlit_rim": band & ~lit}
+    grazing = np.abs(pixel_normals(scene) @ sun_direction(envmap)) < SUN_GRAZING    # NaN (a miss): False
+    return {"inside": mask & ~band, "grazing_sun_rim": band & grazing, "other_rim": band & ~grazing}
 
 
 def region_stats(img, ref, masks, exposure) -> dict:
@@ -207,8 +208,8 @@ def _cell(s) -> str:
 
 def one_line(row) -> str:
     st = row["stats"]
-    return (f"{row['material']}/{row['map']}: unlit / lit rim Y ratio / ΔE " +
-            "; ".join(f"{k} {_cell(v.get('unlit_rim'))}, {_cell(v.get('lit_rim'))}" for k, v in st.items()) +
+    return (f"{row['material']}/{row['map']}: grazing-sun / other rim Y ratio / ΔE " +
+            "; ".join(f"{k} {_cell(v.get('grazing_sun_rim'))}, {_cell(v.get('other_rim'))}" for k, v in st.items()) +
             (f"  [{'; '.join(row['notes'])}]" if row["notes"] else ""))
 
 
@@ -239,7 +240,7 @@ def summary_table(summary) -> str:
                          f"{s['y_median']:.3f} ({s['y_min']:.2f}–{s['y_max']:.2f}) / "
                          f"{s['de_median']:.2f} ({s['de_min']:.2f}–{s['de_max']:.2f})")
         body.append([rep, max(s["n"] for s in regs.values())] + cells)
-    return P.md_table(body, ["representation", "cases", "inside", "lit rim", "unlit rim"])
+    return P.md_table(body, ["representation", "cases", "inside", "grazing-sun rim", "other rim"])
 
 
 def markdown(rows, meta, summary) -> str:
@@ -249,7 +250,7 @@ def markdown(rows, meta, summary) -> str:
          f"paired with `rgl` on the same rays. Cells: luminance ratio over `rgl` / ΔE2000 mean; summary: median "
          f"(range) over the cases.", "", summary_table(summary), ""]
     for reg in REGIONS:
-        L += [f"Per case, {reg.replace('_', ' ')}:", "",
+        L += [f"Per case, {reg.replace('_', ' ').replace('grazing sun', 'grazing-sun')}:", "",
               P.md_table([[r["material"], r["map"]] + [_cell(r["stats"].get(rep, {}).get(reg)) for rep in REPS]
                           for r in rows], ["material", "map"] + list(REPS)), ""]
     notes = [f"- {r['material']}/{r['map']}: {n}" for r in rows for n in r["notes"]]
@@ -276,7 +277,7 @@ def plot(images, path, shown=("measured", "projected", "projected-mean", "ration
     for i, k in enumerate(keys):
         d = images[k]
         ref = d["imgs"]["rgl"]
-        mask = d["masks"]["inside"] | d["masks"]["lit_rim"] | d["masks"]["unlit_rim"]
+        mask = d["masks"]["inside"] | d["masks"]["grazing_sun_rim"] | d["masks"]["other_rim"]
         x = np.clip(ref * d["exposure"], 0, 1) ** (1 / 2.2)
         axes[i, 0].imshow(x)
         axes[i, 0].set_ylabel(f"{k[0]}\n{k[1]}", fontsize=6)

@@ -769,7 +769,7 @@ def test_studies_share_one_cdf_table_per_material(rgl_data):
 # --------------------------------------------------------------------------------------------
 # Publishing (--docs): docs/images, docs/study_<name>.md and the study's block in docs/results.md
 STUDY_DOCS = {"convergence": "convergence", "comparison": "comparison", "fit": "fit_study",
-              "failure_map": "failure_map", "fidelity": "fidelity"}   # block marker name -> module
+              "failure_map": "failure_map", "fidelity": "fidelity", "limb": "limb"}   # block marker name -> module
 
 
 def _docs_root(tmp_path):
@@ -1009,8 +1009,8 @@ def test_fidelity_explains_rational_misses_by_the_projection_ceiling():
 # The limb study (studies.limb)
 def test_limb_regions_follow_the_sun(tmp_path):
     """The sun is the map's brightest texel, in the lights' conventions; the sphere's pixel normals
-    are unit vectors facing the camera at the centre; the lit and unlit rims split the rim band by
-    the sign of n . s, and swap when the sun moves to the opposite side."""
+    are unit vectors facing the camera at the centre; the grazing-sun rim is the rim band's pixels
+    with |n . s| < 0.3, the other rim the rest, and the grazing-sun rim moves with the sun."""
     from studies import fidelity as FI
     from studies import limb
     from warp_rbrdf import lights
@@ -1033,16 +1033,16 @@ def test_limb_regions_follow_the_sun(tmp_path):
     mask = MR.sphere_mask(64)
     band = FI.rim_band(64, mask)
     r = limb.regions(scene, mask, band, env)
-    assert not (r["lit_rim"] & r["unlit_rim"]).any() and ((r["lit_rim"] | r["unlit_rim"]) == band).all()
-    assert (r["inside"] == (mask & ~band)).all() and r["lit_rim"].any() and r["unlit_rim"].any()
-    assert (n[r["lit_rim"]] @ s > 0).all() and (n[r["unlit_rim"]] @ s <= 0).all()
+    g, o = r["grazing_sun_rim"], r["other_rim"]
+    assert not (g & o).any() and ((g | o) == band).all()
+    assert (r["inside"] == (mask & ~band)).all() and g.any() and o.any()
+    assert (np.abs(n[g] @ s) < limb.SUN_GRAZING).all() and (np.abs(n[o] @ s) >= limb.SUN_GRAZING).all()
     img2 = np.full((H, W, 3), 0.1, np.float32)
-    img2[H - 1 - j, (i + W // 2) % W] = 1e4                    # the antipodal texel
+    img2[H // 2 - 1, W - 1 - i] = 1e4                          # a sun on the other side, lower
     env2 = tmp_path / "sun2.exr"
     write_exr(env2, img2)
-    r2 = limb.regions(scene, mask, band, env2)
-    swapped = r2["lit_rim"] & r["lit_rim"]
-    assert swapped.sum() < 0.1 * r["lit_rim"].sum()
+    g2 = limb.regions(scene, mask, band, env2)["grazing_sun_rim"]
+    assert g2.any() and (g2 & g).sum() < 0.5 * g.sum()
 
 
 def test_limb_region_stats():
@@ -1087,7 +1087,7 @@ def test_limb_smoke(tmp_path):
     assert set(data) == {"meta", "summary", "rows"} and data["rows"][0]["stats"] == json.loads(json.dumps(st))
     assert (tmp_path / "limb.md").read_text() == r["markdown"] and _png_size(tmp_path / "limb.png")[1] > 0
     t = limb.block_table(r).splitlines()
-    assert t[0] == "| representation | cases | inside | lit rim | unlit rim |"
+    assert t[0] == "| representation | cases | inside | grazing-sun rim | other rim |"
     c = _cells(t[2])
     assert c[0] == "measured" and c[1] == "1"
     _num(re.match(r"(\S+) ", c[2]).group(1), st["measured"]["inside"]["y_ratio"])
