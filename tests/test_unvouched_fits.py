@@ -539,3 +539,27 @@ def test_valid_file_is_written_as_before(tmp_path):
     save_coefficients(model, tmp_path / "again.json")
     assert "fallback" not in json.loads(src.read_text())
     assert (tmp_path / "again.json").read_bytes() == src.read_bytes()
+
+
+def test_flagged_fit_without_a_recorded_cutoff_is_not_moved_onto_a_domain(fitted):
+    """The measured domain of a flagged fit is the cut-off its file records, as for any fit: a
+    flagged fit recording none is evaluated by its recipe (its table still comes from the fitter's
+    79 deg projection), so that the domain rule never depends on whether a piece is flagged."""
+    from fit.rational.coefficient_file import load as load_coefficients
+    from warp_rbrdf.materials.rational import evaluate_at_angles, measured_domain
+
+    d, _ = fitted
+    m = load_coefficients(d / "spiky.json")
+    assert measured_domain(m) is not None and rational.flagged_regions(m)
+    free = copy.deepcopy(m)
+    free.fit_info.pop("grazing_cutoff_deg")
+    assert free.fallback["grazing_cutoff_deg"] == 79.0   # the default the table is checked against
+    a = rational.load(MaterialSpec(name="a", type="rational", data=m))
+    b = rational.load(MaterialSpec(name="b", type="rational", data=free))
+    wi, wo = _pairs(20000, seed=21)
+    th, _, td, _ = directions_to_half_diff(wi, wo)
+    beyond = (np.cos(th) * np.cos(td) < np.cos(np.radians(measured_domain(m)))) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    assert beyond.sum() > 100
+    np.testing.assert_array_equal(b.evaluate(wi, wo), evaluate_at_angles(free, b.fallback_table, None)(wi, wo))
+    np.testing.assert_array_equal(a.evaluate(wi, wo)[~beyond], b.evaluate(wi, wo)[~beyond])
+    assert not np.array_equal(a.evaluate(wi, wo)[beyond], b.evaluate(wi, wo)[beyond])

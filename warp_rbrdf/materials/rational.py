@@ -115,11 +115,11 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     if [v.name for v in model.variables] != ["theta_h", "theta_d"]:
         raise SceneError(scene_file, f"{key}.file", f"{head}; a projected table can replace only a fit "
                                                     f"in (theta_h, theta_d)")
-    cut = fit_cutoff_deg(model)     # the flagged pieces' table: the fit's projection and cut-off
+    table_cut = fit_cutoff_deg(model)   # the flagged pieces' table: the fit's projection's cut-off
     if getattr(model, "fallback", None) is not None:
         # the table the fitter wrote into the file (fit.rational.fallback): no measurement needed
         try:
-            table = table_from_record(model.fallback, model)
+            table = table_from_record(model.fallback, model)     # checked against table_cut
         except ValueError as e:       # fit.jsonfields.Invalid names the key; one line
             raise SceneError(scene_file, f"{key}.file", f"{head}; {fit_name}: embedded fallback table "
                                                         f"unusable ({e})") from None
@@ -137,7 +137,7 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     from fit.rational.brdf_fit import project_for_fit
 
     try:
-        p = project_for_fit(load_measured(src), grazing_cutoff_deg=cut)
+        p = project_for_fit(load_measured(src), grazing_cutoff_deg=table_cut)
     except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line
         raise SceneError(scene_file, f"{key}.file", f"{head}; cannot read its source measurement {src} "
                                                     f"({e})") from None
