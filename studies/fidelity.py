@@ -606,7 +606,8 @@ def explain_rational(rows, tol) -> str:
     if ceiling:
         out.append(f"On {len(ceiling)} missed cases the projected table itself misses the same statistic, so a fit "
                    f"of it is not expected to meet the target there: the projection's ceiling (φd and non-reciprocity "
-                   f"folded into a median; the route past it is the 3-D fits of issue 25, "
+                   f"folded into a median; at the limb, what any function of (θh, θd) alone leaves: "
+                   f"[study_limb.md](study_limb.md); the 3-D fits of issue 25 keep φd, "
                    f"[fit_accuracy.md](fit_accuracy.md)): {', '.join(ceiling)}.")
     if fit_only:
         out.append(f"On {len(fit_only)} the table meets it and the fit does not (the fit's own "
