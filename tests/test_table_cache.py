@@ -17,11 +17,12 @@ from warp_rbrdf.techniques import table_cache as tc
 _ARRAYS = ("theta_v", "cdf_theta", "cdf_phi", "row_fallback", "albedo")
 
 
-def _same(a, b):
+def _same(a, b, atol=0.0):
+    """Tables ``a`` and ``b`` equal, bit for bit (``atol`` 0) or to ``atol``."""
     for k in _ARRAYS:
         x, y = getattr(a, k), getattr(b, k)
         assert x.dtype == y.dtype and x.shape == y.shape, k
-        assert np.array_equal(x, y), k
+        assert (np.array_equal(x, y) if atol == 0 else np.allclose(x, y, rtol=0.0, atol=atol)), k
     assert a.eps == b.eps
 
 
@@ -84,7 +85,10 @@ def test_shipped_default_table_is_current(monkeypatch):
     assert md.cdf[0] is not None
     _same(md.cdf[0], shipped)
     lm = md.loaded[0]
-    _same(tabulate(lm.evaluate), shipped)
+    # a fresh tabulation of today's fit: its NumPy evaluation sums through BLAS, whose thread
+    # count moves the last bit (2e-15 measured with 2 threads against the table made with one);
+    # a table of another fit differs by orders of magnitude more
+    _same(tabulate(lm.evaluate), shipped, atol=1e-12)
 
 
 @pytest.mark.parametrize("field", ["statistic", "incident"])
