@@ -278,6 +278,22 @@ def _public(d: dict) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
+def study_config(preset: dict, allm: dict, half_keys=("spp",), **overrides) -> dict:
+    """A study's configuration: the preset with the ``overrides`` that are not None; no
+    ``materials`` means every shared RGL file of ``allm``. ValueError for an unknown material or
+    an odd sample count in ``half_keys`` (each image is two half-spp renders)."""
+    cfg = dict(preset)
+    cfg.update({k: v for k, v in overrides.items() if v is not None})
+    cfg["materials"] = list(cfg["materials"] or allm)
+    unknown = [m for m in cfg["materials"] if m not in allm]
+    if unknown:
+        raise ValueError(f"unknown material(s) {unknown}; the shared RGL files are {sorted(allm)}")
+    for k in half_keys:
+        if cfg[k] < 2 or cfg[k] % 2:
+            raise ValueError(f"{k} must be an even number >= 2 (two half renders), got {cfg[k]}")
+    return cfg
+
+
 def run(preset="full", out="results/fidelity", materials=None, maps=None, resolution=None, spp=None,
         mitsuba_spp=None, tol=None, fit_time_limit=None, allow_fit=None, mitsuba=True, charts=True,
         quiet=False) -> dict:
@@ -286,19 +302,10 @@ def run(preset="full", out="results/fidelity", materials=None, maps=None, resolu
     from warp_rbrdf import mitsuba_reference as MR
     from warp_rbrdf.scene import MaterialSpec
 
-    cfg = dict(PRESETS[preset])
-    for k, v in dict(materials=materials, maps=maps, resolution=resolution, spp=spp, mitsuba_spp=mitsuba_spp,
-                     tol=tol, fit_time_limit=fit_time_limit, allow_fit=allow_fit).items():
-        if v is not None:
-            cfg[k] = v
     allm = rgl_materials()
-    cfg["materials"] = list(cfg["materials"] or allm)
-    unknown = [m for m in cfg["materials"] if m not in allm]
-    if unknown:
-        raise ValueError(f"unknown material(s) {unknown}; the shared RGL files are {sorted(allm)}")
-    for k in ("spp", "mitsuba_spp"):
-        if cfg[k] < 2 or cfg[k] % 2:
-            raise ValueError(f"{k} must be an even number >= 2 (two half renders), got {cfg[k]}")
+    cfg = study_config(PRESETS[preset], allm, ("spp", "mitsuba_spp"), materials=materials, maps=maps,
+                       resolution=resolution, spp=spp, mitsuba_spp=mitsuba_spp, tol=tol,
+                       fit_time_limit=fit_time_limit, allow_fit=allow_fit)
     res = int(cfg["resolution"])
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -47,12 +47,12 @@ from studies import common as C
 from studies import fidelity as FI
 from studies import metrics as M
 from studies import publish as P
+from warp_rbrdf.lights import LUMINANCE as LUMA
 
 REPS = ("measured", "projected", "projected-mean", "rational", "rational-3d")
 REGIONS = ("inside", "grazing_sun_rim", "other_rim")
 SUN_GRAZING = 0.3                # |n . s| below it: the sun within 17.5 deg of the local horizon
 FIT_TIME_LIMIT_S = 300.0         # a new 2-D fit (``--fit``), as the fidelity study bounds it
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 DOCS = dict(name="limb", title="The limb of the 2-D representations (median, mean, 2-D and 3-D fits)",
             charts={"limb.png": "study_limb.png"})
 PRESETS = {
@@ -141,18 +141,9 @@ def run(preset="full", out="results/limb", materials=None, maps=None, resolution
         fits3d=None, allow_fit=None, charts=True, quiet=False) -> dict:
     from warp_rbrdf import mitsuba_reference as MR
 
-    cfg = dict(PRESETS[preset])
-    for k, v in dict(materials=materials, maps=maps, resolution=resolution, spp=spp, fits3d=fits3d,
-                     allow_fit=allow_fit).items():
-        if v is not None:
-            cfg[k] = v
     allm = FI.rgl_materials()
-    cfg["materials"] = list(cfg["materials"] or allm)
-    unknown = [m for m in cfg["materials"] if m not in allm]
-    if unknown:
-        raise ValueError(f"unknown material(s) {unknown}; the shared RGL files are {sorted(allm)}")
-    if cfg["spp"] < 2 or cfg["spp"] % 2:
-        raise ValueError(f"spp must be an even number >= 2 (two half renders), got {cfg['spp']}")
+    cfg = FI.study_config(PRESETS[preset], allm, materials=materials, maps=maps, resolution=resolution, spp=spp,
+                          fits3d=fits3d, allow_fit=allow_fit)
     res = int(cfg["resolution"])
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -265,8 +256,7 @@ def block_table(res) -> str:
             "[study_limb.md](study_limb.md) has every case.)\n")
 
 
-def plot(images, path, shown=("measured", "projected", "projected-mean", "rational", "rational-3d"), lo=0.7,
-         hi=1.3):
+def plot(images, path, shown=REPS, lo=0.7, hi=1.3):
     """Luminance-ratio maps (representation over ``rgl``; grey 1, black <= ``lo``, white >= ``hi``),
     one row per case."""
     import matplotlib.pyplot as plt
@@ -278,8 +268,7 @@ def plot(images, path, shown=("measured", "projected", "projected-mean", "ration
         d = images[k]
         ref = d["imgs"]["rgl"]
         mask = d["masks"]["inside"] | d["masks"]["grazing_sun_rim"] | d["masks"]["other_rim"]
-        x = np.clip(ref * d["exposure"], 0, 1) ** (1 / 2.2)
-        axes[i, 0].imshow(x)
+        axes[i, 0].imshow(FI._srgb(ref, d["exposure"]))
         axes[i, 0].set_ylabel(f"{k[0]}\n{k[1]}", fontsize=6)
         for j, rep in enumerate(shown, 1):
             ax = axes[i, j]
@@ -295,8 +284,11 @@ def plot(images, path, shown=("measured", "projected", "projected-mean", "ration
         ax.set_yticks([])
     fig.suptitle(f"luminance over rgl (black ≤ {lo}, white ≥ {hi})", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=72)   # about 115 px per render, as the fidelity study's sheets
     plt.close(fig)
+    from PIL import Image       # matplotlib's own dependency: grey maps as RGB without alpha
+
+    Image.open(path).convert("RGB").save(path, optimize=True)
 
 
 def main(argv=None):
