@@ -8,9 +8,7 @@ Order of preference (the first that works):
    whose interval options are the requested ones (the shipped fits are made with
    :data:`FIT_OPTIONS`; a flagged one carries its fallback table, :mod:`fit.rational.fallback`),
    or, where no new fit may be made (``allow_fit=False``), one made with other options (source
-   ``"shipped (other interval options)"``: none of the shipped files today, but a shipped file
-   is any file in ``warp_rbrdf/data/``, e.g. satin_rosaline's, which kept a ``tol+spread``
-   band until its file could carry its fallback table);
+   ``"shipped (other interval options)"``; none of today's shipped files);
 3. the project's fitter, called in this process: :func:`fit.rational.brdf_fit.fit_brdf` on the
    measured file with the options ``rbrdf-fit brdf`` passes by default (:data:`FIT_OPTIONS`),
    saved with :func:`fit.rational.coefficient_file.save`: the same fit and file as
@@ -83,11 +81,10 @@ def made_with(model, options: dict | None = None) -> bool:
     return True
 
 
-def shipped_model(stem: str, tol: float, options: dict | None = None, any_options: bool = True):
+def shipped_model(stem: str, tol: float):
     """``(model, path)`` of a coefficient file shipped in ``warp_rbrdf/data/`` for the material
-    file stem ``stem`` (e.g. ``paper_white_rgb``) whose ``fit.tolerance`` equals ``tol`` (and,
-    unless ``any_options``, that was made with :data:`FIT_OPTIONS` updated with ``options``,
-    :func:`made_with`), or None."""
+    file stem ``stem`` (e.g. ``paper_white_rgb``) whose ``fit.tolerance`` equals ``tol``, whatever
+    its interval options (:func:`made_with` tells), or None."""
     from fit.rational.coefficient_file import load
     from warp_rbrdf.paths import PACKAGE_DATA
 
@@ -96,7 +93,7 @@ def shipped_model(stem: str, tol: float, options: dict | None = None, any_option
             m = load(p)
         except Exception:  # noqa: BLE001
             continue
-        if abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12 and (any_options or made_with(m, options)):
+        if abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12:
             return m, p
     return None
 

@@ -501,7 +501,7 @@ def test_rational_model_does_not_reuse_a_fit_made_with_other_intervals(tmp_path,
     from warp_rbrdf.paths import PACKAGE_DATA
 
     assert F.made_with(load(PACKAGE_DATA / "satin_rosaline_rgb.json"))     # shipped: today's options
-    assert F.shipped_model("satin_rosaline_rgb", 0.05, any_options=False) is not None
+    assert F.made_with(F.shipped_model("satin_rosaline_rgb", 0.05)[0])
     # a shipped file made with the old band intervals (the same coefficients, recorded tol+spread)
     old = json.loads((PACKAGE_DATA / "satin_rosaline_rgb.json").read_text())
     old["fit"]["band_intervals"] = "tol+spread"
@@ -512,7 +512,7 @@ def test_rational_model_does_not_reuse_a_fit_made_with_other_intervals(tmp_path,
     assert shipped.fit_info["band_intervals"] == "tol+spread" != F.FIT_OPTIONS["band_intervals"] == "tol"
     assert not F.made_with(shipped) and F.made_with(shipped, {"band_intervals": "tol+spread"})
     assert F.shipped_model("satin_rosaline_rgb", 0.05) is not None                  # the benchmarks' fallback
-    assert F.shipped_model("satin_rosaline_rgb", 0.05, any_options=False) is None
+    assert not F.made_with(F.shipped_model("satin_rosaline_rgb", 0.05)[0])
     # where no new fit may be made (the studies' --no-fit and smoke runs), the shipped file stands in
     got, info = F.rational_model("satin", 0.05, allow_fit=False, fit_dir=tmp_path / "none")
     assert got is not None and info["source"] == "shipped (other interval options)"
