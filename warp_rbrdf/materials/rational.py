@@ -115,29 +115,35 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
     if [v.name for v in model.variables] != ["theta_h", "theta_d"]:
         raise SceneError(scene_file, f"{key}.file", f"{head}; a projected table can replace only a fit "
                                                     f"in (theta_h, theta_d)")
-    table_cut = fit_cutoff_deg(model)   # the flagged pieces' table: the fit's projection's cut-off
     if getattr(model, "fallback", None) is not None:
         # the table the fitter wrote into the file (fit.rational.fallback): no measurement needed
         try:
-            table = table_from_record(model.fallback, model)     # checked against table_cut
+            table = table_from_record(model.fallback, model)
         except ValueError as e:       # fit.jsonfields.Invalid names the key; one line
             raise SceneError(scene_file, f"{key}.file", f"{head}; {fit_name}: embedded fallback table "
                                                         f"unusable ({e})") from None
         src_name = str((model.source or {}).get("file") or "") or "its source measurement"
-        where = f"embedded in {fit_name}" if spec.file is not None else "carried by the fit"
-        note = (f"rational fit not within its bound for {what}: using the projected table there "
-                f"(median projection of {src_name}, {where}, clamped to each region's measured range)")
-        return LoadedMaterial(spec, model, scaled(evaluate_at_angles(model, table, cut), spec.scale),
-                              scale=spec.scale, fallback_table=table, notes=(note,),
-                              coefficients=_packed(model, True, scene_file, key, cut))
-    src = find_source(model, spec, scene_file, key, head)
-    # the measurement (and the fitter's projection policy) only for a flagged fit without an
-    # embedded table (files written before the fitter embedded it)
+        origin = f"{src_name}, " + (f"embedded in {fit_name}" if spec.file is not None else "carried by the fit")
+    else:
+        model, table, origin = _table_from_source(model, spec, scene_file, key, head)
+    note = (f"rational fit not within its bound for {what}: using the projected table there "
+            f"(median projection of {origin}, clamped to each region's measured range)")
+    return LoadedMaterial(spec, model, scaled(evaluate_at_angles(model, table, cut), spec.scale),
+                          scale=spec.scale, fallback_table=table, notes=(note,),
+                          coefficients=_packed(model, True, scene_file, key, cut))
+
+
+def _table_from_source(model, spec, scene_file, key, head) -> tuple:
+    """``(model, table, source name)`` of a flagged fit whose file carries no table (written
+    before the fitter embedded it): the fallback table of the fitter's projection of its source
+    measurement (:func:`find_source`) with the fit's grazing cut-off, and a copy of the model
+    with the measured ranges its flagged channels lack."""
     from fit.formats import load_measured
     from fit.rational.brdf_fit import project_for_fit
 
+    src = find_source(model, spec, scene_file, key, head)
     try:
-        p = project_for_fit(load_measured(src), grazing_cutoff_deg=table_cut)
+        p = project_for_fit(load_measured(src), grazing_cutoff_deg=fit_cutoff_deg(model))
     except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line
         raise SceneError(scene_file, f"{key}.file", f"{head}; cannot read its source measurement {src} "
                                                     f"({e})") from None
@@ -149,12 +155,7 @@ def load(spec, scene_file="<scene>", key="materials") -> LoadedMaterial:
                 rng = region_measured_range(p, leaf, c)
                 if rng is not None:
                     leaf.function_info[c] = dict(leaf.function_info[c], measured_range=list(rng))
-    table = fallback_table(p)
-    note = (f"rational fit not within its bound for {what}: using the projected table there "
-            f"(median projection of {src.name}, clamped to each region's measured range)")
-    return LoadedMaterial(spec, model, scaled(evaluate_at_angles(model, table, cut), spec.scale),
-                          scale=spec.scale, fallback_table=table, notes=(note,),
-                          coefficients=_packed(model, True, scene_file, key, cut))
+    return model, fallback_table(p), src.name
 
 
 def _packed(model, table, scene_file, key, cutoff_deg=None) -> tuple:
