@@ -262,8 +262,8 @@ def plot(images, path, shown=REPS, lo=0.7, hi=1.3):
     import matplotlib.pyplot as plt
 
     keys = list(images)
-    fig, axes = plt.subplots(len(keys), len(shown) + 1, figsize=(1.6 * (len(shown) + 1), 1.6 * len(keys) + 0.4),
-                             squeeze=False)
+    height = 1.6 * len(keys) + 0.4
+    fig, axes = plt.subplots(len(keys), len(shown) + 1, figsize=(1.6 * (len(shown) + 1), height), squeeze=False)
     for i, k in enumerate(keys):
         d = images[k]
         ref = d["imgs"]["rgl"]
@@ -283,7 +283,7 @@ def plot(images, path, shown=REPS, lo=0.7, hi=1.3):
         ax.set_xticks([])
         ax.set_yticks([])
     fig.suptitle(f"luminance over rgl (black ≤ {lo}, white ≥ {hi})", fontsize=8)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / height))     # the title above the column titles
     fig.savefig(path, dpi=72)   # about 115 px per render, as the fidelity study's sheets
     plt.close(fig)
     from PIL import Image       # matplotlib's own dependency: grey maps as RGB without alpha
