@@ -789,11 +789,7 @@ def plot(images, materials, mapname, path, fits, mask, de_max=5.0):
     fig.tight_layout(rect=(0, 0, 0.965, 1 - 0.35 / height))
     if im is not None:
         fig.colorbar(im, cax=fig.add_axes([0.972, 0.35, 0.008, 0.3]))
-    fig.savefig(path, dpi=72)   # about 100 px per 256 px render
-    plt.close(fig)
-    from PIL import Image     # matplotlib's own dependency: RGB without the opaque alpha (-10 %)
-
-    Image.open(path).convert("RGB").save(path, optimize=True)
+    P.save_figure(fig, path)
 
 
 # --------------------------------------------------------------------------------------------

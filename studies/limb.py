@@ -284,11 +284,7 @@ def plot(images, path, shown=REPS, lo=0.7, hi=1.3):
         ax.set_yticks([])
     fig.suptitle(f"luminance over rgl (black ≤ {lo}, white ≥ {hi})", fontsize=8)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.3 / height))     # the title above the column titles
-    fig.savefig(path, dpi=72)   # about 115 px per render, as the fidelity study's sheets
-    plt.close(fig)
-    from PIL import Image       # matplotlib's own dependency: grey maps as RGB without alpha
-
-    Image.open(path).convert("RGB").save(path, optimize=True)
+    P.save_figure(fig, path)
 
 
 def main(argv=None):
