@@ -18,12 +18,15 @@ up to 4e-5 relative, and the absolute float32 error scales with the largest valu
 (a steep interpolant), so tiny values carry large *relative* errors: between 1e-3 and 1e-2 of
 the sample's maximum we measured up to 5.7e-4 (NumPy, chm_mint_rgb) and 4.9e-4 (Warp). "Above
 noise" is therefore a value above 1e-2 of the channel's maximum over the sample; there the
-relative error must be <= 1e-4 (measured max over the 20 shared files: NumPy 6.0e-5, Warp
-6.0e-5), and everywhere the absolute error must be <= 5e-5 of that maximum (measured max:
-NumPy 1.3e-5, Warp 6.8e-6). Mitsuba 3.9.1 leaves ``m_reduction`` uninitialized for isotropic
+relative error must be <= 1e-4 (measured max over the 20 shared files: NumPy 8.2e-5, Warp
+7.4e-5, both chm_mint_rgb at a view 88.9 deg from the normal, where Mitsuba's own float32 answer
+moves by 4e-5 when the pair is turned by pi/2 about the normal), and everywhere the absolute
+error must be <= 5e-5 of that maximum (measured max: NumPy 1.3e-5, Warp 4.8e-6). Mitsuba 3.9.1 leaves ``m_reduction`` uninitialized for isotropic
 files, so depending on the heap at load time it rotates the pair by pi about the normal when
-``si.wi.y > 0`` before the lookup (a symmetry of isotropic data; observed to change only the
-float32 rounding, by up to 3e-7 absolute): the tolerances cover both cases.
+``si.wi.y > 0`` before the lookup (a symmetry of isotropic data; bit-identical results), or,
+when the garbage reads exactly 4, mirrors pairs (not a symmetry of measured data; it failed
+these tests once): :mod:`warp_rbrdf.mitsuba_reference` detects a mirroring plugin and loads it
+again (:class:`GarbageReduction` emulates both cases).
 
 Renders compare channel means within 4 standard errors (the per-pixel variances of both
 renderers: ours from its per-sample moments, Mitsuba's from 16 independent passes) and each
@@ -125,6 +128,105 @@ def test_mitsuba_indexes_the_tensors_by_si_wi(name):
     assert np.median(np.abs(swapped - m)[sel] / m[sel]) > 0.03
 
 
+class GarbageReduction:
+    """Mitsuba 3.9.1's ``measured`` plugin as it behaves when its uninitialized ``m_reduction``
+    (set for anisotropic files only) reads ``garbage`` >= 2 (``measured.cpp``): with
+    ``s = (si.wi.x if garbage == 4 else si.wi.y, si.wi.y)``, x is negated where ``s[0]`` has no sign bit
+    and y where ``s[1]`` has none (``mulsign_neg``), in ``si.wi`` and ``wo`` before eval and pdf, and in
+    ``si.wi`` before sampling and the sampled ``wo`` after. 4 mirrors pairs, which the measured
+    data are not symmetric under; any other value rotates by pi, which they are."""
+
+    def __init__(self, bsdf, garbage: int):
+        self.bsdf, self.garbage = bsdf, garbage
+
+    def _signs(self, wi):
+        return (wi[0] if self.garbage == 4 else wi[1]), wi[1]
+
+    @staticmethod
+    def _flip(v, s):
+        import math
+
+        neg = [c if math.copysign(1.0, t) < 0 else -c for c, t in zip((v[0], v[1]), s)]
+        return MR._mi().Vector3f(neg[0], neg[1], v[2])
+
+    def _si(self, si, s):
+        out = MR._mi().SurfaceInteraction3f()
+        out.wi = self._flip(si.wi, s)
+        return out
+
+    def eval(self, ctx, si, wo):
+        s = self._signs(si.wi)
+        return self.bsdf.eval(ctx, self._si(si, s), self._flip(wo, s))
+
+    def pdf(self, ctx, si, wo):
+        s = self._signs(si.wi)
+        return self.bsdf.pdf(ctx, self._si(si, s), self._flip(wo, s))
+
+    def sample(self, ctx, si, sample1, sample2):
+        s = self._signs(si.wi)
+        bs, w = self.bsdf.sample(ctx, self._si(si, s), sample1, sample2)
+        bs.wo = self._flip(bs.wo, s)
+        return bs, w
+
+
+@pytest.mark.parametrize("name", ALL_RGL)
+def test_mirror_check_tells_the_garbage_apart(name):
+    """:func:`MR._mirrors` flags a plugin that mirrors pairs (``m_reduction`` reading 4) and
+    passes one that is right or rotates by pi (any other garbage value), on every shared file."""
+    real = MR.load_bsdf(rgl_path(name))
+    assert not MR._mirrors(real)
+    assert MR._mirrors(GarbageReduction(real, 4))
+    assert not MR._mirrors(GarbageReduction(real, 2))
+
+
+def test_reference_reloads_a_mirroring_plugin(monkeypatch):
+    """Mitsuba 3.9.1 leaves ``m_reduction`` uninitialized for isotropic files; once in many CI runs
+    a plugin read 4 and mirrored pairs, and the parity tests failed on one file (eval 1.1e-4
+    relative off at one pair, sampled directions far apart). A plugin that mirrors is loaded
+    again (the rejected one kept alive), and given up on with one line after ``MAX_LOADS``."""
+    path = rgl_path("acrylic_felt_purple_rgb")
+    real = MR.load_bsdf(path)
+    wt, wx = direction_pairs(1000, seed=7)
+    clean = MR.eval(path, wt, wx)
+    loads = []
+
+    def flaky():                     # the first two loads mirror, the third is right
+        loads.append(1)
+        return GarbageReduction(real, 4) if len(loads) < 3 else real
+
+    assert MR._load_checked(flaky, lambda b: b, "x.bsdf") is real and len(loads) == 3
+    # the emulated plugin gives wrong answers: eval through it misses the parity tolerance
+    mi = MR._mi()
+    ctx, si, bad = mi.BSDFContext(), mi.SurfaceInteraction3f(), GarbageReduction(real, 4)
+    mirrored = np.empty_like(clean)
+    for k in range(len(wt)):
+        si.wi = mi.Vector3f(wt[k])
+        v = bad.eval(ctx, si, mi.Vector3f(wx[k]))
+        mirrored[k] = (v[0], v[1], v[2])
+    with pytest.raises(AssertionError, match="relative error"):
+        check_close(mirrored, clean, "mirrored")
+    loads.clear()
+    with pytest.raises(MR.ReferenceUnavailable, match=r"^x\.bsdf: .*mirrored direction pairs in 8 loads"):
+        MR._load_checked(lambda: loads.append(1) or GarbageReduction(real, 4), lambda b: b, "x.bsdf")
+    assert len(loads) == MR.MAX_LOADS == 8
+    # through the module: a first load that mirrors is replaced, and eval is the clean one
+    MR._measured.cache_clear()
+    state = {"n": 0}
+    load_dict = mi.load_dict
+
+    def first_mirrors(d):
+        state["n"] += 1
+        b = load_dict(d)
+        return GarbageReduction(b, 4) if state["n"] == 1 else b
+
+    monkeypatch.setattr(mi, "load_dict", first_mirrors)
+    try:
+        np.testing.assert_array_equal(MR.eval(path, wt, wx), clean)
+        assert state["n"] == 2
+    finally:
+        MR._measured.cache_clear()
+
+
 def test_negative_entries_clamped_copy(tmp_path, monkeypatch):
     """Mitsuba does not clamp negative rgb entries (its eval goes negative next to them); the
     clamped copy it is given by default matches our reader, which clamps at load."""
@@ -172,7 +274,7 @@ def warp_rgl():
 @pytest.mark.parametrize("name", ALL_RGL)
 def test_warp_rgl_eval_matches_mitsuba(warp_rgl, name):
     """float32 Warp vs float32 Mitsuba: the same tolerances as the float64 NumPy reader
-    (measured: <= 6.0e-5 relative above noise, <= 6.8e-6 of the maximum everywhere)."""
+    (measured: <= 7.4e-5 relative above noise, <= 4.8e-6 of the maximum everywhere)."""
     r, paths = warp_rgl
     view, light = direction_pairs()
     ref = MR.eval(paths[name], view, light)             # si.wi = the view
