@@ -10,7 +10,7 @@ only on the material's file and its spec fields, so it is stored once under a ke
   tabulation defaults, :data:`VERSION` and the source of :mod:`fit.sampling.table`; a material
   given in memory (``spec.data``) or without a readable file is never cached.
 * where: the shipped tables of the shipped fits, ``warp_rbrdf/data/tables/<key>.npz`` (written
-  by ``python -m warp_rbrdf.techniques.table_cache``), then the user cache
+  by ``python -m warp_rbrdf.techniques.table_cache``, with one BLAS thread), then the user cache
   ``<Warp kernel cache>/rbrdf-tables/<key>.npz`` (written atomically after a tabulation; it goes
   with the kernel cache, so emptying one empties both).
 
@@ -158,5 +158,14 @@ def ship_default_tables() -> list[Path]:
 
 
 if __name__ == "__main__":
+    import sys
+
+    from fit.batch.tasks import THREAD_ENV
+
+    # one BLAS thread, as the fitter's batch workers: the tabulation's last bit depends on the
+    # thread count (2e-15 with two), and the shipped table is compared bit for bit
+    if any(os.environ.get(k) != v for k, v in THREAD_ENV.items()):
+        os.execve(sys.executable, [sys.executable, "-m", "warp_rbrdf.techniques.table_cache", *sys.argv[1:]],
+                  {**os.environ, **THREAD_ENV})
     for p in ship_default_tables():
         print(p)
