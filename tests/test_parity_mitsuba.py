@@ -227,6 +227,27 @@ def test_reference_reloads_a_mirroring_plugin(monkeypatch):
         MR._measured.cache_clear()
 
 
+def test_mirror_check_only_for_isotropic_files(tmp_path, monkeypatch):
+    """An anisotropic file may set ``m_reduction`` to 4 on purpose (data over a quarter of the
+    azimuths): only isotropic files (``phi_i`` with at most 2 entries) are checked."""
+    from fit.formats.tensor_file import read_tensor_file, write_tensor_file
+
+    path = rgl_path("paper_white_rgb")
+    assert MR._isotropic(path)
+    arrays = {k: np.array(f.data) for k, f in read_tensor_file(path).items()}
+    arrays["phi_i"] = np.linspace(0, np.pi / 2, 4, dtype=arrays["phi_i"].dtype)
+    write_tensor_file(tmp_path / "aniso.bsdf", arrays)
+    assert not MR._isotropic(tmp_path / "aniso.bsdf")
+    mi, real = MR._mi(), MR.load_bsdf(path)
+    monkeypatch.setattr(mi, "load_dict", lambda d: GarbageReduction(real, 4))
+    monkeypatch.setattr(MR, "_isotropic", lambda f: False)
+    MR._measured.cache_clear()
+    try:
+        assert isinstance(MR._measured("any.bsdf"), GarbageReduction)   # loaded once, not checked
+    finally:
+        MR._measured.cache_clear()
+
+
 def test_negative_entries_clamped_copy(tmp_path, monkeypatch):
     """Mitsuba does not clamp negative rgb entries (its eval goes negative next to them); the
     clamped copy it is given by default matches our reader, which clamps at load."""

@@ -195,17 +195,27 @@ def _load_checked(load, bsdf_of, what):
                                f"files in Mitsuba 3.9.1)")
 
 
+def _isotropic(filename) -> bool:
+    """Whether the ``.bsdf`` file is isotropic as the plugin decides it (``phi_i`` with at most
+    2 entries): only then is ``m_reduction`` left uninitialized (an anisotropic file may set it
+    to 4 on purpose, its data covering a quarter of the azimuths)."""
+    from fit.formats.tensor_file import read_tensor_file
+
+    phi_i = read_tensor_file(filename).get("phi_i")
+    return phi_i is not None and int(np.prod(phi_i.shape)) <= 2
+
+
 @functools.lru_cache(maxsize=32)
 def _measured(filename: str):
-    return _load_checked(lambda: _mi().load_dict({"type": "measured", "filename": filename}),
-                         lambda bsdf: bsdf, filename)
+    load = lambda: _mi().load_dict({"type": "measured", "filename": filename})  # noqa: E731
+    return _load_checked(load, lambda bsdf: bsdf, filename) if _isotropic(filename) else load()
 
 
 def _load_scene(scene_dict: dict, material):
     """``mi.load_dict(scene_dict)`` of a reference scene; an RGL ``material``'s plugin checked by
     :func:`_load_checked`."""
     mi = _mi()
-    if _material_kind(material)[0] != "rgl":
+    if _material_kind(material)[0] != "rgl" or not _isotropic(scene_dict["sphere"]["bsdf"]["filename"]):
         return mi.load_dict(scene_dict)
     return _load_checked(lambda: mi.load_dict(scene_dict), lambda scene: scene.shapes()[0].bsdf(),
                          str(material))
