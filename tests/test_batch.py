@@ -121,8 +121,11 @@ def test_bad_arguments_are_one_line(tmp_path, capsys, monkeypatch, args, message
 def test_interrupt_and_resume_on_local_cluster(materials, tmp_path, capsys):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "fit.cli", "batch", str(materials), "--out", str(out), "--workers", "1", *FAST]
+    # Ctrl-C as in a terminal: SIGINT at its default in the batch, even when this test runs where
+    # it is ignored (a background job of a shell without job control), which exec would pass on
     proc = subprocess.Popen(cmd, cwd=tmp_path, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         while not _manifests(out) and proc.poll() is None and time.monotonic() < deadline:
