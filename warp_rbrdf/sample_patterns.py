@@ -7,8 +7,10 @@ pixel, sample) whatever the tiling or thread count.
 * ``PATTERN_INDEPENDENT``: hashed uniform random numbers (lowbias32 integer hash).
 * ``PATTERN_STRATIFIED`` (scene default): correlated multi-jittered 2-D points (Kensler 2013,
   "Correlated Multi-Jittered Sampling"), one independently scrambled pattern per (pixel,
-  dimension), with the sample index permuted so that any spp works ("padded" multi-jitter: each
-  2-D dimension is stratified, the dimensions are decorrelated).
+  dimension) ("padded" multi-jitter: each 2-D dimension is stratified, the dimensions are
+  decorrelated). An spp that is not a product ``m * n`` of the pattern's grid takes that many
+  distinct cells of the next full pattern, chosen at random per pixel, so each sample stays
+  uniform and every estimator unbiased (:func:`cmj_2d`).
 * ``PATTERN_SOBOL``: the first two Sobol dimensions, index-shuffled and Owen-scrambled by hashing
   (Burley 2020, "Practical Hash-based Owen Scrambling"), padded the same way; any power-of-two
   prefix is a (0, m, 2)-net. Measured against CMJ by ``benchmarks.bench_env_sampling`` (same
@@ -152,11 +154,22 @@ def cmj_randfloat(i: wp.uint32, p: wp.uint32) -> float:
 
 @wp.func
 def cmj_2d(s: int, n_samples: int, p: wp.uint32) -> wp.vec2:
-    """Sample ``s`` of an ``n_samples`` CMJ pattern scrambled by ``p``."""
+    """Sample ``s`` (0 <= s < ``n_samples``) of a CMJ pattern scrambled by ``p``.
+
+    The pattern is an ``m`` x ``n`` grid (``m = floor(sqrt(n_samples))``, ``n = ceil(n_samples /
+    m)``). When ``n_samples < m * n`` (a count that is not such a product: 5, 32, 128, 512,
+    8192, ...) the ``n_samples`` samples are ``n_samples`` distinct cells of the full pattern,
+    picked by a ``p``-keyed permutation of all ``m * n`` cells. Each sample is then uniform over
+    the unit square (a uniformly chosen cell, uniform inside it), so every estimator stays
+    unbiased. (Kensler's original permutes the sample index over ``[0, n_samples)`` only, which
+    always keeps the first ``n_samples`` cells in row order: the last row and the last columns
+    are under-sampled and the mean of ``x`` over a 128-sample pattern is 0.490: rendered channel
+    means were up to 4.5 % too bright under a small bright sun; issue 20.) For ``n_samples = m * n``
+    both are the same permutation, so those patterns are unchanged."""
     N = wp.uint32(n_samples)
     m = wp.uint32(wp.max(1, int(wp.floor(wp.sqrt(float(n_samples))))))
     n = (N + m - wp.uint32(1)) // m
-    si = cmj_permute(wp.uint32(s), N, p * wp.uint32(0x51633E2D))
+    si = cmj_permute(wp.uint32(s), m * n, p * wp.uint32(0x51633E2D))
     sx = cmj_permute(si % m, m, p * _KA511E9B3)
     sy = cmj_permute(si // m, n, p * wp.uint32(0x63D83595))
     jx = cmj_randfloat(si, p * _KA399D265)
