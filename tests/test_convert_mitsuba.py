@@ -6,7 +6,8 @@ the file skips without Mitsuba; under CI (``CI=true``) a missing Mitsuba is a fa
   Mitsuba (``scalar_rgb``) against the analytic lobe. Measured at the time of writing (2000
   pairs, seed 5, both directions within 80 deg, luminance of rho): Mitsuba against the lobe
   RMS 6.2 %, p99 21 %, max 72 %, median 1.7 %, mean ratio 1.002 -- of which the MERL table
-  itself (nearest bin) is RMS 3.3 %, p99 15 %, max 21 % from the lobe; Mitsuba against our
+  itself was RMS 3.3 %, p99 15 %, max 21 % from the lobe with the nearest bin, 0.35 % RMS read
+  trilinearly (the default since 2026-11-24; Mitsuba against the lobe: RMS 4.7 %, p99 20 %); Mitsuba against our
   reader of the same file: <= 3.2e-6 relative (float32).
 * An RGL file re-parameterized (RGL -> RGL) renders in Mitsuba like the original: the
   reference sphere under the studio map, mean over the sphere within the renders' noise.
@@ -48,7 +49,9 @@ def test_analytic_lobe_via_merl_to_rgl_in_mitsuba(tmp_path):
     assert vs_lobe.rel_rms < 0.09 and vs_lobe.rel_p99 < 0.35 and vs_lobe.rel_max < 1.0
     assert vs_lobe.rel_median < 0.03 and abs(vs_lobe.mean_ratio - 1) < 0.015
     alone = compare(table.evaluate, lobe, n, seed=5)
-    assert vs_lobe.rel_rms < 2 * alone.rel_rms + 0.01      # the RGL step adds less than the table
+    # the MERL table read trilinearly is 0.35 % RMS from the lobe (nearest bin: 3.3 %); the
+    # RGL tensors of the conversion set the rest
+    assert alone.rel_rms < 0.01
     vs_ours = compare(mitsuba, read_rgl(out).evaluate, n, seed=5)
     assert vs_ours.rel_max < 1e-4
 

@@ -23,7 +23,7 @@ def test_material_kind_implements_the_interface(kind):
     impl = kind.impl()
     missing = [a for a in MATERIAL_API if not hasattr(impl, a)]
     assert not missing, f"{kind.module} lacks {missing}"
-    assert set(kind.keys) <= {"albedo", "file", "scale", "statistic", "incident", "unvouched"}
+    assert set(kind.keys) <= {"albedo", "file", "scale", "statistic", "incident", "interpolation", "unvouched"}
     # the roles key exactly on the kinds that read RGL files
     assert ("incident" in kind.keys) == (".bsdf" in kind.suffixes)
     assert ("file" in kind.keys) == bool(kind.suffixes)

@@ -63,6 +63,8 @@ def test_data_paths(monkeypatch, tmp_path):
     (lambda s: s.replace("irradiance = 3", "radiance = 3"), "lights[0].radiance", "irradiance"),
     (lambda s: s.replace("fov = 30", "fov = 30\nfocal = 2"), "camera.focal", "unknown key"),
     (lambda s: s.replace('type = "lambert"', 'type = "plastic"'), "materials.red.type", "expected one of"),
+    (lambda s: s.replace('albedo = [0.8, 0.1, 0.1]', 'interpolation = "nearest"'), "materials.red.interpolation",
+     "unknown key"),
     (lambda s: s + '\n[integrator]\nspp = 0\n', "integrator.spp", "expected an integer in [1"),
     (lambda s: s + '\n[[lights]]\ntype = "envmap"\nfile = "${RBRDF_DATA}/none.hdr"\n', "lights[1].file", "not found"),
 ])
@@ -73,6 +75,19 @@ def test_bad_scene_errors(tmp_path, edit, key, words):
     msg = str(e.value)
     assert "\n" not in msg
     assert str(p) in msg and key in msg and words in msg, msg
+
+
+def test_measured_interpolation_key(tmp_path):
+    """``interpolation`` of a measured material: "linear" by default, "nearest" when stated."""
+    (tmp_path / "m.binary").write_bytes(b"")   # parsing does not read it
+    text = GOOD.replace('type = "lambert"\nalbedo = [0.8, 0.1, 0.1]', 'type = "measured"\nfile = "m.binary"')
+    assert load_scene(write(tmp_path, text)).materials["red"].interpolation == "linear"
+    text = text.replace('file = "m.binary"', 'file = "m.binary"\ninterpolation = "nearest"')
+    assert load_scene(write(tmp_path, text)).materials["red"].interpolation == "nearest"
+    p = write(tmp_path, text.replace('"nearest"', '"cubic"'), "bad.toml")
+    with pytest.raises(SceneError) as e:
+        load_scene(p)
+    assert str(e.value).startswith(f"{p}: materials.red.interpolation: ") and "expected one of" in str(e.value)
 
 
 def test_invalid_toml_and_missing_file(tmp_path):

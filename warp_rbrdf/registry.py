@@ -48,7 +48,7 @@ class MaterialKind:
     suffixes: tuple = ()      # file types its ``file`` key accepts (empty: no file)
     module: str = ""          # implementation module
     keys: tuple = ()          # scene keys it reads besides type / sampler / cdf, among
-                              # albedo, file, scale, statistic, incident (see scene-format)
+                              # albedo, file, scale, statistic, incident, interpolation (see scene-format)
     default_sampler: str = "mis"            # strategy when neither material nor integrator names one
     default_sampler_cdf: str | None = None  # the same when the material has a ``cdf`` (None: as without)
 
@@ -104,9 +104,9 @@ COMBINE_MIS = 2      # both, power heuristic
 MATERIALS = (
     MaterialKind("lambert", 0, "albedo / pi", (), "warp_rbrdf.materials.lambert", ("albedo",),
                  default_sampler="mis"),
-    MaterialKind("measured", 1, "3-D (theta_h, theta_d, phi_d) MERL-grid table, nearest bin "
-                 "(MERL .binary, or RGL .bsdf resampled)", (".binary", ".bsdf"),
-                 "warp_rbrdf.materials.measured", ("file", "scale", "incident"),
+    MaterialKind("measured", 1, "3-D (theta_h, theta_d, phi_d) MERL-grid table, trilinear between "
+                 "bin centres (MERL .binary, or RGL .bsdf resampled)", (".binary", ".bsdf"),
+                 "warp_rbrdf.materials.measured", ("file", "scale", "incident", "interpolation"),
                  default_sampler="mis-tabulated"),
     MaterialKind("projected", 2, "2-D (theta_h, theta_d) median projection, nearest cluster "
                  "(.binary/.bsdf projected at load, or an .npz from `rbrdf-fit project`)",

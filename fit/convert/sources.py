@@ -62,7 +62,7 @@ def load_source(path) -> Source:
 
         m = read_merl(path)
         return Source("merl", m.name, str(path), m.evaluate, True, m,
-                      notes=[(f"MERL input: nearest-bin values, {100 * (1 - m.valid_fraction):.1f} % of "
+                      notes=[(f"MERL input: trilinear between bin centres, {100 * (1 - m.valid_fraction):.1f} % of "
                              "the bins marked 'no sample'")])
     if suffix == ".bsdf":
         from ..formats.rgl import read_rgl

@@ -94,3 +94,47 @@ def phi_d_index(phi_d, n_phi_d: int = N_PHI_D) -> np.ndarray:
     n = _check(n_phi_d)
     p = np.mod(np.asarray(phi_d, float), phi_d_period(n))
     return np.clip(np.floor(p / np.pi * N_PHI_D), 0, n - 1).astype(np.intp)
+
+
+#: How a table on the grid is read between its bin centres (:func:`trilinear_corners`).
+INTERPOLATIONS = ("linear", "nearest")
+
+
+def trilinear_corners(theta_h, theta_d, phi_d, n_phi_d: int = N_PHI_D):
+    """The 8 bin centres around a point of the grid and their trilinear weights.
+
+    Coordinates are continuous bin positions whose integers are the centres: ``u = 90
+    sqrt(theta_h / (pi/2)) - 0.5`` (theta_h square-root spaced, as the bins),
+    ``v = 90 theta_d / (pi/2) - 0.5`` and ``w = 180 phi_d / pi - 0.5`` after the fold or wrap of
+    :func:`phi_d_index`. ``u`` and ``v`` are clamped to the first and last centres (the value
+    is held constant beyond them); ``w`` is periodic: with 180 bins, bin 179 and bin 0 are
+    neighbours across phi_d = pi (the reciprocity fold), with 360 across 2 pi = 0.
+
+    Returns ``(i, j, k, weight)``: integer arrays of shape ``broadcast(...) + (8,)`` and
+    float64 weights of that shape, summing to 1 over the last axis (a coordinate within 1e-9
+    of a centre is snapped to it: weights exactly 0 and 1). Angles in radians.
+    """
+    n = _check(n_phi_d)
+    th, td, pd = np.broadcast_arrays(np.asarray(theta_h, float), np.asarray(theta_d, float),
+                                     np.asarray(phi_d, float))
+    u = np.clip(np.sqrt(np.clip(th, 0.0, None) / HALF_PI) * N_THETA_H - 0.5, 0.0, N_THETA_H - 1.0)
+    v = np.clip(td / HALF_PI * N_THETA_D - 0.5, 0.0, N_THETA_D - 1.0)
+    w = np.mod(pd, phi_d_period(n)) / np.pi * N_PHI_D - 0.5
+    i0 = np.minimum(np.floor(u).astype(np.intp), N_THETA_H - 2)
+    j0 = np.minimum(np.floor(v).astype(np.intp), N_THETA_D - 2)
+    k0f = np.floor(w)
+    # a coordinate within 1e-9 of a centre is that centre (rounding of the angles): weights
+    # exactly 0 and 1, so a table read at its own centres returns its values bit for bit
+    a, b, c = (np.where(f < 1e-9, 0.0, np.where(f > 1.0 - 1e-9, 1.0, f))
+               for f in (u - i0, v - j0, w - k0f))
+    k0 = np.mod(k0f.astype(np.intp), n)
+    k1 = np.mod(k0 + 1, n)
+    ii, jj, kk, ww = [], [], [], []
+    for di, wa in ((0, 1.0 - a), (1, a)):
+        for dj, wb in ((0, 1.0 - b), (1, b)):
+            for k, wc in ((k0, 1.0 - c), (k1, c)):
+                ii.append(i0 + di)
+                jj.append(j0 + dj)
+                kk.append(k)
+                ww.append(wa * wb * wc)
+    return (np.stack(ii, -1), np.stack(jj, -1), np.stack(kk, -1), np.stack(ww, -1))

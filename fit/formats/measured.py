@@ -21,6 +21,7 @@ from ..errors import BRDFFileError
 from ..limits import MAX_BRDF_VALUE
 from .angles import directions_to_half_diff, half_diff_to_directions
 from .grid import (
+    INTERPOLATIONS,
     N_PHI_D,
     PHI_D_BINS,
     grid_shape,
@@ -31,11 +32,35 @@ from .grid import (
     theta_d_index,
     theta_h_centres,
     theta_h_index,
+    trilinear_corners,
 )
 
 
 def _above_horizon(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     return (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+
+
+#: Value of a bin without a sample in :attr:`MeasuredBRDF.kernel_table` (valid values are >= 0).
+NO_SAMPLE = -1.0
+
+
+def _read(table, valid, theta_h, theta_d, phi_d, n_phi_d, interpolation):
+    """``table`` (90, 90, n_phi_d, 3) read at Rusinkiewicz angles: nearest bin, or trilinear
+    over the bins where ``valid`` (None: every bin), weights renormalised per channel."""
+    if interpolation not in INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, got {interpolation!r}")
+    if interpolation == "nearest":
+        i, j, k = np.broadcast_arrays(theta_h_index(theta_h), theta_d_index(theta_d),
+                                      phi_d_index(phi_d, n_phi_d))
+        return table[i, j, k]
+    i, j, k, w = trilinear_corners(theta_h, theta_d, phi_d, n_phi_d)
+    corners = table[i, j, k]                               # (..., 8, 3)
+    if valid is None:
+        return np.einsum("...c,...cr->...r", w, corners)
+    wv = w[..., None] * valid[i, j, k]                     # (..., 8, 3)
+    s = wv.sum(-2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(s > 0.0, (wv * corners).sum(-2) / np.where(s > 0.0, s, 1.0), 0.0)
 
 
 @dataclass
@@ -68,8 +93,8 @@ class MeasuredBRDF:
         A source that stores f * cos(theta_x) (an RGL file: x is the direction that is *not*
         the tensors' incident one) can also give that smooth quantity at every bin centre
         (``weighted``; bins whose centre dips below the horizon get its grazing value).
-        :meth:`evaluate` then returns ``weighted[bin] / cos(theta_x)`` with the pair's *own*
-        cosine, so rho * cos(theta_x) is the nearest bin's f cos exactly: no 1 / cos of a bin
+        :meth:`evaluate` then returns ``weighted`` (read as ``interpolation`` says) divided by
+        the pair's *own* cosine, so rho * cos(theta_x) is the table's f cos exactly: no 1 / cos of a bin
         centre near the horizon is multiplied by another direction's cosine (a line of
         pixels 10-20 % too dark along each bright light's terminator otherwise), and no bin
         straddling the horizon reads 0. ``values`` (rho at the centres) stays what the
@@ -133,45 +158,49 @@ class MeasuredBRDF:
         return float(self.valid.mean())
 
     # Evaluation -------------------------------------------------------------------------
-    def lookup(self, theta_h, theta_d, phi_d) -> np.ndarray:
-        """Nearest-bin values for Rusinkiewicz angles; shape ``broadcast(...) + (3,)``.
+    def lookup(self, theta_h, theta_d, phi_d, interpolation: str = "linear") -> np.ndarray:
+        """``values`` at Rusinkiewicz angles (radians); shape ``broadcast(...) + (3,)``.
 
         ``phi_d`` is folded into [0, pi) when the table is :attr:`reciprocal`, else wrapped into
-        [0, 2 pi). Bins without a sample return 0.
+        [0, 2 pi). ``interpolation``: ``"linear"`` (default), trilinear between the 8 bin
+        centres around the point (:func:`fit.formats.grid.trilinear_corners`), bins without a
+        sample left out and the weights of the others renormalised (0 where none has one);
+        ``"nearest"``, the bin the point falls in (the MERL reference code's lookup; bins
+        without a sample return 0).
         """
-        i = theta_h_index(theta_h)
-        j = theta_d_index(theta_d)
-        k = phi_d_index(phi_d, self.n_phi_d)
-        i, j, k = np.broadcast_arrays(i, j, k)
-        return self.values[i, j, k]
+        return _read(self.values, self.valid, theta_h, theta_d, phi_d, self.n_phi_d, interpolation)
 
-    def evaluate(self, wi, wo) -> np.ndarray:
-        """rho(wi, wo) in 1/sr by nearest-bin lookup with the MERL conventions.
+    def evaluate(self, wi, wo, interpolation: str = "linear") -> np.ndarray:
+        """rho(wi, wo) in 1/sr with the MERL conventions, read between the bin centres as
+        ``interpolation`` says (:meth:`lookup`: ``"linear"`` or ``"nearest"``).
 
         ``wi`` (towards the light), ``wo`` (towards the viewer): unit vectors ``(..., 3)`` in the
         local frame; phi_d is that of ``wi`` in the half-vector frame
         (:func:`fit.formats.angles.directions_to_half_diff`), so on a full-circle table
         ``evaluate(wi, wo)`` and ``evaluate(wo, wi)`` read different bins. Returns ``(..., 3)``;
-        0 where either direction is at or below the tangent plane.
+        0 where either direction is at or below the tangent plane. With a ``weighted`` table,
+        ``weighted`` is read the same way and divided by the pair's own cos(theta_x).
         """
         wi = np.asarray(wi, float)
         wo = np.asarray(wo, float)
         th, _, td, pd = directions_to_half_diff(wi, wo)
         above = _above_horizon(*np.broadcast_arrays(wi, wo))[..., None]
         if self.weighted is None:
-            return np.where(above, self.lookup(th, td, pd), 0.0)
-        i, j, k = np.broadcast_arrays(theta_h_index(th), theta_d_index(td), phi_d_index(pd, self.n_phi_d))
+            return np.where(above, self.lookup(th, td, pd, interpolation), 0.0)
+        v = _read(self.weighted, None, th, td, pd, self.n_phi_d, interpolation)
         cos_x = np.broadcast_arrays(wi, wo)[0 if self.weighted_by == "light" else 1][..., 2:3]
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(above, self.weighted[i, j, k] / np.where(above, cos_x, 1.0), 0.0)
+            return np.where(above, v / np.where(above, cos_x, 1.0), 0.0)
 
     @property
     def kernel_table(self) -> tuple:
-        """``(table, divide_by)`` for the renderer: ``values`` and 0, or ``weighted`` and the
-        direction whose cosine divides it (1: the light, 2: the view)."""
+        """``(table, divide_by)`` for the renderer: ``values`` with its bins without a sample
+        set to -1 (:data:`NO_SAMPLE`, so that an interpolating lookup can leave them out) and 0,
+        or ``weighted`` (every bin filled) and the direction whose cosine divides it (1: the
+        light, 2: the view)."""
         if self.weighted is None:
-            return self.values, 0
-        return self.weighted, 1 if self.weighted_by == "light" else 2
+            return np.where(self.valid, self.values, NO_SAMPLE), 0
+        return np.maximum(self.weighted, 0.0), 1 if self.weighted_by == "light" else 2
 
     @classmethod
     def from_function(cls, func, name: str = "analytic", reciprocal: bool = True) -> "MeasuredBRDF":

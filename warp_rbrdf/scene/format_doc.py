@@ -95,6 +95,8 @@ def _materials_section() -> str:
         "  scale = 1.0               number or [r, g, b] multiplier",
         "  incident = \"view\"         RGL .bsdf files: which direction is the tensors' theta_i: view",
         "                            (the reference implementations', Mitsuba 3 and pbrt-v4) | light",
+        "  interpolation = \"linear\"  measured: between the MERL grid's bin centres: linear (trilinear",
+        "                            in the grid's coordinates) | nearest (the bin, as MERL's own code)",
         "  unvouched = \"projected\"   rational: where the fit is flagged (not within its bound), the",
         "                            measured projection of its source file (found next to the fit,",
         "                            the scene or in $RBRDF_DATA) clamped to the region's measured",

@@ -15,6 +15,7 @@ from .. import limits, registry
 from ..errors import SceneError
 from .specs import (
     INCIDENT_ROLES,
+    INTERPOLATIONS,
     LIGHT_TYPES,
     MATERIAL_TYPES,
     PATTERNS,
@@ -153,6 +154,8 @@ def scene_from_dict(data: dict, file="<scene>", base_dir: Path | None = None) ->
             spec.statistic = m.string("statistic", "median", STATISTICS)
         if "incident" in kind.keys:
             spec.incident = m.string("incident", "view", INCIDENT_ROLES)
+        if "interpolation" in kind.keys:
+            spec.interpolation = m.string("interpolation", "linear", INTERPOLATIONS)
         if "unvouched" in kind.keys:
             spec.unvouched = m.string("unvouched", "projected", UNVOUCHED)
         tech = registry.technique(registry.strategy(spec.sampler).technique)

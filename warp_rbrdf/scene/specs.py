@@ -9,6 +9,8 @@ from typing import Any
 
 import numpy as np
 
+from fit.formats.grid import INTERPOLATIONS as GRID_INTERPOLATIONS
+
 from .. import registry
 
 MATERIAL_TYPES = registry.MATERIAL_NAMES
@@ -19,6 +21,7 @@ LIGHT_TYPES = ("directional", "envmap", "constant", "sky")
 ENV_TYPES = ("envmap", "constant", "sky")
 STATISTICS = ("median", "mean", "geometric", "harmonic", "rms")
 INCIDENT_ROLES = ("view", "light")   # which direction is an RGL file's theta_i
+INTERPOLATIONS = GRID_INTERPOLATIONS   # measured: how the MERL grid is read (fit.formats.grid)
 UNVOUCHED = ("projected", "refuse")   # rational: what a piece the fit does not vouch for becomes
 
 
@@ -54,6 +57,7 @@ class MaterialSpec:
     statistic: str = "median"
     scale: tuple = (1.0, 1.0, 1.0)
     incident: str = "view"    # RGL files: the tensors' incident direction (view | light)
+    interpolation: str = "linear"  # measured: between the MERL grid's bin centres (linear | nearest)
     unvouched: str = "projected"  # rational: flagged pieces -> the projected table | "refuse"
     data: Any = None          # in-memory table / rational function (Python API only)
     cdf: Any = None           # rbrdf-cdf file path or in-memory fit.sampling.cdf_file.CDFFit
