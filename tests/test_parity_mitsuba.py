@@ -218,7 +218,9 @@ def test_reference_reloads_a_mirroring_plugin(monkeypatch):
 
     monkeypatch.setattr(mi, "load_dict", first_mirrors)
     try:
-        np.testing.assert_array_equal(MR.eval(path, wt, wx), clean)
+        # the clean load, within the parity tolerance the mirrored one misses: two clean loads
+        # may differ at float32 rounding (seen once in CI: 2.8e-7 absolute on values ~0.002)
+        check_close(MR.eval(path, wt, wx), clean, "reloaded")
         assert state["n"] == 2
     finally:
         MR._measured.cache_clear()
