@@ -91,7 +91,7 @@ def test_shipped_default_table_is_current(monkeypatch):
     _same(tabulate(lm.evaluate), shipped, atol=1e-12)
 
 
-@pytest.mark.parametrize("field", ["statistic", "incident"])
+@pytest.mark.parametrize("field", ["statistic", "incident", "interpolation"])
 def test_key_spec_fields(field):
     spec = _sphere_spec()
     assert tc.key(dataclasses.replace(spec, **{field: "other"})) != tc.key(spec)

@@ -6,7 +6,8 @@ start of ``rbrdf render`` on the embedded default scene before this module. The 
 only on the material's file and its spec fields, so it is stored once under a key:
 
 * ``key``: SHA-256 of the material's type, the bytes of its file, its other spec fields that
-  change the BRDF (``albedo``, ``statistic``, ``scale``, ``incident``, ``unvouched``), the
+  change the BRDF (``albedo``, ``statistic``, ``scale``, ``incident``, ``interpolation``,
+  ``unvouched``), the
   tabulation defaults, :data:`VERSION` and the source of :mod:`fit.sampling.table`; a material
   given in memory (``spec.data``) or without a readable file is never cached.
 * where: the shipped tables of the shipped fits, ``warp_rbrdf/data/tables/<key>.npz`` (written
@@ -34,9 +35,10 @@ from fit.sampling.table import CDFTable, tabulate
 from ..paths import PACKAGE_DATA
 
 #: Bump when a material kind's evaluation changes what the same file and spec mean.
-VERSION = 2    # 2: rational fits evaluated on their measured domain (materials/rational.py)
+VERSION = 3    # 2: rational fits evaluated on their measured domain (materials/rational.py);
+               # 3: measured tables read trilinearly by default (``interpolation``)
 SHIPPED = PACKAGE_DATA / "tables"
-_SPEC_FIELDS = ("albedo", "statistic", "scale", "incident", "unvouched")
+_SPEC_FIELDS = ("albedo", "statistic", "scale", "incident", "interpolation", "unvouched")
 _ARRAYS = ("theta_v", "cdf_theta", "cdf_phi", "row_fallback", "albedo")
 
 
