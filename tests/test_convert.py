@@ -81,26 +81,59 @@ def test_fold_stores_the_mean_of_both_orientations_and_measures_it():
     assert "NOT reciprocal" in fold.describe()
 
 
-def test_rational_fit_to_merl_is_the_fit_at_the_bin_centres(tmp_path, capsys):
-    """fit -> dense MERL table: every valid bin holds the fit evaluated at its centre (float64
-    through the channel scales), the bins within 1 deg of the horizon are 'no sample'."""
-    assert main(["convert", str(FIT), str(tmp_path / "fit.binary"), "--pairs", "2000"]) == 0
-    out = capsys.readouterr().out
-    assert "rational fit of" in out and "reciprocal; nothing is lost" in out
-    m = read_merl(tmp_path / "fit.binary")
-    model = load_source(FIT).obj
+@pytest.mark.parametrize("name", ["paper_white_rgb.json", "satin_rosaline_rgb.json"])
+def test_rational_fit_to_merl_is_what_the_renderer_shows(name, tmp_path, capsys):
+    """fit -> dense MERL table: every valid bin holds what the renderer shows of the fit at its
+    centre (float64 through the channel scales): the recipe with the angles moved onto the
+    measured domain of the fit's grazing cut-off and, where the fitter flags a piece
+    (satin_rosaline's blue band), the projected table embedded in the file; the bins within
+    1 deg of the horizon are 'no sample'. Both rules matter on these files: the bare recipe
+    differs from the table (before 2026-11-24 the table held the bare recipe, up to 418 /sr on
+    satin_rosaline where the renderer shows at most 243)."""
     from fit.convert.merl_writer import bin_centre_directions
     from fit.formats.grid import theta_d_centres, theta_h_centres
+    from fit.rational.domain import measured_domain
+    from fit.rational.fallback import table_from_record
+    from fit.rational.vouched import values_at_angles
+    from warp_rbrdf.materials import rational
+    from warp_rbrdf.scene import MaterialSpec
 
-    expected = model.evaluate_brdf(theta_h_centres()[:, None], theta_d_centres()[None, :])   # (90, 90, 3)
+    fit = ROOT / "warp_rbrdf" / "data" / name
+    assert main(["convert", str(fit), str(tmp_path / "fit.binary"), "--pairs", "2000"]) == 0
+    out = capsys.readouterr().out
+    assert "rational fit of" in out and "reciprocal; nothing is lost" in out and "as rendered" in out
+    m = read_merl(tmp_path / "fit.binary")
+    model = load_source(fit).obj
+    cut = measured_domain(model)
+    assert cut == 79.0
+    table = None if model.fallback is None else table_from_record(model.fallback, model)
+    assert (table is not None) == (name == "satin_rosaline_rgb.json")
+    at = (theta_h_centres()[:, None], theta_d_centres()[None, :])
+    expected = values_at_angles(model, table, cut)(*at)                              # (90, 90, 3)
     full = np.broadcast_to(expected[:, :, None, :], m.values.shape)
     assert np.allclose(m.values[m.valid], full[m.valid], rtol=1e-12, atol=0)
+    bare = np.broadcast_to(model.evaluate_brdf(*at)[:, :, None, :], m.values.shape)
+    assert not np.allclose(m.values[m.valid], bare[m.valid], rtol=1e-3, atol=0)
     wi, wo = bin_centre_directions()
     c = np.sin(np.radians(1))
     assert np.array_equal(m.valid[..., 0], (wi[..., 2] > c) & (wo[..., 2] > c))
-    # the table, looked up by direction, is the fit's own evaluation at the centres' directions
-    k = (slice(None, None, 9), slice(None, None, 9), slice(None, None, 9))
-    assert np.allclose(m.evaluate(wi[k], wo[k])[m.valid[k]], model.evaluate(wi[k], wo[k])[m.valid[k]], rtol=1e-9)
+    # the table, looked up by direction, is the renderer's NumPy reference at the centres' directions
+    shown = rational.load(MaterialSpec(name="fit", type="rational", file=fit)).evaluate
+    k = (slice(None, None, 7), slice(None, None, 7), slice(None, None, 7))
+    assert np.allclose(m.evaluate(wi[k], wo[k])[m.valid[k]], shown(wi[k], wo[k])[m.valid[k]], rtol=1e-6, atol=1e-9)
+
+
+def test_flagged_fit_without_its_table_is_refused(tmp_path, capsys):
+    """A flagged fit whose file carries no projected table (written before the fitter embedded
+    it) has nothing vouched to tabulate where it is flagged: one line naming the file and the
+    region, exit 2, nothing written."""
+    d = json.loads((ROOT / "warp_rbrdf" / "data" / "satin_rosaline_rgb.json").read_text())
+    del d["fallback"]
+    (tmp_path / "old.json").write_text(json.dumps(d))
+    assert main(["convert", str(tmp_path / "old.json"), str(tmp_path / "x.binary")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "old.json" in err and "not within its bound for theta_d > 60 deg (blue" in err
+    assert "convert its source measurement" in err and not (tmp_path / "x.binary").exists()
 
 
 def test_rational_fit_to_rgl(tmp_path):

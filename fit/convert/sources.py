@@ -1,12 +1,14 @@
 """The inputs of a conversion: any BRDF the project reads, as one evaluable :class:`Source`.
 
-* ``.binary``: a MERL-MIT file (:func:`fit.formats.merl.read_merl`), evaluated by nearest bin,
-  reciprocal (its 180 phi_d bins fold (wi, wo) and (wo, wi) together);
+* ``.binary``: a MERL-MIT file (:func:`fit.formats.merl.read_merl`), evaluated trilinearly
+  between its bin centres (``MeasuredBRDF.evaluate``'s default), reciprocal (its 180 phi_d bins
+  fold (wi, wo) and (wo, wi) together);
 * ``.bsdf``: an RGL-EPFL file (:func:`fit.formats.rgl.read_rgl`), evaluated exactly with the
   reference semantics (tensor incident direction = the view, ``incident="view"``); not
   reciprocal;
-* ``.json``: an ``rbrdf-rational`` fit (:mod:`fit.convert.dense`), a function of
-  (theta_h, theta_d) only, hence reciprocal.
+* ``.json``: an ``rbrdf-rational`` fit (:mod:`fit.convert.dense`), evaluated as the renderer
+  shows it (measured domain, projected table where flagged): a 2-D fit is a function of
+  (theta_h, theta_d) only, hence reciprocal; a 3-D fit keeps the roles (not reciprocal).
 
 Every source evaluates ``rho(wi_light, wo_view)`` in 1/sr, RGB, *without* the cosine, for
 local unit directions of shape ``(..., 3)`` (z = normal), 0 where either direction is at or

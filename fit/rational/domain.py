@@ -6,7 +6,8 @@ has data only where ``cos theta_h cos theta_d >= cos c``; beyond it the fit extr
 freely. Every evaluator of such a fit moves its angles onto that domain before the recipe of
 :mod:`fit.rational.coefficient_file`: the renderer (:mod:`warp_rbrdf.materials.rational`: its
 Warp kernel and NumPy reference) and the exports (:mod:`fit.export`: the same rule emitted in
-GLSL, HLSL, C and the Mitsuba plugin's Dr.Jit). This module is the one definition of the rule;
+GLSL, HLSL, C and the Mitsuba plugin's Dr.Jit) and the table conversions (:mod:`fit.convert.dense`,
+through :mod:`fit.rational.vouched`). This module is the one definition of the rule;
 it needs only NumPy.
 """
 from __future__ import annotations

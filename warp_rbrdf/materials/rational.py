@@ -54,12 +54,7 @@ from pathlib import Path
 import numpy as np
 import warp as wp
 
-from fit.formats.angles import directions_to_half_diff
-from fit.formats.grid import (
-    N_THETA_D,
-    theta_d_index,
-    theta_h_index,
-)
+from fit.formats.grid import N_THETA_D
 from fit.formats.measured import file_sha256
 from fit.rational.brdf_model import (
     describe_regions,
@@ -71,6 +66,7 @@ from fit.rational.domain import measured_domain, onto_measured_domain  # noqa: F
 from fit.rational.fallback import fallback_table, fit_cutoff_deg, table_from_record
 from fit.rational.model import flagged, measured_range, output_clamp
 from fit.rational.variables3d import evaluate_directions, is_3d
+from fit.rational.vouched import evaluate_at_angles, values_with_table  # noqa: F401 - re-exported
 
 from ..chebyshev import FlatData, cheb_sum6
 from ..errors import SceneError
@@ -211,48 +207,6 @@ def find_source(model, spec, scene_file, key, head) -> Path:
                      f"{head}; the projected table that replaces it there needs its source measurement "
                      f"{name!r}" + (f" (sha256 {sha[:12]}...)" if sha else "") +
                      f", not found in {where}{found}")
-
-
-def evaluate_at_angles(model, table=None, cutoff_deg=None):
-    """NumPy reference of :func:`rational_eval` for a 2-D fit: ``evaluate(wi, wo) -> (..., 3)``,
-    rho (1/sr) at the directions' Rusinkiewicz angles moved onto the measured domain
-    (:func:`onto_measured_domain`; ``cutoff_deg`` None: not moved), from the model, or with a
-    fallback table ``table`` from :func:`values_with_table`; 0 below the horizon."""
-    tab = None if table is None else np.asarray(table, np.float32).astype(np.float64)
-
-    def evaluate(wi, wo):
-        wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
-        th, _, td, _ = directions_to_half_diff(wi, wo)
-        x = np.stack(np.broadcast_arrays(th, td), axis=-1)
-        if cutoff_deg is not None:
-            x = onto_measured_domain(x, cutoff_deg)
-        out = np.asarray(model(x), np.float64) if tab is None else values_with_table(model, tab, x)
-        above = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
-        return np.where(above[..., None], out, 0.0)
-
-    return evaluate
-
-
-def values_with_table(model, table, x) -> np.ndarray:
-    """rho (1/sr) ``(..., 3)`` at Rusinkiewicz angles ``x`` ``(..., 2)`` (theta_h, theta_d,
-    radians) of a model with a fallback table ``(90 * 90, 3)`` or ``(90, 90, 3)``: the model,
-    except that every flagged channel of a flagged piece is the table's nearest cluster at the
-    inputs clamped onto that piece's box, clamped to the piece's measured range."""
-    flags = {r["leaf"]: r["channels"] for r in flagged_regions(model)}
-    tab = np.asarray(table, np.float64).reshape(-1, N_THETA_D, 3)
-    x = np.asarray(x, np.float64)
-    out = np.array(model(x), dtype=np.float64)
-    for k, (leaf, sel, xl) in enumerate(model.leaves(x)):
-        if k not in flags or not np.any(sel):
-            continue
-        tv = tab[theta_h_index(xl[..., 0]), theta_d_index(xl[..., 1])]
-        for c in flags[k]:
-            v = tv[..., c]
-            rng = measured_range(leaf.function_info[c])
-            if rng is not None:
-                v = np.clip(v, rng[0], rng[1])
-            out[..., c] = np.where(sel, v, out[..., c])
-    return out
 
 
 def check_model(model, file="<scene>", key="materials"):
