@@ -57,13 +57,19 @@ def merl_theta_d_index(theta_d: float) -> int:
 
 
 @wp.func
-def merl_phi_d_index(phi_d: float, n_phi_d: int) -> int:
-    """Bin of ``phi_d`` in (-pi, pi] (:func:`half_diff`) on a table of ``n_phi_d`` phi_d bins:
-    180 folds phi_d into [0, pi) (reciprocity), 360 wraps it into [0, 2 pi) (no fold)."""
+def merl_phi_d_wrap(phi_d: float, n_phi_d: int) -> float:
+    """``phi_d`` in (-pi, pi] (:func:`half_diff`) on a table of ``n_phi_d`` phi_d bins: 180
+    folds it into [0, pi) (reciprocity), 360 wraps it into [0, 2 pi) (no fold); radians."""
     period = float(n_phi_d) / 180.0 * wp.pi
     p = phi_d
     if p < 0.0:
         p = p + period
     if p >= period:
         p = p - period
-    return wp.clamp(int(wp.floor(p / wp.pi * 180.0)), 0, n_phi_d - 1)
+    return p
+
+
+@wp.func
+def merl_phi_d_index(phi_d: float, n_phi_d: int) -> int:
+    """Bin of ``phi_d`` in (-pi, pi] on a table of ``n_phi_d`` phi_d bins (:func:`merl_phi_d_wrap`)."""
+    return wp.clamp(int(wp.floor(merl_phi_d_wrap(phi_d, n_phi_d) / wp.pi * 180.0)), 0, n_phi_d - 1)

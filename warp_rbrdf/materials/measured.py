@@ -26,6 +26,7 @@ from .frame import (
     N_TH,
     half_diff,
     merl_phi_d_index,
+    merl_phi_d_wrap,
     merl_theta_d_index,
     merl_theta_h_index,
 )
@@ -73,13 +74,7 @@ def measured_trilinear(mats: Materials, base: int, a: wp.vec3, n_pd: int) -> wp.
     the other weights renormalised."""
     u = wp.clamp(wp.sqrt(wp.max(a[0], 0.0) / wp.HALF_PI) * 90.0 - 0.5, 0.0, float(N_TH - 1))
     v = wp.clamp(a[1] / wp.HALF_PI * 90.0 - 0.5, 0.0, float(N_TD - 1))
-    period = float(n_pd) / 180.0 * wp.pi
-    p = a[2]
-    if p < 0.0:
-        p = p + period
-    if p >= period:
-        p = p - period
-    w = p / wp.pi * 180.0 - 0.5
+    w = merl_phi_d_wrap(a[2], n_pd) / wp.pi * 180.0 - 0.5
     i0 = wp.min(int(wp.floor(u)), N_TH - 2)
     j0 = wp.min(int(wp.floor(v)), N_TD - 2)
     kf = wp.floor(w)

@@ -7,9 +7,9 @@ only on the material's file and its spec fields, so it is stored once under a ke
 
 * ``key``: SHA-256 of the material's type, the bytes of its file, its other spec fields that
   change the BRDF (``albedo``, ``statistic``, ``scale``, ``incident``, ``interpolation``,
-  ``unvouched``), the
-  tabulation defaults, :data:`VERSION` and the source of :mod:`fit.sampling.table`; a material
-  given in memory (``spec.data``) or without a readable file is never cached.
+  ``unvouched``), the tabulation defaults, :data:`VERSION` and the source of
+  :mod:`fit.sampling.table`; a material given in memory (``spec.data``) or without a readable
+  file is never cached.
 * where: the shipped tables of the shipped fits, ``warp_rbrdf/data/tables/<key>.npz`` (written
   by ``python -m warp_rbrdf.techniques.table_cache``, with one BLAS thread), then the user cache
   ``<Warp kernel cache>/rbrdf-tables/<key>.npz`` (written atomically after a tabulation; it goes
