@@ -23,8 +23,9 @@ alternating runs, ratios measured side by side):
 * ``--icosphere``: the same scene with its spheres tessellated (``Renderer(...,
   analytic_spheres=False)``) against the analytic spheres;
 * ``--mitsuba``: Mitsuba 3's samples/s on the reference scene (its ``direct`` integrator, all
-  cores), in a worker process, variant ``llvm_ad_rgb`` when a libLLVM is found (set
-  ``DRJIT_LIBLLVM_PATH``, or one under /usr/lib is used), else ``scalar_rgb``;
+  cores), in a worker process, variant ``llvm_ad_rgb`` when a libLLVM that Mitsuba renders with
+  is found (``DRJIT_LIBLLVM_PATH``, else :func:`warp_rbrdf.mitsuba_reference.find_libllvm`),
+  else ``scalar_rgb``;
 * ``--bvh``: the BVH of the scene's triangles with Warp's constructors and leaf sizes
   (1 thread, CPU time of the rendering thread).
 """
@@ -181,29 +182,15 @@ def _reference_material(material):
     return DATA / "rgl" / f"{material}.bsdf"
 
 
-def find_libllvm():
-    """``DRJIT_LIBLLVM_PATH`` if set, else the newest libLLVM under /usr/lib (or None)."""
-    if os.environ.get("DRJIT_LIBLLVM_PATH"):
-        return os.environ["DRJIT_LIBLLVM_PATH"]
-    import glob
-    import re
-
-    found = glob.glob("/usr/lib/*/libLLVM*.so*") + glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*")
-
-    def version(p):
-        return tuple(int(x) for x in re.findall(r"\d+", Path(p).name)) or (0,)
-
-    return max(found, key=version) if found else None
-
-
 def mitsuba_worker(argv):
     """Worker process: ``--mitsuba-worker MATERIAL ENVMAP RESOLUTION SPP``; prints its variant,
     then renders once per line read (the line is the seed) and prints the seconds."""
     material, envmap, res, spp = argv[0], argv[1], int(argv[2]), int(argv[3])
-    llvm = find_libllvm()
+    from warp_rbrdf import mitsuba_reference as MR
+
+    llvm = MR.find_libllvm()      # one Mitsuba renders with (some LLVM versions abort on Dr.Jit's kernels)
     if llvm:
         os.environ["DRJIT_LIBLLVM_PATH"] = llvm
-    from warp_rbrdf import mitsuba_reference as MR
 
     d = MR.mitsuba_scene_dict(_reference_material(material), DATA / "envmaps" / f"{envmap}.hdr", spp, res)
     import drjit as dr

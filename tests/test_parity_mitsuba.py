@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import data_file, require_mitsuba
+from conftest import data_file, missing, require_mitsuba
 from fit.formats.angles import spherical_to_direction
 from fit.formats.rgl import read_rgl
 from warp_rbrdf import mitsuba_reference as MR
@@ -411,3 +411,77 @@ def test_render_check_sees_the_roles():
     swapped = render_stats(path, incident="light", sampler="mis")["zp"]
     assert np.std(swapped) > 1.5 * np.std(ref), (np.std(swapped), np.std(ref))
     assert np.mean(np.abs(swapped) > 4) > 3 * np.mean(np.abs(ref) > 4) + 0.02
+
+
+# --------------------------------------------------------------------------------------------
+# The shared libLLVM of Mitsuba's LLVM variant: a library that aborts the process is never used
+def test_libllvm_probe_contains_an_abort_and_names_it(monkeypatch):
+    """A test render that aborts (as Dr.Jit's kernels do inside libLLVM 15: "LLVM ERROR: Cannot
+    select ... fmaximum", SIGABRT) is reported in one line and this process goes on."""
+    require_mitsuba()
+    monkeypatch.setattr(MR, "LIBLLVM_PROBE", "import sys; sys.stderr.write('LLVM ERROR: Cannot select: x\\n')\n"
+                                             "import os; os.abort()")
+    MR.libllvm_problem.cache_clear()
+    try:
+        why = MR.libllvm_problem("/any/libLLVM-15.so")
+    finally:
+        MR.libllvm_problem.cache_clear()
+    assert why == "a test render with it failed (signal 6: LLVM ERROR: Cannot select: x)"
+
+
+def test_libllvm_not_a_library_is_refused(tmp_path, monkeypatch):
+    """DRJIT_LIBLLVM_PATH naming a file that is no LLVM: find_libllvm gives None (no other
+    library is put in its place) and set_variant refuses in one line naming the variable, while
+    the scalar variant stays selected."""
+    MR_ = require_mitsuba()
+    fake = tmp_path / "libLLVM-19.so"
+    fake.write_bytes(b"not a shared library")
+    monkeypatch.setenv("DRJIT_LIBLLVM_PATH", str(fake))
+    try:
+        assert MR_.find_libllvm() is None
+        with pytest.raises(MR_.ReferenceUnavailable) as e:
+            MR_.set_variant(MR_.LLVM_VARIANT)
+        msg = str(e.value)
+        assert msg.startswith(f"DRJIT_LIBLLVM_PATH={fake}: not usable for Mitsuba's 'llvm_ad_rgb' variant: "
+                              "a test render with it failed (exit status 1"), msg
+        assert "\n" not in msg
+        import mitsuba as mi
+
+        assert mi.variant() == MR_.VARIANT
+    finally:
+        MR_.libllvm_problem.cache_clear()
+
+
+def test_find_libllvm_skips_a_library_that_fails(tmp_path, monkeypatch):
+    """Candidates are tried in LIBLLVM_CANDIDATES' order and the first whose test render
+    passes is taken; none passing gives None and set_variant names the first one's problem."""
+    MR_ = require_mitsuba()
+    bad, good = tmp_path / "libLLVM-15.so", tmp_path / "libLLVM-19.so"
+    bad.write_bytes(b"")
+    good.write_bytes(b"")
+    monkeypatch.delenv("DRJIT_LIBLLVM_PATH", raising=False)
+    monkeypatch.setattr(MR_, "LIBLLVM_CANDIDATES", (str(bad), str(tmp_path / "libLLVM-1[6-9].so")))
+    problems = {str(bad): "a test render with it failed (signal 6: LLVM ERROR: Cannot select: y)"}
+    monkeypatch.setattr(MR_, "libllvm_problem", lambda p: problems.get(p))
+    assert MR_.find_libllvm() == str(good)
+    problems[str(good)] = "a test render with it failed (exit status 1: z)"
+    assert MR_.find_libllvm() is None
+    with pytest.raises(MR_.ReferenceUnavailable, match=r"needs a shared libLLVM that it renders with .*"
+                                                       r"; .*libLLVM-15\.so: a test render with it failed "
+                                                       r"\(signal 6: LLVM ERROR: Cannot select: y\)$"):
+        MR_.set_variant(MR_.LLVM_VARIANT)
+
+
+def test_llvm_variant_renders_with_the_library_found():
+    """find_libllvm's library passes its test render and set_variant selects Mitsuba's LLVM
+    variant with it. ``.ci/run`` installs libLLVM 19, so under CI a missing or failing library
+    is a failure; locally the test skips without one."""
+    MR_ = require_mitsuba()
+    lib = MR_.find_libllvm()
+    if lib is None:
+        missing("no libLLVM that Mitsuba renders with (Debian: apt-get install libllvm19)")
+    assert MR_.libllvm_problem(lib) is None
+    try:
+        assert MR_.set_variant(MR_.LLVM_VARIANT) == MR_.LLVM_VARIANT
+    finally:
+        MR_.set_variant(MR_.VARIANT)

@@ -420,34 +420,82 @@ def sphere_mask(resolution: int, margin: float = 1.0) -> np.ndarray:
 #: Mitsuba's LLVM variant (vectorized, JIT-compiled with LLVM; needs a system libLLVM).
 LLVM_VARIANT = "llvm_ad_rgb"
 #: Where :func:`find_libllvm` looks for the shared LLVM library Dr.Jit loads (Debian's
-#: ``libllvm19`` package first; ``DRJIT_LIBLLVM_PATH`` wins when set).
+#: ``libllvm19`` package first; ``DRJIT_LIBLLVM_PATH`` wins when set). Every candidate must also
+#: pass :func:`libllvm_problem`: some LLVM versions abort the whole process on Dr.Jit's kernels.
 LIBLLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM.so.19*", "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",
                       "/usr/lib/llvm-19/lib/libLLVM*.so*", "/usr/lib/aarch64-linux-gnu/libLLVM.so.19*",
                       "/usr/lib/x86_64-linux-gnu/libLLVM-1[5-8].so", "/usr/lib/x86_64-linux-gnu/libLLVM.so.1[5-8]*")
+#: The child process of :func:`libllvm_problem`: Mitsuba's LLVM variant renders an 8 x 8 diffuse
+#: sphere under a constant emitter with the library named by ``DRJIT_LIBLLVM_PATH``.
+LIBLLVM_PROBE = """
+import drjit as dr
+import mitsuba as mi
+mi.set_variant("llvm_ad_rgb")
+if not dr.has_backend(dr.JitBackend.LLVM):
+    raise SystemExit("Dr.Jit could not load it")
+scene = mi.load_dict({"type": "scene", "integrator": {"type": "direct"},
+                      "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+                      "sphere": {"type": "sphere", "center": [0, 0, -3], "bsdf": {"type": "diffuse"}},
+                      "light": {"type": "constant"}})
+image = mi.render(scene, spp=4)
+import numpy as np
+if not float(np.mean(np.asarray(image))) > 0.0:
+    raise SystemExit("the test render is black")
+"""
+#: Seconds the child process of :func:`libllvm_problem` may take (a good library: about 2 s).
+LIBLLVM_PROBE_TIMEOUT_S = 120.0
+
+
+@functools.lru_cache(maxsize=None)
+def libllvm_problem(path: str) -> str | None:
+    """None when Mitsuba's LLVM variant renders with the shared LLVM library ``path``, else one
+    line saying why not. The test render (:data:`LIBLLVM_PROBE`) runs in a child process: a
+    library that Dr.Jit loads but whose code generation aborts (libLLVM 15 cannot select the
+    ``fmaximum`` Dr.Jit emits: "LLVM ERROR: Cannot select", then SIGABRT) would otherwise take
+    the calling process with it. Remembered per path for the process's life."""
+    import subprocess
+    import sys
+
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=str(path))
+    try:
+        r = subprocess.run([sys.executable, "-c", LIBLLVM_PROBE], env=env, capture_output=True,
+                           text=True, timeout=LIBLLVM_PROBE_TIMEOUT_S, stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        return f"a test render with it did not end within {LIBLLVM_PROBE_TIMEOUT_S:.0f} s"
+    if r.returncode == 0:
+        return None
+    lines = [ln.strip() for ln in (r.stderr + "\n" + r.stdout).splitlines() if ln.strip()]
+    why = next((ln for ln in lines if "ERROR" in ln), lines[-1] if lines else "no message")
+    how = f"signal {-r.returncode}" if r.returncode < 0 else f"exit status {r.returncode}"
+    return f"a test render with it failed ({how}: {why[:160]})"
 
 
 def find_libllvm() -> str | None:
-    """The shared LLVM library for Dr.Jit's LLVM backend: ``$DRJIT_LIBLLVM_PATH`` when set,
-    else the first existing match of :data:`LIBLLVM_CANDIDATES` (LLVM 19 preferred), else None."""
-    import glob
-
+    """The shared LLVM library for Dr.Jit's LLVM backend: ``$DRJIT_LIBLLVM_PATH`` when set, else
+    the first existing match of :data:`LIBLLVM_CANDIDATES` (LLVM 19 preferred), provided that
+    Mitsuba renders with it (:func:`libllvm_problem`); else None. A ``DRJIT_LIBLLVM_PATH`` that
+    fails is not replaced by another library (None; :func:`set_variant` says why)."""
     env = os.environ.get("DRJIT_LIBLLVM_PATH")
     if env:
-        return env
-    for pattern in LIBLLVM_CANDIDATES:
-        hits = sorted(glob.glob(pattern))
-        if hits:
-            return hits[0]
-    return None
+        return env if libllvm_problem(env) is None else None
+    return next((p for p in libllvm_candidates() if libllvm_problem(p) is None), None)
+
+
+def libllvm_candidates() -> list[str]:
+    """The existing files matching :data:`LIBLLVM_CANDIDATES`, in its order (not yet tested)."""
+    import glob
+
+    return [hit for pattern in LIBLLVM_CANDIDATES for hit in sorted(glob.glob(pattern))]
 
 
 def set_variant(variant: str = VARIANT) -> str:
     """Select Mitsuba's ``variant`` for the functions of this module that build and render
     scenes (:func:`timing_scene`, :func:`render_timed`, :func:`render_sphere`) and return it.
 
-    An ``llvm_*`` variant needs a shared libLLVM: when ``DRJIT_LIBLLVM_PATH`` is unset it is
-    set to :func:`find_libllvm`'s answer before the variant is selected. Raises
-    :class:`ReferenceUnavailable` when Mitsuba or the variant's backend cannot be used. The
+    An ``llvm_*`` variant needs a shared libLLVM that Mitsuba renders with (:func:`find_libllvm`):
+    when ``DRJIT_LIBLLVM_PATH`` is unset it is set to that library before the variant is
+    selected. Raises :class:`ReferenceUnavailable` when Mitsuba or the variant's backend cannot
+    be used (a ``DRJIT_LIBLLVM_PATH`` whose test render fails is named with the reason). The
     cached ``measured`` plugins of :func:`load_bsdf` (``eval`` / ``pdf`` / ``sample``) are those
     of the variant they were first loaded with: call ``set_variant(VARIANT)`` before using them
     again."""
@@ -455,8 +503,13 @@ def set_variant(variant: str = VARIANT) -> str:
     if variant.startswith("llvm"):
         lib = find_libllvm()
         if lib is None:
-            raise ReferenceUnavailable(f"Mitsuba's {variant!r} variant needs a shared libLLVM (Debian: "
-                                       f"apt-get install libllvm19) or DRJIT_LIBLLVM_PATH")
+            env = os.environ.get("DRJIT_LIBLLVM_PATH")
+            if env:
+                raise ReferenceUnavailable(f"DRJIT_LIBLLVM_PATH={env}: not usable for Mitsuba's {variant!r} "
+                                           f"variant: {libllvm_problem(env)}")
+            tried = "".join(f"; {p}: {libllvm_problem(p)}" for p in libllvm_candidates()[:1])
+            raise ReferenceUnavailable(f"Mitsuba's {variant!r} variant needs a shared libLLVM that it renders "
+                                       f"with (Debian: apt-get install libllvm19) or DRJIT_LIBLLVM_PATH{tried}")
         os.environ.setdefault("DRJIT_LIBLLVM_PATH", lib)
     try:
         mi.set_variant(variant)
