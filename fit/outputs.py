@@ -15,11 +15,21 @@ truncated or half-written.
   folder or a named pipe, a read-only place, a wrong suffix): one-line
   :class:`fit.errors.OutputError`.
 
+Before a temporary file is renamed it is checked (:func:`_finish`): flushed to the disk
+(``os.fsync``, which reports the write errors a file system delays), its size on disk equal to
+the bytes the writer handed over (:func:`atomic_write`, :meth:`OutputSet.write_bytes`) or at
+least non-empty (writers that write by path, such as OpenImageIO or matplotlib, which may fail
+silently on a full disk), and read back by a ``verify`` function when one is given. A failure
+(``ENOSPC``, ``EIO``, a short file) is one :class:`fit.errors.OutputError` naming the final
+path, e.g. ``--out x.exr: no space left on device; nothing written, x.exr unchanged``; the
+temporary files are removed and every existing output is left as it was.
+
 Renamed files get the permissions of the file they replace, or ``0666`` less the umask.
 """
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import stat
 import tempfile
@@ -152,13 +162,93 @@ def _make_dirs(folder: Path, created: list, flag=None) -> None:
         created.append(d)
 
 
+#: What an ``OSError`` of a write means, in the words of the error line (others: its strerror).
+_PROBLEMS = {errno.ENOSPC: "no space left on device", errno.EDQUOT: "disk quota exceeded",
+             errno.EFBIG: "file too large for its file system", errno.EIO: "input/output error",
+             errno.EROFS: "read-only file system"}
+
+#: Errors that an ``OutputSet`` block turns into an :class:`OutputError` naming its last staged
+#: output (a writer that raises them while writing a staged file: matplotlib, NumPy, pandas).
+_WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO, errno.EROFS})
+
+#: Staged temporary file (its ``os.fspath``) -> (final path, flag) while an OutputSet holds it:
+#: a ``save`` function writing a staged file atomically names the final output in its errors.
+_STAGED: dict = {}
+
+
+def _named(path, flag):
+    """``(path, flag)`` to name in an error about writing ``path``: the final output and its
+    flag when ``path`` is a file staged by an :class:`OutputSet`."""
+    final, staged_flag = _STAGED.get(os.fspath(path), (path, None))
+    return final, (flag if flag is not None else staged_flag)
+
+
+def _problem(e) -> str:
+    """The words for ``e`` (an ``OSError`` or a text)."""
+    if isinstance(e, OSError):
+        return e.strerror or _PROBLEMS.get(e.errno) or str(e)
+    return str(e)
+
+
+def write_failed(path, e, flag: str | None = None) -> OutputError:
+    """The one-line error for an output ``path`` that could not be written (``e``: the
+    ``OSError`` or the problem in words): says that nothing was written and whether an earlier
+    file of that name is there, unchanged."""
+    final, flag = _named(path, flag)
+    try:
+        kept = os.path.lexists(final)
+    except (OSError, ValueError):
+        kept = False
+    tail = f"; nothing written, {display_path(final)} unchanged" if kept else "; nothing written"
+    return OutputError(final, _problem(e) + tail, flag)
+
+
+def _no_space(folder) -> bool:
+    """True when the file system of ``folder`` has no free block left for this user."""
+    try:
+        return os.statvfs(folder).f_bavail == 0
+    except (OSError, ValueError):
+        return False
+
+
+def _finish(tmp: Path, expected: int | None = None, verify=None) -> None:
+    """Make the temporary file ``tmp`` durable and check it: ``os.fsync``; its size equal to
+    ``expected`` bytes when given, else non-zero; ``verify(tmp)`` (raises ``OSError`` when the
+    file does not hold what was meant) when given. Raises ``OSError``."""
+    fd = os.open(tmp, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+        size = os.fstat(fd).st_size
+    finally:
+        os.close(fd)
+    complete = size == expected if expected is not None else size > 0
+    if not complete:
+        if _no_space(tmp.parent):
+            raise OSError(errno.ENOSPC, f"no space left on device (the file has {size} bytes"
+                                        + (f" of {expected})" if expected is not None else ")"))
+        raise OSError(errno.EIO, f"short write ({size} of {expected} bytes on disk)" if expected is not None
+                      else "the writer left an empty file")
+    if verify is not None:
+        verify(tmp)
+
+
+def _fsync_dir(folder: Path) -> None:
+    """Make a rename in ``folder`` durable (best effort: the file is already in place)."""
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
 def _temp_in(folder: Path, final: Path, flag=None) -> Path:
     """A new empty hidden file in ``folder`` that keeps ``final``'s suffix (savefig and
     savez choose the format from it)."""
     try:
         fd, name = tempfile.mkstemp(dir=folder, prefix=f".{final.name[:80]}.", suffix=f".part{final.suffix}")
     except OSError as e:
-        raise OutputError(final, f"cannot write in {display_path(folder)} ({e.strerror or e})", flag) from None
+        raise write_failed(final, f"cannot write in {display_path(folder)} ({_problem(e)})", flag) from None
     os.close(fd)
     return Path(name)
 
@@ -174,7 +264,7 @@ def _replace(tmp: Path, final: Path, flag=None) -> None:
     except OSError as e:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
-        raise OutputError(final, f"cannot write ({e.strerror or e})", flag) from None
+        raise write_failed(final, e, flag) from None
 
 
 def _remove_created(created: list) -> None:
@@ -184,42 +274,89 @@ def _remove_created(created: list) -> None:
     created.clear()
 
 
+class _Temp:
+    """One temporary file being written: ``tmp`` (renamed onto ``final``), the bytes the writer
+    handed over when known (``expected``) and an optional read-back check (``verify``)."""
+
+    def __init__(self, tmp: Path, final: Path, expected=None, verify=None):
+        self.tmp, self.final, self.expected, self.verify = tmp, final, expected, verify
+
+
 @contextlib.contextmanager
-def atomic_path(path, flag: str | None = None):
-    """Yield a temporary path next to ``path`` (same suffix) to write the file to; on success
-    it is renamed onto ``path`` (parent folders created), on an exception it is removed and
-    ``path`` is left as it was."""
+def _atomic(path, flag, verify=None):
+    """Yield a :class:`_Temp` next to ``path``; when the block ends without an exception the
+    file is checked (:func:`_finish`) and renamed onto ``path``; otherwise, or when the check
+    fails, it is removed (with the folders created for it) and ``path`` is left as it was.
+    ``OSError`` in the block or the check is an :class:`OutputError` naming ``path``."""
     final = Path(path)
     if final.is_symlink():
         final = Path(os.path.realpath(final))
     created: list = []
     _make_dirs(final.parent, created, flag)
-    tmp = _temp_in(final.parent, final, flag)
+    t = _Temp(_temp_in(final.parent, final, flag), final, verify=verify)
     try:
-        yield tmp
+        try:
+            yield t
+            _finish(t.tmp, t.expected, t.verify)
+        except OSError as e:
+            raise write_failed(final, e, flag) from None
     except BaseException:
         with contextlib.suppress(OSError):
-            os.unlink(tmp)
+            os.unlink(t.tmp)
         _remove_created(created)
         raise
     try:
-        _replace(tmp, final, flag)
+        _replace(t.tmp, final, flag)
     except OutputError:
         _remove_created(created)
         raise
+    _fsync_dir(final.parent)
+
+
+@contextlib.contextmanager
+def atomic_path(path, flag: str | None = None, verify=None):
+    """Yield a temporary path next to ``path`` (same suffix) to write the file to; on success
+    it is flushed, checked non-empty (and by ``verify(tmp)``, which raises ``OSError`` when the
+    file is not what was meant) and renamed onto ``path`` (parent folders created); on an
+    exception or a failed check it is removed and ``path`` is left as it was."""
+    with _atomic(path, flag, verify) as t:
+        yield t.tmp
+
+
+class _Utf8Text:
+    """A text file over the binary file ``raw``: ``write(str)`` writes its UTF-8 bytes as they
+    are (no newline translation); everything else is ``raw``'s."""
+
+    def __init__(self, raw):
+        self._raw = raw
+
+    def write(self, s: str) -> int:
+        self._raw.write(s.encode("utf-8"))
+        return len(s)
+
+    def __getattr__(self, name):          # flush, fileno, ... of the binary file
+        return getattr(self._raw, name)
+
+
+@contextlib.contextmanager
+def _open_counting(t: _Temp, mode: str):
+    """Open ``t.tmp`` for writing (``"w"`` UTF-8 text, ``"wb"`` bytes); when the block ends the
+    file is flushed, fsynced and closed, and ``t.expected`` is where the writer ended (the size
+    it meant the file to have)."""
+    with open(t.tmp, "wb") as raw:
+        yield raw if "b" in mode else _Utf8Text(raw)
+        raw.flush()
+        t.expected = raw.tell()
+        os.fsync(raw.fileno())
 
 
 @contextlib.contextmanager
 def atomic_write(path, mode: str = "w", flag: str | None = None):
     """Open a temporary file next to ``path`` for writing (``"w"``: UTF-8 text, ``"wb"``:
-    bytes); renamed onto ``path`` when the block ends without an exception."""
-    with atomic_path(path, flag) as tmp:
-        kw = {} if "b" in mode else {"encoding": "utf-8", "newline": "\n"}
-        try:
-            with open(tmp, "wb" if "b" in mode else "w", **kw) as f:
-                yield f
-        except OSError as e:
-            raise OutputError(path, f"cannot write ({e.strerror or e})", flag) from None
+    bytes); renamed onto ``path`` when the block ends without an exception and the file on disk
+    has every byte written (a short or failed write is a one-line :class:`OutputError`)."""
+    with _atomic(path, flag) as t, _open_counting(t, mode) as f:
+        yield f
 
 
 def save_figure(fig, path, outputs=None, dpi: int = 90) -> None:
@@ -230,7 +367,8 @@ def save_figure(fig, path, outputs=None, dpi: int = 90) -> None:
 
     try:
         if outputs is not None:
-            fig.savefig(outputs.stage(path), dpi=dpi, format="png")
+            with outputs.writing(path) as tmp:
+                fig.savefig(tmp, dpi=dpi, format="png")
         else:
             with atomic_path(path) as tmp:
                 fig.savefig(tmp, dpi=dpi, format="png")
@@ -239,27 +377,37 @@ def save_figure(fig, path, outputs=None, dpi: int = 90) -> None:
 
 
 class OutputSet:
-    """All outputs of one run: staged as temporary files (:meth:`stage`), renamed into place by
-    :meth:`commit` when the run has succeeded, removed by :meth:`abort` otherwise. Use as a
-    context manager: leaving the block without :meth:`commit` aborts."""
+    """All outputs of one run: staged as temporary files (:meth:`stage`, :meth:`writing`,
+    :meth:`write_bytes`, :meth:`write_text`), checked and renamed into place by :meth:`commit`
+    when the run has succeeded, removed by :meth:`abort` otherwise. Use as a context manager:
+    leaving the block without :meth:`commit` aborts, and a write error (``ENOSPC``, ``EIO``,
+    ...) raised in the block is an :class:`OutputError` naming the output last staged."""
 
     def __init__(self, flag: str | None = "--out"):
         self.flag = flag
-        self._staged: list = []     # (tmp, final)
+        self._staged: list = []     # _Temp
         self._created: list = []
         self.committed: list = []
 
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type, exc, tb):
+        last = self._staged[-1].final if self._staged else None
         if self._staged or self._created:
             self.abort()
+        if isinstance(exc, OSError) and exc.errno in _WRITE_ERRNOS and last is not None:
+            raise write_failed(last, exc, self.flag) from None
         return False
 
-    def stage(self, final) -> Path:
+    def stage(self, final, verify=None) -> Path:
         """A temporary path for the output ``final`` (its folders are created, and removed
-        again on abort); the caller writes the whole file there."""
+        again on abort); the caller writes the whole file there. ``verify(tmp)``, when given,
+        is called by :meth:`commit` before any rename and raises ``OSError`` when the file does
+        not hold what was meant."""
+        return self._stage(final, verify).tmp
+
+    def _stage(self, final, verify=None) -> _Temp:
         final = Path(final)
         if final.is_symlink():
             final = Path(os.path.realpath(final))
@@ -272,29 +420,69 @@ class OutputSet:
         if st is not None and not stat.S_ISREG(st.st_mode):
             raise OutputError(final, f"is a {_kind(st.st_mode)}; refusing to replace it", self.flag)
         _make_dirs(final.parent, self._created, self.flag)
-        tmp = _temp_in(final.parent, final, self.flag)
-        self._staged.append((tmp, final))
-        return tmp
+        t = _Temp(_temp_in(final.parent, final, self.flag), final, verify=verify)
+        self._staged.append(t)
+        _STAGED[os.fspath(t.tmp)] = (final, self.flag)
+        return t
+
+    @contextlib.contextmanager
+    def writing(self, final, verify=None):
+        """Stage ``final`` and yield its temporary path to a writer that writes by name (an
+        ``OSError`` it raises is an :class:`OutputError` naming ``final``)."""
+        tmp = self.stage(final)
+        self._staged[-1].verify = verify
+        try:
+            yield tmp
+        except OSError as e:
+            raise write_failed(final, e, self.flag) from None
+
+    def write_bytes(self, final, data: bytes) -> Path:
+        """Stage ``final`` holding ``data``; :meth:`commit` checks every byte is on disk."""
+        self.stage(final)
+        t = self._staged[-1]
+        try:
+            with _open_counting(t, "wb") as f:
+                f.write(data)
+        except OSError as e:
+            raise write_failed(final, e, self.flag) from None
+        return t.tmp
+
+    def write_text(self, final, text: str) -> Path:
+        """Stage ``final`` holding ``text`` (UTF-8, ``\n`` line ends)."""
+        return self.write_bytes(final, text.encode("utf-8"))
 
     def commit(self) -> list:
-        """Rename every staged file onto its final name; returns the final paths."""
+        """Check every staged file (:func:`_finish`: fsync, size, ``verify``), then, only when
+        all are complete, rename each onto its final name; returns the final paths. A failed
+        check removes every staged file and leaves every final path as it was."""
+        for t in self._staged:
+            try:
+                _finish(t.tmp, t.expected, t.verify)
+            except OSError as e:
+                self.abort()
+                raise write_failed(t.final, e, self.flag) from None
         staged, self._staged = self._staged, []
+        for t in staged:
+            _STAGED.pop(os.fspath(t.tmp), None)
         try:
-            for k, (tmp, final) in enumerate(staged):
-                _replace(tmp, final, self.flag)
-                self.committed.append(final)
+            for k, t in enumerate(staged):
+                _replace(t.tmp, t.final, self.flag)
+                self.committed.append(t.final)
         except OutputError:
-            for tmp, _ in staged[k + 1:]:
+            for u in staged[k + 1:]:
                 with contextlib.suppress(OSError):
-                    os.unlink(tmp)
+                    os.unlink(u.tmp)
             raise
+        for folder in {t.final.parent for t in staged}:
+            _fsync_dir(folder)
         self._created.clear()
         return list(self.committed)
 
     def abort(self) -> None:
         """Remove the staged files and the folders this run created."""
-        for tmp, _ in self._staged:
+        for t in self._staged:
+            _STAGED.pop(os.fspath(t.tmp), None)
             with contextlib.suppress(OSError):
-                os.unlink(tmp)
+                os.unlink(t.tmp)
         self._staged.clear()
         _remove_created(self._created)
