@@ -560,7 +560,7 @@ def test_cli_export_plugin_with_cdf(tmp_path, small_cdf):
     out = tmp_path / "p.py"
     assert cli_main(["export", str(FITS[1]), str(out), "--cdf", str(cdf)]) == 0
     text = out.read_text()
-    assert '\\"cdf_theta\\"' in text and "sampling: tabulated inverse CDFs" in text
+    assert '"cdf_theta"' in text and "sampling: tabulated inverse CDFs" in text
     need_mitsuba()
     import mitsuba as mi
 

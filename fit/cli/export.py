@@ -45,12 +45,14 @@ def render(model, suffix: str, name=None, precision: str = "float", cdf=None) ->
 
 
 def run(args, log=print) -> int:
-    from ..export.emitter import ExportError, flagged_summary, identifier
+    from ..export.emitter import ExportError, flagged_summary
+    from ..export.escape import MAX_IDENTIFIER, is_identifier, literal
     from ..rational.coefficient_file import load
 
     out = check_output_file(args.out, flag="OUT", suffixes=tuple(EXPORTERS))
-    if args.name is not None and identifier(args.name) != args.name:
-        raise FlagError("--name", f"expected letters, digits and '_' (not starting with a digit), got {args.name!r}")
+    if args.name is not None and not is_identifier(args.name):
+        raise FlagError("--name", f"expected letters and digits joined by single '_' (not starting with a digit, "
+                                  f"at most {MAX_IDENTIFIER} characters), got {literal(args.name, 80)}")
     if args.precision != "float" and out.suffix.lower() != ".glsl":
         raise FlagError("--precision", "only a .glsl output has a double variant (C: -DRBRDF_REAL_DOUBLE)")
     if args.cdf is not None and out.suffix.lower() != ".py":

@@ -2,7 +2,7 @@
 (``static inline`` functions, the default) or compiled on its own (``-DRBRDF_API=`` gives the
 functions external linkage; :func:`to_c` with ``header=False`` writes that define in).
 
-Emitted functions (``N`` = :func:`fit.export.emitter.identifier` of the name), all computing in
+Emitted functions (``N`` = :func:`fit.export.escape.identifier` of the name), all computing in
 ``RBRDF_REAL`` (``float`` by default, ``-DRBRDF_REAL_DOUBLE`` for ``double``)::
 
     void rbrdf_N_angles(RBRDF_REAL theta_h, RBRDF_REAL theta_d, RBRDF_REAL rho[3]);
@@ -21,7 +21,8 @@ Needs ``<math.h>`` (link with ``-lm``).
 from __future__ import annotations
 
 from ..rational.domain import measured_domain
-from .emitter import Emitter, Language, c_literal, identifier, policy_text
+from .emitter import Emitter, Language, c_literal, policy_text
+from .escape import identifier
 
 C = Language(real="RBRDF_REAL", literal=c_literal,
              funcs={"min": "RBRDF_MIN", "max": "RBRDF_MAX", "clamp": "rbrdf_clamp_",

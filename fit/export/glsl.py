@@ -2,7 +2,7 @@
 textures; compiled by the tests as ``#version 330 core``, ``410 core`` and ``300 es``; the
 double variant needs 4.00).
 
-Emitted functions (``N`` = :func:`fit.export.emitter.identifier` of the name):
+Emitted functions (``N`` = :func:`fit.export.escape.identifier` of the name):
 
 * ``vec3 rbrdf_N_angles(float theta_h, float theta_d)``: rho (1/sr) at Rusinkiewicz angles
   (radians), the fit's recipe with its clamps (:mod:`fit.export.emitter`), on the fit's
@@ -27,9 +27,9 @@ from .emitter import (
     Language,
     _digits,
     glsl_literal,
-    identifier,
     policy_text,
 )
+from .escape import identifier
 
 GLSL = Language(real="float", literal=glsl_literal,
                 funcs={"min": "min", "max": "max", "clamp": "clamp", "sqrt": "sqrt", "exp": "exp",
