@@ -147,3 +147,59 @@ def read_json(path, what: str = "JSON file", max_bytes: int = MAX_JSON_BYTES):
     (:data:`fit.limits.MAX_JSON_BYTES`), UTF-8, without NaN/Infinity literals or numbers that
     overflow, nested at most :data:`fit.limits.MAX_JSON_DEPTH` deep."""
     return parse_json(read_bytes(Path(path), max_bytes, what), path, what)
+
+
+def sha256_regular(path, max_bytes: int, what: str = "file") -> str:
+    """Hex sha256 of the bytes of the regular file ``path``, at most ``max_bytes`` (checked
+    with ``stat`` before the first byte is read, :func:`open_regular`; a file that grows past
+    the limit while it is hashed is refused)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    n = 0
+    f = open_regular(path, max_bytes, what)
+    try:
+        with f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                n += len(chunk)
+                if n > max_bytes:
+                    raise BRDFFileError(path, f"{what} grew above the limit of {max_bytes} bytes while being read")
+                h.update(chunk)
+    except OSError as e:
+        raise BRDFFileError(path, f"cannot read file ({e.strerror or e})") from None
+    return h.hexdigest()
+
+
+def walk_files(root, max_entries: int):
+    """Every entry under the folder ``root`` that is not a folder, as ``(path, parts)`` (parts:
+    the names below ``root``), depth first in sorted order. Links to folders are neither
+    followed nor returned (no loop, no walk out of ``root``); links to files are returned.
+    At most ``max_entries`` entries (files and folders) are looked at: a larger tree is a
+    :class:`BRDFFileError` naming ``root`` (an unbounded walk, e.g. of ``/``, is refused, not
+    waited on), and so is a folder that cannot be listed."""
+    root = Path(root)
+    stack = [(root, ())]
+    seen = 0
+    while stack:
+        folder, parts = stack.pop()
+        try:
+            with os.scandir(folder) as it:
+                entries = sorted(it, key=lambda e: e.name)
+        except OSError as e:
+            raise BRDFFileError(folder, f"cannot list folder ({e.strerror or e})") from None
+        seen += len(entries)
+        if seen > max_entries:
+            raise BRDFFileError(root, f"folder tree holds more than {max_entries} entries "
+                                      "(fit.limits.MAX_WALK_ENTRIES); name a smaller folder or a pattern")
+        subfolders = []
+        for e in entries:
+            try:
+                if e.is_dir(follow_symlinks=False):
+                    subfolders.append((Path(e.path), parts + (e.name,)))
+                    continue
+                if e.is_symlink() and e.is_dir():
+                    continue
+            except OSError:
+                pass
+            yield Path(e.path), parts + (e.name,)
+        stack.extend(reversed(subfolders))

@@ -29,6 +29,9 @@ MAX_NPZ_BYTES = 16 << 20
 MAX_NPZ_MEMBER_BYTES = 4 << 20
 #: Deepest nesting of a JSON document (objects and arrays); the files need 6.
 MAX_JSON_DEPTH = 64
+#: Most entries (files and folders) a walk of an input folder or a ``**`` pattern looks at
+#: (``rbrdf-fit batch``; the shared data folder holds < 100): a walk of ``/`` is refused, not waited on.
+MAX_WALK_ENTRIES = 200_000
 
 # --- RGL tensor files ----------------------------------------------------------------------------
 #: Largest number of elements of all floating-point fields of an RGL file together (converted

@@ -22,63 +22,21 @@ together at the end of the run.
 """
 from __future__ import annotations
 
-import glob
 import os
 import signal
 import threading
 import time
 from pathlib import Path
 
-from ..errors import BRDFFileError, FlagError, OutputError
-from ..formats import SUFFIXES
+from ..errors import BRDFFileError, FlagError, OutputError, display_text
+from .inputs import collect_inputs, expand_inputs  # noqa: F401 - expand_inputs: the API before
 from .keys import BatchOptions, BrdfOptions, CdfOptions
+from .progress import ProgressClock
+from .scheduler import CONNECT_TIMEOUT_S
 from .report import BatchReport, plot_coefficients, rows_from_results
 from .tasks import THREAD_ENV, run_material
 
 REPORT_FILES = ("report.csv", "report.md", "report_coefficients.png")
-
-
-def expand_inputs(inputs) -> list:
-    """Measured-BRDF files named by ``inputs``: files, folders (their ``.binary`` / ``.bsdf``
-    files, recursively) and glob patterns (``*``, ``?``, ``[``, ``**``), in sorted order
-    without duplicates (same resolved path). :class:`BRDFFileError` (one line) for a name that
-    matches nothing, a folder without BRDF files, or a file of another type."""
-    out, seen = [], set()
-
-    def add(p: Path):
-        key = os.path.realpath(p)
-        if key not in seen:
-            seen.add(key)
-            out.append(p)
-
-    if isinstance(inputs, (str, os.PathLike)):
-        inputs = [inputs]
-    for item in inputs:
-        s = os.fspath(item)
-        p = Path(s)
-        if p.is_dir():
-            found = sorted(q for q in p.rglob("*") if q.suffix.lower() in SUFFIXES and q.is_file())
-            if not found:
-                raise BRDFFileError(p, f"folder without measured-BRDF files ({', '.join(SUFFIXES)})")
-            for q in found:
-                add(q)
-        elif p.is_file():
-            if p.suffix.lower() not in SUFFIXES:
-                raise BRDFFileError(p, f"unknown BRDF file type {p.suffix or '(no extension)'!r}; "
-                                       f"expected one of {', '.join(SUFFIXES)}")
-            add(p)
-        elif glob.has_magic(s):
-            found = sorted(Path(q) for q in glob.glob(s, recursive=True)
-                           if Path(q).suffix.lower() in SUFFIXES and Path(q).is_file())
-            if not found:
-                raise BRDFFileError(s, "pattern matches no measured-BRDF file")
-            for q in found:
-                add(q)
-        elif p.exists():
-            raise BRDFFileError(p, "not a regular file or folder")
-        else:
-            raise BRDFFileError(p, "file not found")
-    return out
 
 
 def make_options(tols=(0.05,), cdf: bool = True, brdf_options: dict | None = None,
@@ -110,22 +68,23 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _start_client(workers: int | None, scheduler: str | None, timeout_s: float):
-    """``(client, cluster or None, n_workers)``."""
+def _start_client(workers: int | None, scheduler: str | None, timeout_s: float, worker_timeout_s: float):
+    """``(client, cluster or None, n_workers)``: a local cluster of ``workers`` processes, or
+    the scheduler at ``scheduler`` (:func:`fit.batch.scheduler.connect` within ``timeout_s``)
+    with at least one worker within ``worker_timeout_s``."""
     import logging
 
     from distributed import Client, LocalCluster
 
     if scheduler:
+        from .scheduler import connect
+
+        client = connect(scheduler, timeout_s)
         try:
-            client = Client(scheduler, timeout=timeout_s)
-        except (OSError, TimeoutError) as e:
-            raise FlagError("--scheduler", f"cannot connect to {scheduler} ({e})") from None
-        try:
-            client.wait_for_workers(1, timeout=timeout_s)
+            client.wait_for_workers(1, timeout=worker_timeout_s)
         except (TimeoutError, OSError):
             client.close()
-            raise FlagError("--scheduler", f"no worker joined {scheduler} within {timeout_s:g} s") from None
+            raise FlagError("--scheduler", f"no worker joined {scheduler} within {worker_timeout_s:g} s") from None
         return client, None, len(client.scheduler_info(n_workers=-1)["workers"])
     n = workers or default_workers()
     # Worker processes start with SIGINT ignored (inherited through exec): Ctrl-C in a terminal
@@ -145,73 +104,114 @@ def _start_client(workers: int | None, scheduler: str | None, timeout_s: float):
 
 def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: dict | None = None,
                  cdf_options: dict | None = None, workers: int | None = None, scheduler: str | None = None,
-                 progress: bool | None = None, log=None, connect_timeout_s: float = 30.0,
+                 progress: bool | None = None, log=None, on_progress=None,
+                 connect_timeout_s: float = CONNECT_TIMEOUT_S, worker_timeout_s: float = 30.0,
                  report_only: bool = False) -> BatchReport:
-    """Fit every material of ``inputs`` (files, folders, globs: :func:`expand_inputs`) into the
-    folder ``out`` on dask.distributed and return the report (:class:`BatchReport`, also
-    written to ``out/report.csv``, ``report.md`` and ``report_coefficients.png``).
+    """Fit every material of ``inputs`` (files, folders, globs: :func:`fit.batch.inputs.collect_inputs`)
+    into the folder ``out`` on dask.distributed and return the report (:class:`BatchReport`,
+    also written to ``out/report.csv``, ``report.md`` and ``report_coefficients.png``).
 
     ``tols``: relative tolerance(s), one BRDF fit per material and tolerance
     (:func:`fit.fit_brdf`; ``brdf_options``: its other arguments, e.g. ``{"max_degree": 8}``,
     defaults those of ``rbrdf-fit brdf``); ``cdf``: also fit the inverse CDFs
     (:func:`fit.fit_cdf`; ``cdf_options``: :class:`fit.batch.keys.CdfOptions` fields, defaults
     those of ``rbrdf-fit cdf``). ``workers``: local worker processes (default: one per core);
-    ``scheduler``: address of a running scheduler instead (``workers`` ignored).
-    ``progress``: tqdm bar over materials (None: on when stderr is a terminal); ``log(str)``:
-    one line per material finished. ``report_only``: fit nothing, start no cluster: the report
-    of the outputs already done (rows of outputs not done have status ``"missing"``).
+    ``scheduler``: address of a running scheduler instead (``workers`` ignored;
+    :mod:`fit.batch.scheduler`: checked before anything is read, reached within
+    ``connect_timeout_s`` seconds, a first worker within ``worker_timeout_s``).
+    ``progress``: tqdm bar over materials on stderr (None: on when stderr is a terminal);
+    ``on_progress(event)``: a :class:`fit.batch.progress.BatchProgress` per stage and per
+    material finished (done/total, elapsed, estimate left); ``log(str)``: one line per material
+    finished. ``report_only``: fit nothing, start no cluster: the report of the outputs already
+    done (rows of outputs not done have status ``"missing"``).
 
-    Bad arguments (no input, a missing file, an unusable output folder, an unreachable
-    scheduler) raise the one-line :class:`fit.errors.RbrdfError` before anything is fitted.
+    Every input is checked with ``stat`` before it is read or hashed: a file over its format's
+    size, or a special file found in a folder, is that material's failure (a report row with
+    its one-line error), the others are fitted. Bad arguments (no input, a missing file, an
+    unusable output folder, a bad or unreachable scheduler) raise the one-line
+    :class:`fit.errors.RbrdfError` before anything is fitted or the output folder created.
     ``KeyboardInterrupt`` cancels the tasks in flight and closes the local cluster before it
     propagates."""
     from tqdm import tqdm
 
-    from ..formats.measured import file_sha256
+    from ..formats import max_file_bytes
+    from ..inputs import sha256_regular
     from ..outputs import OutputSet, check_output_dir
 
     t0 = time.perf_counter()
+    clock = ProgressClock(on_progress)
     log = log or (lambda s: None)
     try:
         options = make_options(tols, cdf, brdf_options, cdf_options)
         _check_options(options)
     except (TypeError, ValueError) as e:
         raise FlagError("options", str(e)) from None
-    out = check_output_dir(out, "--out")
-    paths = expand_inputs(inputs)
-    if not paths:
-        raise BRDFFileError("<inputs>", "no input")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise OutputError(out, f"cannot create folder ({e.strerror or e})", "--out") from None
+    if scheduler is not None and not report_only:
+        from .scheduler import check_address
 
-    results, pending = [], []
-    for p in paths:
-        try:
-            sha = file_sha256(p)
-        except OSError as e:
+        check_address(scheduler)
+    out = check_output_dir(out, "--out")
+    items = collect_inputs(inputs)
+    if not items:
+        raise BRDFFileError("<inputs>", "no input")
+    clock.total = len(items)
+    refused = sum(1 for i in items if i.error)
+    clock.emit("inputs", f"{len(items)} measured files, {_mb(sum(i.size for i in items))}"
+                         + (f", {refused} refused before reading" if refused else "") + "; hashing")
+
+    results, pending, n_before, n_unread = [], [], 0, 0
+    for item in items:
+        p = item.path
+        error = item.error
+        if error is None:
+            try:
+                sha = sha256_regular(p, max_file_bytes(p), "measured file")
+            except BRDFFileError as e:
+                error = str(e)
+        if error is not None:
+            n_unread += 1
             results.append({"input": os.fspath(p), "name": p.stem, "sha256": None, "brdf": [], "cdf": None,
-                            "error": f"{p}: cannot read ({e.strerror or e})", "seconds": 0.0})
+                            "error": error, "seconds": 0.0})
             continue
         # cheap in the client: which outputs are already done
         r, complete = material_status(p, options, out, sha)
+        n_before += complete
         if complete or report_only:
             results.append(r)
         else:
             pending.append((p, sha))
+    clock.done = len(results)
+    clock.emit("hashed", f"{n_before} done before" + (f", {n_unread} failed (not readable)" if n_unread else "")
+                         + f", {len(pending)} to fit")
 
-    n_total = len(paths)
+    n_total = len(items)
     bar = tqdm(total=n_total, initial=n_total - len(pending), desc="materials", unit="material",
                disable=(not progress) if progress is not None else None)
     n_workers = 0
     client = cluster = None
     futures = {}
+
+    def say(r: dict) -> None:
+        line = _one_line(r)
+        if not bar.disable:
+            with tqdm.external_write_mode():
+                log(line)
+                clock.emit("material", line, r.get("name"), finished=True)
+        else:
+            log(line)
+            clock.emit("material", line, r.get("name"), finished=True)
+
     try:
         if pending:
             from distributed import as_completed
 
-            client, cluster, n_workers = _start_client(workers, scheduler, connect_timeout_s)
+            clock.emit("cluster", f"connecting to the scheduler {display_text(scheduler)}" if scheduler else
+                       f"starting a local cluster of {workers or default_workers()} worker processes")
+            client, cluster, n_workers = _start_client(workers, scheduler, connect_timeout_s, worker_timeout_s)
+            _make_out(out)
+            clock.emit("ready", f"{n_workers} worker{'s' if n_workers != 1 else ''} ready; "
+                                f"{len(pending)} materials submitted")
+            clock.start_fitting()
             for p, sha in pending:
                 f = client.submit(run_material, os.fspath(Path(p).resolve()), options, os.fspath(Path(out).resolve()),
                                   sha, key=f"rbrdf-material-{p.stem}-{sha[:12]}-{_options_tag(options)}",
@@ -229,7 +229,7 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
                          "error": f"{p}: task failed ({type(e).__name__}: {str(e)[:300]})", "seconds": 0.0}
                 results.append(r)
                 bar.update(1)
-                log(_one_line(r))
+                say(r)
     except BaseException:
         for f in futures:
             f.cancel()
@@ -241,6 +241,7 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
         if cluster is not None:
             cluster.close()
 
+    _make_out(out)
     rows = rows_from_results(results)
     counts = {"done": 0, "skipped": 0, "failed": 0} | ({"missing": 0} if report_only else {})
     for r in results:
@@ -248,6 +249,7 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
             counts[rec.get("status", "failed")] = counts.get(rec.get("status", "failed"), 0) + 1
         if r.get("error") and not r.get("brdf"):
             counts["failed"] += 1
+    clock.emit("report", f"writing {', '.join(REPORT_FILES)}")
     report = BatchReport(rows, wall_s=time.perf_counter() - t0, counts=counts, workers=n_workers)
     with OutputSet() as outputs:
         report.to_csv(outputs.stage(out / REPORT_FILES[0]))
@@ -256,6 +258,17 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
         outputs.commit()
     report.wall_s = time.perf_counter() - t0
     return report
+
+
+def _mb(n: int) -> str:
+    return f"{n / 1e6:.1f} MB"
+
+
+def _make_out(out: Path) -> None:
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(out, f"cannot create folder ({e.strerror or e})", "--out") from None
 
 
 def material_status(path, options: BatchOptions, out, sha: str):

@@ -100,8 +100,8 @@ def manifest_path(output: Path) -> Path:
 def read_done(output: Path, key: str):
     """The manifest of ``output`` if the output is done (manifest readable, same key, output
     present with the recorded sha256), else None."""
-    from ..formats.measured import file_sha256
-    from ..inputs import read_json
+    from ..inputs import read_json, sha256_regular
+    from ..limits import MAX_JSON_BYTES
 
     m = manifest_path(output)
     if not m.is_file() or not output.is_file():
@@ -109,7 +109,7 @@ def read_done(output: Path, key: str):
     try:
         d = read_json(m, "batch manifest")
         if not (isinstance(d, dict) and d.get("format") == MANIFEST_FORMAT and d.get("key") == key
-                and d.get("output_sha256") == file_sha256(output)):
+                and d.get("output_sha256") == sha256_regular(output, MAX_JSON_BYTES, "batch output")):
             return None
     except (RbrdfError, OSError):
         return None
@@ -205,7 +205,8 @@ def run_material(path, options: BatchOptions, out, input_sha256: str | None = No
     :func:`brdf_record` / :func:`cdf_record`; ``"error"`` is the one-line reason of a material
     that could not be loaded (then no output was attempted). Never raises for a problem of the
     material (only ``KeyboardInterrupt`` and ``SystemExit`` pass)."""
-    from ..formats.measured import file_sha256
+    from ..formats import check_measured_file
+    from ..inputs import sha256_regular
 
     t0 = time.perf_counter()
     in_worker = _in_dask_worker()
@@ -216,7 +217,8 @@ def run_material(path, options: BatchOptions, out, input_sha256: str | None = No
     with warnings.catch_warnings(), _errstate():
         warnings.simplefilter("ignore")
         try:
-            sha = file_sha256(path)             # the bytes this task reads (the client's hash may be older)
+            # the bytes this task reads (the client's hash may be older), checked before they are read
+            sha = sha256_regular(path, check_measured_file(path), "measured file")
             if input_sha256 and sha != input_sha256:
                 raise RbrdfError(f"{display_text(path)}: the file changed since the batch started")
             result["sha256"] = sha

@@ -2,6 +2,10 @@
 (:func:`fit.batch.runner.fit_database`), with the BRDF flags of ``rbrdf-fit brdf`` and the
 table flags of ``rbrdf-fit cdf`` and their defaults. Registered by :mod:`fit.cli`.
 
+Progress: one line per stage and per material finished on stdout (``batch: [done/total] ...;
+elapsed ..., about ... left``, :mod:`fit.batch.progress`), also without a terminal; on a
+terminal a tqdm bar over the materials on stderr too. ``--quiet``: the summary only.
+
 Exit status: 0 when every material's outputs are done (or were done before), 1 when at least
 one material failed (listed in the summary and the report; the others are written), 2 for bad
 arguments (one line, nothing fitted), 130 on Ctrl-C (tasks in flight cancelled, no file
@@ -55,10 +59,15 @@ def _cmd_batch(args) -> int:
         except ValueError as e:
             raise FlagError("--n-v/--n-t/--n-p", str(e)) from None
     try:
+        tty = sys.stdout.isatty()
+    except (AttributeError, ValueError):
+        tty = False
+    try:
         report = fit_database(args.inputs, args.out, tols=args.tol, cdf=not args.no_cdf, brdf_options=brdf,
                               cdf_options=cdf, workers=args.workers, scheduler=args.scheduler,
-                              report_only=args.report_only,
-                              log=None if args.quiet else (lambda s: print(display_text(s), flush=True)))
+                              report_only=args.report_only, progress=tty and not args.quiet,
+                              on_progress=None if args.quiet else
+                              (lambda e: print(display_text(e.line()), flush=True)))
     except KeyboardInterrupt:
         print("rbrdf-fit batch: interrupted: the materials finished are kept, the tasks in flight were "
               "cancelled (no file half-written); run the same command again to resume", file=sys.stderr)
@@ -96,12 +105,13 @@ def register(sub) -> None:
     p.add_argument("--workers", type=integer(1, MAX_WORKERS), default=None,
                    help="local worker processes (default: one per core), one thread each")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="address of a running dask scheduler (e.g. tcp://10.0.0.5:8786) instead of a local "
-                        "cluster; its workers must import this fit package and see INPUTS and --out")
+                   help="address of a running dask scheduler, [tcp|tls|ws|wss://]HOST:PORT (e.g. tcp://10.0.0.5:8786), "
+                        "instead of a local cluster; reached within 5 s, its first worker within 30 s; its "
+                        "workers must import this fit package and see INPUTS and --out")
     p.add_argument("--no-cdf", dest="no_cdf", action="store_true", help="BRDF fits only, no inverse CDFs")
     p.add_argument("--report-only", dest="report_only", action="store_true",
                    help="fit nothing: write the report of the outputs already in --out (not done: 'missing')")
-    p.add_argument("--quiet", action="store_true", help="no line per material (the summary only)")
+    p.add_argument("--quiet", action="store_true", help="no progress lines or bar (the summary only)")
     g = p.add_argument_group("BRDF fit (as rbrdf-fit brdf)")
     g.add_argument("--intervals", choices=INTERVALS, default="tol")
     g.add_argument("--core-theta-d", dest="core_theta_d", default="auto", metavar="DEG|auto",

@@ -20,6 +20,27 @@ from .rgl import read_rgl
 SUFFIXES = (".binary", ".bsdf")
 
 
+def max_file_bytes(path) -> int:
+    """Largest file of the format of ``path`` (by its suffix) a reader accepts, in bytes: a
+    MERL file has exactly :data:`fit.formats.merl.MERL_FILE_BYTES`, an RGL file at most
+    :data:`fit.limits.MAX_RGL_FILE_BYTES`."""
+    from ..limits import MAX_RGL_FILE_BYTES
+    from .merl import MERL_FILE_BYTES
+
+    return MERL_FILE_BYTES if Path(path).suffix.lower() == ".binary" else MAX_RGL_FILE_BYTES
+
+
+def check_measured_file(path) -> int:
+    """Size in bytes of the measured file ``path``, checked with ``stat`` before any byte is
+    read (:func:`fit.inputs.check_regular_file`): a regular file (not a folder, named pipe,
+    device or socket) within its format's size (:func:`max_file_bytes`); else a one-line
+    :class:`BRDFFileError` naming it."""
+    from ..inputs import check_regular_file
+
+    what = "MERL file" if Path(path).suffix.lower() == ".binary" else "RGL tensor file"
+    return check_regular_file(path, max_file_bytes(path), what)
+
+
 def load_measured(path, incident: str = "view") -> MeasuredBRDF:
     """Read a measured BRDF as a :class:`MeasuredBRDF` on the MERL grid. ``incident``: the
     roles of an RGL file's directions (:attr:`fit.formats.rgl.RGLBRDF.incident`; MERL files
