@@ -55,7 +55,9 @@ import numpy as np
 import warp as wp
 
 from fit.formats.grid import N_THETA_D
-from fit.formats.measured import file_sha256
+from fit.errors import BRDFFileError
+from fit.formats import check_measured_file
+from fit.inputs import sha256_regular
 from fit.rational.brdf_model import (
     describe_regions,
     flagged_regions,
@@ -197,7 +199,11 @@ def find_source(model, spec, scene_file, key, head) -> Path:
     mismatched = []
     for c in cands:
         if c.is_file():
-            if not sha or file_sha256(c) == sha:
+            try:    # stat before the hash: a file over its format's size is never read
+                usable = not sha or sha256_regular(c, check_measured_file(c), "measured file") == sha
+            except BRDFFileError:
+                usable = False
+            if usable:
                 return c
             mismatched.append(str(c))
     where = ", ".join(str(d) for d in dirs) or "nowhere (no coefficient file, scene file or RBRDF_DATA)"
