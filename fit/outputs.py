@@ -203,7 +203,7 @@ def write_failed(path, e, flag: str | None = None) -> OutputError:
     return OutputError(final, _problem(e) + tail, flag)
 
 
-def _no_space(folder) -> bool:
+def no_space_left(folder) -> bool:
     """True when the file system of ``folder`` has no free block left for this user."""
     try:
         return os.statvfs(folder).f_bavail == 0
@@ -223,11 +223,11 @@ def _finish(tmp: Path, expected: int | None = None, verify=None) -> None:
         os.close(fd)
     complete = size == expected if expected is not None else size > 0
     if not complete:
-        if _no_space(tmp.parent):
-            raise OSError(errno.ENOSPC, f"no space left on device (the file has {size} bytes"
+        if no_space_left(tmp.parent):
+            raise OSError(errno.ENOSPC, f"No space left on device (the file has {size} bytes"
                                         + (f" of {expected})" if expected is not None else ")"))
-        raise OSError(errno.EIO, f"short write ({size} of {expected} bytes on disk)" if expected is not None
-                      else "the writer left an empty file")
+        raise OSError(errno.EIO, f"Short write ({size} of {expected} bytes on disk)" if expected is not None
+                      else "The writer left an empty file")
     if verify is not None:
         verify(tmp)
 

@@ -10,8 +10,10 @@ Bad input (docs/robustness.md): one line on stderr, ``rbrdf: error: ...`` naming
 key, the flag or the output path, exit status 2, no traceback and no warnings; flags are typed
 and bounded by :mod:`warp_rbrdf.limits` (``rbrdf render: error: argument --spp: ...``). The
 output paths are checked before the scene is read; the EXR and the PNG are staged as temporary
-files and renamed into place together only when the render is complete and every pixel is
-finite (:class:`fit.outputs.OutputSet`): a failing run leaves every existing file as it was.
+files, read back (a full disk, an I/O error or a short file is one line naming the output, exit
+status 2) and renamed into place together only when the render is complete, every pixel is
+finite and both files are whole (:class:`fit.outputs.OutputSet`): a failing run leaves every
+existing file as it was.
 """
 from __future__ import annotations
 
@@ -211,9 +213,11 @@ def cmd_render(a) -> int:
             "rbrdf:seed": str(a.seed if a.seed is not None else scene.integrator.seed),
             "rbrdf:render_seconds": f"{s.render_seconds:.3f}", "rbrdf:threads": str(s.threads),
             "rbrdf:device": s.device}
-    with OutputSet("--out") as outputs:
-        write_exr(outputs.stage(out), img, meta, atomic=False)
-        write_png(outputs.stage(png), img, a.exposure, meta, atomic=False)
+    with OutputSet("--out") as outputs:       # both read back, then renamed together
+        with outputs.writing(out) as tmp:
+            write_exr(tmp, img, meta, atomic=False)
+        with outputs.writing(png) as tmp:
+            write_png(tmp, img, a.exposure, meta, atomic=False)
         outputs.commit()
     print(f"scene    {display_path(scene.path)}: {s.width}x{s.height}, {s.spp} spp, "
           f"{r.geometry.num_triangles} triangles, max_depth {scene.integrator.max_depth}")

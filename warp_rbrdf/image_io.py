@@ -6,12 +6,17 @@ by :func:`png_path_for`, into the file name (``name_ev+0.0.png``).
 
 :func:`write_exr` and :func:`write_png` write to a temporary file next to the target and rename
 it into place when it is complete (:func:`fit.outputs.atomic_path`); ``rbrdf render`` instead
-stages both in one :class:`fit.outputs.OutputSet` and renames them together.
+stages both in one :class:`fit.outputs.OutputSet` and renames them together. OpenImageIO can
+report success for a file it could not write (on a full disk it leaves an empty file and every
+call returns true), so every written image is read back (:func:`check_image_file`: the header's
+size and channels and every pixel equal to what was written) before it is renamed; a failure is
+an ``OSError`` that the caller names with the final output path.
 :func:`nonfinite_pixels` is the check every rendered image passes before it is written.
 """
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shutil
 import tempfile
@@ -20,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from fit.errors import display_path
-from fit.outputs import atomic_path
+from fit.outputs import atomic_path, no_space_left
 
 from .errors import RenderError
 
@@ -85,9 +90,16 @@ def oiio_filename(path, write: bool = False):
         shutil.rmtree(tmpdir, ignore_errors=True)
 
 
+#: Rows read back at a time by :func:`check_image_file` (bounds its memory whatever the size).
+_CHECK_ROWS = 256
+
+
 def _write(path: Path, pixels: np.ndarray, fmt, attrs: dict, atomic: bool = True):
-    """Write ``pixels`` (H, W, C) to ``path``; ``atomic``: through a temporary file next to it,
-    renamed onto ``path`` when complete (an existing file is never left half-written)."""
+    """Write ``pixels`` (H, W, C) to ``path`` and read it back (:func:`check_image_file`);
+    ``atomic``: through a temporary file next to it, renamed onto ``path`` when complete (an
+    existing file is never left half-written; a failure is a one-line
+    :class:`fit.errors.OutputError` naming ``path``). Without ``atomic`` a failure is an
+    ``OSError``."""
     if atomic:
         with atomic_path(path) as tmp:
             _write(tmp, pixels, fmt, attrs, atomic=False)
@@ -105,14 +117,59 @@ def _write(path: Path, pixels: np.ndarray, fmt, attrs: dict, atomic: bool = True
         spec.attribute(k, v)
     out = oiio.ImageOutput.create(str(path))
     if out is None:
-        raise RenderError(f"{display_path(path)}: cannot create image writer ({_oneline(oiio.geterror())})")
+        raise OSError(errno.EIO, f"cannot create an image writer ({_oneline(oiio.geterror())})")
     try:
         if not out.open(str(path), spec):
-            raise RenderError(f"{display_path(path)}: cannot open for writing ({_oneline(out.geterror())})")
+            raise OSError(errno.EIO, f"cannot open it for writing ({_oneline(out.geterror())})")
         if not out.write_image(np.ascontiguousarray(pixels)):
-            raise RenderError(f"{display_path(path)}: cannot write image ({_oneline(out.geterror())})")
+            raise OSError(errno.EIO, f"cannot write the image ({_oneline(out.geterror())})")
     finally:
-        out.close()
+        closed = out.close()
+    if not closed:
+        raise OSError(errno.EIO, f"cannot finish the image ({_oneline(out.geterror())})")
+    check_image_file(path, pixels)
+
+
+def check_image_file(path, pixels: np.ndarray) -> None:
+    """Raise ``OSError`` unless the image file ``path`` reads back as ``pixels`` (H, W, C; float32
+    or uint8, compared exactly, NaN equal to NaN), read in blocks of :data:`_CHECK_ROWS` rows:
+    the check OpenImageIO's own return values cannot give (it reports success for an empty or
+    truncated file on a full disk). ``errno.ENOSPC`` when the file system is full, else
+    ``errno.EIO``."""
+    path = Path(path)
+    try:
+        _compare(path, pixels)
+    except OSError as e:
+        if no_space_left(path.parent):
+            raise OSError(errno.ENOSPC, f"No space left on device ({e.strerror})") from None
+        raise
+
+
+def _compare(path: Path, pixels: np.ndarray) -> None:
+    import OpenImageIO as oiio
+
+    if os.path.getsize(path) == 0:
+        raise OSError(errno.EIO, "the image writer left an empty file")
+    H, W, C = pixels.shape
+    fmt = oiio.UINT8 if pixels.dtype == np.uint8 else oiio.FLOAT
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        raise OSError(errno.EIO, f"the written image cannot be read back ({_oneline(oiio.geterror())})")
+    try:
+        spec = inp.spec()
+        if (spec.width, spec.height, spec.nchannels) != (W, H, C):
+            raise OSError(errno.EIO, f"the written image reads back as {spec.width}x{spec.height}x"
+                                     f"{spec.nchannels}, not {W}x{H}x{C}")
+        for r in range(0, H, _CHECK_ROWS):
+            e = min(H, r + _CHECK_ROWS)
+            px = inp.read_scanlines(0, 0, r, e, 0, 0, C, fmt)
+            if px is None:
+                raise OSError(errno.EIO, f"the written image cannot be read back ({_oneline(inp.geterror())})")
+            px = np.asarray(px).reshape(e - r, W, C)
+            if not np.array_equal(px, pixels[r:e], equal_nan=fmt != oiio.UINT8):
+                raise OSError(errno.EIO, f"the written image reads back different (rows {r}-{e - 1})")
+    finally:
+        inp.close()
 
 
 def _oneline(text) -> str:

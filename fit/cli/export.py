@@ -69,7 +69,7 @@ def run(args, log=print) -> int:
     except ExportError as e:
         raise BRDFFileError(path, f"cannot export this fit: {e}") from None
     with OutputSet(flag="OUT") as outputs:
-        outputs.stage(out).write_text(text, encoding="utf-8")
+        outputs.write_text(out, text)       # every byte checked on disk before the rename
         outputs.commit()
     log(f"wrote {out} ({EXPORTERS[out.suffix.lower()]}, {model.n_coefficients} coefficients)")
     for k, chans in flagged_summary(model):

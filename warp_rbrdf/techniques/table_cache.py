@@ -24,11 +24,12 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from fit.errors import RbrdfError
+from fit.outputs import atomic_write
 from fit.sampling import table as table_mod
 from fit.sampling.table import CDFTable, tabulate
 
@@ -91,17 +92,11 @@ def read(path: Path) -> CDFTable | None:
 
 
 def write(path: Path, t: CDFTable) -> None:
-    """Store ``t`` at ``path`` atomically (a temporary file in the same folder, then rename)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.stem, suffix=".tmp.npz", dir=path.parent)
-    os.close(fd)
-    try:
-        np.savez_compressed(tmp, **{k: getattr(t, k) for k in _ARRAYS}, eps=np.float64(t.eps))
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    """Store ``t`` at ``path`` atomically (:func:`fit.outputs.atomic_write`: a temporary file in
+    the same folder, every byte checked on disk, then renamed); a failure is a one-line
+    :class:`fit.errors.OutputError` and leaves ``path`` as it was."""
+    with atomic_write(path, "wb") as f:
+        np.savez_compressed(f, **{k: getattr(t, k) for k in _ARRAYS}, eps=np.float64(t.eps))
 
 
 def cached_tabulate(spec, evaluate, before_build=None) -> CDFTable:
@@ -127,7 +122,7 @@ def cached_tabulate(spec, evaluate, before_build=None) -> CDFTable:
     if udir is not None:
         try:
             write(udir / f"{k}.npz", t)
-        except OSError:
+        except (OSError, RbrdfError):     # a full or read-only cache: the table is still correct
             pass
     return t
 
