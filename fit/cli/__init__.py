@@ -12,15 +12,22 @@ the flag or the output path -- ``rbrdf-fit: error: FILE: problem`` for the
 flags (:mod:`fit.cli.flags`) -- and the exit status is 2, without a traceback or warnings.
 Outputs are staged and renamed into place only when the whole run succeeds
 (:class:`fit.outputs.OutputSet`): a failing run leaves every existing file as it was.
+
+Results go to stdout, progress to stderr (:class:`fit.progress.CLIProgress`, given to the
+commands as ``args.progress``; ``--no-progress`` turns it off); HiGHS stays quiet unless
+``--verbose``. A reader that closes stdout early (``rbrdf-fit info FILE | head -1``) ends the
+command quietly with status 141, as a tool killed by SIGPIPE.
 """
 from __future__ import annotations
 
+import os
 import sys
 import warnings
 
 import numpy as np
 
 from ..errors import RbrdfError
+from ..progress import CLIProgress
 from . import batch, brdf, cdf, convert, export, measured
 from .flags import OneLineParser
 
@@ -52,19 +59,27 @@ def build_parser() -> OneLineParser:
 def main(argv=None) -> int:
     """Run ``rbrdf-fit`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status:
     0 success, 1 a fit that misses its tolerance (nothing written), 2 bad input (one line on
-    stderr), 130 interrupted."""
+    stderr), 130 interrupted, 141 stdout closed by its reader."""
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as e:          # --help (0) or a one-line flag error (2)
         return e.code if isinstance(e.code, int) else 2
     np.set_printoptions(precision=4, suppress=True)
+    if getattr(args, "verbose", False):
+        from ..rational import lp
+
+        lp.set_verbose(True)
+    args.progress = CLIProgress(f"rbrdf-fit {args.command}", enabled=not getattr(args, "no_progress", False))
     try:
         # NumPy and matplotlib warnings are not messages to the user: what matters is checked
         # and reported in one line
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
-            return int(args.func(args) or 0)
+            try:
+                return int(args.func(args) or 0)
+            finally:
+                args.progress.close()
     except RbrdfError as e:
         print(f"rbrdf-fit: error: {e}", file=sys.stderr)
         return 2
@@ -75,3 +90,17 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("rbrdf-fit: interrupted (no output written)", file=sys.stderr)
         return 130
+    except BrokenPipeError:          # stdout closed early (rbrdf-fit info FILE | head -1)
+        quiet_stdout()
+        return 141                   # as a tool killed by SIGPIPE; outputs were committed first
+
+
+def quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's final flush of a stdout whose reader
+    has gone does not print a second ``BrokenPipeError``."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass

@@ -4,10 +4,13 @@
 
 Registered by :mod:`fit.cli` (it calls :func:`register` with its sub-parsers). The output is
 written only when the run succeeds: a fit that misses its tolerance exits with status 1 and
-writes nothing (an existing file stays as it was) unless ``--allow-infeasible`` is given.
+writes nothing (an existing file stays as it was; the summary table on stdout, the verdict on
+stderr) unless ``--allow-infeasible`` is given. Progress (reading, projecting, each piece's
+channels) goes to stderr (:class:`fit.progress.CLIProgress`).
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from ..errors import BRDFFileError, display_path, display_text
@@ -21,24 +24,18 @@ from ..limits import (
     MIN_TOLERANCE,
 )
 from ..outputs import OutputSet, check_output_file
+from ..progress import one_step
 from ..rational.brdf_fit import INTERVALS, fit_brdf
 from ..rational.brdf_model import THETA_D_MAX_DEG
 from ..rational.coefficient_file import save
-from .flags import core_angle, integer, number
+from .flags import add_run_flags, core_angle, integer, number
 
 
 def _cmd_brdf(args) -> int:
-    from tqdm import tqdm  # the progress bar, imported only when a fit runs
-
     out = check_output_file(args.out, "--out", (".json",))
-    b = load_measured(args.file)
-    bar = tqdm(desc=f"fitting {b.name}", unit="LP", leave=False, disable=None)  # None: off when not a terminal
-
-    def progress(channel, event):
-        bar.set_postfix_str(f"{channel} ({event['m']},{event['n']}) "
-                            f"{'ok' if event['feasible'] else 'no'}")
-        bar.update(1)
-
+    progress = getattr(args, "progress", None)
+    with one_step(progress, "reading the file"):
+        b = load_measured(args.file)
     core = args.core_theta_d
     try:
         fit = fit_brdf(b, tol=args.tol, intervals=args.intervals, core_theta_d_deg=core,
@@ -48,8 +45,6 @@ def _cmd_brdf(args) -> int:
                        source_file=Path(args.file).name)
     except ValueError as e:
         raise BRDFFileError(args.file, str(e)) from None
-    finally:
-        bar.close()
     write = fit.valid or args.allow_infeasible
     if write:
         with OutputSet() as outputs:
@@ -71,8 +66,9 @@ def _cmd_brdf(args) -> int:
     if write:
         print(f"{fit.summary()}; wrote {display_path(out)}")
         return 0
-    print(f"{fit.summary()}; the tolerance is not met: nothing written to {display_path(out)} "
-          "(--allow-infeasible writes the flagged fit)")
+    sys.stdout.flush()      # the table first, then the verdict on stderr
+    print(f"rbrdf-fit brdf: {fit.summary()}; the tolerance is not met: nothing written to "
+          f"{display_path(out)} (--allow-infeasible writes the flagged fit)", file=sys.stderr)
     return 1
 
 
@@ -119,4 +115,5 @@ def register(subparsers) -> None:
     p.add_argument("--allow-infeasible", action="store_true",
                    help="write the file and exit 0 even when no fit meets the tolerance (the file is "
                         "flagged); without it such a run writes nothing and exits 1")
+    add_run_flags(p)
     p.set_defaults(func=_cmd_brdf)

@@ -3,7 +3,10 @@ CDFs (issue 6, :mod:`fit.sampling`). Registered by :mod:`fit.cli`.
 
 The table flags are bounded (:mod:`fit.limits`: rows, cells and the estimated memory are
 checked before anything is tabulated); outputs are written only when the run succeeds
-(:class:`fit.outputs.OutputSet`)."""
+(:class:`fit.outputs.OutputSet`). ``--time-limit S`` bounds the whole command: one
+:class:`fit.progress.Deadline`, started with the command, is shared by reading, tabulating and
+fitting; the table is always completed, and what is not verified when it runs out is sampled
+with the table (the printed reason says so). Progress goes to stderr."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -18,6 +21,7 @@ from ..limits import (
     MAX_TIME_LIMIT_S,
 )
 from ..outputs import OutputSet, check_output_dir, check_output_file
+from ..progress import Deadline, one_step
 from ..sampling.cdf_file import (
     LAYOUTS,
     TIME_LIMIT_S,
@@ -30,7 +34,7 @@ from ..sampling.cdf_file import (
 from ..sampling.plots import plot_cdf
 from ..sampling.table import check_table_size
 from ..sampling.variance_gate import PIECES_DEFAULTS
-from .flags import file_prefix, integer, number
+from .flags import add_run_flags, file_prefix, integer, number
 
 
 def _check_sizes(args) -> None:
@@ -44,22 +48,25 @@ def _check_sizes(args) -> None:
         raise FlagError("--n-v/--n-t/--n-p", str(e)) from None
 
 
-def _load_or_fit(args, log=print):
+def _load_or_fit(args, log=print, deadline: Deadline | None = None):
     path = Path(args.file)
     if path.suffix.lower() == ".json":
         return load(path)
+    progress = getattr(args, "progress", None)
     incident = getattr(args, "incident", "view")
-    b = load_measured(path, incident=incident)
+    with one_step(progress, "reading the file"):
+        b = load_measured(path, incident=incident)
     params = dict(n_v=args.n_v, n_t=args.n_t, n_p=args.n_p, eps=args.eps)
     source = file_source(path)
     if path.suffix.lower() == ".bsdf":   # the tables depend on the roles of an RGL file
         source["incident"] = incident
     if getattr(args, "table_only", False):
         return table_only(b.evaluate, params, reason="table only (--table-only)", name=b.name,
-                          source=source)
+                          source=source, progress=progress)
+    if deadline is None:
+        deadline = Deadline(None if args.time_limit <= 0 else args.time_limit)
     return fit_cdf(b.evaluate, name=b.name, table_params=params, log=log, layout=args.layout,
-                   refinements=args.refinements, source=source,
-                   time_limit_s=None if args.time_limit <= 0 else args.time_limit)
+                   refinements=args.refinements, source=source, deadline=deadline, progress=progress)
 
 
 def _add_table_args(p):
@@ -82,14 +89,17 @@ def _add_table_args(p):
                    help=f"refit rounds when verification fails (global layout; 0-{MAX_REFINEMENTS})")
     p.add_argument("--table-only", action="store_true", help="tabulate only, no rational fit")
     p.add_argument("--time-limit", type=number(0.0, MAX_TIME_LIMIT_S), default=TIME_LIMIT_S, metavar="S",
-                   help=f"bound on the rational fitting time in seconds (default {TIME_LIMIT_S:g}; 0: none); "
-                        "what is not verified by then falls back to the tabulated sampler, with the reason")
+                   help=f"bound on the whole command in seconds (default {TIME_LIMIT_S:g}; 0: none): the "
+                        "table is always completed; what is not verified by then is sampled with the "
+                        "table, with the reason")
+    add_run_flags(p)
 
 
 def _cmd_cdf(args) -> int:
+    deadline = Deadline(None if args.time_limit <= 0 else args.time_limit)
     out = check_output_file(args.out, "--out", (".json",))
     _check_sizes(args)
-    fit = _load_or_fit(args)
+    fit = _load_or_fit(args, deadline=deadline)
     with OutputSet() as outputs:
         fit.save(outputs.stage(out))
         outputs.commit()
@@ -99,6 +109,9 @@ def _cmd_cdf(args) -> int:
               f"renderers use the tabulated sampler")
     else:
         print(f"{name}: rational inverse CDFs verified ({display_text(fit.reason)})")
+    if (fit.fit_info or {}).get("time_limit_reached"):
+        print(f"time limit {args.time_limit:g} s reached (--time-limit): what was not verified by then "
+              "is sampled with the table")
     print(f"wrote {display_path(out)}")
     return 0
 

@@ -20,7 +20,8 @@ from ..convert.rgl_writer import (
 from ..convert.spectral import DEFAULT_N_WAVELENGTHS
 from ..convert.summary import DEFAULT_MAX_THETA_DEG, DEFAULT_PAIRS
 from ..errors import FlagError
-from .flags import integer, number
+from ..progress import one_step
+from .flags import add_run_flags, integer, number
 
 
 def _cmd_convert(args) -> int:
@@ -29,7 +30,8 @@ def _cmd_convert(args) -> int:
         raise FlagError("--n-wavelengths", "only applies to a spectral output: add --spectral")
     if args.spectral and options["n_wavelengths"] is None:
         options["n_wavelengths"] = DEFAULT_N_WAVELENGTHS
-    summary = convert(args.input, args.output, flag=None, **options)
+    with one_step(getattr(args, "progress", None), "converting"):
+        summary = convert(args.input, args.output, flag=None, **options)
     print(summary)
     return 0
 
@@ -71,4 +73,5 @@ def register(sub) -> None:
     arg(g, "n_pairs", DEFAULT_PAIRS, "random direction pairs (0: no comparison)")
     arg(g, "max_theta_deg", DEFAULT_MAX_THETA_DEG, "largest polar angle of the pairs", "DEG")
     arg(g, "seed", 0, "seed of the pairs", "SEED")
+    add_run_flags(p)
     p.set_defaults(func=_cmd_convert)

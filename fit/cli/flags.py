@@ -1,14 +1,18 @@
-"""Command-line values of ``rbrdf-fit``: a parser whose errors are one line, and typed,
-bounded flag values.
+"""Command-line values of ``rbrdf-fit`` (and ``rbrdf``): a parser whose errors are one line,
+typed, bounded flag values, and the flags every long-running command shares.
 
 :class:`OneLineParser` prints ``rbrdf-fit brdf: error: argument --tol: ...`` and exits with
-status 2 -- one line, no usage block. The converters (:func:`number`, :func:`integer`,
+status 2 -- one line, no usage block. An unknown flag is reported by the sub-command that got
+it, with the closest flag it knows: ``rbrdf-fit brdf: error: unrecognized argument --tolerance
+(did you mean --tol?); see 'rbrdf-fit brdf --help'``. :func:`add_run_flags` adds
+``--no-progress`` and ``--verbose``. The converters (:func:`number`, :func:`integer`,
 :func:`core_angle`, :func:`file_prefix`) refuse NaN, infinities and values outside the ranges
 of :mod:`fit.limits` with a message that argparse prefixes with the flag's name.
 """
 from __future__ import annotations
 
 import argparse
+import difflib
 import math
 
 from ..errors import display_text
@@ -19,6 +23,38 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(2, f"{self.prog}: error: {display_text(message)} (see {self.prog} --help)\n")
+
+    def parse_args(self, args=None, namespace=None):
+        """As ``ArgumentParser.parse_args``, but arguments nobody recognised are reported by
+        the innermost sub-command that was chosen (:meth:`unrecognized`)."""
+        ns, extras = self.parse_known_args(args, namespace)
+        if extras:
+            self._chosen(ns).unrecognized(extras)
+        return ns
+
+    def _chosen(self, ns) -> "OneLineParser":
+        """The innermost sub-parser that ``ns`` went through (``self`` when none)."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                sub = action.choices.get(getattr(ns, action.dest, None) or "")
+                if isinstance(sub, OneLineParser):
+                    return sub._chosen(ns)
+        return self
+
+    def unrecognized(self, extras) -> None:
+        """Exit 2 with one line naming the first unknown argument of ``extras``, the closest
+        flag of this parser (difflib, or the flag that begins the same way) and its help."""
+        flags = sorted({o for a in self._actions for o in a.option_strings})
+        words = [e for e in extras if e.startswith("-")] or list(extras)
+        word = words[0].split("=", 1)[0]
+        close = [f for f in flags if f.startswith("--") and len(word) > 3 and
+                 (f.startswith(word) or word.startswith(f))]
+        close = close or difflib.get_close_matches(word, flags, n=1, cutoff=0.6)
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        what = "argument" if len(extras) == 1 or len(words) == 1 else "arguments"
+        shown = word if what == "argument" else " ".join(w.split("=", 1)[0] for w in words)
+        self.exit(2, f"{self.prog}: error: unrecognized {what} {display_text(shown)[:80]}{hint}; "
+                     f"see '{self.prog} --help'\n")
 
 
 def _fmt(x) -> str:
@@ -82,3 +118,12 @@ def file_prefix(text: str) -> str:
         raise argparse.ArgumentTypeError(f"{display_text(text)[:40]!r} is not a plain file-name prefix "
                                          "(1-100 characters, no '/', '\\' or control characters)")
     return text
+
+
+def add_run_flags(p) -> None:
+    """``--no-progress`` (no progress bar or progress lines on stderr) and ``--verbose`` (HiGHS's
+    banner and solver log on stdout) on the sub-parser ``p`` of a command that may run long."""
+    p.add_argument("--no-progress", dest="no_progress", action="store_true",
+                   help="no progress on stderr (default: a bar on a terminal, otherwise one line per "
+                        "stage with an estimate of the time left)")
+    p.add_argument("--verbose", action="store_true", help="show the LP solver's (HiGHS) banner and log")

@@ -12,11 +12,13 @@ from ..outputs import OutputSet, check_output_dir, check_output_file
 from ..projection.albedo import directional_albedo
 from ..projection.plots import plot_projection
 from ..projection.project import GRAZING_ANGLES, STATISTICS, project
-from .flags import number
+from ..progress import one_step
+from .flags import add_run_flags, number
 
 
 def _cmd_info(args) -> int:
-    b = load_measured(args.file)
+    with one_step(getattr(args, "progress", None), "reading the file"):
+        b = load_measured(args.file)
     print(f"file            {display_path(b.source)}")
     print(f"material        {display_text(b.name)}")
     if b.metadata.get("description"):
@@ -40,11 +42,16 @@ def _add_projection_args(p) -> None:
                    help="drop samples beyond this angle in degrees, in (0, 90], before the statistics (e.g. 80)")
     p.add_argument("--grazing-angle", choices=GRAZING_ANGLES, default="theta_io",
                    help="angle the cut-off applies to: max(theta_i, theta_o) (default) or theta_d")
+    add_run_flags(p)
 
 
 def _project_from_args(args):
-    p = project(load_measured(args.file), statistic=args.statistic,
-                grazing_cutoff_deg=args.grazing_cutoff, grazing_angle=args.grazing_angle)
+    progress = getattr(args, "progress", None)
+    with one_step(progress, "reading the file"):
+        b = load_measured(args.file)
+    with one_step(progress, "projecting"):
+        p = project(b, statistic=args.statistic, grazing_cutoff_deg=args.grazing_cutoff,
+                    grazing_angle=args.grazing_angle)
     for c, ch in enumerate("RGB"):
         if not (p.count[..., c] > 0).any():
             if args.grazing_cutoff is not None:
@@ -82,6 +89,7 @@ def register(sub) -> None:
     p = sub.add_parser("info", help="dimensions, valid fraction, value range and normal-incidence albedo",
                        description="Print what a measured BRDF file holds.")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
+    add_run_flags(p)
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("project", help="project onto (theta_h, theta_d) and save an .npz",

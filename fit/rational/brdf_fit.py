@@ -59,6 +59,7 @@ from ..formats.colour import LUMINANCE
 from ..formats.measured import ProjectedBRDF
 from ..projection.albedo import directional_albedo
 from ..projection.project import project
+from ..progress import report
 from .brdf_model import (
     CHANNELS,
     GRAZING_CUTOFF_DEG,
@@ -270,11 +271,17 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     fewer than ``fraction`` of their above-horizon samples after the grazing cut-off only held
     within ``factor`` (see :func:`channel_data`; None: never). ``peak_split_deg``: if no core
     is met with one function per channel, the cores are tried again split at
-    ``theta_h = peak_split_deg`` into a specular-peak piece and the rest (None: never). ``progress(label, event)`` is called after every degree pair tried.
+        ``theta_h = peak_split_deg`` into a specular-peak piece and the rest (None: never).
+
+    ``progress(stage, done, total)`` (:mod:`fit.progress`): stage ``"projecting"`` (0 then 1
+    of 1), then per piece tried ``"fitting theta_d A-B ..."`` with the channels fitted so far
+    (0 to 3; a piece that is rejected early stops before 3).
     """
     _check_fit_args(tol, max_degree, max_den_degree, floor_frac, core_theta_d_deg, intervals, band_intervals)
     t0 = time.perf_counter()
+    report(progress, "projecting", 0, 1)
     p = project_for_fit(brdf)
+    report(progress, "projecting", 1, 1)
     name = name or p.name
     # Floor reference: the Lambertian with the material's white-sky *luminance* albedo, the
     # same in R, G and B (errors are seen against luminance; a channel that is near zero where
@@ -367,6 +374,8 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
                           (np.deg2rad(a), np.deg2rad(b))])
     piece = PieceFit((a, b), intervals, [], [], partial=partial, theta_h_range_deg=(ha, hb))
     label = f"theta_d {a:g}-{b:g}" + (f" theta_h {ha:g}-{hb:g}" if (ha, hb) != (0.0, 90.0) else "")
+    stage = f"fitting {label}" + (" (partial band)" if partial is not None else "")
+    report(progress, stage, 0, 3)
     data = []
     for c in range(3):
         d = channel_data(p, c, tol, intervals, floor_frac, spread_k, (a, b), rho_ref=float(rho_ref[c]),
@@ -393,23 +402,19 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
         c0 = order[0]
         d, U, lo, hi, yt = data[c0]
         ok = not pre.proves_infeasible(U, top, y=yt, lower=lo, upper=hi, max_rounds=PRECHECK_ROUNDS)
-        if progress is not None:
-            progress(f"{label} {CHANNELS[c0]}", {"m": max_degree, "n": max_den_degree, "feasible": ok,
-                                                 "n_coefficients": None})
         if not ok:
             piece.rejected = True
             return piece
     results, errors = [None] * 3, [None] * 3
     prev = None
-    for c in order:
+    for k, c in enumerate(order):
         d, U, lo, hi, yt = data[c]
-        cb = None if progress is None else (lambda e, c=c: progress(f"{label} {CHANNELS[c]}", e))
         # R, G and B usually need the same degrees: start each channel from the previous one's
         # pair (a feasible start only prunes the search; the fewest-coefficient pair is kept).
         start = (prev.num_degree, prev.den_degree) if prev is not None and prev.valid else None
         # A piece that may be rejected needs no converged best-effort fit of a failing channel.
         fitter = IntervalRationalFitter(max_degree=max_degree, max_den_degree=max_den_degree,
-                                        domain=rf_domain, progress=cb, start_degrees=start,
+                                        domain=rf_domain, start_degrees=start,
                                         best_effort=not stop_on_infeasible)
         r = fitter.fit(U, y=yt, lower=lo, upper=hi)
         if r.function is None:
@@ -417,6 +422,7 @@ def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value
             raise ValueError(f"no rational function for channel {CHANNELS[c]} on {label} ({r.message}); "
                              "a larger tolerance or degree may help")
         results[c], errors[c] = r, brdf_errors(r, U, d, value_transform, offset, tol)
+        report(progress, stage, k + 1, 3)
         prev = r
         if stop_on_infeasible and not r.valid:
             piece.rejected = True

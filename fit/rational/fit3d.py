@@ -174,6 +174,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..formats.angles import cos_theta_i_o, cosine_directions, half_diff_to_directions
+from ..progress import report
 from .fitter import IntervalRationalFitter
 from .model import PiecewiseRationalModel, RationalModel, Variable
 from .refine import refine
@@ -496,7 +497,7 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
                 theta_h_edges=None, piece_degrees=None, noise_frac=DEFAULT_NOISE_FRAC,
                 grazing_cos=DEFAULT_GRAZING_COS, channel_floor=DEFAULT_CHANNEL_FLOOR, time_limit=DEFAULT_TIME_LIMIT,
                 source=None, objective=None, relax=DEFAULT_RELAX, ladder_steps=DEFAULT_LADDER_STEPS,
-                ceiling=None, noise=None, keep=None) -> Fit3D:
+                ceiling=None, noise=None, keep=None, progress=None) -> Fit3D:
     """3-D fit of data ``X`` ``(N, 3)`` (theta_h, theta_d, |phi_d|, radians) with values ``rho``
     ``(N, 3)`` (1/sr): pieces along theta_h at ``theta_h_edges`` (inner edges), each channel a
     rational function of total degrees ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol``
@@ -511,7 +512,8 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
     record)}`` of functions kept as they are (their records measured again on this data; one that
     is no longer within the tolerance it met, or not certified, is fitted again), the others
     fitted with their tolerance ladder started one step below the earlier record's
-    ``minimax_met``."""
+    ``minimax_met``. ``progress(stage, done, total)`` (:mod:`fit.progress`) is told the
+    functions (piece x channel) done: stage ``"3-D fit"`` (``"3-D refit"`` with ``keep``)."""
     t0 = time.perf_counter()
     if ceiling is None:
         ceiling = Ceiling(time_limit)
@@ -525,6 +527,8 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
     edges = [0.0] + sorted(float(e) for e in (theta_h_edges or [])) + [tm]
     pieces, piece_info, records = [], [], []
     n_pieces = len(edges) - 1
+    stage = "3-D refit" if keep else "3-D fit"
+    report(progress, stage, 0, 3 * n_pieces)
     for k in range(n_pieces):
         a, b = edges[k], edges[k + 1]
         sel = (X[:, 0] >= a - 1e-12) & (X[:, 0] <= b + 1e-12)
@@ -559,6 +563,7 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
             funcs.append(f)
             infos.append(rec)
             records.append(dict(rec, piece=k, channel="RGB"[c]))
+            report(progress, stage, 3 * k + c + 1, 3 * n_pieces)
         vmax = float(2.0 * rho[sel].max() + 1.0)
         pieces.append(RationalModel(name=name, variables=variables, functions=funcs, value_transform="log",
                                     value_offset=offset, value_min=0.0, value_max=vmax, function_info=infos))
@@ -635,13 +640,19 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     ``fit_info["albedo"]``). Every step stops on a count (module docstring, "Budgets");
     ``time_limit`` (in ``options``, default :data:`DEFAULT_TIME_LIMIT` = 120 s) is only the
     wall-clock safety net of the whole fit (``albedo_time``: an extra one of the albedo step),
-    recorded as ``fit_info["stopped"] = "time"`` when it is passed."""
+    recorded as ``fit_info["stopped"] = "time"`` when it is passed. ``progress(stage, done,
+    total)`` (in ``options``; :mod:`fit.progress`): stages ``"sampling the file"``, ``"3-D
+    fit"`` (functions done), ``"verification"`` (rounds), ``"3-D refit"``, ``"albedo
+    policy"``."""
     t0 = time.perf_counter()
     ceiling = options.pop("ceiling", None)
     limit = options.pop("time_limit", DEFAULT_TIME_LIMIT)
+    progress = options.get("progress")
     if ceiling is None:
         ceiling = Ceiling(limit)
+    report(progress, "sampling the file", 0, 1)
     X, rho, tm = sample_rgl(brdf, grid, n_random, theta_fit_deg)
+    report(progress, "sampling the file", 1, 1)
     src = {"file": str(getattr(brdf, "source", "") or ""), "sha256": str(getattr(brdf, "source_sha256", "") or "")}
     options.setdefault("name", f"{brdf.name}_3d")
     if n_objective and options.get("relax", DEFAULT_RELAX) > 1.0:
@@ -654,8 +665,10 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     res.info["_refit"] = (X, rho, tm, src, options)
     res = verify_and_refit(brdf, res, verify, verify_rounds, ceiling=ceiling, refit_above=verify_above)
     if albedo:
+        report(progress, "albedo policy", 0, 1)
         _albedo_step(brdf, res, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
                      refits=albedo_refits, total_growth=albedo_total_growth)
+        report(progress, "albedo policy", 1, 1)
     ceiling.record(res.model.fit_info)
     domain_record(res.model.fit_info)
     res.time_s = time.perf_counter() - t0
@@ -689,7 +702,7 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time, verify: int,
 
 
 def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, time_limit=None,
-                     ceiling=None, refit_all: bool = False, refit_above: float = 1.0):
+                     ceiling=None, refit_all: bool = False, refit_above: float = 1.0, progress=None):
     """The verification of :func:`fit_rgl` on a fit made by it (its data in ``res.info``):
     returns the fit after at most ``verify_rounds`` refits (the budget: a count). A refit adds
     the worst (at most 2,000) fresh points more than ``refit_above`` times outside the stated
@@ -698,13 +711,18 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
     are kept, their records measured again on the enlarged data; ``refit_all``: every function),
     with the noise levels of the first fit; ``fit_info["verify_refitted"]`` lists them per round.
     ``time_limit`` (s; None: none) or a caller's ``ceiling`` (:class:`Ceiling`) is only the
-    wall-clock safety net: once passed, no further refit is started (``fit_info["stopped"]``)."""
+    wall-clock safety net: once passed, no further refit is started (``fit_info["stopped"]``).
+    ``progress(stage, done, total)`` (default: the fit's own, from its options;
+    :mod:`fit.progress`): stage ``"verification"``, the rounds done."""
     t0 = time.perf_counter()
     if ceiling is None:
         ceiling = Ceiling(time_limit)
     X, rho, tm, src, options = res.info["_refit"]
+    progress = progress if progress is not None else options.get("progress")
     ratio_max, n_added, refitted = None, 0, []
-    for rnd in range(verify_rounds + 1 if verify else 0):
+    n_rounds = verify_rounds + 1 if verify else 0
+    for rnd in range(n_rounds):
+        report(progress, "verification", rnd, n_rounds)
         Xv = sample_grid(tm, (1, 1, 1), verify // 2, seed=1000 + rnd)
         wi, wo = half_diff_to_directions(Xv[:, 0], 0.0, Xv[:, 1], Xv[:, 2])
         rv = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
@@ -791,7 +809,8 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
                    albedo_tol: float = DEFAULT_ALBEDO_TOL, albedo_time=DEFAULT_ALBEDO_TIME,
                    albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
                    albedo_total_growth: float = DEFAULT_ALBEDO_TOTAL_GROWTH,
-                   albedo_refits: int = DEFAULT_ALBEDO_REFITS, max_variants=None, **common) -> Fit3D:
+                   albedo_refits: int = DEFAULT_ALBEDO_REFITS, max_variants=None, progress=None,
+                   **common) -> Fit3D:
     """Fit every layout of ``variants`` (each :func:`fit_rgl` keyword arguments, updated with
     ``common``) and return the one with the lowest :func:`validation_rmse` (a later layout must
     be :data:`SELECT_MARGIN` lower to replace an earlier one; a layout with ``"if_rmse_below"`` is
@@ -804,7 +823,9 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
     ``time_limit`` (s; default 120; None: none) is only the wall-clock safety net of the whole
     selection: past ``select_share`` of it no further layout is started (logged as skipped,
     "time"), past it no refit and no albedo round; ``fit_info["stopped"] = "time"`` and
-    ``stopped_at`` record it. ``time_s`` is the whole selection."""
+    ``stopped_at`` record it. ``time_s`` is the whole selection. ``progress(stage, done,
+    total)`` (:mod:`fit.progress`): each layout's stages as in :func:`fit_rgl`, then the chosen
+    one's ``"verification"`` and ``"albedo policy"``."""
     t0 = time.perf_counter()
     ceiling = Ceiling(time_limit)
     best, log = None, []
@@ -823,7 +844,7 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
         if below is not None and best is not None and best.info["validation_rmse"] >= below:
             log.append({"variant": k, "options": _plain(opts), "skipped": f"validation RMSE >= {below:g}"})
             continue
-        res = fit_rgl(brdf, verify=0, albedo=False, ceiling=ceiling, **opts)
+        res = fit_rgl(brdf, verify=0, albedo=False, ceiling=ceiling, progress=progress, **opts)
         v_rmse = validation_rmse(brdf, res.model)
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
                     "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse, "time_s": res.time_s})
@@ -837,13 +858,15 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
         raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
     chosen = best.info
     best = verify_and_refit(brdf, best, verify, chosen["verify_rounds_budget"], ceiling=ceiling,
-                            refit_above=chosen["verify_above"])
+                            refit_above=chosen["verify_above"], progress=progress)
     for key in ("validation_rmse", "variant"):
         best.info[key] = chosen[key]
     best.info["validation_rmse"] = validation_rmse(brdf, best.model)
     if albedo:
+        report(progress, "albedo policy", 0, 1)
         _albedo_step(brdf, best, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
                      refits=albedo_refits, total_growth=albedo_total_growth)
+        report(progress, "albedo policy", 1, 1)
         v_after = validation_rmse(brdf, best.model) if best.info["albedo"]["refitted"] else best.info["validation_rmse"]
         best.info["albedo"]["validation_rmse_before"] = best.info["validation_rmse"]
         best.info["albedo"]["validation_rmse"] = v_after

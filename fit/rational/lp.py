@@ -10,6 +10,13 @@ scratch with ``scipy.optimize.linprog`` (same LP, same result, slower).
 constraint generation: variables ``(p, q, delta)``, maximise ``delta``, ``q_0 = 1``,
 ``|coefficients| <= coef_bound``, ``-1e3 <= delta <= 1``, rows ``Q >= q_min`` and the interval
 rows of the data points added so far.
+
+Every HiGHS model of the fitter is made by :func:`new_model`: quiet (no copyright banner, no
+solver log) unless :func:`set_verbose` asked for HiGHS's log (``rbrdf-fit ... --verbose``).
+HiGHS writes its banner on a model's first logged call unless ``output_flag`` is off by then,
+and highspy's ``Highs`` class makes such a call in its constructor (it installs its callback),
+so models are made from the raw binding ``highspy._core._Highs`` with ``output_flag`` set
+first.
 """
 from __future__ import annotations
 
@@ -20,8 +27,9 @@ import numpy as np
 # either, every round is solved from scratch with `linprog` (same LP, same result, slower).
 try:
     import highspy as _hs
+    from highspy import _core as _hs_core
 
-    _HighsModel, _HighsStatus = _hs.Highs, _hs.HighsModelStatus
+    _HighsModel, _HighsStatus = _hs_core._Highs, _hs.HighsModelStatus
 except Exception:  # pragma: no cover
     try:
         from scipy.optimize._highspy import _core as _hs
@@ -31,6 +39,25 @@ except Exception:  # pragma: no cover
         _HighsModel = _HighsStatus = None
 
 _HIGHS_OPTIONS: dict = {}   # extra HiGHS options for the incremental model (defaults measured best)
+_VERBOSE = False            # HiGHS's banner and log on stdout (set_verbose)
+
+
+def set_verbose(on: bool) -> None:
+    """Let the HiGHS models made from now on print HiGHS's banner and solver log (stdout)."""
+    global _VERBOSE
+    _VERBOSE = bool(on)
+
+
+def new_model():
+    """A new, empty HiGHS model (the raw binding), quiet unless :func:`set_verbose` is on:
+    ``output_flag`` and ``log_to_console`` are set before any other call, which keeps HiGHS's
+    copyright banner from being printed. None without HiGHS's bindings."""
+    if _HighsModel is None:
+        return None
+    h = _HighsModel()
+    h.setOptionValue("output_flag", _VERBOSE)
+    h.setOptionValue("log_to_console", _VERBOSE)
+    return h
 
 
 class IncrementalLP:
@@ -43,8 +70,7 @@ class IncrementalLP:
 
     def __init__(self, cost, lo, hi):
         self.nv = len(cost)
-        h = _HighsModel()
-        h.setOptionValue("output_flag", False)
+        h = new_model()
         for k_, v_ in _HIGHS_OPTIONS.items():
             h.setOptionValue(k_, v_)
         lo = np.array([-np.inf if v is None else v for v in lo], dtype=np.float64)

@@ -46,6 +46,7 @@ from scipy.optimize import nnls
 from .basis import chebyshev_basis
 from .bernstein import subdivision_matrix
 from .function import RationalFunction
+from .lp import new_model
 
 try:   # the same HiGHS bindings as fit.rational.lp (the fallback QP solver only)
     import highspy as _hs
@@ -80,8 +81,7 @@ def _least_distance(G, h, iteration_limit, time_limit=60.0):
     rule: a count, the same on any machine) or, as a last-resort safety net only,
     ``time_limit`` seconds."""
     m, n = G.shape
-    hs = _hs.Highs()
-    hs.setOptionValue("output_flag", False)
+    hs = new_model()
     hs.setOptionValue("qp_iteration_limit", int(iteration_limit))
     hs.setOptionValue("time_limit", float(time_limit))
     hs.addVars(n, np.full(n, -np.inf), np.full(n, np.inf))

@@ -41,6 +41,7 @@ from ..formats.angles import HALF_PI
 from ..formats.measured import file_sha256
 from ..inputs import read_json
 from ..limits import MAX_CDF_PHI_PIECES, MAX_CDF_PIECES, MAX_CDF_ROWS, check_memory
+from ..progress import Deadline
 from ..rational.coefficient_file import jsonable
 from .global_layout import GlobalMaps, fit_global_layout
 from .maps import sample_maps
@@ -51,7 +52,7 @@ from .variance_gate import fit_pieces_layout
 FORMAT = "rbrdf-cdf"
 VERSION = 2   # 2: "layout" key (pieces or global); version-1 files (global layout) still load
 DEFAULTS = dict(n_v=32, n_t=64, n_p=64, sub=3, eps=0.02, noise=1e-6)
-TIME_LIMIT_S = 180.0   # default bound on fit_cdf's fitting time (s)
+TIME_LIMIT_S = 180.0   # default bound on fit_cdf's time (s), tabulation included
 LAYOUTS = ("pieces", "global")
 #: The file's description of the sampler, as files have always stated it: its "rows" entry
 #: describes the removed per-row layout (readers refuse "rows" files) and its "pieces" entry
@@ -267,6 +268,40 @@ def _table_from_dict(td, key: str = "table_data") -> CDFTable:
     return CDFTable(theta_v=tv, cdf_theta=ct, cdf_phi=cp, row_fallback=fb, eps=eps, albedo=albedo)
 
 
+def _table_params(tp, table: CDFTable, key: str = "table") -> dict:
+    """The ``table`` record (the parameters the tables were built with): an object whose
+    ``n_v``, ``n_t``, ``n_p`` (and ``sub``) are JSON integers and agree with the tables'
+    shapes, whose ``eps`` is the table's ``eps`` and ``noise`` a number >= 0, when given."""
+    tp = dict(F.obj(tp, key))
+    for k, n in (("n_v", table.n_v), ("n_t", table.n_t), ("n_p", table.n_p)):
+        if k in tp:
+            got = F.integer(tp[k], F.sub(key, k))
+            if got != n:
+                raise F.Invalid(F.sub(key, k), f"{got}, but the tables in table_data have {k} = {n}")
+    if "sub" in tp:
+        F.integer(tp["sub"], F.sub(key, "sub"), lo=1, hi=64)
+    if "eps" in tp and abs(F.number(tp["eps"], F.sub(key, "eps")) - table.eps) > 1e-12:
+        raise F.Invalid(F.sub(key, "eps"), f"{tp['eps']:g}, but table_data.eps is {table.eps:g}")
+    if "noise" in tp:
+        F.number(tp["noise"], F.sub(key, "noise"), lo=0.0)
+    return tp
+
+
+def _source(src, key: str = "source") -> dict:
+    """The ``source`` record (informative): ``file`` a name, ``sha256`` a hexadecimal digest,
+    ``incident`` ``view`` or ``light``, when given."""
+    src = dict(F.obj(src, key))
+    if src.get("file") is not None:
+        F.name(src["file"], F.sub(key, "file"))
+    sha = src.get("sha256")
+    if sha is not None and (not isinstance(sha, str) or len(sha) > 128
+                            or any(ch not in "0123456789abcdefABCDEF" for ch in sha)):
+        raise F.Invalid(F.sub(key, "sha256"), "expected a hexadecimal digest")
+    if src.get("incident") is not None:
+        F.string(src["incident"], F.sub(key, "incident"), choices=("view", "light"))
+    return src
+
+
 def _pieces_from_dict(pd, table: CDFTable, key: str = "pieces") -> PieceMaps:
     F.obj(pd, key)
     n_mu = F.integer(F.get(pd, "n_mu", key), F.sub(key, "n_mu"))
@@ -294,8 +329,10 @@ def from_dict(d: dict, path=None) -> CDFFit:
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise BRDFFileError(path, f"not an {FORMAT} file")
     ver = d.get("version")
-    if isinstance(ver, bool) or ver not in (1, VERSION):
-        raise BRDFFileError(path, f"unsupported {FORMAT} version {ver if isinstance(ver, int) else repr(ver)[:20]} (this reader knows {VERSION})")
+    if type(ver) is not int or ver not in (1, VERSION):   # 2.0 or true is not the integer 2 or 1
+        raise BRDFFileError(path, f"key version: unsupported {FORMAT} version "
+                                  f"{ver if type(ver) is int else repr(ver)[:20]} (this reader knows the "
+                                  f"integers 1 and {VERSION})")
     try:
         table = _table_from_dict(F.get(d, "table_data"), "table_data")
         layout = F.string(d.get("layout", "global"), "layout", choices=("pieces", "global", "rows"))
@@ -316,17 +353,17 @@ def from_dict(d: dict, path=None) -> CDFFit:
         if not fb and (maps is None or not maps.complete):
             raise F.Invalid("fallback", "false, but the rational maps are missing")
         verification = dict(F.obj(d.get("verification", {}), "verification"))
-        reason = F.string(d.get("reason", ""), "reason")
+        reason = F.name(d.get("reason", ""), "reason", max_len=4096)
         if not fb and layout == "global":
             # never trust the file's verdict: verify the maps again
             verification, bad, why = maps.verify(table)
             if bad:
                 raise F.Invalid("fallback", f"false, but the rational maps fail verification ({why})")
-        return CDFFit(table=table, table_params=dict(F.obj(d.get("table", {}), "table")), maps=maps,
+        return CDFFit(table=table, table_params=_table_params(d.get("table", {}), table), maps=maps,
                       verification=verification, fallback=fb, reason=reason,
                       fit_info=dict(F.obj(d.get("fit", {}), "fit")),
-                      name=F.string(d.get("name", ""), "name", max_len=1000),
-                      source=dict(F.obj(d.get("source", {}), "source")))
+                      name=F.name(d.get("name", ""), "name"),
+                      source=_source(d.get("source", {})))
     except BRDFFileError:
         raise
     except F.Invalid as e:
@@ -343,11 +380,12 @@ def load(path) -> CDFFit:
 
 # --------------------------------------------------------------------------------------------
 def table_only(evaluate, table_params: dict | None = None, reason: str = "table only", name: str = "",
-               source: dict | None = None) -> CDFFit:
+               source: dict | None = None, progress=None) -> CDFFit:
     """A :class:`CDFFit` with the tables and no rational fit (``fallback`` True: the tabulated
-    samplers use it, a rational sampler falls back to them)."""
+    samplers use it, a rational sampler falls back to them). ``progress(stage, done, total)``:
+    :mod:`fit.progress`."""
     params = dict(DEFAULTS, **(table_params or {}))
-    return CDFFit(table=tabulate(evaluate, **params), table_params=params, maps=None,
+    return CDFFit(table=tabulate(evaluate, **params, progress=progress), table_params=params, maps=None,
                   verification={}, fallback=True, reason=reason, name=name,
                   source=source or {"file": "", "sha256": ""})
 
@@ -356,7 +394,7 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
             theta_kw: dict | None = None, phi_kw: dict | None = None, refinements: int = 1,
             log=None, source: dict | None = None, monotone: bool = True,
             time_limit_s: float | None = TIME_LIMIT_S, layout: str = "pieces",
-            pieces_kw: dict | None = None) -> CDFFit:
+            pieces_kw: dict | None = None, progress=None, deadline: Deadline | None = None) -> CDFFit:
     """Tabulate (unless ``table`` is given), build the rational inverse CDFs of ``layout``,
     verify them, decide fallback. ``evaluate(wi, wo) -> (..., 3)`` is the material (1/sr, RGB);
     ``log(str)`` reports.
@@ -367,17 +405,29 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
     (:func:`fit.sampling.variance_gate.fit_pieces`); it has no time limit, 2-21 s per material,
     mostly its variance gate) or ``"global"`` (the paper's F(theta_v, mu), G(theta_v, theta_l, u),
     :func:`fit.sampling.global_layout.fit_global_layout`; ``theta_kw``, ``phi_kw``,
-    ``refinements``, ``monotone`` apply to it, and ``time_limit_s`` bounds its fitting time,
-    tabulation excluded)."""
+    ``refinements``, ``monotone`` apply to it).
+
+    ``time_limit_s`` (s, None: none) bounds the whole call, tabulation included, through one
+    :class:`fit.progress.Deadline` shared by every stage (``deadline``, when given, replaces
+    it: a command passes the deadline it started at). The table is always completed; once the
+    deadline has passed, the rows not yet checked (pieces) or the maps not yet verified
+    (global) are sampled with the table and the reason says that the time limit was reached.
+    ``progress(stage, done, total)`` (:mod:`fit.progress`) is told each stage's steps:
+    ``"tabulating the CDFs"`` (rows), ``"variance gate (N phi pieces)"`` (rows), ``"global
+    layout fits"`` (fits and refits)."""
     log = log or (lambda s: None)
+    if deadline is None:
+        deadline = Deadline(time_limit_s)
     params = dict(DEFAULTS, **(table_params or {}))
     if table is None:
-        table = tabulate(evaluate, **params)
+        table = tabulate(evaluate, **params, progress=progress)
     if layout == "pieces":
-        maps, verification, fb, reason, info = fit_pieces_layout(table, evaluate, log=log, **(pieces_kw or {}))
+        kw = dict(pieces_kw or {}, progress=progress, deadline=deadline)
+        maps, verification, fb, reason, info = fit_pieces_layout(table, evaluate, log=log, **kw)
     elif layout == "global":
         maps, verification, fb, reason, info = fit_global_layout(table, theta_kw, phi_kw, refinements, monotone,
-                                                                 time_limit_s, log)
+                                                                 deadline.seconds, log, deadline=deadline,
+                                                                 progress=progress)
     else:
         raise ValueError(f"layout must be one of {', '.join(map(repr, LAYOUTS))}, not {layout!r}")
     return CDFFit(table=table, table_params=params, maps=maps, verification=verification, fallback=fb,

@@ -53,7 +53,10 @@ from ..rational.function import RationalFunction
 from ..rational.model import RationalModel, Variable
 from .maps import normalized_map
 from .monotone import monotone_refit
+from ..progress import report
 from .table import CDFTable, inverse_cdf_phi, inverse_cdf_theta
+
+GLOBAL_STAGE = "global layout fits"   # the progress stage of fit_global_layout
 
 VERIFY_GRID = {"theta": (257, 2049), "phi": (33, 65, 513)}
 
@@ -273,7 +276,7 @@ def _refit(f, var, data, span, verify, log, what, deadline=None):
 
 def fit_global_layout(table: CDFTable, theta_kw: dict | None = None, phi_kw: dict | None = None,
                       refinements: int = 1, monotone: bool = True, time_limit_s: float | None = None,
-                      log=None):
+                      log=None, deadline=None, progress=None):
     """Fit both inverse CDFs of ``table``, verify, decide fallback: ``(maps, verification,
     fallback, reason, info)`` with ``maps`` the :class:`GlobalMaps` (kept, recorded in the file,
     even when they fail verification; None when nothing was fitted).
@@ -286,14 +289,23 @@ def fit_global_layout(table: CDFTable, theta_kw: dict | None = None, phi_kw: dic
     when it is reached, and whatever is not verified by then falls back (the reason says so).
     A sharp lobe can otherwise take many minutes (measured, near-mirror Blinn-Phong n = 5000:
     the theta refit alone ran 233 s with its LP re-solved from scratch every round).
-    ``log(str)`` reports."""
+    ``deadline`` (:class:`fit.progress.Deadline`), when given, is the end instead of
+    ``time_limit_s`` from now (shared with the caller's earlier stages). ``log(str)`` reports;
+    ``progress(stage, done, total)`` (:mod:`fit.progress`) counts the fits of the rounds,
+    stage ``"global layout fits"``."""
     log = log or (lambda s: None)
     theta_kw = dict(theta_kw or {})
     phi_kw = dict(phi_kw or {})
     # (the fitter's name as the files have always recorded it, now fit.rational.fitter)
     info: dict = {"fitter": "fit.fitter.IntervalRationalFitter", "rounds": []}
     t0 = time.perf_counter()
-    deadline = None if time_limit_s is None else t0 + float(time_limit_s)
+    if deadline is not None:
+        time_limit_s = deadline.seconds
+        deadline = deadline.end
+    else:
+        deadline = None if time_limit_s is None else t0 + float(time_limit_s)
+    total_fits = 2 * (refinements + 1)
+    report(progress, GLOBAL_STAGE, 0, total_fits)
 
     def left():
         return None if deadline is None else max(deadline - time.perf_counter(), 0.0)
@@ -304,6 +316,7 @@ def fit_global_layout(table: CDFTable, theta_kw: dict | None = None, phi_kw: dic
     F = G = None
     vt = vp = {"ok": False}
     for rnd in range(refinements + 1):
+        report(progress, GLOBAL_STAGE, 2 * rnd, total_fits)
         if not vt.get("ok") and not late():
             rt, dt, data_t = fit_theta(table, **theta_kw, time_limit=left())
             F = rt.function
@@ -326,6 +339,7 @@ def fit_global_layout(table: CDFTable, theta_kw: dict | None = None, phi_kw: dic
                                                               "phi", deadline)
         info["rounds"].append({"theta_ok": vt.get("ok"), "phi_ok": vp.get("ok")})
         if (vt.get("ok") and vp.get("ok")) or late():
+            report(progress, GLOBAL_STAGE, total_fits, total_fits)
             break
         theta_kw["n_mu"] = 2 * theta_kw.get("n_mu", 33) - 1
         theta_kw["tol"] = 0.5 * theta_kw.get("tol", 0.03)

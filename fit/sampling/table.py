@@ -35,6 +35,9 @@ from ..limits import (
     MAX_CDF_THETA_CELLS,
     check_memory,
 )
+from ..progress import report
+
+TABULATE_STAGE = "tabulating the CDFs"   # the progress stage of tabulate
 
 
 @dataclass
@@ -161,11 +164,12 @@ def check_table_size(n_v: int, n_t: int, n_p: int, sub: int = 3, chunk_rows: int
 
 
 def tabulate(evaluate, n_v: int = 32, n_t: int = 64, n_p: int = 64, sub: int = 3,
-             eps: float = 0.02, noise: float = 1e-6, chunk_rows: int = 4) -> CDFTable:
+             eps: float = 0.02, noise: float = 1e-6, chunk_rows: int = 4, progress=None) -> CDFTable:
     """Tabulate the inverse-CDF sampler of ``evaluate(wi, wo) -> (..., 3)`` (1/sr, RGB).
 
     ``wi`` is the light, ``wo`` the view. Cell masses use the Rec.709 luminance of
-    ``rho * cos(theta_l) * sin(theta_l)`` (negative values clamped to 0).
+    ``rho * cos(theta_l) * sin(theta_l)`` (negative values clamped to 0). ``progress(stage,
+    done, total)`` (:mod:`fit.progress`) is told the rows done, stage ``"tabulating the CDFs"``.
     """
     if not 0.0 < eps <= 1.0:
         raise ValueError("eps must be in (0, 1]: it keeps every direction sampleable")
@@ -180,12 +184,14 @@ def tabulate(evaluate, n_v: int = 32, n_t: int = 64, n_p: int = 64, sub: int = 3
     wi = spherical_to_direction(tt, pp)
     weight = np.cos(tt) * np.sin(tt) * (dt / sub) * (dp / sub)
     mass = np.empty((n_v, n_t, n_p))
+    report(progress, TABULATE_STAGE, 0, n_v)
     for r0 in range(0, n_v, chunk_rows):
         rows = theta_v[r0:r0 + chunk_rows]
         wo = spherical_to_direction(rows, np.zeros_like(rows))[:, None, None, :]
         f = np.asarray(evaluate(wi[None], wo), float) @ LUMINANCE
         f = np.maximum(np.nan_to_num(f, nan=0.0, posinf=0.0), 0.0) * weight
         mass[r0:r0 + chunk_rows] = f.reshape(len(rows), n_t, sub, n_p, sub).sum(axis=(2, 4))
+        report(progress, TABULATE_STAGE, r0 + len(rows), n_v)
     total = mass.sum(axis=(1, 2))  # half-hemisphere luminance albedo / 2
     albedo = 2.0 * total
     fallback = (total <= 0) | (total < noise * max(total.max(), 0.0))

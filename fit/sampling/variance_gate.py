@@ -16,9 +16,11 @@ import numpy as np
 
 from ..formats.angles import spherical_to_direction
 from ..formats.colour import LUMINANCE
+from ..progress import Deadline, report
 from .pieces import PieceMaps, build_pieces, sample_pieces, verify_pieces
 from .table import CDFTable, inverse_pdf
 
+TIME_LIMIT_REASON = "time limit reached"   # the reason of a row left to the table by a deadline
 PIECES_DEFAULTS = dict(n_mu=64, n_u=(16, 32, 64), max_variance_ratio=1.2, gate_samples=32768, gate_recheck=8)
 
 
@@ -51,7 +53,8 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
                n_u=PIECES_DEFAULTS["n_u"],
                max_variance_ratio: float | None = PIECES_DEFAULTS["max_variance_ratio"],
                gate_samples: int = PIECES_DEFAULTS["gate_samples"],
-               gate_recheck: int | None = PIECES_DEFAULTS["gate_recheck"], flat_end=None, log=None):
+               gate_recheck: int | None = PIECES_DEFAULTS["gate_recheck"], flat_end=None, log=None,
+               progress=None, deadline: Deadline | None = None):
     """Build, verify and gate the pieces of ``table``. ``evaluate(wi, wo) -> (N, 3)`` (the
     material tabulated) is needed for the variance gate (``max_variance_ratio`` None: no
     gate). A row whose ratio on ``gate_samples`` pairs lies between limit / 1.25 and twice the
@@ -65,20 +68,26 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
     ``ok``, ``reason`` and the gate's ``variance`` dict, ``info["n_u_tried"]`` the rational
     rows per candidate tried. ``flat_end``: (n_v,) bool, rows built with the flat end piece from
     the start (default: none; a row over the gate is tried again with it, see
-    :func:`_fit_pieces_once`)."""
+    :func:`_fit_pieces_once`). ``progress(stage, done, total)`` (:mod:`fit.progress`) is told
+    the rows gated per candidate. ``deadline`` (:class:`fit.progress.Deadline`): once it has
+    passed, no further candidate is tried and the rows not yet gated are sampled with the
+    table (reason ``"time limit reached"``); ``info["time_limit_reached"]`` says so."""
     log = log or (lambda s: None)
     t0 = time.perf_counter()
     best, tried = None, {}
     for nu in sorted(np.atleast_1d(n_u).astype(int).tolist()):
+        if best is not None and deadline is not None and deadline.passed():
+            break
         pm, info = _fit_pieces_once(table, evaluate, n_mu, nu, max_variance_ratio, gate_samples, gate_recheck,
-                                    flat_end)
+                                    flat_end, progress, deadline)
         tried[nu] = info["verified_rows"]
         if best is None or info["verified_rows"] > best[1]["verified_rows"]:
             best = (pm, info)
         if not any(r.get("reason", "").startswith("variance") for r in info["rows"]):
             break
     pm, info = best
-    info.update(n_u_tried=tried, time_s=time.perf_counter() - t0)
+    info.update(n_u_tried=tried, time_s=time.perf_counter() - t0,
+                time_limit_reached=bool(deadline is not None and deadline.passed()))
     ratios = [r["variance"]["ratio"] for r in info["rows"] if "variance" in r]
     log(f"  pieces ({n_mu} theta x {info['n_u']} phi pieces per map; phi pieces tried: rational rows "
         + ", ".join(f"{k}: {v}" for k, v in tried.items()) + f"): {info['verified_rows']}/{table.n_v} "
@@ -90,10 +99,11 @@ def fit_pieces(table: CDFTable, evaluate=None, n_mu: int = PIECES_DEFAULTS["n_mu
 
 
 def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_samples, gate_recheck=None,
-                     flat_end=None):
+                     flat_end=None, progress=None, deadline=None):
     """:func:`fit_pieces` for one phi piece count. Rows over the gate are tried again with a
     flat end piece (:attr:`fit.sampling.pieces.PieceMaps.flat_end`; rows already built with it
-    are not) and keep it if it passes."""
+    are not) and keep it if it passes. Rows reached after ``deadline`` are not gated: they
+    are sampled with the table (reason ``"time limit reached"``)."""
     pm = build_pieces(table, n_mu, n_u, flat_end=flat_end)
     ver = verify_pieces(pm)
 
@@ -109,6 +119,9 @@ def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_sample
             out["variance"] = ratio(gate_samples * gate_recheck)
         return out
 
+    late = (lambda: False) if deadline is None else deadline.passed
+    stage = f"variance gate ({n_u} phi pieces)"
+    report(progress, stage, 0, table.n_v)
     rows = []
     for v in range(table.n_v):
         r = {"ok": bool(ver["rows"][v])}
@@ -117,19 +130,24 @@ def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_sample
         elif table.row_fallback[v]:
             r.update(ok=False, reason="table row without BRDF mass (cosine fallback row)")
         elif max_variance_ratio is not None and evaluate is not None:
-            r.update(gate(pm, v))
-            if not r["variance"]["ratio"] <= max_variance_ratio:
-                r.update(ok=False, reason=f"variance > {max_variance_ratio:g} x the table's")
+            if late():
+                r.update(ok=False, reason=TIME_LIMIT_REASON)
+            else:
+                r.update(gate(pm, v))
+                if not r["variance"]["ratio"] <= max_variance_ratio:
+                    r.update(ok=False, reason=f"variance > {max_variance_ratio:g} x the table's")
         rows.append(r)
         pm.row_ok[v] = r["ok"]
-    retry = [v for v, r in enumerate(rows) if r.get("reason", "").startswith("variance") and not pm.flat_end[v]]
+        report(progress, stage, v + 1, table.n_v)
+    retry = [] if late() else [v for v, r in enumerate(rows)
+                               if r.get("reason", "").startswith("variance") and not pm.flat_end[v]]
     if retry:
         flat = pm.flat_end.copy()
         flat[retry] = True
         alt = build_pieces(table, n_mu, n_u, flat_end=flat)
         alt_rows = verify_pieces(alt)["rows"]
         for v in retry:
-            if not alt_rows[v]:
+            if not alt_rows[v] or late():
                 continue
             g = gate(alt, v)
             rows[v]["variance_pchip_end"] = rows[v]["variance"]
@@ -149,7 +167,8 @@ def _fit_pieces_once(table, evaluate, n_mu, n_u, max_variance_ratio, gate_sample
 
 def fit_pieces_layout(table: CDFTable, evaluate=None, log=None, **kw):
     """The pieces layout of ``table`` for :func:`fit.sampling.cdf_file.fit_cdf`: ``(maps,
-    verification, fallback, reason, info)`` from :func:`fit_pieces` (``kw`` tunes it);
+    verification, fallback, reason, info)`` from :func:`fit_pieces` (``kw`` tunes it, among
+    them ``progress`` and ``deadline``);
     ``maps`` None (fallback) when no row is rational. The reason says how many view rows are
     rational and why the others are sampled with the table."""
     log = log or (lambda s: None)
