@@ -323,31 +323,47 @@ def atomic_path(path, flag: str | None = None, verify=None):
         yield t.tmp
 
 
-class _Utf8Text:
-    """A text file over the binary file ``raw``: ``write(str)`` writes its UTF-8 bytes as they
-    are (no newline translation); everything else is ``raw``'s."""
+class _Tracked:
+    """The writer's view of a temporary file opened by :func:`_open_counting`: ``write`` takes
+    ``str`` (``text``: UTF-8, no newline translation) or bytes-like data and counts what it was
+    handed; ``end`` is the furthest position written, the size the writer means the file to
+    have (``seek`` and ``tell`` are followed, so a zip writer that rewrites its headers counts
+    once). Everything else is the binary file's."""
 
-    def __init__(self, raw):
-        self._raw = raw
+    def __init__(self, raw, text: bool):
+        self._raw, self._text = raw, text
+        self._pos = self.end = 0
 
-    def write(self, s: str) -> int:
-        self._raw.write(s.encode("utf-8"))
-        return len(s)
+    def write(self, data) -> int:
+        b = data.encode("utf-8") if self._text else data
+        self._raw.write(b)
+        n = memoryview(b).nbytes
+        self._pos += n
+        self.end = max(self.end, self._pos)
+        return len(data) if self._text else n
 
-    def __getattr__(self, name):          # flush, fileno, ... of the binary file
+    def seek(self, offset: int, whence: int = os.SEEK_SET) -> int:
+        self._pos = self._raw.seek(offset, whence)
+        return self._pos
+
+    def tell(self) -> int:
+        return self._pos
+
+    def __getattr__(self, name):          # flush, fileno, seekable, ... of the binary file
         return getattr(self._raw, name)
 
 
 @contextlib.contextmanager
 def _open_counting(t: _Temp, mode: str):
-    """Open ``t.tmp`` for writing (``"w"`` UTF-8 text, ``"wb"`` bytes); when the block ends the
-    file is flushed, fsynced and closed, and ``t.expected`` is where the writer ended (the size
-    it meant the file to have)."""
+    """Open ``t.tmp`` for writing (``"w"`` UTF-8 text, ``"wb"`` bytes) as a :class:`_Tracked`
+    file; when the block ends the file is flushed, fsynced and closed, and ``t.expected`` is the
+    size the writer meant it to have."""
     with open(t.tmp, "wb") as raw:
-        yield raw if "b" in mode else _Utf8Text(raw)
+        f = _Tracked(raw, "b" not in mode)
+        yield f
         raw.flush()
-        t.expected = raw.tell()
         os.fsync(raw.fileno())
+        t.expected = f.end
 
 
 @contextlib.contextmanager
@@ -359,18 +375,35 @@ def atomic_write(path, mode: str = "w", flag: str | None = None):
         yield f
 
 
+#: The last 12 bytes of every complete PNG file (an empty IEND chunk and its CRC).
+_PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"
+
+
+def png_complete(path) -> None:
+    """Raise ``OSError`` unless the file ``path`` starts with the PNG signature and ends with
+    the IEND chunk (a PNG cut short by a full disk does not)."""
+    with open(path, "rb") as f:
+        head = f.read(8)
+        size = f.seek(0, os.SEEK_END)
+        f.seek(max(size - len(_PNG_END), 0))
+        tail = f.read()
+    if head != b"\x89PNG\r\n\x1a\n" or tail != _PNG_END:
+        raise OSError(errno.EIO, f"the PNG written is incomplete ({size} bytes, no IEND chunk at its end)")
+
+
 def save_figure(fig, path, outputs=None, dpi: int = 90) -> None:
     """Save the matplotlib figure ``fig`` as the PNG ``path`` and close it: staged in
     ``outputs`` (an :class:`OutputSet`, renamed into place by its commit) when given, else
-    through a temporary file renamed onto ``path`` (:func:`atomic_path`)."""
+    through a temporary file renamed onto ``path`` (:func:`atomic_path`); either way checked
+    whole (:func:`png_complete`) before the rename."""
     import matplotlib.pyplot as plt
 
     try:
         if outputs is not None:
-            with outputs.writing(path) as tmp:
+            with outputs.writing(path, verify=png_complete) as tmp:
                 fig.savefig(tmp, dpi=dpi, format="png")
         else:
-            with atomic_path(path) as tmp:
+            with atomic_path(path, verify=png_complete) as tmp:
                 fig.savefig(tmp, dpi=dpi, format="png")
     finally:
         plt.close(fig)
