@@ -10,9 +10,9 @@ IPv4 address or a bracketed IPv6 address, ``PORT`` in 1-65535. Refused in one li
 Connecting: a plain socket first reaches ``HOST:PORT`` within ``timeout_s`` (default
 :data:`CONNECT_TIMEOUT_S`), so the error says why it cannot -- the name does not resolve,
 the connection is refused (nothing listens there), no answer within the timeout (host down,
-unroutable or filtered), network or host unreachable; then dask's ``Client`` must finish its
-handshake within the same timeout (a port that accepts and never answers as a scheduler is
-"no dask scheduler answered"). Every failure is one :class:`fit.errors.FlagError` naming
+unroutable or filtered), network or host unreachable; then dask's handshake must finish
+within the same timeout (a port that accepts and never answers as a scheduler is "no dask
+scheduler answered": ``distributed.Client`` alone would wait for it without end). Every failure is one :class:`fit.errors.FlagError` naming
 ``--scheduler``, the address and the cause.
 """
 from __future__ import annotations
@@ -130,12 +130,49 @@ def probe(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
                                        f"{_cause(e, port, timeout_s)}") from None
 
 
+def handshake(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """dask's own handshake with the scheduler at ``address``, within ``timeout_s`` in all
+    (``distributed.Client`` waits without end for the answer of a port that accepts and never
+    speaks). Runs in a thread of its own, so that it works under a running event loop too;
+    :class:`FlagError` naming the address when no dask scheduler answers."""
+    import asyncio
+
+    from distributed.comm import connect as comm_connect
+    from distributed.security import Security
+
+    box = {}
+
+    async def go():
+        comm = await asyncio.wait_for(comm_connect(address, timeout=timeout_s,
+                                                   **Security().get_connection_args("client")), timeout_s)
+        await comm.close()
+
+    def work():
+        try:
+            asyncio.run(go())
+        except BaseException as e:     # noqa: BLE001 - reported by the caller
+            box["error"] = e
+
+    t = threading.Thread(target=work, daemon=True, name="rbrdf-scheduler-handshake")
+    t.start()
+    t.join(timeout_s + 1.0)
+    e = box.get("error")
+    if t.is_alive() or isinstance(e, (TimeoutError, asyncio.TimeoutError)):
+        raise FlagError("--scheduler", f"cannot connect to {display_text(address)}: no dask scheduler answered "
+                                       f"within {timeout_s:g} s (something listens there, but does not speak dask)")
+    if e is not None:
+        raise FlagError("--scheduler", f"cannot connect to {display_text(address)}: "
+                                       f"{display_text(f'{type(e).__name__}: {e}')[:200]}")
+
+
 def connect(address: str, timeout_s: float = CONNECT_TIMEOUT_S):
-    """A ``distributed.Client`` of the scheduler at ``address`` (checked, probed, then dask's
-    handshake within ``timeout_s``); :class:`FlagError` naming the address and the cause."""
+    """A ``distributed.Client`` of the scheduler at ``address``: checked, reached with a plain
+    socket (:func:`probe`), dask's handshake (:func:`handshake`), each within ``timeout_s``;
+    :class:`FlagError` naming the address and the cause."""
     from distributed import Client
 
     probe(address, timeout_s)
+    handshake(address, timeout_s)
     try:
         return Client(address, timeout=timeout_s)
     except (OSError, TimeoutError) as e:
