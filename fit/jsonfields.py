@@ -9,6 +9,7 @@ reader turns into one :class:`fit.errors.BRDFFileError` line naming the file and
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
@@ -81,9 +82,11 @@ def number(v, key: str, lo: float | None = None, hi: float | None = None, option
 
 
 def integer(v, key: str, lo: int | None = None, hi: int | None = None) -> int:
-    """A JSON integer (``3``, or ``3.0``) in [lo, hi]."""
-    if isinstance(v, float) and v.is_integer():
-        v = int(v)
+    """A JSON integer in [lo, hi]: written without a fraction or exponent (``3``, never ``3.0``
+    or ``3e0``, which JSON parsers return as floats: an integer field is never converted)."""
+    if isinstance(v, float):
+        raise Invalid(key, f"expected an integer, got the number {v!r} (integers are written without "
+                           "a decimal point or exponent)")
     if not isinstance(v, int) or isinstance(v, bool):
         raise Invalid(key, f"expected an integer, got {_kind(v)}")
     if (lo is not None and v < lo) or (hi is not None and v > hi):
@@ -103,6 +106,28 @@ def string(v, key: str, choices=None, optional: bool = False, max_len: int = 100
     if choices is not None and v not in choices:
         raise Invalid(key, f"{v[:40]!r} is not one of {', '.join(map(repr, choices))}")
     return v
+
+
+#: Longest name (a model, material, output, variable or unit name, a source file name) a file
+#: may hold, in characters; the project's names are below 64.
+MAX_NAME_CHARS = 256
+#: Characters a name may not hold: C0 and C1 controls (NUL, escape, newline, tab, DEL...), the
+#: Unicode line and paragraph separators and the bidirectional embedding, override and isolate
+#: controls (text that would print on several lines or reorder what a reader sees).
+_NAME_FORBIDDEN = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\u202a-\u202e\u2066-\u2069]")
+
+
+def name(v, key: str, optional: bool = False, max_len: int = MAX_NAME_CHARS):
+    """A JSON string used as a name: at most ``max_len`` characters, none of them a control
+    character, a line separator or a bidirectional control (:data:`_NAME_FORBIDDEN`). Names
+    are data: writers that put them into code or markup escape them as well."""
+    s = string(v, key, optional=optional, max_len=max_len)
+    if s is not None:
+        bad = _NAME_FORBIDDEN.search(s)
+        if bad:
+            raise Invalid(key, f"a name may not hold control characters (U+{ord(bad.group()):04X} at "
+                               f"character {bad.start()})")
+    return s
 
 
 def flag(v, key: str) -> bool:

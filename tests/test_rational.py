@@ -136,7 +136,7 @@ def _piecewise():
         pieces.append(RationalModel("p", [Variable("theta_h", "rad", "sqrt", (0, np.pi / 2)),
                                           Variable("theta_d", "rad", "identity", edges[k:k + 2])],
                                     [f, f.scaled(0.5), f.scaled(0.25)], value_transform="log",
-                                    value_offset=1e-3))
+                                    value_offset=1e-3, value_max=1e3))
     return PiecewiseRationalModel("pw", [Variable("theta_h", "rad", "sqrt", (0, np.pi / 2)),
                                          Variable("theta_d", "rad", "identity", (0.0, 1.3))],
                                   "theta_d", edges, pieces,

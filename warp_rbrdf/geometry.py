@@ -42,7 +42,7 @@ import warp as wp
 from fit.errors import BRDFFileError, display_path
 from fit.inputs import check_regular_file
 
-from . import limits, transforms
+from . import limits, mesh_checks, transforms
 from .errors import SceneError
 from .scene import Scene, ShapeSpec
 
@@ -103,8 +103,9 @@ def load_mesh_file(path, file="<scene>", key="file"):
     at most :data:`~warp_rbrdf.limits.MAX_MESH_BYTES`. Checked after reading, before trimesh
     merges vertices (which would silently drop or keep bad data): at least one triangle, at most
     :data:`~warp_rbrdf.limits.MAX_TRIANGLES`, every vertex finite and within
-    :data:`~warp_rbrdf.limits.MAX_COORDINATE`, every face index in range. Each problem is a
-    one-line :class:`SceneError` naming the scene key and the file."""
+    :data:`~warp_rbrdf.limits.MAX_COORDINATE`, every face index in range. Before trimesh parses
+    it, an OBJ's face indices and an ASCII PLY's element counts (:func:`_check_structure`). Each
+    problem is a one-line :class:`SceneError` naming the scene key and the file."""
     import trimesh
 
     shown = display_path(path)
@@ -112,6 +113,7 @@ def load_mesh_file(path, file="<scene>", key="file"):
         check_regular_file(path, limits.MAX_MESH_BYTES, "mesh file")
     except BRDFFileError as e:
         raise SceneError(file, key, f"mesh {shown}: {e.problem}") from None
+    _check_structure(path, shown, file, key)
     try:
         m = trimesh.load(str(path), force="mesh", process=False)
     except MemoryError:
@@ -147,6 +149,25 @@ def load_mesh_file(path, file="<scene>", key="file"):
     except MemoryError:
         raise SceneError(file, key, f"mesh {shown}: out of memory while processing it") from None
     return np.asarray(m.vertices, float), np.asarray(m.faces, np.int64), normals
+
+
+def _check_structure(path, shown, file, key) -> None:
+    """What trimesh accepts silently (:mod:`warp_rbrdf.mesh_checks`): an OBJ face index of 0 or
+    beyond the vertices, an ASCII PLY whose body does not hold the elements its header
+    declares; one-line :class:`SceneError` naming the key and the file."""
+    suffix = str(path).lower().rsplit(".", 1)[-1]
+    try:
+        if suffix == "obj":
+            with open(path, "rb") as fh:
+                mesh_checks.check_obj(fh.read())
+        elif suffix == "ply":
+            with open(path, "rb") as fh:
+                head = fh.read(mesh_checks.PLY_HEADER_BYTES)
+                mesh_checks.check_ply(head, lambda: head + fh.read())
+    except ValueError as e:
+        raise SceneError(file, key, f"mesh {shown}: {e}") from None
+    except OSError as e:
+        raise SceneError(file, key, f"cannot read mesh {shown} ({e.strerror or e.__class__.__name__})") from None
 
 
 def sphere_mesh(center, radius, subdivisions):

@@ -115,8 +115,13 @@ def parse_tensor_file(buf: bytes, path=None) -> dict[str, TensorField]:
     for name, ndim, code, offset, shape in entries:
         dtype = np.dtype(DTYPES[code])
         count = 1
+        extent = 1           # product of the non-zero sides: what NumPy must be able to index
         for s in shape:
             count *= int(s)  # Python ints: no overflow
+            extent *= max(int(s), 1)
+        if count == 0 and extent * dtype.itemsize > size:   # empty, but NumPy cannot index it
+            fail(f"field {name!r} has the absurd shape {list(shape)}: a zero side, and the others "
+                 f"span {extent * dtype.itemsize} bytes, more than the file's {size} (corrupt field table)")
         nbytes = count * dtype.itemsize
         if nbytes > size:
             fail(f"field {name!r} of shape {list(shape)} needs {nbytes} bytes but the file has "

@@ -180,6 +180,7 @@ from .model import (
     RationalModel,
     Variable,
 )
+from .value_bound import bound_ratio
 
 FORMAT = "rbrdf-rational"
 VERSION = 1            # single rational function per output
@@ -305,8 +306,8 @@ def _variables(v, key: str, kind: str, three_d: bool = False) -> list:
     for i, vd in enumerate(vs):
         k = F.sub(key, i)
         F.obj(vd, k)
-        name = F.string(F.get(vd, "name", k), F.sub(k, "name"), max_len=64)
-        unit = F.string(vd.get("unit", ""), F.sub(k, "unit"), max_len=64)
+        name = F.name(F.get(vd, "name", k), F.sub(k, "name"), max_len=64)
+        unit = F.name(vd.get("unit", ""), F.sub(k, "unit"), max_len=64)
         transform = F.string(vd.get("transform", "identity"), F.sub(k, "transform"), choices=INPUT_TRANSFORMS)
         lo, hi = F.array(F.get(vd, "domain", k), F.sub(k, "domain"), (2,))
         if not hi > lo:
@@ -353,10 +354,25 @@ def _polynomial(pd, key: str, n_vars: int, denominator: bool):
     return exps, coef
 
 
-def _function(fd, key: str, variables: list, budget: _Budget):
+def _degrees_record(fd, key: str, f: RationalFunction) -> None:
+    """The informative ``num_degrees``, ``den_degrees`` and ``n_coefficients`` of a function
+    record, when present: JSON integers that agree with its polynomials."""
+    for k, want in (("num_degrees", list(f.num_degrees)), ("den_degrees", list(f.den_degrees))):
+        if fd.get(k) is not None:
+            got = F.array(fd[k], F.sub(key, k), (f.n_vars,), kind="int").tolist()
+            if got != want:
+                raise F.Invalid(F.sub(key, k), f"{got} does not match the exponents (their maxima are {want})")
+    if fd.get("n_coefficients") is not None:
+        got = F.integer(fd["n_coefficients"], F.sub(key, "n_coefficients"))
+        if got != f.n_coefficients:
+            raise F.Invalid(F.sub(key, "n_coefficients"), f"{got}, but the numerator and denominator hold "
+                                                          f"{f.n_coefficients} coefficients")
+
+
+def _function(fd, key: str, variables: list, budget: _Budget, kind: str = "function"):
     F.obj(fd, key)
     n = len(variables)
-    F.string(fd.get("output", ""), F.sub(key, "output"), max_len=64)
+    F.name(fd.get("output", ""), F.sub(key, "output"), max_len=64)
     basis = F.string(fd.get("basis", "chebyshev"), F.sub(key, "basis"))
     if basis != "chebyshev":
         raise F.Invalid(F.sub(key, "basis"), f"unsupported basis {basis[:40]!r}")
@@ -392,8 +408,12 @@ def _function(fd, key: str, variables: list, budget: _Budget):
             lo, hi = F.array(info[k], F.sub(key, k), (2,))
             if not lo <= hi:
                 raise F.Invalid(F.sub(key, k), f"[{lo:g}, {hi:g}] is empty")
+            if kind == "brdf" and (lo < 0 or hi > MAX_BRDF_VALUE):
+                raise F.Invalid(F.sub(key, k), f"[{lo:g}, {hi:g}] 1/sr is not inside [0, {MAX_BRDF_VALUE:g}] "
+                                               "(fit.limits.MAX_BRDF_VALUE)")
     f = RationalFunction(domain=dom, num_exponents=ne, num_coef=nc, den_exponents=de, den_coef=dc,
                          var_names=tuple(v.name for v in variables))
+    _degrees_record(fd, key, f)
     return f, info
 
 
@@ -406,8 +426,8 @@ def _value(d, key: str, kind: str) -> dict:
                                  F.sub(key, "offset"), lo=0.0),
         "value_min": F.number(v.get("min"), F.sub(key, "min"), optional=True),
         "value_max": F.number(v.get("max"), F.sub(key, "max"), optional=True),
-        "value_name": F.string(v.get("name", "y"), F.sub(key, "name"), max_len=64),
-        "value_unit": F.string(v.get("unit", ""), F.sub(key, "unit"), max_len=64),
+        "value_name": F.name(v.get("name", "y"), F.sub(key, "name"), max_len=64),
+        "value_unit": F.name(v.get("unit", ""), F.sub(key, "unit"), max_len=64),
     }
     lo, hi = out["value_min"], out["value_max"]
     if lo is not None and hi is not None and not hi > lo:
@@ -417,7 +437,24 @@ def _value(d, key: str, kind: str) -> dict:
             raise F.Invalid(F.sub(key, "min"), "a BRDF needs a clamp min >= 0 (it is never negative)")
         if hi is not None and hi > MAX_BRDF_VALUE:
             raise F.Invalid(F.sub(key, "max"), f"{hi:g} 1/sr is above {MAX_BRDF_VALUE:g} (fit.limits.MAX_BRDF_VALUE)")
+        if lo > MAX_BRDF_VALUE:
+            raise F.Invalid(F.sub(key, "min"), f"{lo:g} 1/sr is above {MAX_BRDF_VALUE:g} (fit.limits.MAX_BRDF_VALUE)")
+        if out["value_offset"] > MAX_BRDF_VALUE:
+            raise F.Invalid(F.sub(key, "offset"), f"{out['value_offset']:g} 1/sr is above {MAX_BRDF_VALUE:g} "
+                                                  "(fit.limits.MAX_BRDF_VALUE)")
     return out
+
+
+def _source(d, key: str) -> dict:
+    """The ``source`` record (informative), its ``file`` a name and its ``sha256`` hex when given."""
+    src = dict(F.obj(d.get("source", {"file": "", "sha256": ""}), key))
+    if src.get("file") is not None:
+        F.name(src["file"], F.sub(key, "file"))
+    sha = src.get("sha256")
+    if sha is not None and (not isinstance(sha, str) or len(sha) > 128
+                            or any(ch not in "0123456789abcdefABCDEF" for ch in sha)):
+        raise F.Invalid(F.sub(key, "sha256"), "expected a hexadecimal digest")
+    return src
 
 
 def _domain_policy(d, key: str) -> dict:
@@ -441,7 +478,7 @@ def _model(d: dict, path, key: str, depth: int, budget: _Budget, three_d: bool =
         raise F.Invalid(F.sub(key, "functions"), "expected a list of 1 to 16 functions")
     functions, infos = [], []
     for i, fd in enumerate(raw):
-        f, info = _function(fd, F.sub(F.sub(key, "functions"), i), variables, budget)
+        f, info = _function(fd, F.sub(F.sub(key, "functions"), i), variables, budget, kind)
         functions.append(f)
         infos.append(info)
     outputs = d.get("outputs")
@@ -449,18 +486,18 @@ def _model(d: dict, path, key: str, depth: int, budget: _Budget, three_d: bool =
         outputs = [fd.get("output", "") for fd in raw]
     if not isinstance(outputs, list) or len(outputs) != len(functions):
         raise F.Invalid(F.sub(key, "outputs"), f"expected a list of {len(functions)} output names")
-    outputs = [F.string(o, F.sub(F.sub(key, "outputs"), i), max_len=64) for i, o in enumerate(outputs)]
+    outputs = [F.name(o, F.sub(F.sub(key, "outputs"), i), max_len=64) for i, o in enumerate(outputs)]
     if kind == "brdf" and outputs != ["R", "G", "B"]:
         raise F.Invalid(F.sub(key, "outputs"), f"a BRDF's outputs are R, G, B, not {', '.join(outputs)}")
     basis = F.string(d.get("basis", "chebyshev"), F.sub(key, "basis"))
     if basis != "chebyshev":
         raise F.Invalid(F.sub(key, "basis"), f"unsupported basis {basis[:40]!r}")
     return RationalModel(
-        name=F.string(d.get("name", ""), F.sub(key, "name"), max_len=1000), variables=variables,
+        name=F.name(d.get("name", ""), F.sub(key, "name")), variables=variables,
         functions=functions, outputs=tuple(outputs), kind=kind, **value,
         domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
         fit_info=dict(F.obj(d.get("fit", {}), F.sub(key, "fit"))), function_info=infos,
-        source=dict(F.obj(d.get("source", {"file": "", "sha256": ""}), F.sub(key, "source"))))
+        source=_source(d, F.sub(key, "source")))
 
 
 def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
@@ -488,11 +525,11 @@ def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
         infos.append(dict(F.obj(pd.get("info", {}), F.sub(ki, "info"))))
     try:
         return PiecewiseRationalModel(
-            name=F.string(d.get("name", ""), F.sub(key, "name"), max_len=1000), variables=variables,
+            name=F.name(d.get("name", ""), F.sub(key, "name")), variables=variables,
             split_variable=var, edges=[float(e) for e in edges], pieces=pieces, kind=kind,
             domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
             fit_info=dict(F.obj(d.get("fit", {}), F.sub(key, "fit"))), piece_info=infos,
-            source=dict(F.obj(d.get("source", {"file": "", "sha256": ""}), F.sub(key, "source"))))
+            source=_source(d, F.sub(key, "source")))
     except ValueError as e:
         raise F.Invalid(key or "pieces", str(e)) from None
 
@@ -524,11 +561,46 @@ def recertify(model, path=None, budget: _Budget | None = None) -> None:
                     "certified") is True else ""
                 raise BRDFFileError(path, f"{where}: {cert.reason or 'Q > 0 could not be proven'} "
                                           f"(re-checked on load){claim}")
-            if leaf.value_transform == "log" and leaf.value_max is None:
-                bound = float(np.abs(f.num_coef).sum()) / cert.lower_bound
-                if bound > 700.0:
-                    raise BRDFFileError(path, f"{where}: log value without a 'max' clamp and |P/Q| up to "
-                                              f"{bound:.3g}: exp would overflow")
+            if leaf.value_max is None and (leaf.kind == "brdf" or leaf.value_transform == "log"):
+                _check_bounded(leaf, f, cert.lower_bound, where, path, budget)
+
+
+def _check_bounded(leaf, f, q_lower: float, where: str, path, budget: _Budget) -> None:
+    """A function of a model without a ``max`` clamp: prove that its values stay within
+    :data:`fit.limits.MAX_BRDF_VALUE` (a BRDF: P/Q, or exp(P/Q) - offset, on the whole box;
+    another log-valued function: exp(P/Q) finite), :func:`fit.rational.value_bound.bound_ratio`
+    within the file's certification budget; :class:`BRDFFileError` naming the function and
+    ``value.max`` when they do not or cannot be proven to. The step-7 ranges do not count: they
+    are optional records that older readers ignore."""
+    log = leaf.value_transform == "log"
+    top = MAX_BRDF_VALUE if leaf.kind == "brdf" else math.inf
+    limit = math.log(top + leaf.value_offset) if log and math.isfinite(top) else (700.0 if log else top)
+    size = int(np.prod(np.asarray(f.num_degrees) + 1)) + int(np.prod(np.asarray(f.den_degrees) + 1))
+    boxes = min(MAX_CERTIFY_BOXES, max((MAX_CERTIFY_WORK - budget.certify_work) // max(size, 1), 1))
+    res = bound_ratio(f.num_exponents, f.num_coef, f.den_exponents, f.den_coef, limit, q_lower, max_boxes=boxes)
+    budget.certify_work += res.work
+    if res.bounded:
+        return
+    what = "exp(P/Q) - offset" if log else "P/Q"
+    if res.witness is None:
+        raise BRDFFileError(path, f"{where}: no 'value.max' clamp, and {what} <= {top:g} 1/sr could not be "
+                                  f"proven on the box ({res.reason}; fit.limits.MAX_BRDF_VALUE)")
+    at = ", ".join(f"{v.name} = {_from_unit(t, v):.4g}" for t, v in zip(res.witness, leaf.variables))
+    if log:
+        shown = ("overflows float64: exp would overflow" if res.value > 709.0
+                 else f"= {math.exp(res.value) - leaf.value_offset:.3g}")
+        said = f"P/Q = {res.value:.3g}, exp(P/Q) - offset {shown}"
+    else:
+        said = f"P/Q = {res.value:.3g}"
+    raise BRDFFileError(path, f"{where}: no 'value.max' clamp, and at {at} {said}, above "
+                              f"{top:g} 1/sr (fit.limits.MAX_BRDF_VALUE)")
+
+
+def _from_unit(t: float, var) -> float:
+    """The variable's own value (its unit) at the box coordinate ``t`` in [-1, 1]."""
+    ulo, uhi = var.rf_domain
+    u = ulo + 0.5 * (t + 1.0) * (uhi - ulo)
+    return u * u if var.transform == "sqrt" else u
 
 
 def from_dict(d: dict, path=None, certify: bool = True):
@@ -542,9 +614,10 @@ def from_dict(d: dict, path=None, certify: bool = True):
         raise BRDFFileError(path, f"not an {FORMAT} coefficient file (format key is "
                                   f"{str(got)[:40] if got is not None else None!r})")
     ver = d.get("version")
-    if isinstance(ver, bool) or ver not in VERSIONS:
-        raise BRDFFileError(path, f"unsupported {FORMAT} version {ver if isinstance(ver, int) else repr(ver)[:20]} (this reader knows versions "
-                                  f"{', '.join(map(str, VERSIONS))})")
+    if type(ver) is not int or ver not in VERSIONS:   # 3.0 or true is not the integer 3 or 1
+        raise BRDFFileError(path, f"key version: unsupported {FORMAT} version "
+                                  f"{ver if type(ver) is int else repr(ver)[:20]} (this reader knows the "
+                                  f"integers {', '.join(map(str, VERSIONS))})")
     budget = _Budget()
     label = {VERSION_PIECEWISE: "version-2 ", VERSION_3D: "version-3 "}.get(ver, "")
     try:
@@ -554,7 +627,10 @@ def from_dict(d: dict, path=None, certify: bool = True):
             raise F.Invalid("split", "missing (a version-2 file is piecewise)")
         model = _model(d, path, "", 0, budget, three_d=ver == VERSION_3D)
         if "fallback" in d:       # optional (flagged 2-D fits): checked whole, kept as written
-            table_from_record(d["fallback"], model, "fallback")
+            table = table_from_record(d["fallback"], model, "fallback")
+            if table.max(initial=0.0) > MAX_BRDF_VALUE:
+                raise F.Invalid("fallback.blocks", f"holds {float(table.max()):.3g} 1/sr, above {MAX_BRDF_VALUE:g} "
+                                                   "(fit.limits.MAX_BRDF_VALUE)")
             model.fallback = d["fallback"]
     except F.Invalid as e:
         raise BRDFFileError(path, f"invalid {FORMAT} {label}coefficient file: {e}") from None
