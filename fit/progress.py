@@ -48,17 +48,17 @@ class Deadline:
 
 class CLIProgress:
     """``progress(stage, done, total)`` of a command: on a terminal (``stream.isatty()``) one
-    tqdm bar per stage (shown after ``min_seconds``, removed when the stage ends); otherwise
+    tqdm bar per stage (shown after ``min_seconds``, default :data:`MIN_SECONDS`, removed when the stage ends); otherwise
     one line per stage on ``stream`` (default stderr), at the first step after which the
     stage's estimated length (elapsed / done x total) reaches ``min_seconds``: ``PROG: STAGE:
     done/total after T s, about E s left`` (or ``PROG: STAGE: done in T s`` when that step
     ends it). A stage estimated shorter prints nothing. ``enabled`` False: silent.
     :meth:`close` ends the current bar."""
 
-    def __init__(self, prog: str, enabled: bool = True, stream=None, min_seconds: float = MIN_SECONDS):
+    def __init__(self, prog: str, enabled: bool = True, stream=None, min_seconds: float | None = None):
         self.prog = prog
         self.enabled = enabled
-        self.min_seconds = float(min_seconds)
+        self.min_seconds = float(MIN_SECONDS if min_seconds is None else min_seconds)
         self.stream = stream if stream is not None else sys.stderr
         try:
             self.tty = bool(self.stream.isatty())
