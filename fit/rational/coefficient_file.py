@@ -503,6 +503,7 @@ def _model(d: dict, path, key: str, depth: int, budget: _Budget, three_d: bool =
 def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
     if depth >= MAX_SPLIT_DEPTH:
         raise F.Invalid(key, f"pieces nested more than {MAX_SPLIT_DEPTH} deep (fit.limits.MAX_SPLIT_DEPTH)")
+    name = F.name(d.get("name", ""), F.sub(key, "name"))    # before the pieces, which inherit it
     ks = F.sub(key, "split")
     split = F.obj(F.get(d, "split", key), ks)
     var = F.string(F.get(split, "variable", ks), F.sub(ks, "variable"), choices=[v.name for v in variables])
@@ -525,7 +526,7 @@ def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
         infos.append(dict(F.obj(pd.get("info", {}), F.sub(ki, "info"))))
     try:
         return PiecewiseRationalModel(
-            name=F.name(d.get("name", ""), F.sub(key, "name")), variables=variables,
+            name=name, variables=variables,
             split_variable=var, edges=[float(e) for e in edges], pieces=pieces, kind=kind,
             domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
             fit_info=dict(F.obj(d.get("fit", {}), F.sub(key, "fit"))), piece_info=infos,
