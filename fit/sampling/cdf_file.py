@@ -402,7 +402,7 @@ def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_param
     ``layout``: ``"pieces"`` (default; :mod:`fit.sampling.pieces`, monotone rational-quadratic
     pieces uniform in mu and u per table row, built from the table (no fitting), rows above the
     variance gate sampled with the table; ``pieces_kw`` tunes it
-    (:func:`fit.sampling.variance_gate.fit_pieces`); it has no time limit, 2-21 s per material,
+    (:func:`fit.sampling.variance_gate.fit_pieces`); 2-21 s per material on an idle machine,
     mostly its variance gate) or ``"global"`` (the paper's F(theta_v, mu), G(theta_v, theta_l, u),
     :func:`fit.sampling.global_layout.fit_global_layout`; ``theta_kw``, ``phi_kw``,
     ``refinements``, ``monotone`` apply to it).
