@@ -162,10 +162,10 @@ def _make_dirs(folder: Path, created: list, flag=None) -> None:
         created.append(d)
 
 
-#: What an ``OSError`` of a write means, in the words of the error line (others: its strerror).
-_PROBLEMS = {errno.ENOSPC: "no space left on device", errno.EDQUOT: "disk quota exceeded",
-             errno.EFBIG: "file too large for its file system", errno.EIO: "input/output error",
-             errno.EROFS: "read-only file system"}
+#: Words for an ``OSError`` of a write that carries no strerror of its own.
+_PROBLEMS = {errno.ENOSPC: "No space left on device", errno.EDQUOT: "Disk quota exceeded",
+             errno.EFBIG: "File too large for its file system", errno.EIO: "Input/output error",
+             errno.EROFS: "Read-only file system"}
 
 #: Errors that an ``OutputSet`` block turns into an :class:`OutputError` naming its last staged
 #: output (a writer that raises them while writing a staged file: matplotlib, NumPy, pandas).
