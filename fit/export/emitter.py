@@ -93,7 +93,8 @@ def leaves(model) -> list:
 
 def check_exportable(model) -> None:
     """ExportError unless ``model`` is a BRDF fit in (theta_h, theta_d) with 3 outputs and the
-    clamp policy, every leaf with finite coefficients."""
+    clamp policy, every leaf with finite coefficients, and a grazing cut-off record (if any)
+    that is a number."""
     names = [v.name for v in model.variables]
     if names == ["theta_h", "theta_d", "phi_d"]:
         raise ExportError("a version-3 fit of (theta_h, theta_d, phi_d): the exports evaluate fits in "
@@ -113,6 +114,10 @@ def check_exportable(model) -> None:
             for a in (f.num_coef, f.den_coef, f.domain):
                 if not np.all(np.isfinite(a)):
                     raise ExportError("a function has non-finite coefficients or domain")
+    try:
+        measured_domain(model)
+    except (TypeError, ValueError):
+        raise ExportError("fit.grazing_cutoff_deg is not a number") from None
 
 
 def flagged_summary(model) -> list:

@@ -25,6 +25,7 @@ from .emitter import (
     Emitter,
     ExportError,
     Language,
+    check_exportable,
     _digits,
     glsl_literal,
     policy_text,
@@ -53,6 +54,7 @@ def to_glsl(model, name: str | None = None, header: bool = True, precision: str 
     ``precision="double"``: the recipe in ``double`` (GLSL 4.00 / ``GL_ARB_gpu_shader_fp64``;
     ``exp`` in float, GLSL has no double ``exp``; likewise ``cos`` and ``acos`` of the measured
     domain): the statements of the C double build."""
+    check_exportable(model)
     fn = function_name(model, name)
     if precision == "float":
         lang, pre, conv = GLSL, [], ""
