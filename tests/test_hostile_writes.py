@@ -141,7 +141,8 @@ def full_disk(tmp_path):
         _fill(d)
         yield d
     finally:
-        subprocess.run(["umount", os.fspath(d)], capture_output=True, timeout=30)
+        if subprocess.run(["umount", os.fspath(d)], capture_output=True, timeout=30).returncode:
+            subprocess.run(["umount", "-l", os.fspath(d)], capture_output=True, timeout=30)
 
 
 # ----------------------------------------------------------------------------------------------
