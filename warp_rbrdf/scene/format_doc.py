@@ -64,8 +64,9 @@ Limits (warp_rbrdf.limits; a value outside is an error, never clamped): every nu
   factors in [1e-6, 1e6]; <= 64 materials, 4096 shapes, 64 directional lights, 2^22 triangles;
   scene file <= 1 MiB, meshes and maps <= 256 MiB, maps <= 2^24 texels, each finite, >= 0, <= 1e9.
 
-Paths: "${RBRDF_DATA}/x" or "data:x" resolve through $RBRDF_DATA (run from a source checkout:
-default ../shared/data next to it; installed: no default, set it); "pkg:x" is
+Paths: "${RBRDF_DATA}/x" or "data:x" resolve through $RBRDF_DATA (a relative one: against the
+current directory; run from a source checkout: default ../shared/data next to it; installed: no
+default, set it); "pkg:x" is
 warp_rbrdf/data/x; other relative paths are relative to the scene.
 """
 
