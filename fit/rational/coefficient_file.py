@@ -143,7 +143,12 @@ Reading (:func:`load`, :func:`from_dict`) trusts nothing in the file: every valu
 type, shape and range, the sizes are bounded (:mod:`fit.limits`: variables, exponents, terms,
 pieces, nesting, coefficients), a BRDF file must have the variables and outputs above, a
 ``min`` >= 0 and ``"outside": "clamp"``, and Q > 0 of every function is proved again
-(:func:`recertify`) whatever its ``q_certificate`` says. Every problem is one
+(:func:`recertify`) whatever its ``q_certificate`` says. A BRDF's values stay within
+:data:`fit.limits.MAX_BRDF_VALUE`: ``max``, ``min``, ``offset``, the step-7 ranges and the
+fallback table within it, and without ``max`` every function proven bounded on its box
+(:func:`fit.rational.value_bound.bound_ratio`). Integer fields are JSON integers (``3.0`` is
+refused), ``num_degrees`` / ``den_degrees`` / ``n_coefficients`` agree with the polynomials,
+and names hold no control characters (:func:`fit.jsonfields.name`). Every problem is one
 :class:`fit.errors.BRDFFileError` line naming the file and the key (docs/robustness.md).
 """
 from __future__ import annotations
@@ -546,8 +551,8 @@ def recertify(model, path=None, budget: _Budget | None = None) -> None:
     """Prove Q > 0 again on the box of every function of ``model`` (whatever its record says);
     :class:`BRDFFileError` naming the function when a denominator has a zero (a pole) or
     cannot be proven positive within :data:`fit.limits.MAX_CERTIFY_BOXES` sub-boxes and the
-    file's work budget :data:`fit.limits.MAX_CERTIFY_WORK`. A log-valued model without an upper
-    clamp must also have a bounded exponent (no overflow)."""
+    file's work budget :data:`fit.limits.MAX_CERTIFY_WORK`. A model without an upper clamp
+    (``max``) must also be proven bounded (:func:`_check_bounded`)."""
     budget = budget or _Budget()
     for key, leaf in _leaf_models(model):
         for c, f in enumerate(leaf.functions):
