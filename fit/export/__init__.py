@@ -14,7 +14,10 @@ the file's evaluation recipe, on the fit's measured domain when it records the g
 of its projection (:mod:`fit.rational.domain`, the renderer's rule: no extrapolation where the
 fit has no data; fits without a recorded cut-off export as before); the Mitsuba plugin's
 runtime does the same in Dr.Jit. The domain and clamp policy of every export is in its header
-and in docs/exports.md, with the measured agreement against the NumPy evaluation.
+and in docs/exports.md, with the measured agreement against the NumPy evaluation. Text of the
+fit (its name, source, tolerance record, channel names) reaches generated code only through
+:mod:`fit.export.escape` (quoted inert forms in comments and docstrings, ASCII literals,
+identifiers of letters and digits).
 """
 from __future__ import annotations
 
