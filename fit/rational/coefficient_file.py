@@ -501,8 +501,23 @@ def _model(d: dict, path, key: str, depth: int, budget: _Budget, three_d: bool =
         name=F.name(d.get("name", ""), F.sub(key, "name")), variables=variables,
         functions=functions, outputs=tuple(outputs), kind=kind, **value,
         domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
-        fit_info=dict(F.obj(d.get("fit", {}), F.sub(key, "fit"))), function_info=infos,
+        fit_info=_fit_info(d, key), function_info=infos,
         source=_source(d, F.sub(key, "source")))
+
+
+def _fit_info(d: dict, key: str) -> dict:
+    """The file's ``fit`` record (how the fit was made), with the fields that readers act on
+    checked: ``grazing_cutoff_deg`` (the projection's grazing cut-off, degrees, in [0, 90] or
+    null: :mod:`fit.rational.domain`, :mod:`fit.rational.fallback`) and ``tolerance`` (a
+    non-negative number or null, quoted by the exports). Other fields are kept as they are."""
+    info = dict(F.obj(d.get("fit", {}), F.sub(key, "fit")))
+    fkey = F.sub(key, "fit")
+    if info.get("grazing_cutoff_deg") is not None:
+        info["grazing_cutoff_deg"] = F.number(info["grazing_cutoff_deg"], F.sub(fkey, "grazing_cutoff_deg"),
+                                              lo=0.0, hi=90.0)
+    if info.get("tolerance") is not None and not isinstance(info["tolerance"], list):
+        info["tolerance"] = F.number(info["tolerance"], F.sub(fkey, "tolerance"), lo=0.0)
+    return info
 
 
 def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
@@ -534,7 +549,7 @@ def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
             name=name, variables=variables,
             split_variable=var, edges=[float(e) for e in edges], pieces=pieces, kind=kind,
             domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
-            fit_info=dict(F.obj(d.get("fit", {}), F.sub(key, "fit"))), piece_info=infos,
+            fit_info=_fit_info(d, key), piece_info=infos,
             source=_source(d, F.sub(key, "source")))
     except ValueError as e:
         raise F.Invalid(key or "pieces", str(e)) from None
