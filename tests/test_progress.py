@@ -152,8 +152,8 @@ def test_highs_banner_absent_unless_verbose(capfd, glossy, tmp_path, monkeypatch
 # --- --time-limit bounds the whole command -------------------------------------------------------
 def test_time_limit_bounds_the_pieces_layout():
     """A deadline reached during the variance gate sends the rows not yet checked to the table,
-    says so, and ends the call near the limit (each row here costs >= 0.3 s: the whole gate
-    would take >= 2.4 s)."""
+    says so, and ends the call near the limit (each row here costs >= 0.3 s, the table 0.3 s:
+    unbounded, the call would take >= 2.7 s)."""
     from fit.sampling.cdf_file import fit_cdf
 
     base = lambert((0.5, 0.5, 0.5))
@@ -163,14 +163,14 @@ def test_time_limit_bounds_the_pieces_layout():
         return base(wi, wo)
 
     t0 = time.perf_counter()
-    fit = fit_cdf(slow, table_params=dict(n_v=8, n_t=8, n_p=8), time_limit_s=0.8,
+    fit = fit_cdf(slow, table_params=dict(n_v=8, n_t=8, n_p=8), time_limit_s=1.2,
                   pieces_kw=dict(gate_samples=256, gate_recheck=None))
     dt = time.perf_counter() - t0
     rows = fit.fit_info["rows"]
     late = [r for r in rows if r.get("reason") == "time limit reached"]
     assert fit.fit_info["time_limit_reached"] and 0 < len(late) < 8
     assert "time limit reached" in fit.reason
-    assert dt < 0.8 + 1.0, dt
+    assert dt < 1.2 + 1.0, dt
 
 
 def test_cdf_time_limit_cli_says_so(capsys, merl, tmp_path):
