@@ -49,8 +49,9 @@ class Deadline:
 class CLIProgress:
     """``progress(stage, done, total)`` of a command: on a terminal (``stream.isatty()``) one
     tqdm bar per stage (shown after ``min_seconds``, default :data:`MIN_SECONDS`, removed when the stage ends); otherwise
-    one line per stage on ``stream`` (default stderr), at the first step after which the
-    stage's estimated length (elapsed / done x total) reaches ``min_seconds``: ``PROG: STAGE:
+    one line per stage on ``stream`` (default stderr), at the first step after at least
+    ``min_seconds / 2`` of the stage at which its estimated length (elapsed / done x total)
+    reaches ``min_seconds``: ``PROG: STAGE:
     done/total after T s, about E s left`` (or ``PROG: STAGE: done in T s`` when that step
     ends it). A stage estimated shorter prints nothing. ``enabled`` False: silent.
     :meth:`close` ends the current bar."""
@@ -88,8 +89,8 @@ class CLIProgress:
         if self._said or done <= 0:
             return
         dt = time.perf_counter() - self._t0
-        if dt / done * max(total, done) < self.min_seconds:
-            return
+        if dt < 0.5 * self.min_seconds or dt / done * max(total, done) < self.min_seconds:
+            return          # too early for an estimate, or a short stage
         self._said = True
         if done >= total:
             line = f"{self.prog}: {stage}: done in {dt:.1f} s"
@@ -111,3 +112,22 @@ def one_step(progress, stage: str):
     report(progress, stage, 0, 1)
     yield
     report(progress, stage, 1, 1)
+
+
+class StageBar:
+    """A tqdm-like counter (``update(n)``, ``close()``) that reports one stage of ``total`` steps
+    to ``progress(stage, done, total)``: for loops written against a tqdm bar (the renderer's
+    tiles)."""
+
+    def __init__(self, progress, stage: str, total: int):
+        self.progress, self.stage, self.total, self.n = progress, stage, int(total), 0
+        report(progress, stage, 0, self.total)
+
+    def update(self, n: int = 1) -> None:
+        self.n = min(self.n + int(n), self.total)
+        report(self.progress, self.stage, self.n, self.total)
+
+    def close(self) -> None:
+        close = getattr(self.progress, "close", None)
+        if close is not None:
+            close()

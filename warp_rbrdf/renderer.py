@@ -178,10 +178,10 @@ class Renderer:
                 wp.synchronize_device(dev)
 
         bar = None
-        if progress:
-            from tqdm import tqdm
+        if progress:     # a bar on a terminal, else one line with an estimate (fit.progress)
+            from fit.progress import CLIProgress, StageBar
 
-            bar = tqdm(total=len(tl), unit="tile", desc="render", leave=False)
+            bar = StageBar(CLIProgress("rbrdf render"), f"render ({len(tl)} tiles)", len(tl))
         t0 = time.perf_counter()
         try:
             integrator.launch_tiles(one, tl, threads if dev.is_cpu else 1, bar)
