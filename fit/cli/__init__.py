@@ -77,7 +77,9 @@ def main(argv=None) -> int:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
             try:
-                return int(args.func(args) or 0)
+                status = int(args.func(args) or 0)
+                sys.stdout.flush()   # a reader that has gone is seen here, not at the exit
+                return status
             finally:
                 args.progress.close()
     except RbrdfError as e:
