@@ -227,10 +227,12 @@ def run_block(block: Block, cwd: Path, env: dict, scratch: Path) -> str:
         argv = [sys.executable, str(runner), str(script), block.where]
     else:
         argv = ["bash", "-e", "-o", "pipefail", "-c", block.text]
+    t0 = time.monotonic()
     try:
         r = subprocess.run(argv, cwd=cwd, env=env, capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S)
     except subprocess.TimeoutExpired:
         pytest.fail(f"{block.where} ran past {BLOCK_TIMEOUT_S} s")
+    print(f"{block.where}: exit {r.returncode} after {time.monotonic() - t0:.1f} s")   # shown with -s
     output = r.stdout + r.stderr
     assert r.returncode == 0, f"{block.where} exited {r.returncode}:\n{block.text}\n{output[-4000:]}"
     return r.stdout if block.lang == "python" else output
