@@ -212,6 +212,13 @@ def test_external_scheduler_and_failure_isolation(materials, tmp_path):
     procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
                                addr.rsplit(":", 1)[1], "--no-dashboard"], **common)]
     try:
+        deadline = time.monotonic() + 60      # the batch says "connection refused" at once: wait for the port
+        while time.monotonic() < deadline and procs[0].poll() is None:
+            try:
+                socket.create_connection(("127.0.0.1", int(addr.rsplit(":", 1)[1])), timeout=1).close()
+                break
+            except OSError:
+                time.sleep(0.2)
         procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", addr, "--nthreads", "1",
                                        "--nworkers", "1", "--no-dashboard", "--death-timeout", "60"], **common))
         report = fit_database([db], tmp_path / "out", scheduler=addr, progress=False, connect_timeout_s=60,
