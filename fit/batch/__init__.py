@@ -1,5 +1,8 @@
 """Batch fitting of a whole database on dask.distributed (issue 24).
 
+* :mod:`fit.batch.inputs`: the measured files of INPUTS, each checked with ``stat`` before it is read;
+* :mod:`fit.batch.scheduler`: a ``--scheduler`` address, checked and reached within seconds;
+* :mod:`fit.batch.progress`: the progress events (a line per stage and per material);
 * :mod:`fit.batch.keys`: what an output is keyed by (input content hash + options);
 * :mod:`fit.batch.tasks`: one material as one task (BRDF fits, inverse CDFs, manifests);
 * :mod:`fit.batch.report`: the database report (CSV, Markdown, chart);

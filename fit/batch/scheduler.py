@@ -12,8 +12,8 @@ Connecting: a plain socket first reaches ``HOST:PORT`` within ``timeout_s`` (def
 the connection is refused (nothing listens there), no answer within the timeout (host down,
 unroutable or filtered), network or host unreachable; then dask's handshake must finish
 within the same timeout (a port that accepts and never answers as a scheduler is "no dask
-scheduler answered": ``distributed.Client`` alone would wait for it without end). Every failure is one :class:`fit.errors.FlagError` naming
-``--scheduler``, the address and the cause.
+scheduler answered": ``distributed.Client`` alone would wait for it without end). Every
+failure is one :class:`fit.errors.FlagError` naming ``--scheduler``, the address and the cause.
 """
 from __future__ import annotations
 
