@@ -208,6 +208,19 @@ def test_unknown_flag_names_the_subcommand_and_the_closest_flag(capsys):
     assert len(err.splitlines()) == 1
 
 
+def test_unknown_flag_named_before_the_error_it_causes(capsys):
+    """A mistyped required flag is named, not the "required" error it leads to; abbreviations
+    argparse accepts and negative numbers are not unknown flags."""
+    rc, out, err = run(capsys, ["brdf", "x.binary", "--output", "x.json"])
+    assert rc == 2 and out == ""
+    assert err == ("rbrdf-fit brdf: error: unrecognized argument --output (did you mean --out?); "
+                   "see 'rbrdf-fit brdf --help'\n")
+    rc, _, err = run(capsys, ["brdf", "x.binary", "--to", "0.05"])
+    assert rc == 2 and "the following arguments are required: --out" in err and "unrecognized" not in err
+    rc, _, err = run(capsys, ["cdf", "x.binary", "--n-v", "-3"])
+    assert rc == 2 and "unrecognized" not in err
+
+
 def test_unknown_render_flag(capsys):
     from warp_rbrdf.cli import main as rbrdf
 

@@ -22,15 +22,65 @@ class OneLineParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` (sub-parsers too) whose errors are one line on stderr, exit 2."""
 
     def error(self, message):
+        if getattr(self, "_argv", None) is not None:
+            # an unknown flag is what the user got wrong first (a mistyped --out makes --out
+            # "required"): name it rather than the consequence
+            chosen, tokens = self._chosen_from_argv(self._argv)
+            unknown = [t for t in tokens if chosen._unknown_flag(t)]
+            if unknown:
+                chosen.unrecognized(unknown)
         self.exit(2, f"{self.prog}: error: {display_text(message)} (see {self.prog} --help)\n")
 
     def parse_args(self, args=None, namespace=None):
         """As ``ArgumentParser.parse_args``, but arguments nobody recognised are reported by
-        the innermost sub-command that was chosen (:meth:`unrecognized`)."""
-        ns, extras = self.parse_known_args(args, namespace)
+        the innermost sub-command that was chosen (:meth:`unrecognized`), also when they
+        caused another error (a mistyped required flag)."""
+        import sys
+        argv = list(sys.argv[1:] if args is None else args)
+        parsers = self._all_parsers()
+        for q in parsers:
+            q._argv = argv
+        try:
+            ns, extras = self.parse_known_args(argv, namespace)
+        finally:
+            for q in parsers:
+                q._argv = None
         if extras:
             self._chosen(ns).unrecognized(extras)
         return ns
+
+    def _all_parsers(self) -> list:
+        """This parser and every sub-parser below it."""
+        out = [self]
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in set(action.choices.values()):
+                    if isinstance(sub, OneLineParser):
+                        out += sub._all_parsers()
+        return out
+
+    def _chosen_from_argv(self, argv) -> tuple:
+        """``(innermost sub-parser named in argv, the tokens after its name)``."""
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for i, tok in enumerate(argv):
+                    sub = action.choices.get(tok)
+                    if isinstance(sub, OneLineParser):
+                        return sub._chosen_from_argv(argv[i + 1:])
+        return self, list(argv)
+
+    def _unknown_flag(self, token: str) -> bool:
+        """``token`` looks like a flag (``-x``, ``--name[=v]``, not a negative number) that is
+        neither a flag of this parser nor an unambiguous abbreviation of one."""
+        if not token.startswith("-") or token == "-" or token == "--" or self._negative_number_matcher.match(token):
+            return False
+        word = token.split("=", 1)[0]
+        flags = {o for a in self._actions for o in a.option_strings}
+        if word in flags:
+            return False
+        if word.startswith("--") and self.allow_abbrev:
+            return sum(f.startswith(word) for f in flags) != 1
+        return not (len(word) > 2 and word[:2] in flags)      # -n5 style
 
     def _chosen(self, ns) -> "OneLineParser":
         """The innermost sub-parser that ``ns`` went through (``self`` when none)."""
@@ -49,7 +99,7 @@ class OneLineParser(argparse.ArgumentParser):
         word = words[0].split("=", 1)[0]
         close = [f for f in flags if f.startswith("--") and len(word) > 3 and
                  (f.startswith(word) or word.startswith(f))]
-        close = close or difflib.get_close_matches(word, flags, n=1, cutoff=0.6)
+        close = close or difflib.get_close_matches(word, flags, n=1, cutoff=0.7)
         hint = f" (did you mean {close[0]}?)" if close else ""
         what = "argument" if len(extras) == 1 or len(words) == 1 else "arguments"
         shown = word if what == "argument" else " ".join(w.split("=", 1)[0] for w in words)
