@@ -53,7 +53,7 @@ def _mitsuba_vs(path, func, n, seed=7):
     """(Mitsuba vs func, Mitsuba vs our reader) as Differences of f cos, or None without Mitsuba."""
     from fit.convert.summary import compare
     from fit.formats.rgl import read_rgl
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     if not MR.available():
         return None, None

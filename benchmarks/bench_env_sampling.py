@@ -1,6 +1,6 @@
 """Benchmark of environment-map importance sampling (issue 21 item 2).
 
-The reference scene of :mod:`warp_rbrdf.mitsuba_reference` (unit sphere, camera at (0, 0, 4),
+The reference scene of :mod:`lab.mitsuba_reference` (unit sphere, camera at (0, 0, 4),
 30 deg vertical fov, hidden map at scale 1, direct lighting) with a **Lambert** sphere and
 **environment-map sampling only** (sampler ``light``: one environment sample and its shadow ray
 per camera sample, no BSDF sample), under each map, rendered by
@@ -15,7 +15,7 @@ per camera sample, no BSDF sample), under each map, rendered by
   ``independent``.
 
 Error: relative RMSE of one render on the sphere's fully covered pixels
-(:func:`warp_rbrdf.mitsuba_reference.sphere_mask`), from seed pairs: for two independent unbiased
+(:func:`lab.mitsuba_reference.sphere_mask`), from seed pairs: for two independent unbiased
 renders X1, X2 of the same scene, E|X1 - X2|^2 = 2 sigma^2, so
 RMSE = sqrt(mean((X1 - X2)^2) / 2), divided by the mean of (X1 + X2) / 2 over the same pixels;
 the median over ``--pairs`` pairs (seeds 2k+1, 2k+2). No reference render is needed, and the
@@ -55,7 +55,7 @@ def rel_rmse_pair(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
 
 def light_only_scene(path, res: int, pattern: str):
     """The reference sphere scene (ours), Lambert, sampler ``light``."""
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     sc = MR.sphere_scene(("lambert", ALBEDO), path, 1, res, pattern=pattern)
     mat = dataclasses.replace(sc.materials["obj"], sampler="light")
@@ -73,7 +73,7 @@ def use_scheme(renderer, image, scheme: int):
 
 def ours(path, image, res, spps, pairs, schemes, patterns):
     from warp_rbrdf import lights
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
     from warp_rbrdf.renderer import Renderer
 
     mask = MR.sphere_mask(res)
@@ -99,7 +99,7 @@ def ours(path, image, res, spps, pairs, schemes, patterns):
 
 
 def mitsuba(path, res, spps, pairs, samplers):
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     mi = MR._mi()
     mask = MR.sphere_mask(res)
@@ -206,7 +206,7 @@ def main(argv=None):
 
     wp.config.quiet = True
     from warp_rbrdf import lights
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
     from warp_rbrdf.paths import require_data_root
 
     for s in schemes:

@@ -30,7 +30,7 @@ def warp_throughput(model, n: int = 1_000_000) -> float:
     """Evaluations per second of the rational material's Warp evaluation (one launch, one
     CPU thread, median of 5, host<->device copies included)."""
     from fit.formats.angles import spherical_to_direction
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 

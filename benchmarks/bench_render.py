@@ -16,7 +16,7 @@ the kernels are compiled and warmed up.
 Further comparisons, each interleaved render by render (the machine is shared: medians of
 alternating runs, ratios measured side by side):
 
-* ``--scene reference``: Mitsuba's reference sphere scene (:mod:`warp_rbrdf.mitsuba_reference`:
+* ``--scene reference``: Mitsuba's reference sphere scene (:mod:`lab.mitsuba_reference`:
   unit sphere, camera at (0, 0, 4), 30 deg, hidden environment map, direct lighting with one
   environment and one BSDF sample, power heuristic) with ``--material`` (an RGL file name of
   the shared data, or ``lambert``) under ``--envmap``;
@@ -24,7 +24,7 @@ alternating runs, ratios measured side by side):
   analytic_spheres=False)``) against the analytic spheres;
 * ``--mitsuba``: Mitsuba 3's samples/s on the reference scene (its ``direct`` integrator, all
   cores), in a worker process, variant ``llvm_ad_rgb`` when a libLLVM that Mitsuba renders with
-  is found (``DRJIT_LIBLLVM_PATH``, else :func:`warp_rbrdf.mitsuba_reference.find_libllvm`),
+  is found (``DRJIT_LIBLLVM_PATH``, else :func:`lab.mitsuba_reference.find_libllvm`),
   else ``scalar_rgb``;
 * ``--bvh``: the BVH of the scene's triangles with Warp's constructors and leaf sizes
   (1 thread, CPU time of the rendering thread).
@@ -171,7 +171,7 @@ DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
 def reference_scene(material, envmap, resolution, spp):
     """Mitsuba's reference sphere scene for our renderer (``material``: an RGL file name of the
     shared data or ``lambert``)."""
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     return MR.sphere_scene(_reference_material(material), DATA / "envmaps" / f"{envmap}.hdr", spp, resolution)
 
@@ -186,7 +186,7 @@ def mitsuba_worker(argv):
     """Worker process: ``--mitsuba-worker MATERIAL ENVMAP RESOLUTION SPP``; prints its variant,
     then renders once per line read (the line is the seed) and prints the seconds."""
     material, envmap, res, spp = argv[0], argv[1], int(argv[2]), int(argv[3])
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     llvm = MR.find_libllvm()      # one Mitsuba renders with (some LLVM versions abort on Dr.Jit's kernels)
     if llvm:

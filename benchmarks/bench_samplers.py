@@ -105,7 +105,7 @@ def main(argv=None):
     from fit.analytic import lambert
     from fit.formats import load_measured
     from fit.sampling.cdf_file import fit_cdf, load
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.paths import require_data_root
     from warp_rbrdf.scene import MaterialSpec

@@ -1,7 +1,7 @@
 """Benchmark (issue 21): time to 1 % error of our renderer against Mitsuba 3, per RGL material
 and environment map, on the reference scene of Mitsuba's ``measured`` plugin.
 
-Scene (:mod:`warp_rbrdf.mitsuba_reference`): unit sphere at the origin, camera at (0, 0, 4)
+Scene (:mod:`lab.mitsuba_reference`): unit sphere at the origin, camera at (0, 0, 4)
 looking at the origin, 30 deg vertical field of view, ``--resolution`` px square (256), the map
 at scale 1, hidden; direct lighting with one environment sample and one BSDF sample per camera
 sample, power heuristic. Mitsuba renders the ``.bsdf`` file with its ``measured`` plugin and
@@ -306,7 +306,7 @@ class Ours:
     and strategy ``sampler`` (through the public API: Scene -> Renderer -> render)."""
 
     def __init__(self, config: str, path: Path, envmap: Path, resolution: int, threads: int):
-        from warp_rbrdf import mitsuba_reference as MR
+        from lab import mitsuba_reference as MR
         from warp_rbrdf.renderer import Renderer
         from warp_rbrdf.scene import MaterialSpec
 
@@ -342,7 +342,7 @@ class Mitsuba:
     label = "mitsuba"
 
     def __init__(self, path: Path, envmap: Path, resolution: int, spp: int):
-        from warp_rbrdf import mitsuba_reference as MR
+        from lab import mitsuba_reference as MR
 
         self.MR = MR
         t0 = time.perf_counter()
@@ -743,7 +743,7 @@ def report(res: dict) -> str:
 def machine_info(variant: str) -> dict:
     import warp
 
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     proc = platform.processor() or platform.machine()
     try:
@@ -807,7 +807,7 @@ def main(argv=None):
     if hasattr(sys.stdout, "reconfigure"):
         sys.stdout.reconfigure(line_buffering=True)   # progress lines reach a log file as they come
 
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
     from warp_rbrdf.paths import require_data_root
 
     data = require_data_root("the RGL files and environment maps")

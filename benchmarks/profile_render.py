@@ -4,7 +4,7 @@ Warp functions it inlines (issue 21, "profile where the time goes").
     python -m benchmarks.profile_render [--material cc_ibiza_sunset_rgb] [--envmap rooitou_park_1k]
                                         [--spp 256] [--resolution 128] [--json FILE] [--lines]
 
-How: the reference sphere scene of :mod:`warp_rbrdf.mitsuba_reference` (the scene of
+How: the reference sphere scene of :mod:`lab.mitsuba_reference` (the scene of
 ``benchmarks/bench_vs_mitsuba.py``) is rendered on one thread under Linux ``perf record``. Its
 render kernel is compiled in a private Warp cache with the same flags as always plus DWARF line
 tables (``-debug-info-kind=line-tables-only``: the same machine code, the object is
@@ -190,7 +190,7 @@ def _child(a) -> None:
     wp.config.log_level = wp.LOG_WARNING
     wp.init()
     from warp_rbrdf import integrator
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.shipped_kernels import render_module_options
 

@@ -139,7 +139,7 @@ def representations(path, tol: float, fits3d: Path | None, allow_fit: bool) -> t
 
 def run(preset="full", out="results/limb", materials=None, maps=None, resolution=None, spp=None,
         fits3d=None, allow_fit=None, charts=True, quiet=False) -> dict:
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     allm = FI.rgl_materials()
     cfg = FI.study_config(PRESETS[preset], allm, materials=materials, maps=maps, resolution=resolution, spp=spp,

@@ -42,9 +42,9 @@ def data_file(relative: str) -> Path:
 
 
 def require_mitsuba():
-    """:mod:`warp_rbrdf.mitsuba_reference` when Mitsuba 3 is usable; skip (locally) or fail (CI:
+    """:mod:`lab.mitsuba_reference` when Mitsuba 3 is usable; skip (locally) or fail (CI:
     the ``test`` extra installs it) when it is not."""
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     if not MR.available():
         missing(f"Mitsuba 3 is not installed ({MR.INSTALL_HINT})")

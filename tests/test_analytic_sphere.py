@@ -11,7 +11,7 @@ from conftest import ROOT, data_file
 
 from warp_rbrdf import geometry as G
 from warp_rbrdf import load_scene, transforms
-from warp_rbrdf import testing as T
+from lab import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.runtime import init_warp
 from warp_rbrdf.scene import CameraSpec, IntegratorSpec, Scene, ShapeSpec
@@ -283,7 +283,7 @@ def test_white_furnace_analytic_sphere():
     sc.materials["m"] = T.lambert(albedo=1.0, sampler="mis")
     sc.integrator.hide_environment = True
     img, var = Renderer(sc).render(return_variance=True)
-    from warp_rbrdf.mitsuba_reference import sphere_mask
+    from lab.mitsuba_reference import sphere_mask
 
     on = sphere_mask(24)          # pixels wholly on the sphere (same camera as the reference scene)
     assert on.sum() > 100 and np.all(img[on] > 0)
@@ -318,7 +318,7 @@ def test_reference_sphere_render_equals_the_icosphere_render():
     """The Mitsuba reference scene (unit sphere, environment map, hidden) with a Lambert
     material, analytic vs the icosphere of mitsuba_reference.SPHERE_SUBDIVISIONS: channel means
     within 3 standard errors and per-pixel z-scores inside the silhouette noise-like."""
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     env = data_file("envmaps/studio_small_03_1k.hdr")
     sc = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), env, 64, 48)

@@ -5,9 +5,12 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from conftest import data_file
 
 from benchmarks import bench_fit_accuracy as B
+
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
 
 def test_metric_known_answers():

@@ -17,6 +17,8 @@ from benchmarks.bench_vs_mitsuba import (
     untrusted,
 )
 
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
+
 MASK = np.zeros((40, 40), bool)
 MASK[4:36, 4:36] = True
 

@@ -283,7 +283,7 @@ def warp_rational_samples(brdf, fit, n: int = 4000):
     """Renderer (plane, measured ``brdf`` with rational inverse CDFs ``fit``) and ``n`` Warp
     samples of its rational-derivative strategy: ``(renderer, theta_v, phi_v, xi, wi, alpha)``
     for view angles below 89 deg and xi away from 0 and 1."""
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 
@@ -303,7 +303,7 @@ def test_pieces_warp_equals_numpy_and_renders_agree(paint):
     directions and alphas; the standard estimator's weight 1 / pdf equals alpha; a render of
     the paint plane under a constant sky with the pieces sampler agrees with the tabulated
     sampler's within 4 sigma per channel of the image mean."""
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 

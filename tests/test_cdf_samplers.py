@@ -79,7 +79,7 @@ def test_broken_fits_trigger_fallback(lambert_fit):
     assert bad2.fallback and not bad2.verification["phi"]["q_certified"]
     # the renderer falls back explicitly (printed) to the tabulated sampler
     from warp_rbrdf import registry
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.materials.build import build_material_data
 
     spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler="rational")
@@ -129,7 +129,7 @@ def test_rows_layout_file_is_refused(lambert_fit, tmp_path):
 # ---- Warp ---------------------------------------------------------------------------------
 def test_warp_renders_agree(lambert_fit):
     """A Lambert plane under a constant sky: every pixel is the albedo, with every sampler."""
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
 
     _, fit = lambert_fit
@@ -144,7 +144,7 @@ def test_warp_renders_agree(lambert_fit):
 def test_warp_measured_tabulated_matches_reference(rgl):
     """A glossy RGL material under an uneven sky: tabulated / mis-tabulated agree with a
     high-spp cosine-MIS reference within noise."""
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 

@@ -290,7 +290,7 @@ def _hashes(r):
 
 
 def test_a_new_fit_compiles_nothing():
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 
@@ -333,7 +333,7 @@ def test_a_new_cdf_file_compiles_nothing(global_fits):
     the Warp samples equal the NumPy reference for each."""
     from fit.analytic import lambert
     from fit.sampling.cdf_file import fit_cdf
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.techniques import rational as technique
 

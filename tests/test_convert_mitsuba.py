@@ -24,7 +24,9 @@ from fit.convert.summary import compare
 from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import write_merl
 from fit.formats.rgl import read_rgl
-from warp_rbrdf import mitsuba_reference as MR
+from lab import mitsuba_reference as MR
+
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
 SIZES = {"n_theta_i": 12, "n_vndf": 64, "n_rgb": 48, "n_ndf": 64}
 

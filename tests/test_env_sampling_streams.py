@@ -9,7 +9,7 @@ import pytest
 
 from warp_rbrdf import registry
 from warp_rbrdf import sample_patterns as P
-from warp_rbrdf import testing as T
+from lab import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.runtime import init_warp
 
@@ -148,7 +148,7 @@ def test_stratified_render_has_the_same_mean_at_any_spp():
     difference (per-pixel sample variances: an upper bound for stratified samples). Keeping the
     first 32 cells in row order made the 32-spp image 4.3-4.5 % brighter (about 20 standard
     errors)."""
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     env = data_file("envmaps/rooitou_park_1k.hdr")
     r = Renderer(MR.sphere_scene(("lambert", 0.5), env, spp=8, resolution=32, pattern="stratified"))

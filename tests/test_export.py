@@ -477,7 +477,7 @@ def our_sphere():
 
 @pytest.mark.parametrize("sampling", ["cosine", "cdf"])
 def test_mitsuba_plugin_sphere_matches_our_render(our_sphere, small_cdf, sampling):
-    """The reference sphere (warp_rbrdf.mitsuba_reference) in Mitsuba with the plugin (direct
+    """The reference sphere (lab.mitsuba_reference) in Mitsuba with the plugin (direct
     integrator: environment + BSDF sample, power heuristic; the BSDF sample cosine or from the
     CDF tables) against our renderer's rational material with ``mis`` (environment + cosine)
     and the same fit: channel means within

@@ -130,7 +130,7 @@ def test_version_3_file_round_trip(synthetic_fit, tmp_path):
 
 
 def test_warp_eval_equals_numpy_eval(synthetic_fit):
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from conftest import data_file
 
-from warp_rbrdf.mitsuba_reference import sphere_scene
+from lab.mitsuba_reference import sphere_scene
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.scene import MaterialSpec
 

@@ -1,6 +1,6 @@
 """Parity with the reference implementation (issue 20): Mitsuba 3's ``measured`` plugin (the
 RGL-EPFL format authors' code) against our NumPy reader, our Warp ``rgl`` material and its
-``rgl`` sampler, and a rendered sphere (:mod:`warp_rbrdf.mitsuba_reference`).
+``rgl`` sampler, and a rendered sphere (:mod:`lab.mitsuba_reference`).
 
 Mitsuba comes with the ``reference`` extra (``pip install -e ".[reference]"``; the ``test``
 extra pulls it in). Locally the file skips without it; under CI (``CI=true``) a missing Mitsuba
@@ -27,7 +27,7 @@ Mitsuba 3.9.1 leaves ``m_reduction`` uninitialized for isotropic files, so depen
 heap at load time it rotates the pair by pi about the normal when ``si.wi.y > 0`` before the
 lookup (a symmetry of isotropic data; bit-identical results), or, when the garbage reads
 exactly 4, mirrors pairs (not a symmetry of measured data; it failed these tests once):
-:mod:`warp_rbrdf.mitsuba_reference` detects a mirroring plugin and loads it again
+:mod:`lab.mitsuba_reference` detects a mirroring plugin and loads it again
 (:class:`GarbageReduction` emulates both cases).
 
 Renders compare channel means within 4 standard errors (the per-pixel variances of both
@@ -46,7 +46,9 @@ import pytest
 from conftest import data_file, missing, require_mitsuba
 from fit.formats.angles import spherical_to_direction
 from fit.formats.rgl import read_rgl
-from warp_rbrdf import mitsuba_reference as MR
+from lab import mitsuba_reference as MR
+
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
 #: Every RGL material of the shared data folder (isotropic RGB).
 ALL_RGL = (
@@ -278,7 +280,7 @@ def test_negative_entries_clamped_copy(tmp_path, monkeypatch):
 @pytest.fixture(scope="module")
 def warp_rgl():
     """One renderer holding every shared RGL file as an ``rgl`` material (sampler mis-rgl)."""
-    from warp_rbrdf import testing as T
+    from lab import testing as T
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import IntegratorSpec, MaterialSpec, Scene, ShapeSpec
 

@@ -6,6 +6,8 @@ import pytest
 
 from benchmarks import profile_render as PR
 
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
+
 DISASSEMBLY = """
 0000000000000000 <kernel>:
        0:\tpush   %rbp

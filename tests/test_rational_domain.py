@@ -86,7 +86,7 @@ def satin():
     """The shipped satin fit as the renderer loads it, and one compiled renderer."""
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import Scene, ShapeSpec
-    from warp_rbrdf.testing import top_down_camera
+    from lab.testing import top_down_camera
 
     spec = MaterialSpec(name="satin", type="rational", file=PACKAGE_DATA / "satin_rosaline_rgb.json")
     sc = Scene(camera=top_down_camera(4), materials={"satin": spec},

@@ -110,7 +110,7 @@ def all_kinds():
     """One renderer holding one material of every kind (one compile)."""
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import Scene, ShapeSpec
-    from warp_rbrdf.testing import top_down_camera
+    from lab.testing import top_down_camera
 
     specs = _specs()
     assert set(specs) == set(registry.MATERIAL_NAMES), "add an instance of the new kind to _specs()"

@@ -64,7 +64,7 @@ class Case:
     pdf_sub = 24
 
     def __init__(self, name, evaluate, cdf, spec_kw, sampler="mis-rational"):
-        from warp_rbrdf import testing as T
+        from lab import testing as T
         from warp_rbrdf.renderer import Renderer
         from warp_rbrdf.scene import MaterialSpec
 

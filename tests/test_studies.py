@@ -26,6 +26,8 @@ import colour  # noqa: E402,F401  (the studies measure ΔE2000 with colour-scien
 from studies import metrics as M  # noqa: E402
 from studies import publish as P  # noqa: E402
 
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
+
 NAN = float("nan")
 
 
@@ -265,7 +267,7 @@ def test_fidelity_smoke(tmp_path):
     studio map, 32 px, 8 spp, no new fit): every representation paired with the rgl reference,
     finite metrics and floors, the targets checked, its files and the block's table."""
     from studies import fidelity
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     for m in fidelity.PRESETS["smoke"]["materials"]:
         data_file(f"rgl/{m}_rgb.bsdf")
@@ -1014,7 +1016,7 @@ def test_limb_regions_follow_the_sun(tmp_path):
     from studies import fidelity as FI
     from studies import limb
     from warp_rbrdf import lights
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
     from warp_rbrdf.image_io import write_exr
 
     H, W = 32, 64

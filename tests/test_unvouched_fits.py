@@ -140,7 +140,7 @@ def test_valid_fit_is_clamped_to_its_vouched_range_and_unchanged_at_its_data(fit
 def renderer(fitted):
     """One scene, one compile: the flagged fit from its file and the same coefficients vouched."""
     from warp_rbrdf.renderer import Renderer
-    from warp_rbrdf.testing import top_down_camera
+    from lab.testing import top_down_camera
 
     d, _ = fitted
     specs = {"flagged": MaterialSpec(name="flagged", type="rational", file=d / "spiky.json"),
@@ -350,7 +350,7 @@ def test_real_rgl_fit_with_a_tiny_degree_limit(tmp_path, monkeypatch):
 
     from fit.formats import load_measured
     from warp_rbrdf.renderer import Renderer
-    from warp_rbrdf.testing import top_down_camera
+    from lab.testing import top_down_camera
 
     src = data_file("rgl/paper_white_rgb.bsdf")
     monkeypatch.setenv("RBRDF_DATA", str(DATA))
@@ -437,7 +437,7 @@ def test_embedded_table_renders_without_the_source_as_the_source_does(fitted, tm
     from its embedded table, and its NumPy reference, packed data and Warp values equal those of
     the same file without the table next to its source measurement, bit for bit."""
     from warp_rbrdf.renderer import Renderer
-    from warp_rbrdf.testing import top_down_camera
+    from lab.testing import top_down_camera
 
     d, _ = fitted
     monkeypatch.setenv("RBRDF_DATA", str(tmp_path / "empty"))

@@ -7,7 +7,7 @@ import pytest
 
 from conftest import data_file
 from warp_rbrdf import lights, transforms
-from warp_rbrdf import testing as T
+from lab import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.runtime import init_warp
 

@@ -9,7 +9,7 @@ from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.formats.grid import phi_d_centres, theta_d_centres, theta_h_centres
 from fit.formats.measured import MeasuredBRDF
 from fit.projection.project import project
-from warp_rbrdf import testing as T
+from lab import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.scene import MaterialSpec
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warp_rbrdf import testing as T
+from lab import testing as T
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.scene import MaterialSpec
 

@@ -43,7 +43,7 @@ Negative ``rgb`` entries (measurement noise, down to about -0.04) are clamped to
 file is read (conventions.md). The reference loader (powitacq) clamps after interpolation;
 Mitsuba 3's ``measured`` plugin does not clamp at all (its eval goes negative on 7 of the 20
 shared files, down to -1.6 on chm_mint), so the parity tests give it clamped copies
-(:func:`warp_rbrdf.mitsuba_reference.clamped_copy`).
+(:func:`lab.mitsuba_reference.clamped_copy`).
 
 Incidence beyond the last measured angle: these files store a last ``theta_i`` slice at
 90 deg whose ``rgb`` is a copy of the previous (last measured) slice, e.g. 78.5 deg

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec
+from warp_rbrdf.scene import CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec
 
 
 def top_down_camera(resolution=16, height=1.0, fov=40.0) -> CameraSpec:
@@ -47,7 +47,7 @@ def directional(to_light, irradiance=1.0) -> LightSpec:
 
 def project_to_film(camera: CameraSpec, points) -> np.ndarray:
     """Film coordinates (px, py) of world points (inverse of the camera convention)."""
-    from .camera import camera_frame
+    from warp_rbrdf.camera import camera_frame
 
     o, r, u, f = camera_frame(camera)
     W, H = camera.resolution

@@ -1,5 +1,5 @@
 """Mitsuba 3 as the reference implementation of the RGL-EPFL ``.bsdf`` format and of a reference
-scene (issue 20, parity with the reference implementation).
+scene (parity with the reference implementation).
 
 Mitsuba 3's ``measured`` plugin (``src/bsdfs/measured.cpp``) is the format authors' own code.
 This module wraps it, in the ``scalar_rgb`` variant (no LLVM or CUDA needed), for the parity
@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RenderError
+from warp_rbrdf.errors import RenderError
 
 #: The Mitsuba variant used (CPU, no LLVM / CUDA needed).
 VARIANT = "scalar_rgb"
@@ -379,7 +379,7 @@ def sphere_scene(material, envmap, spp: int, resolution: int = 256, seed: int = 
     ``lambert`` type with ``mis`` (environment + cosine sample). ``pattern`` defaults to
     independent samples as Mitsuba's sampler (so the per-pixel variance estimates the error of
     the mean). The material is named ``"obj"``."""
-    from .scene import CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec
+    from warp_rbrdf.scene import CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec
 
     kind, m = _material_kind(material)
     if kind == "lambert":

@@ -1,0 +1,13 @@
+"""Lab code: what serves the tests, the studies and the benchmarks, not the users.
+
+* :mod:`lab.mitsuba_reference`: Mitsuba 3 as the reference implementation (the ``measured``
+  plugin's eval / pdf / sample, the reference sphere scene, Mitsuba's LLVM variant for timed
+  renders); needs the optional extra ``reference``.
+* :mod:`lab.testing`: small in-memory scenes for tests and examples.
+
+Reference harnesses, test helpers and superseded variants live here. The package runs from a
+checkout (``pythonpath = ["."]`` for pytest, ``python -m studies.<name>`` / ``python -m
+benchmarks.<name>`` from the repository root) and is not in the wheel (``pyproject.toml`` packages
+only ``fit*`` and ``warp_rbrdf*``). ``fit/`` and ``warp_rbrdf/`` never import it
+(``tests/test_core_lab.py`` checks both).
+"""
