@@ -22,7 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 from fit.formats import load_measured  # noqa: E402
 from fit.formats.measured import MeasuredBRDF  # noqa: E402
 from fit.formats.merl import write_merl  # noqa: E402
-from fit.projection.project import STATISTICS, project  # noqa: E402
+from fit.projection.project import project  # noqa: E402
+from fit.projection.projected import STATISTICS  # noqa: E402
 
 
 def main(argv=None) -> int:

@@ -11,9 +11,10 @@ The public API below keeps ``import fit`` cheap: ``fit_brdf``, ``fit_cdf`` and `
 """
 from .errors import BRDFFileError, FlagError, OutputError, RbrdfError
 from .formats import load_measured
-from .formats.measured import MeasuredBRDF, ProjectedBRDF
+from .formats.measured import MeasuredBRDF
 from .lazy import lazy_attributes
 from .projection.project import project
+from .projection.projected import ProjectedBRDF
 from .rational.coefficient_file import load as load_coefficients
 
 __all__ = ["BRDFFileError", "FlagError", "OutputError", "RbrdfError", "MeasuredBRDF", "ProjectedBRDF", "load_measured", "project",

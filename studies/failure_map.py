@@ -241,7 +241,7 @@ def run(preset="full", out="results/failure_map", samplers=None, charts=True, qu
             other[f"projection_de_{g}"] = projection_error(g, "studio", "ibiza", res, spp)
             bar.update(1)
     if "fit" in cases:
-        from fit.formats.measured import ProjectedBRDF  # noqa: F401
+        from fit.projection.projected import ProjectedBRDF  # noqa: F401
         from fit.projection.project import project
 
         mirror = load_mirror(out)

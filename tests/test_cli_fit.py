@@ -7,7 +7,8 @@ import pytest
 
 from fit.analytic import glossy_lobe, lambert
 from fit.cli import main
-from fit.formats.measured import MeasuredBRDF, ProjectedBRDF
+from fit.formats.measured import MeasuredBRDF
+from fit.projection.projected import ProjectedBRDF
 from fit.formats.merl import write_merl
 
 

@@ -341,7 +341,7 @@ def test_successful_runs_replace_whole_files(capsys, merl, cdf_json, work):
     os.chmod(work / "old.npz", 0o640)
     rc, _, err = run(capsys, ["project", merl, "--out", work / "old.npz"])
     assert rc == 0 and err == ""
-    from fit.formats.measured import ProjectedBRDF
+    from fit.projection.projected import ProjectedBRDF
 
     assert ProjectedBRDF.load(work / "old.npz").value.shape == (90, 90, 3)
     assert (os.stat(work / "old.npz").st_mode & 0o777) == 0o640

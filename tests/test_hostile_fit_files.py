@@ -33,7 +33,7 @@ from hostile import (
 
 from fit.errors import BRDFFileError
 from fit.formats import load_measured
-from fit.formats.measured import ProjectedBRDF
+from fit.projection.projected import ProjectedBRDF
 from fit.formats.merl import MERL_FILE_BYTES, MERL_SHAPE, read_merl
 from fit.formats.rgl import read_rgl
 from fit.formats.tensor_file import read_tensor_file, write_tensor_file

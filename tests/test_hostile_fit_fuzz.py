@@ -148,7 +148,7 @@ def npz_bytes(tmp_path_factory):
 
 
 def test_fuzz_npz(tmp_path, npz_bytes):
-    from fit.formats.measured import ProjectedBRDF
+    from fit.projection.projected import ProjectedBRDF
 
     def check(p):
         full = p.count > 0

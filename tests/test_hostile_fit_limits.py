@@ -53,7 +53,7 @@ def test_named_pipes_are_refused_at_once(tmp_path):
     code = f"""
         from fit.errors import BRDFFileError
         from fit.formats import load_measured
-        from fit.formats.measured import ProjectedBRDF
+        from fit.projection.projected import ProjectedBRDF
         from fit.rational.coefficient_file import load as load_rational
         from fit.sampling.cdf_file import load as load_cdf
         for load, path in ((load_measured, {str(pipes['.binary'])!r}), (load_measured, {str(pipes['.bsdf'])!r}),
@@ -136,7 +136,7 @@ def test_memory_bombs_under_a_2_5_gb_address_space(bombs, tmp_path):
         resource.setrlimit(resource.RLIMIT_AS, (2_500_000_000, 2_500_000_000))
         from fit.cli import main
         from fit.errors import BRDFFileError
-        from fit.formats.measured import ProjectedBRDF
+        from fit.projection.projected import ProjectedBRDF
         from fit.rational.coefficient_file import load
         results = []
         for argv in {[[str(a) for a in r] for r in runs]!r}:

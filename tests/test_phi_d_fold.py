@@ -18,10 +18,11 @@ from fit.formats.grid import (
     theta_d_centres,
     theta_h_centres,
 )
-from fit.formats.measured import MeasuredBRDF, ProjectedBRDF
+from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import write_merl
 from fit.formats.rgl import read_rgl
 from fit.projection.project import below_horizon_counts, grazing_mask, project
+from fit.projection.projected import ProjectedBRDF
 from fit.rational.brdf_fit import channel_data, project_for_fit
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])

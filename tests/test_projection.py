@@ -5,9 +5,10 @@ import pytest
 from fit.analytic import glossy_lobe, lambert
 from fit.formats.angles import half_diff_to_directions
 from fit.formats.grid import MERL_SHAPE, phi_d_centres, theta_d_centres, theta_h_centres
-from fit.formats.measured import MeasuredBRDF, ProjectedBRDF
+from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import read_merl, write_merl
-from fit.projection.project import STATISTICS, below_horizon_counts, grazing_mask, project
+from fit.projection.project import below_horizon_counts, grazing_mask, project
+from fit.projection.projected import STATISTICS, ProjectedBRDF
 
 
 def test_lambert_clusters_equal_albedo_over_pi(tmp_path):

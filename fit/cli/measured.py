@@ -11,7 +11,8 @@ from ..formats import load_measured
 from ..outputs import OutputSet, check_output_dir, check_output_file
 from ..projection.albedo import directional_albedo
 from ..projection.plots import plot_projection
-from ..projection.project import GRAZING_ANGLES, STATISTICS, project
+from ..projection.project import project
+from ..projection.projected import GRAZING_ANGLES, STATISTICS
 from ..progress import one_step
 from .flags import add_run_flags, number
 

@@ -115,6 +115,12 @@ def half_diff_to_directions(theta_h, phi_h, theta_d, phi_d):
     return wi, wo
 
 
+def above_horizon(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """True where both directions are strictly above the tangent plane (z > 0); directions
+    ``(..., 3)``, result ``(...)`` bool."""
+    return (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+
+
 def cos_theta_i_o(theta_h, theta_d, phi_d):
     """Closed-form ``(cos theta_i, cos theta_o)`` for given half/difference angles.
 

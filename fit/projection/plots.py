@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..formats.measured import ProjectedBRDF
+from .projected import ProjectedBRDF
 from ..outputs import save_figure
 
 GRAZING_DEG = 80.0

@@ -18,10 +18,8 @@ import numpy as np
 
 from ..formats.angles import cos_theta_i_o
 from ..formats.grid import N_PHI_D, grid_shape, phi_d_centres, theta_d_centres, theta_h_centres
-from ..formats.measured import MeasuredBRDF, ProjectedBRDF
-
-STATISTICS = ("median", "mean", "geometric", "harmonic", "rms")
-GRAZING_ANGLES = ("theta_io", "theta_d")
+from ..formats.measured import MeasuredBRDF
+from .projected import GRAZING_ANGLES, STATISTICS, ProjectedBRDF
 
 
 def below_horizon_counts(n_phi_d: int = N_PHI_D) -> np.ndarray:

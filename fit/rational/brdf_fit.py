@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..formats.colour import LUMINANCE
-from ..formats.measured import ProjectedBRDF
+from ..projection.projected import ProjectedBRDF
 from ..projection.albedo import directional_albedo
 from ..projection.project import project
 from ..progress import report

@@ -1,4 +1,4 @@
-"""``projected``: the 2-D (theta_h, theta_d) table of :class:`fit.formats.measured.ProjectedBRDF`
+"""``projected``: the 2-D (theta_h, theta_d) table of :class:`fit.projection.projected.ProjectedBRDF`
 (an ``.npz`` from ``rbrdf-fit project``, or a measured file projected at load with ``statistic``),
 nearest cluster; empty clusters give 0; ``scale`` multiplies it."""
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
-from fit.formats.measured import ProjectedBRDF
+from fit.projection.projected import ProjectedBRDF
 from fit.projection.project import project
 
 from ..errors import SceneError
