@@ -669,7 +669,7 @@ def report(res: dict) -> str:
               if "max_ratio_case" in s else "")
            + (f"; over the trusted cases only: median {_f(s['median_ratio_trusted'])}, max "
               f"{_f(s['max_ratio_trusted'])}" if s.get("unresolved") else "") + "."), "",
-          "Targets of the issue (for the run after the speed work): "
+          "Targets: "
           + "; ".join(f"{k}: {'met' if v else 'not met'}" for k, v in s["targets"].items()) + ".", ""]
     rows = []
     for c in cases:
