@@ -16,7 +16,8 @@ from fit.cli import main
 from fit.convert import convert
 from fit.convert.merl_writer import tabulate_merl
 from fit.convert.rgl_writer import build_rgl
-from fit.convert.sources import Source, load_source
+from fit.convert.source import Source
+from fit.convert.sources import load_source
 from fit.convert.summary import compare, random_pairs
 from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import read_merl, write_merl

@@ -32,14 +32,14 @@ from fit.formats.grid import (
 from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import read_merl, write_merl
 from fit.rational.brdf_fit import fit_brdf, project_for_fit
-from fit.rational.brdf_model import (
+from fit.rational.coefficient_file import load as load_coefficients
+from fit.rational.coefficient_file import save as save_coefficients
+from fit.rational.coefficient_file import to_dict
+from fit.rational.flagged import (
     describe_regions,
     flagged_regions,
     region_measured_range,
 )
-from fit.rational.coefficient_file import load as load_coefficients
-from fit.rational.coefficient_file import save as save_coefficients
-from fit.rational.coefficient_file import to_dict
 from warp_rbrdf.errors import SceneError
 from warp_rbrdf.materials import rational
 from warp_rbrdf.materials.build import build_material_data

@@ -30,7 +30,7 @@ from ..limits import (
     MIN_TOLERANCE,
 )
 from ..rational.brdf_fit import INTERVALS
-from ..rational.brdf_model import THETA_D_MAX_DEG
+from ..rational.domain import THETA_D_MAX_DEG
 from .flags import core_angle, integer, number
 
 MAX_TOLERANCES = 16

@@ -26,7 +26,7 @@ from ..limits import (
 from ..outputs import OutputSet, check_output_file
 from ..progress import one_step
 from ..rational.brdf_fit import INTERVALS, fit_brdf
-from ..rational.brdf_model import THETA_D_MAX_DEG
+from ..rational.domain import THETA_D_MAX_DEG
 from ..rational.coefficient_file import save
 from .flags import add_run_flags, core_angle, integer, number
 

@@ -1,8 +1,9 @@
-"""Conversions between the BRDF formats the project reads and writes (issue 23):
+"""Conversions between the BRDF formats the project reads and writes:
 :func:`convert` (``rbrdf-fit convert IN OUT``), chosen by the files' extensions.
 
-Inputs (:mod:`fit.convert.sources`): MERL-MIT ``.binary``, RGL-EPFL ``.bsdf``, a rational fit
-``.json`` (:mod:`fit.convert.dense`). Outputs:
+Inputs (:mod:`fit.convert.sources`, each read as a :class:`fit.convert.source.Source`):
+MERL-MIT ``.binary``, RGL-EPFL ``.bsdf``, a rational fit ``.json`` (:mod:`fit.convert.dense`).
+Outputs:
 
 * ``.binary``: the exact MERL layout (:mod:`fit.convert.merl_writer`: bin centres, invalid bins
   stored negative, the phi_d fold of a non-reciprocal source measured and reported);
@@ -33,7 +34,8 @@ from .rgl_writer import (
     DEFAULT_N_VNDF,
     DEFAULT_POWER_ITERATIONS,
 )
-from .sources import SOURCE_SUFFIXES, Source, load_source
+from .source import Source
+from .sources import SOURCE_SUFFIXES, load_source
 from .summary import DEFAULT_MAX_THETA_DEG, DEFAULT_PAIRS, ConversionSummary, compare
 
 #: Output extensions and their formats.

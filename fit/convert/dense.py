@@ -22,13 +22,13 @@ from functools import partial
 from pathlib import Path
 
 from ..errors import BRDFFileError
-from ..rational.brdf_model import describe_regions, flagged_regions
 from ..rational.coefficient_file import load
 from ..rational.domain import measured_domain
 from ..rational.fallback import table_from_record
+from ..rational.flagged import describe_regions, flagged_regions
 from ..rational.variables3d import evaluate_directions, is_3d
 from ..rational.vouched import evaluate_at_angles, values_at_angles
-from .sources import Source
+from .source import Source
 
 
 def rational_source(path) -> Source:

@@ -1,4 +1,4 @@
-"""Any :class:`fit.convert.sources.Source` as a MERL-MIT table (written in the exact layout by
+"""Any :class:`fit.convert.source.Source` as a MERL-MIT table (written in the exact layout by
 :func:`fit.formats.merl.write_merl`).
 
 The table holds the source at the 90 x 90 x 180 bin centres of the MERL grid
@@ -32,7 +32,7 @@ from ..formats.grid import (
     theta_h_centres,
 )
 from ..formats.measured import MeasuredBRDF, check_values
-from .sources import Source
+from .source import Source
 
 #: Default margin above the horizon inside which bins are marked "no sample" (degrees).
 HORIZON_MARGIN_DEG = 1.0

@@ -1,4 +1,4 @@
-"""Any :class:`fit.convert.sources.Source` as an RGL-EPFL ``.bsdf`` tensor file: the format's
+"""Any :class:`fit.convert.source.Source` as an RGL-EPFL ``.bsdf`` tensor file: the format's
 adaptive parameterization (Dupuy & Jakob 2018, "An adaptive parameterization for efficient
 material acquisition and rendering"), built from the source's values so that Mitsuba 3's
 ``measured`` plugin and :mod:`fit.formats.rgl` read and evaluate it, and, written spectral
@@ -73,7 +73,7 @@ from ..formats.colour import LUMINANCE
 from ..formats.rgl import GRAZING_Z, _lift
 from ..formats.rgl_interpolants import Bilinear, VNDFWarp, interval
 from ..limits import MAX_RGL_ELEMENTS, MAX_RGL_FIELD_ABS, MIN_RGL_SIGMA
-from .sources import Source
+from .source import Source
 
 #: Default sizes: more theta_i slices (8) and rgb nodes (32 x 32) than the RGL-EPFL files,
 #: their VNDF and NDF sizes.

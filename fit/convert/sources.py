@@ -1,4 +1,5 @@
-"""The inputs of a conversion: any BRDF the project reads, as one evaluable :class:`Source`.
+"""The inputs of a conversion: any BRDF file the project reads, as one evaluable
+:class:`fit.convert.source.Source`, chosen by its extension.
 
 * ``.binary``: a MERL-MIT file (:func:`fit.formats.merl.read_merl`), evaluated trilinearly
   between its bin centres (``MeasuredBRDF.evaluate``'s default), reciprocal (its 180 phi_d bins
@@ -9,49 +10,16 @@
 * ``.json``: an ``rbrdf-rational`` fit (:mod:`fit.convert.dense`), evaluated as the renderer
   shows it (measured domain, projected table where flagged): a 2-D fit is a function of
   (theta_h, theta_d) only, hence reciprocal; a 3-D fit keeps the roles (not reciprocal).
-
-Every source evaluates ``rho(wi_light, wo_view)`` in 1/sr, RGB, *without* the cosine, for
-local unit directions of shape ``(..., 3)`` (z = normal), 0 where either direction is at or
-below the tangent plane (conventions.md).
 """
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import BRDFFileError
+from .source import Source
 
 #: Input extensions and what they hold.
 SOURCE_SUFFIXES = {".binary": "MERL-MIT", ".bsdf": "RGL-EPFL", ".json": "rbrdf-rational fit"}
-
-
-@dataclass
-class Source:
-    """A BRDF to convert.
-
-    Attributes
-    ----------
-    kind : str  ``"merl"``, ``"rgl"`` or ``"rational"``
-    name, path, description : str
-    evaluate : callable ``(wi, wo) -> (..., 3)``  rho in 1/sr (light ``wi``, view ``wo``)
-    reciprocal : bool  ``evaluate(wi, wo) == evaluate(wo, wi)`` by construction
-    obj : the object read (``MeasuredBRDF``, ``RGLBRDF`` or a rational model)
-    notes : list of str  what the reader did to the data (clamps, domain), for the summary
-    evaluate_angles : callable ``(theta_h, theta_d) -> (..., 3)`` or None  for a source that
-        is a function of the Rusinkiewicz angles (radians) alone (a rational fit): the same
-        rho above the horizon, so that a table is tabulated on 90 x 90 angles, not 1.5 M pairs
-    """
-
-    kind: str
-    name: str
-    path: str
-    evaluate: Callable
-    reciprocal: bool
-    obj: object = None
-    description: str = ""
-    notes: list = field(default_factory=list)
-    evaluate_angles: Callable | None = None
 
 
 def load_source(path) -> Source:

@@ -60,14 +60,9 @@ from ..projection.projected import ProjectedBRDF
 from ..projection.albedo import directional_albedo
 from ..projection.project import project
 from ..progress import report
-from .brdf_model import (
-    CHANNELS,
-    GRAZING_CUTOFF_DEG,
-    THETA_D_MAX_DEG,
-    brdf_model,
-    split_core,
-)
+from .brdf_model import brdf_model, split_core
 from .coefficient_file import save as save_model
+from .domain import CHANNELS, GRAZING_CUTOFF_DEG, THETA_D_MAX_DEG
 from .fitter import (
     FitResult,
     IntervalRationalFitter,

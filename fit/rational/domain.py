@@ -1,18 +1,34 @@
 """The measured domain of a 2-D rational fit: where the projection it was made from has data.
 
 A 2-D fit of (theta_h, theta_d) made from a median projection with a grazing cut-off c (the
-file's ``fit.grazing_cutoff_deg``, :data:`fit.rational.brdf_model.GRAZING_CUTOFF_DEG` = 79 deg)
+file's ``fit.grazing_cutoff_deg``, :data:`GRAZING_CUTOFF_DEG` = 79 deg by default)
 has data only where ``cos theta_h cos theta_d >= cos c``; beyond it the fit extrapolates
 freely. Every evaluator of such a fit moves its angles onto that domain before the recipe of
 :mod:`fit.rational.coefficient_file`: the renderer (:mod:`warp_rbrdf.materials.rational`: its
 Warp kernel and NumPy reference) and the exports (:mod:`fit.export`: the same rule emitted in
 GLSL, HLSL, C and the Mitsuba plugin's Dr.Jit) and the table conversions (:mod:`fit.convert.dense`,
-through :mod:`fit.rational.vouched`). This module is the one definition of the rule;
-it needs only NumPy.
+through :mod:`fit.rational.vouched`). This module is the one definition of the rule and of
+the fitted box; it needs only NumPy.
+
+Constants of the fitted domain (see :mod:`fit.rational.brdf_fit` for the policy): samples with
+max(theta_i, theta_o) above :data:`GRAZING_CUTOFF_DEG` are dropped before the median
+projection; the box is theta_h in [0, :data:`THETA_H_MAX`] (radians) x theta_d in
+[0, :data:`THETA_D_MAX_DEG`] (degrees); outputs :data:`CHANNELS`.
 """
 from __future__ import annotations
 
 import numpy as np
+
+from ..formats.angles import HALF_PI
+
+#: Default grazing cut-off (degrees) of a 2-D fit's median projection.
+GRAZING_CUTOFF_DEG = 79.0
+#: Largest theta_d (degrees) of a 2-D fit's box; beyond it the value at the cut-off.
+THETA_D_MAX_DEG = 78.5
+#: Largest theta_h (radians) of a 2-D fit's box.
+THETA_H_MAX = HALF_PI
+#: Output channels of a BRDF fit.
+CHANNELS = ("R", "G", "B")
 
 
 def measured_domain(model):

@@ -1,7 +1,7 @@
 """The projected fallback table of a flagged 2-D BRDF fit, and its record in the coefficient file.
 
 A 2-D (theta_h, theta_d) fit whose record flags a channel of a piece as not within its
-intervals (:func:`fit.rational.brdf_model.flagged_regions`) is not rendered from its function
+intervals (:func:`fit.rational.flagged.flagged_regions`) is not rendered from its function
 there: the renderer (:mod:`warp_rbrdf.materials.rational`) shows the fit's own median projection
 instead, :func:`fallback_table` of :func:`fit.rational.brdf_fit.project_for_fit` with the fit's
 grazing cut-off (empty clusters filled from the nearest measured cluster), clamped to the
@@ -43,7 +43,8 @@ from ..formats.grid import (
     theta_h_centres,
     theta_h_index,
 )
-from .brdf_model import GRAZING_CUTOFF_DEG, flagged_regions
+from .domain import GRAZING_CUTOFF_DEG
+from .flagged import flagged_regions
 from .model import measured_range
 
 KEY = "fallback"

@@ -9,7 +9,7 @@ Two rules on top of the coefficient file's recipe (:mod:`fit.rational.coefficien
    is evaluated with its angles moved onto the domain its projection has data in; beyond it the
    fitted function extrapolates freely (up to thousands of 1/sr where the measurement is below
    1).
-2. **Flagged pieces** (:func:`fit.rational.brdf_model.flagged_regions`): every channel a piece
+2. **Flagged pieces** (:func:`fit.rational.flagged.flagged_regions`): every channel a piece
    does not vouch for is the fallback table's nearest (theta_h, theta_d) cluster
    (:mod:`fit.rational.fallback`: the median projection of the source measurement, ``(90, 90,
    3)`` in 1/sr) at the inputs clamped onto the piece's box, clamped to the piece's measured
@@ -24,8 +24,8 @@ import numpy as np
 
 from ..formats.angles import directions_to_half_diff
 from ..formats.grid import N_THETA_D, theta_d_index, theta_h_index
-from .brdf_model import flagged_regions
 from .domain import onto_measured_domain
+from .flagged import flagged_regions
 from .model import measured_range
 
 

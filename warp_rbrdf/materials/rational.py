@@ -27,7 +27,7 @@ the root of the packed fit; :func:`measured_domain`), as the fits already do bey
 theta_d. Fits that record no cut-off, and version-3 fits, are evaluated by the recipe alone.
 
 **What the fit does not vouch for.** A piece whose record flags a channel as not within its
-intervals (:func:`fit.rational.brdf_model.flagged_regions`: the core when no core was met, a
+intervals (:func:`fit.rational.flagged.flagged_regions`: the core when no core was met, a
 best-effort grazing band, a search stopped at its degree limit) is never rendered from its
 fitted function. With the scene key ``unvouched = "projected"`` (default) that channel of that
 piece is taken from the ``projected`` table of the measurement the fit was made from (the
@@ -58,7 +58,7 @@ from fit.formats.grid import N_THETA_D
 from fit.errors import BRDFFileError
 from fit.formats import check_measured_file
 from fit.inputs import sha256_regular
-from fit.rational.brdf_model import (
+from fit.rational.flagged import (
     describe_regions,
     flagged_regions,
     region_measured_range,
