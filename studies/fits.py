@@ -37,16 +37,17 @@ from pathlib import Path
 
 import numpy as np
 
+from fit.rational.settings import BRDFFitSettings
 from studies import common as C
 
 FIT_DIR = C.ROOT / "results" / "fits"
 
-#: The options ``rbrdf-fit brdf`` passes to :func:`fit.rational.brdf_fit.fit_brdf` by default
-#: (``fit/cli/brdf.py``: --intervals, --core-theta-d, --band-intervals, --theta-h, --value,
-#: --max-degree, --max-den-degree, --floor-frac), as fit_brdf's keyword arguments.
-FIT_OPTIONS = dict(intervals="tol", core_theta_d_deg="auto", band_intervals="tol",
-                   theta_h_transform="sqrt", value_transform="log", max_degree=12, max_den_degree=6,
-                   floor_frac=1.0)
+#: The settings the studies fit with: :class:`fit.rational.settings.BRDFFitSettings`'s
+#: defaults, which are ``rbrdf-fit brdf``'s (``fit/cli/brdf.py`` reads them from there); the
+#: tolerance is the study's.
+FIT_SETTINGS = BRDFFitSettings()
+#: :data:`FIT_SETTINGS` without the tolerance, as a dict (fit_brdf's keyword arguments).
+FIT_OPTIONS = {k: v for k, v in FIT_SETTINGS.get_params().items() if k != "tol"}
 
 
 def brdf_fit_available() -> tuple[bool, str]:
@@ -172,13 +173,13 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
 
 def fit_material(material: str, tol: float, **options):
     """:func:`fit.rational.brdf_fit.fit_brdf` of a material (a :data:`studies.common.MATERIALS`
-    key or a file path) at ``tol`` with :data:`FIT_OPTIONS` (updated with ``options``): the
+    key or a file path) at ``tol`` with :data:`FIT_SETTINGS` (``options`` changed): the
     :class:`fit.rational.brdf_fit.BRDFFit` that ``rbrdf-fit brdf FILE --tol TOL`` makes."""
     from fit.formats import load_measured
     from fit.rational.brdf_fit import fit_brdf
 
     path = C.data_path(C.MATERIALS[material]) if material in C.MATERIALS else Path(material)
-    return fit_brdf(load_measured(path), tol=tol, source_file=path.name, **dict(FIT_OPTIONS, **options))
+    return fit_brdf(load_measured(path), FIT_SETTINGS.clone(tol=tol, **options), source_file=path.name)
 
 
 def direct_fit(material: str, tol: float, abs_floor_rel: float = 1e-3, theta_d_max_deg: float = 80.0,

@@ -107,7 +107,7 @@ def test_policy_lowers_the_albedo_error_and_keeps_the_bound(corrected):
             for m in (pre, res.model)]
     assert fine[1]["error"].max() < 0.5 * fine[0]["error"].max(), (fine[0]["error"].max(), fine[1]["error"].max())
     # the bound: every data point within the tolerance its channel met before, Q > 0 certified
-    X, rho, _, _, _ = res.info["_refit"]
+    X, rho = res.data.X, res.data.rho
     noise = np.array(res.noise)
     for r in res.records:
         assert r["valid"] and r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9)

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from fit.analytic import glossy_lobe, lambert
-from fit.batch.keys import BrdfOptions, CdfOptions, brdf_key, cdf_key
+from fit.batch.keys import BrdfOptions, CdfOptions, brdf_key, cdf_key, output_key
 from fit.batch.report import COLUMNS, BatchReport, plot_coefficients, rows_from_results
 from fit.cli import main
 from fit.formats.measured import MeasuredBRDF
@@ -64,6 +64,9 @@ def test_keys_follow_content_and_options():
     assert k != brdf_key("cd" * 32, BrdfOptions(tol=0.05))          # other bytes
     assert k != brdf_key(sha, BrdfOptions(tol=0.1))                  # other tolerance
     assert k != brdf_key(sha, BrdfOptions(tol=0.05, max_degree=8))   # other option
+    # the key covers every setting of the fit (BRDFFitSettings.get_params()), not a hand-kept subset
+    assert k != brdf_key(sha, BrdfOptions(tol=0.05, spread_k=2.0)) != brdf_key(sha, BrdfOptions(peak_split_deg=None))
+    assert k == output_key("brdf", sha, BrdfOptions(tol=0.05).get_params())
     assert cdf_key(sha, CdfOptions()) != cdf_key(sha, CdfOptions(n_v=16))
     assert cdf_key(sha, CdfOptions()) != k
 

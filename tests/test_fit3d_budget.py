@@ -16,7 +16,7 @@ import time as _time
 import numpy as np
 import pytest
 
-from fit.rational import albedo3d, fit3d
+from fit.rational import albedo3d, ceiling, fit3d
 from fit.rational.fit3d import fit_rgl_select
 from test_albedo3d import Synthetic  # the synthetic glossy lobe as an RGL-like object
 
@@ -69,6 +69,7 @@ def test_a_slow_clock_changes_nothing(normal, monkeypatch):
     clock = JumpingClock(10.0)
     monkeypatch.setattr(fit3d, "time", clock)
     monkeypatch.setattr(albedo3d, "time", clock)
+    monkeypatch.setattr(ceiling, "time", clock)
     slow = select(time_limit=1e7)       # the ceiling far beyond the clock's jumps: only the budgets stop
     assert clock.n > 10                  # the clock was read, and ran ahead by minutes
     assert np.array_equal(coefficients(slow), coefficients(normal))
@@ -82,6 +83,7 @@ def test_the_safety_ceiling_is_recorded(monkeypatch):
     clock = JumpingClock(1.0)
     monkeypatch.setattr(fit3d, "time", clock)
     monkeypatch.setattr(albedo3d, "time", clock)
+    monkeypatch.setattr(ceiling, "time", clock)
     res = select(time_limit=2.0)
     fi = res.model.fit_info
     assert fi["stopped"] == "time" and fi["time_limit"] == 2.0

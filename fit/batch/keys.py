@@ -9,8 +9,9 @@ progress bar) are not part of any key.
 
 Key: the first 16 hex digits (64 bits) of the sha256 of the canonical JSON (sorted keys, no
 whitespace) of ``{"key_version", "kind", "input_sha256", "options"}``; ``kind`` is ``"brdf"``
-(options: the :func:`fit.fit_brdf` arguments with the tolerance) or ``"cdf"`` (options: the
-:func:`fit.fit_cdf` table and layout arguments). :data:`KEY_VERSION` is raised when the
+(options: ``get_params()`` of the fit's :class:`fit.rational.settings.BRDFFitSettings`, every
+setting of the 2-D fit) or ``"cdf"`` (options: the :func:`fit.fit_cdf` table and layout
+arguments). :data:`KEY_VERSION` is raised when the
 meaning of an option changes. The fitter's own code version is *not* part of the key: after
 an update that changes results, re-run into a new folder (or delete the old outputs).
 """
@@ -21,28 +22,15 @@ import json
 import math
 from dataclasses import asdict, dataclass, field
 
-KEY_VERSION = 1
+from ..rational.settings import BRDFFitSettings
+
+KEY_VERSION = 2
 KEY_HEX_DIGITS = 16
 
 
-@dataclass(frozen=True)
-class BrdfOptions:
-    """Arguments of :func:`fit.rational.brdf_fit.fit_brdf` for one tolerance, with the defaults
-    of ``rbrdf-fit brdf`` (:mod:`fit.cli.brdf`)."""
-
-    tol: float = 0.05
-    intervals: str = "tol"
-    core_theta_d_deg: object = "auto"      # "auto" or degrees
-    band_intervals: str = "tol"
-    theta_h_transform: str = "sqrt"
-    value_transform: str = "log"
-    floor_frac: float = 1.0
-    max_degree: int = 12
-    max_den_degree: int = 6
-
-    def kwargs(self) -> dict:
-        """Keyword arguments of :func:`fit.rational.brdf_fit.fit_brdf`."""
-        return asdict(self)
+#: The options of one BRDF output (one tolerance): the 2-D fit's settings, whose defaults are
+#: those of ``rbrdf-fit brdf`` (:mod:`fit.cli.brdf`).
+BrdfOptions = BRDFFitSettings
 
 
 @dataclass(frozen=True)
@@ -68,12 +56,12 @@ class BatchOptions:
     tolerance), the other BRDF options, and the CDF options (None: no CDF, ``--no-cdf``)."""
 
     tols: tuple = (0.05,)
-    brdf: dict = field(default_factory=dict)      # BrdfOptions fields other than tol
+    brdf: dict = field(default_factory=dict)      # BRDFFitSettings names other than tol
     cdf: CdfOptions | None = field(default_factory=CdfOptions)
 
     def brdf_options(self) -> list:
-        """One :class:`BrdfOptions` per tolerance, in the order given."""
-        return [BrdfOptions(tol=float(t), **self.brdf) for t in self.tols]
+        """One :class:`fit.rational.settings.BRDFFitSettings` per tolerance, in the order given."""
+        return [BRDFFitSettings(tol=float(t), **self.brdf) for t in self.tols]
 
 
 def _canonical(value):
@@ -102,8 +90,9 @@ def output_key(kind: str, input_sha256: str, options: dict) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:KEY_HEX_DIGITS]
 
 
-def brdf_key(input_sha256: str, options: BrdfOptions) -> str:
-    return output_key("brdf", input_sha256, asdict(options))
+def brdf_key(input_sha256: str, settings: BRDFFitSettings) -> str:
+    """The key of a BRDF output: from every setting of the fit (``settings.get_params()``)."""
+    return output_key("brdf", input_sha256, settings.get_params())
 
 
 def cdf_key(input_sha256: str, options: CdfOptions) -> str:

@@ -40,7 +40,8 @@ from dataclasses import asdict
 from pathlib import Path
 
 from ..errors import RbrdfError, display_text
-from .keys import BatchOptions, BrdfOptions, CdfOptions, brdf_key, cdf_key
+from ..rational.settings import BRDFFitSettings
+from .keys import BatchOptions, CdfOptions, brdf_key, cdf_key
 
 MANIFEST_FORMAT = "rbrdf-batch-manifest"
 MANIFEST_VERSION = 1
@@ -85,7 +86,7 @@ def material_dir(out, path) -> Path:
     return Path(out) / Path(path).stem
 
 
-def brdf_name(options: BrdfOptions, key: str) -> str:
+def brdf_name(options: BRDFFitSettings, key: str) -> str:
     return f"brdf-tol{options.tol:g}-{key}.json"
 
 
@@ -295,17 +296,17 @@ def _manifest(kind: str, key: str, src: dict, options: dict, record: dict, secon
             "worker": f"{socket.gethostname()}:{os.getpid()}"}
 
 
-def _fit_brdf(brdf, path: Path, bo: BrdfOptions, key: str, target: Path, src: dict) -> dict:
+def _fit_brdf(brdf, path: Path, bo: BRDFFitSettings, key: str, target: Path, src: dict) -> dict:
     from ..errors import BRDFFileError
     from ..rational.brdf_fit import fit_brdf
 
     t = time.perf_counter()
     try:
-        fit = fit_brdf(brdf, source_file=path.name, **bo.kwargs())
+        fit = fit_brdf(brdf, bo, source_file=path.name)
     except ValueError as e:
         raise BRDFFileError(path, str(e)) from None
     record = brdf_record(fit)
-    _write(target, fit.save, _manifest("brdf", key, src, asdict(bo), record, time.perf_counter() - t))
+    _write(target, fit.save, _manifest("brdf", key, src, bo.get_params(), record, time.perf_counter() - t))
     return record
 
 

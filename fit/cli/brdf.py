@@ -25,9 +25,10 @@ from ..limits import (
 )
 from ..outputs import OutputSet, check_output_file
 from ..progress import one_step
-from ..rational.brdf_fit import INTERVALS, fit_brdf
+from ..rational.brdf_fit import fit_brdf
 from ..rational.domain import THETA_D_MAX_DEG
 from ..rational.coefficient_file import save
+from ..rational.settings import INTERVALS, THETA_H_TRANSFORMS, VALUE_TRANSFORMS, BRDFFitSettings
 from .flags import add_run_flags, core_angle, integer, number
 
 
@@ -36,13 +37,8 @@ def _cmd_brdf(args) -> int:
     progress = getattr(args, "progress", None)
     with one_step(progress, "reading the file"):
         b = load_measured(args.file)
-    core = args.core_theta_d
     try:
-        fit = fit_brdf(b, tol=args.tol, intervals=args.intervals, core_theta_d_deg=core,
-                       band_intervals=args.band_intervals, theta_h_transform=args.theta_h,
-                       value_transform=args.value, max_degree=args.max_degree, floor_frac=args.floor_frac,
-                       max_den_degree=args.max_den_degree, progress=progress,
-                       source_file=Path(args.file).name)
+        fit = fit_brdf(b, settings_from_args(args), progress=progress, source_file=Path(args.file).name)
     except ValueError as e:
         raise BRDFFileError(args.file, str(e)) from None
     write = fit.valid or args.allow_infeasible
@@ -72,8 +68,17 @@ def _cmd_brdf(args) -> int:
     return 1
 
 
+def settings_from_args(args) -> BRDFFitSettings:
+    """The :class:`fit.rational.settings.BRDFFitSettings` of parsed ``rbrdf-fit brdf`` flags."""
+    return BRDFFitSettings(tol=args.tol, intervals=args.intervals, core_theta_d_deg=args.core_theta_d,
+                           band_intervals=args.band_intervals, theta_h_transform=args.theta_h,
+                           value_transform=args.value, max_degree=args.max_degree,
+                           max_den_degree=args.max_den_degree, floor_frac=args.floor_frac)
+
+
 def register(subparsers) -> None:
-    """Add ``brdf`` to the sub-parsers ``subparsers``."""
+    """Add ``brdf`` to the sub-parsers ``subparsers`` (defaults: :class:`BRDFFitSettings`'s)."""
+    d = BRDFFitSettings()
     p = subparsers.add_parser(
         "brdf", help="fit R, G, B with rational functions inside a tolerance; write JSON coefficients",
         description="Project the BRDF onto (theta_h, theta_d) (median, grazing samples beyond 79 deg "
@@ -84,34 +89,34 @@ def register(subparsers) -> None:
                     "piecewise; see fit.rational.coefficient_file). Absolute floor: tol * A_Y / pi (A_Y = white-"
                     "sky luminance albedo).")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
-    p.add_argument("--tol", type=number(MIN_TOLERANCE, MAX_TOLERANCE), default=0.05,
-                   help=f"relative tolerance in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}] (default 0.05)")
+    p.add_argument("--tol", type=number(MIN_TOLERANCE, MAX_TOLERANCE), default=d.tol,
+                   help=f"relative tolerance in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}] (default {d.tol:g})")
     p.add_argument("--out", required=True, help="output .json coefficient file (replaced only if the run succeeds)")
-    p.add_argument("--intervals", choices=INTERVALS, default="tol",
+    p.add_argument("--intervals", choices=INTERVALS, default=d.intervals,
                    help="interval policy of the guaranteed core: 'tol' (default) = y +- max(tol y, floor); "
                         "'tol+spread' also widens to the cluster's phi_d standard deviation")
-    p.add_argument("--core-theta-d", dest="core_theta_d", default="auto", metavar="DEG|auto",
+    p.add_argument("--core-theta-d", dest="core_theta_d", default=d.core_theta_d_deg, metavar="DEG|auto",
                    type=core_angle(MIN_CORE_THETA_D_DEG, THETA_D_MAX_DEG),
                    help="theta_d (deg) up to which the tolerance is guaranteed; the grazing band above "
                         "it, up to 78.5 deg, gets its own functions; in [5, 78.5]. 'auto' (default): the "
                         "largest of 60, 50, 40 that every channel meets; 78.5: one function per channel")
-    p.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default="tol",
+    p.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default=d.band_intervals,
                    help="interval policy of the grazing band: 'tol' (default), the core's pure tolerance, "
                         "flagged where not met (the renderer then shows the projected table there); "
                         "'tol+spread' also widens to the cluster's phi_d spread (met more often, vouches "
                         "for less)")
-    p.add_argument("--theta-h", dest="theta_h", choices=("sqrt", "identity"), default="sqrt",
+    p.add_argument("--theta-h", dest="theta_h", choices=THETA_H_TRANSFORMS, default=d.theta_h_transform,
                    help="input transform of theta_h (default sqrt)")
-    p.add_argument("--value", choices=("log", "linear"), default="log", help="value transform (default log)")
-    p.add_argument("--floor-frac", dest="floor_frac", type=number(0.0, MAX_FLOOR_FRAC), default=1.0,
+    p.add_argument("--value", choices=VALUE_TRANSFORMS, default=d.value_transform, help="value transform (default log)")
+    p.add_argument("--floor-frac", dest="floor_frac", type=number(0.0, MAX_FLOOR_FRAC), default=d.floor_frac,
                    help="absolute floor = FLOOR_FRAC * tol * A_Y / pi (A_Y: white-sky luminance albedo; "
                         f"default 1, at most {MAX_FLOOR_FRAC:g}). Smaller keeps dark off-specular values relative "
                         "(better colour on "
                         "dark glossy materials) at the price of feasibility")
-    p.add_argument("--max-degree", type=integer(0, MAX_FIT_DEGREE), default=12,
-                   help=f"largest numerator total degree, 0-{MAX_FIT_DEGREE} (default 12)")
-    p.add_argument("--max-den-degree", type=integer(0, MAX_FIT_DEN_DEGREE), default=6,
-                   help=f"largest denominator total degree, 0-{MAX_FIT_DEN_DEGREE} (default 6)")
+    p.add_argument("--max-degree", type=integer(0, MAX_FIT_DEGREE), default=d.max_degree,
+                   help=f"largest numerator total degree, 0-{MAX_FIT_DEGREE} (default {d.max_degree})")
+    p.add_argument("--max-den-degree", type=integer(0, MAX_FIT_DEN_DEGREE), default=d.max_den_degree,
+                   help=f"largest denominator total degree, 0-{MAX_FIT_DEN_DEGREE} (default {d.max_den_degree})")
     p.add_argument("--allow-infeasible", action="store_true",
                    help="write the file and exit 0 even when no fit meets the tolerance (the file is "
                         "flagged); without it such a run writes nothing and exits 1")

@@ -60,9 +60,9 @@ the function is kept). Two guards, both sampled (nothing is proved between the d
 
 The correction's budget is a count: the rounds of the weight ladder and at most
 ``max_refits`` channel corrections (a channel's pieces refitted at one weight; 27 =
-:data:`fit.rational.fit3d.DEFAULT_ALBEDO_REFITS`, the whole ladder for three channels; ``stopped``
+:data:`fit.rational.settings.DEFAULT_ALBEDO_REFITS`, the whole ladder for three channels; ``stopped``
 = "budget" when they run out). The wall clock is only a safety net (the fit's
-:class:`fit.rational.fit3d.Ceiling` and ``time_limit``, None by default; ``stopped`` = "time").
+:class:`fit.rational.ceiling.Ceiling` and ``time_limit``, None by default; ``stopped`` = "time").
 On the 20 RGL materials the policy took 0.1-17 s (chm_mint 24 corrections, 15.8 s; ilm_solo_m_68
 26, 16.9 s; before, both were cut by a 15 s wall-clock limit). It costs average error (at
 most 15 % of the fit's relative RMSE on its check pairs, 50 % of a channel's; measured in
@@ -88,6 +88,11 @@ import time
 import numpy as np
 
 from ..formats.angles import cosine_directions
+from .ceiling import Ceiling
+from .refine import refine
+from .samples3d import grazing_weight, sample_grid
+from .secant import log_intervals, secant_slope, secant_weights
+from .variables3d import half_diff_3d
 
 ANGLES_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0)
 DEFAULT_ALBEDO_TOL = 0.05
@@ -205,23 +210,12 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                   max_refits: int = DEFAULT_MAX_REFITS, ceiling=None) -> dict:
     """Measure and, where it is outside ``tol``, correct the directional albedo of a
     :class:`fit.rational.fit3d.Fit3D` made by :func:`fit.rational.fit3d.fit_rgl` (its data in
-    ``res.info["_refit"]``) in place (module docstring); returns the record, also written to
+    ``res.data``, :class:`fit.rational.fit3d.FitData3D`) in place (module docstring); returns the record, also written to
     ``res.model.fit_info["albedo"]`` and ``res.info["albedo"]``. Budgets (counts): the rounds of
     ``weights`` and at most ``max_refits`` channel corrections (a channel's pieces refitted at
     one weight); ``time_limit`` (s; None: none) and a caller's ``ceiling``
-    (:class:`fit.rational.fit3d.Ceiling`) are only wall-clock safety nets (``stopped`` =
+    (:class:`fit.rational.ceiling.Ceiling`) are only wall-clock safety nets (``stopped`` =
     "time")."""
-    from .fit3d import (
-        Ceiling,
-        _intervals,
-        _secant_slope,
-        _secant_weights,
-        grazing_weight,
-        sample_grid,
-    )
-    from .refine import refine
-    from .variables3d import half_diff_3d
-
     t0 = time.perf_counter()
     own = Ceiling(time_limit)
 
@@ -248,13 +242,12 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
     rec = {"rule": RULE, "tol": float(tol), "angles_deg": angles, "quadrature_points": int(len(wo) // A),
            "floor_frac": float(floor_frac), "albedo_truth": at.tolist(), "error_before": err0.tolist(),
            "rounds": 0, "refitted": [], "stopped": None, "max_refits": int(max_refits), "channel_refits": 0}
-    refit = res.info.get("_refit")
-    options = refit[4] if refit else {}
-    if np.any(err0 > tol) and (refit is None or options.get("objective") is None):
+    data = getattr(res, "data", None)
+    if np.any(err0 > tol) and (data is None or data.objective is None):
         rec["stopped"] = "no second stage to correct with (one-stage fit or no data)"
     elif np.any(err0 > tol):
-        X, rho, _tm, _src, _ = refit
-        Xo, ro, wobj = options["objective"]
+        X, rho = data.X, data.rho
+        Xo, ro, wobj = data.objective
         pieces = _pieces(model)
         offset = float(model.value_offset)
         noise = np.asarray(res.noise, np.float64)
@@ -284,7 +277,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
 
         rmse0 = np.array([channel_rmse(c) for c in range(3)])
         # fresh points of the spike check (uniform in the variables and cosine pairs, new seed)
-        Xc = sample_grid(float(res.info["_refit"][2]), (1, 1, 1), n_spike // 2, seed=4242)
+        Xc = sample_grid(float(data.theta_max), (1, 1, 1), n_spike // 2, seed=4242)
         kc = _piece_of(model, Xc)
         oc = np.asarray(model(Xc), np.float64)
         gc = grazing_weight(Xc, float(fi.get("grazing_cos", 0.25)))
@@ -325,7 +318,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     y = rho[sel, c]
                     scale = np.maximum(np.maximum(y, noise[c]), cfloor * rho[sel].max(axis=1)) * g[sel]
                     T = float(r0["tolerance_met"])
-                    lo, hi = _intervals(y, scale, offset, T)
+                    lo, hi = log_intervals(y, scale, offset, T)
                     Uo = np.stack([np.sqrt(Xo[so, 0]), Xo[so, 1], Xo[so, 2]], axis=1)
                     yo = np.maximum(ro[so, c], 0.0)
                     to = np.log(yo + offset)
@@ -345,8 +338,8 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                         groups.append((idx, qj[idx] / den[i, c], const, lam * main))
                     if not groups:
                         continue
-                    f2, info = refine(piece.functions[c], U, lo, hi, Uo, to, w0, reweight=_secant_weights(wobj[so]),
-                                      sums=(W, t2, groups, _secant_slope))
+                    f2, info = refine(piece.functions[c], U, lo, hi, Uo, to, w0, reweight=secant_weights(wobj[so]),
+                                      sums=(W, t2, groups, secant_slope))
                     if f2 is None:
                         continue
                     # no spike between the data points: at fresh points of the piece the new

@@ -75,8 +75,8 @@ from .model import (
     apply_value_transform,
     invert_value_transform,
 )
+from .settings import INTERVALS, BRDFFitSettings
 
-INTERVALS = ("tol", "tol+spread")
 
 
 @dataclass
@@ -115,6 +115,7 @@ class BRDFFit:
     model: object                                  # RationalModel or PiecewiseRationalModel
     pieces: list
     time_s: float = 0.0
+    settings: BRDFFitSettings | None = None        # the settings that made it
 
     @property
     def core_pieces(self) -> list:
@@ -248,13 +249,11 @@ CORE_CANDIDATES_DEG = (60.0, 50.0, 40.0)
 PRECHECK_ROUNDS = 6
 
 
-def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="auto",
-             band_intervals: str = "tol", band_partial=(0.5, 2.0), peak_split_deg: float | None = 5.0,
-             theta_h_transform: str = "sqrt",
-             value_transform: str = "log", max_degree: int = 12, max_den_degree: int = 6,
-             floor_frac: float = 1.0, spread_k: float = 1.0, name: str | None = None,
-             progress=None, source_file: str = "") -> BRDFFit:
-    """Fit R, G, B of a measured (or already projected) BRDF over theta_h x theta_d.
+def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None = None, progress=None,
+             source_file: str = "", **params) -> BRDFFit:
+    """Fit R, G, B of a measured (or already projected) BRDF over theta_h x theta_d with
+    ``settings`` (:class:`fit.rational.settings.BRDFFitSettings`, default its defaults; each of
+    its names is also a keyword argument that overrides it, e.g. ``fit_brdf(b, tol=0.1)``).
 
     ``core_theta_d_deg``: the guaranteed core ``theta_d <= core`` is fitted with ``intervals``
     (default pure tolerance); the grazing band ``core < theta_d <= 78.5 deg`` gets its own
@@ -272,7 +271,11 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     of 1), then per piece tried ``"fitting theta_d A-B ..."`` with the channels fitted so far
     (0 to 3; a piece that is rejected early stops before 3).
     """
-    _check_fit_args(tol, max_degree, max_den_degree, floor_frac, core_theta_d_deg, intervals, band_intervals)
+    s = BRDFFitSettings.resolve(settings, **params)
+    tol, intervals, core_theta_d_deg, band_intervals = s.tol, s.intervals, s.core_theta_d_deg, s.band_intervals
+    band_partial = None if s.band_partial is None else tuple(s.band_partial)
+    peak_split_deg, theta_h_transform, value_transform = s.peak_split_deg, s.theta_h_transform, s.value_transform
+    max_degree, max_den_degree, floor_frac, spread_k = s.max_degree, s.max_den_degree, s.floor_frac, s.spread_k
     t0 = time.perf_counter()
     report(progress, "projecting", 0, 1)
     p = project_for_fit(brdf)
@@ -325,39 +328,14 @@ def fit_brdf(brdf, tol: float = 0.05, intervals: str = "tol", core_theta_d_deg="
     total = time.perf_counter() - t0
     model = brdf_model(p, name, pieces, dict(kw, value_max=value_max), intervals, band_intervals, total,
                        source_file)
-    return BRDFFit(model, pieces, total)
+    return BRDFFit(model, pieces, total, settings=s)
 
 
 def _check_fit_args(tol, max_degree, max_den_degree, floor_frac, core, intervals, band_intervals) -> None:
-    """``ValueError`` for arguments outside the ranges of :mod:`fit.limits` (the command line
-    checks the same ranges on its flags): a non-finite or absurd tolerance, negative or huge
-    degrees, a core outside [MIN_CORE_THETA_D_DEG, THETA_D_MAX_DEG] deg."""
-    import math
-
-    from ..limits import (
-        MAX_FIT_DEGREE,
-        MAX_FIT_DEN_DEGREE,
-        MAX_FLOOR_FRAC,
-        MAX_TOLERANCE,
-        MIN_CORE_THETA_D_DEG,
-        MIN_TOLERANCE,
-    )
-
-    if not (isinstance(tol, (int, float)) and MIN_TOLERANCE <= tol <= MAX_TOLERANCE):
-        raise ValueError(f"tol must be in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}], got {tol!r}")
-    if not (isinstance(max_degree, (int, np.integer)) and 0 <= max_degree <= MAX_FIT_DEGREE):
-        raise ValueError(f"max_degree must be an integer in [0, {MAX_FIT_DEGREE}], got {max_degree!r}")
-    if not (isinstance(max_den_degree, (int, np.integer)) and 0 <= max_den_degree <= MAX_FIT_DEN_DEGREE):
-        raise ValueError(f"max_den_degree must be an integer in [0, {MAX_FIT_DEN_DEGREE}], got {max_den_degree!r}")
-    if not (isinstance(floor_frac, (int, float)) and 0.0 <= floor_frac <= MAX_FLOOR_FRAC):
-        raise ValueError(f"floor_frac must be in [0, {MAX_FLOOR_FRAC:g}], got {floor_frac!r}")
-    if core != "auto" and not (isinstance(core, (int, float)) and math.isfinite(core)
-                               and MIN_CORE_THETA_D_DEG <= core <= THETA_D_MAX_DEG):
-        raise ValueError(f"core_theta_d_deg must be 'auto' or in [{MIN_CORE_THETA_D_DEG:g}, {THETA_D_MAX_DEG:g}] "
-                         f"deg, got {core!r}")
-    for k, v in (("intervals", intervals), ("band_intervals", band_intervals)):
-        if v not in INTERVALS:
-            raise ValueError(f"{k} must be one of {INTERVALS}, got {v!r}")
+    """``ValueError`` for arguments outside the ranges of :mod:`fit.limits` (the checks of
+    :class:`fit.rational.settings.BRDFFitSettings`)."""
+    BRDFFitSettings(tol=tol, max_degree=max_degree, max_den_degree=max_den_degree, floor_frac=floor_frac,
+                    core_theta_d_deg=core, intervals=intervals, band_intervals=band_intervals)
 
 
 def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,

@@ -64,7 +64,7 @@ and the **tolerance is the outcome**. A fit has two stages:
    rare): :func:`fit.rational.refine.refine`, a Sanathanan-Koerner iteration of weighted
    least-squares problems with the interval rows and the Bernstein ``Q >= q_min`` rows as
    constraints (a least-distance problem, Lawson-Hanson NNLS; HiGHS QP as the fallback), the
-   log-value residuals weighted by the secant slope of ``exp`` (:func:`_secant_weights`: the
+   log-value residuals weighted by the secant slope of ``exp`` (:func:`fit.rational.secant.secant_weights`: the
    error of the value, not of its log). Measured (one layout, four pieces, 50,000 pairs; one
    stage -> two stages): satin_rosaline 0.127 -> 0.054, cc_iris_purple_gem 0.281 -> 0.072,
    vch_golden_yellow 0.157 -> 0.044, paper_white 0.035 -> 0.020 (0.0098 with one piece of
@@ -167,136 +167,85 @@ issue: paper_white 0.0098, colodur_napoli_4f 0.0196, satin_rosaline 0.0555, cc_i
 """
 from __future__ import annotations
 
-import itertools
+import copy
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..formats.angles import cos_theta_i_o, cosine_directions, half_diff_to_directions
+from ..formats.angles import cosine_directions, half_diff_to_directions
 from ..progress import report
+from .albedo3d import albedo_policy
+from .ceiling import DEFAULT_TIME_LIMIT, Ceiling
 from .fitter import IntervalRationalFitter
 from .model import PiecewiseRationalModel, RationalModel, Variable
 from .refine import refine
-from .variables3d import half_diff_3d
+from .samples3d import (
+    DEFAULT_GRID,
+    DEFAULT_NOISE_FRAC,
+    DEFAULT_RANDOM,
+    DEFAULT_THETA_FIT_DEG,
+    grazing_weight,
+    noise_levels,
+    objective_points,
+    sample_grid,
+    sample_rgl,
+)
+from .secant import log_intervals, secant_weights
+from .settings import (
+    DEFAULT_ALBEDO_REFITS,
+    DEFAULT_ALBEDO_RMSE_GROWTH,
+    DEFAULT_ALBEDO_TIME,
+    DEFAULT_ALBEDO_TOL,
+    DEFAULT_ALBEDO_TOTAL_GROWTH,
+    DEFAULT_CHANNEL_FLOOR,
+    DEFAULT_DEGREES,
+    DEFAULT_GRAZING_COS,
+    DEFAULT_LADDER_STEPS,
+    DEFAULT_OBJECTIVE,
+    DEFAULT_RELAX,
+    DEFAULT_VERIFY,
+    Fit3DSettings,
+)
 
-DEFAULT_GRID = (28, 22, 13)          # theta_h, theta_d, phi_d samples of the data grid
-DEFAULT_DEGREES = (7, 3)             # numerator, denominator total degree per piece
-DEFAULT_NOISE_FRAC = 0.01
-DEFAULT_GRAZING_COS = 0.25          # cos(theta_i) cos(theta_o) below which the bound is on rho cos cos
-DEFAULT_CHANNEL_FLOOR = 0.05        # a channel's error unit is at least this fraction of the largest channel
+__all__ = [
+    "DEFAULT_ALBEDO_REFITS", "DEFAULT_ALBEDO_RMSE_GROWTH", "DEFAULT_ALBEDO_TIME", "DEFAULT_ALBEDO_TOL",
+    "DEFAULT_ALBEDO_TOTAL_GROWTH", "DEFAULT_CHANNEL_FLOOR", "DEFAULT_DEGREES", "DEFAULT_GRAZING_COS",
+    "DEFAULT_GRID", "DEFAULT_LADDER_STEPS", "DEFAULT_NOISE_FRAC", "DEFAULT_OBJECTIVE", "DEFAULT_RANDOM",
+    "DEFAULT_RELAX", "DEFAULT_THETA_FIT_DEG", "DEFAULT_TIME_LIMIT", "DEFAULT_VERIFY", "INTERVALS", "SELECT_MARGIN",
+    "VARIANTS", "Ceiling", "Fit3D", "Fit3DSettings", "FitData3D", "domain_record", "fit_rgl", "fit_rgl_select",
+    "fit_samples", "grazing_weight", "noise_levels", "objective_points", "sample_grid", "sample_rgl",
+    "validation_rmse", "verification_ratio", "verify_and_refit",
+]
+
 INTERVALS = ("rho_c +- tolerance * max(rho_c, noise_c, channel_floor * max(rho_R, rho_G, rho_B)) "
              "* max(1, grazing_cos / (cos theta_i cos theta_o))")
-DEFAULT_THETA_FIT_DEG = 89.0         # data up to here: the file's own extrapolation beyond its last incidence
-DEFAULT_VERIFY = 40000                # fresh points a fit is checked at (fit_rgl)
-DEFAULT_RANDOM = 8000             # random points of each of the two kinds
-DEFAULT_RELAX = 2.0               # second stage: intervals at this multiple of the smallest tolerance met
-DEFAULT_OBJECTIVE = 4000          # objective points of the second stage per theta_h piece
-DEFAULT_ALBEDO_TOL = 0.05         # directional-albedo tolerance of the policy (fit.rational.albedo3d)
-DEFAULT_ALBEDO_TIME = None        # the albedo step's own wall-clock safety net (s); None: the fit's (time_limit)
-DEFAULT_ALBEDO_REFITS = 27        # channel corrections the albedo policy may try (9 weights x 3 channels)
-DEFAULT_TIME_LIMIT = 120.0        # wall-clock safety net of a whole fit (s): never reached in normal runs
-DEFAULT_LADDER_STEPS = 12         # infeasible tolerances at step 1.6 before the ladder squares its step
-DEFAULT_ALBEDO_RMSE_GROWTH = 0.50  # the albedo correction may raise a channel's relative RMSE by this fraction
-DEFAULT_ALBEDO_TOTAL_GROWTH = 0.15  # ... and the fit's (mean over R, G, B) by this one
 
 
-def sample_grid(theta_max: float, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM, seed: int = 7) -> np.ndarray:
-    """``(N, 3)`` physical ``(theta_h, theta_d, |phi_d|)`` (radians) of the data points (module
-    docstring): the grid, ``n_random`` points uniform in ``(sqrt(theta_h), theta_d, phi_d)`` and
-    ``n_random`` pairs of cosine-distributed directions (seeded), all those whose light and view
-    directions are both above the horizon and within ``theta_max`` of the normal."""
-    nh, nd, npd = (int(g) for g in grid)
-    th = theta_max * np.linspace(0.0, 1.0, nh) ** 2
-    td = np.linspace(0.0, theta_max, nd)
-    pd = np.linspace(0.0, np.pi, npd)
-    parts = [np.stack(np.meshgrid(th, td, pd, indexing="ij"), axis=-1).reshape(-1, 3)]
-    rng = np.random.default_rng(seed)
-    if n_random:
-        u = rng.random((n_random, 3))
-        parts.append(np.stack([theta_max * u[:, 0] ** 2, theta_max * u[:, 1], np.pi * u[:, 2]], axis=1))
-        parts.append(half_diff_3d(cosine_directions(rng, n_random), cosine_directions(rng, n_random)))
-    X = np.concatenate(parts)
-    wi, wo = half_diff_to_directions(X[:, 0], 0.0, X[:, 1], X[:, 2])
-    cmin = np.cos(theta_max) - 1e-9
-    keep = (wi[:, 2] >= cmin) & (wo[:, 2] >= cmin) & (wi[:, 2] > 0) & (wo[:, 2] > 0)
-    keep &= (X[:, 0] <= theta_max) & (X[:, 1] <= theta_max)
-    return X[keep]
+@dataclass
+class FitData3D:
+    """What a refit of a fit made by :func:`fit_rgl` needs (:func:`verify_and_refit`, the albedo
+    policy of :mod:`fit.rational.albedo3d`): the data ``X`` ``(N, 3)`` (radians) and ``rho``
+    ``(N, 3)`` (1/sr), ``theta_max`` (radians), the ``source`` record, the second stage's
+    ``objective`` (``(Xo, rho_o, w)`` or None), the model's ``name`` and the ``progress``
+    callback."""
 
-
-def objective_points(theta_max: float, edges, n_per_piece: int = 4000, seed: int = 21):
-    """``(X (M, 3), w (M,))``: the points and weights of the second stage's objective, the
-    benchmark's metric (squared error of ``rho cos theta_i cos theta_o`` over pairs of
-    independent cosine-distributed directions) as an importance-weighted sum. Per theta_h piece
-    ``[edges[k], edges[k+1]]`` (radians), ``n_per_piece`` points uniform in ``(sqrt(theta_h),
-    theta_d, |phi_d|)`` on the piece's box (``theta_d <= theta_max``), weighted by the density of
-    cosine-distributed pairs there over the uniform one,
-
-        p(theta_h, theta_d, phi_d) ~ cos theta_i cos theta_o cos theta_d sin theta_d sin theta_h
-        (Rusinkiewicz Jacobian 4 cos theta_d sin theta_d sin theta_h, phi_h integrated out),
-
-    times ``(cos theta_i cos theta_o)^2`` (the metric weighs ``rho cos cos``); ``w = 0`` where
-    a direction is below the horizon or beyond ``theta_max``. Many points near the peak, where
-    the values are large and cosine pairs rare (the peak piece theta_h <= 0.05 holds a few per
-    thousand of them)."""
-    rng = np.random.default_rng(seed)
-    parts, weights = [], []
-    for a, b in itertools.pairwise(edges):
-        u = rng.random((int(n_per_piece), 3))
-        s0, s1 = np.sqrt(a), np.sqrt(b)
-        sq = s0 + (s1 - s0) * u[:, 0]
-        X = np.stack([sq ** 2, theta_max * u[:, 1], np.pi * u[:, 2]], axis=1)
-        ci, co = cos_theta_i_o(X[:, 0], X[:, 1], X[:, 2])
-        cmin = np.cos(theta_max) - 1e-9
-        ok = (ci > 0) & (co > 0) & (ci >= cmin) & (co >= cmin)
-        vol = (s1 - s0) * theta_max * np.pi
-        dens = ci * co * np.cos(X[:, 1]) * np.sin(X[:, 1]) * np.sin(X[:, 0]) * 2.0 * sq * vol
-        parts.append(X[ok])
-        weights.append((dens * (ci * co) ** 2)[ok])
-    return np.concatenate(parts), np.concatenate(weights)
-
-
-def noise_levels(rho, noise_frac: float = DEFAULT_NOISE_FRAC) -> np.ndarray:
-    """Per channel the noise level ``n_c`` (1/sr) of data ``rho`` ``(N, 3)``: the larger of
-    ``noise_frac * median(rho_c)`` and, where a fraction ``z`` of the values are 0 (negative
-    measurements clamped: values within the noise of 0), the ``min(2 z, 0.5)`` quantile of the
-    channel (vch_golden_yellow's blue: 8.5 % zeros next to a peak of 364 /sr; with the 1 % floor
-    alone its fit went to 0 over the dark region and its bound was 100 % everywhere)."""
-    rho = np.asarray(rho, np.float64)
-    noise = noise_frac * np.median(rho, axis=0)
-    z = np.mean(rho <= 0.0, axis=0)
-    for c in range(rho.shape[1]):
-        if z[c] > 0:
-            noise[c] = max(noise[c], float(np.quantile(rho[:, c], min(2.0 * z[c], 0.5))))
-    return np.maximum(noise, 1e-12)
-
-
-def grazing_weight(X, grazing_cos: float) -> np.ndarray:
-    """``g = max(1, grazing_cos / (cos theta_i cos theta_o))`` of rows ``(theta_h, theta_d,
-    |phi_d|)`` ``(N, 3)``: 1 (a relative bound on rho) where the product of the cosines is at least
-    ``grazing_cos``, beyond it a bound on ``rho cos theta_i cos theta_o`` (module docstring);
-    ``grazing_cos = 0``: 1 everywhere."""
-    ci, co = cos_theta_i_o(X[:, 0], X[:, 1], X[:, 2])
-    return np.maximum(1.0, grazing_cos / np.maximum(ci * co, 1e-6))
-
-
-def sample_rgl(brdf, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM, theta_fit_deg: float = DEFAULT_THETA_FIT_DEG):
-    """``(X (N, 3), rho (N, 3), theta_fit)``: the data of a 3-D fit of an
-    :class:`fit.formats.rgl.RGLBRDF` (its reference evaluation, light = ``wi``, negatives 0) up
-    to ``theta_fit`` = the larger of ``theta_fit_deg`` and its last measured incidence (module
-    docstring)."""
-    theta_max = max(float(brdf.theta_i_max), float(np.radians(theta_fit_deg)))
-    X = sample_grid(theta_max, grid, n_random)
-    wi, wo = half_diff_to_directions(X[:, 0], 0.0, X[:, 1], X[:, 2])
-    rho = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
-    return X, rho, theta_max
+    X: np.ndarray
+    rho: np.ndarray
+    theta_max: float
+    source: dict
+    objective: tuple | None = None
+    name: str = "brdf3d"
+    progress: object = None
 
 
 @dataclass
 class Fit3D:
     """A 3-D fit: ``model`` (evaluate with :func:`fit.rational.variables3d.evaluate_directions`),
     ``records`` (per piece and channel: degrees, stated tolerance, LP rounds, seconds),
-    ``tolerance`` (the largest stated tolerance: every data point is within it), ``time_s``."""
+    ``tolerance`` (the largest stated tolerance: every data point is within it), ``time_s``;
+    ``settings`` (:class:`fit.rational.settings.Fit3DSettings`), ``data`` (:class:`FitData3D`)
+    and ``verify_points`` hold what made it and what a refit needs."""
 
     model: object
     records: list
@@ -306,6 +255,9 @@ class Fit3D:
     n_points: int
     noise: tuple
     info: dict = field(default_factory=dict)
+    settings: Fit3DSettings | None = None          # the settings that made it
+    data: FitData3D | None = None                  # what a refit needs (fit_rgl); None after fit_rgl_select
+    verify_points: tuple | None = None             # (X, rho) of the last verification's fresh points
 
     @property
     def n_coefficients(self) -> int:
@@ -321,32 +273,6 @@ def _variables(box) -> list:
     (h0, h1), (d0, d1), (p0, p1) = box
     return [Variable("theta_h", "rad", "sqrt", (h0, h1)), Variable("theta_d", "rad", "identity", (d0, d1)),
             Variable("phi_d", "rad", "identity", (p0, p1))]
-
-
-class Ceiling:
-    """The last-resort wall-clock safety net of a fit (``time_limit`` seconds from its creation;
-    None: none). No rule of the fit reads the clock otherwise: every loop stops on a count
-    (module docstring, "Budgets"). :meth:`out` answers whether the ceiling is passed and, when it
-    is, remembers where it was noticed (``hits``; the fit records ``stopped = "time"`` and
-    ``stopped_at``)."""
-
-    def __init__(self, time_limit=DEFAULT_TIME_LIMIT):
-        self.time_limit = None if time_limit is None else float(time_limit)
-        self.t0 = time.perf_counter()
-        self.hits: list = []
-
-    def out(self, where: str, share: float = 1.0) -> bool:
-        if self.time_limit is None or time.perf_counter() - self.t0 <= share * self.time_limit:
-            return False
-        if where not in self.hits:
-            self.hits.append(where)
-        return True
-
-    def record(self, fit_info: dict) -> None:
-        fit_info["time_limit"] = self.time_limit
-        fit_info["stopped"] = "time" if self.hits else None
-        if self.hits:
-            fit_info["stopped_at"] = list(self.hits)
 
 
 class _TolFitter(IntervalRationalFitter):
@@ -365,29 +291,6 @@ class _TolFitter(IntervalRationalFitter):
         if not att.feasible:
             return None
         return self._finish(att, [(m, n, True, self._ncoef(m, n))], t0)
-
-
-def _intervals(y, scale, offset, tol):
-    e = tol * scale
-    return np.log(np.maximum(y - e, 0.0) + offset), np.log(y + e + offset)
-
-
-def _secant_slope(R, t):
-    """The secant slope ``(exp(R) - exp(t)) / (R - t)`` of ``exp`` (``exp(t)`` where ``R`` is
-    within 1e-6 of ``t``): the value's error per unit of log error."""
-    d = R - t
-    small = np.abs(d) < 1e-6
-    return np.where(small, np.exp(t), (np.exp(np.clip(R, None, 50.0)) - np.exp(t)) / np.where(small, 1.0, d))
-
-
-def _secant_weights(base):
-    """``reweight(R, t)`` for :func:`fit.rational.refine.refine` on log values: the squared
-    error of the value ``exp(R) - offset`` is ``((exp(R) - exp(t)) / (R - t))^2 (R - t)^2``, so
-    the weight of the squared log residual is ``base`` times that secant slope squared (the value
-    squared where ``R`` is within 1e-6 of ``t``)."""
-    def reweight(R, t):
-        return base * _secant_slope(R, t) ** 2
-    return reweight
 
 
 def _fit_channel(U, y, scale, offset, domain, tol, degrees, ladder_steps=DEFAULT_LADDER_STEPS, step=1.6,
@@ -413,7 +316,7 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, ladder_steps=DEFAULT
     t = max(float(tol), float(start or tol))
     n_bad = 0
     while t <= max_tol:
-        r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
+        r = fitter.try_fit(U, *log_intervals(y, scale, offset, t), degrees)
         tried.append([t, r is not None])
         if r is not None:
             res, t_ok = r, t
@@ -427,7 +330,7 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, ladder_steps=DEFAULT
         raise RuntimeError(f"no fit within {max_tol:g} x the error unit at degrees {degrees}")
     if t_bad is None and t_ok > tol * (1 + 1e-9):      # started above tol and met at once: one step down
         t = max(t_ok / step, float(tol))
-        r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
+        r = fitter.try_fit(U, *log_intervals(y, scale, offset, t), degrees)
         tried.append([t, r is not None])
         if r is not None:
             res, t_ok = r, t
@@ -435,7 +338,7 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, ladder_steps=DEFAULT
             t_bad = t
     if not two_stage and t_bad is not None and not (ceiling is not None and ceiling.out("bisection")):
         t = float(np.sqrt(t_ok * t_bad))
-        r = fitter.try_fit(U, *_intervals(y, scale, offset, t), degrees)
+        r = fitter.try_fit(U, *log_intervals(y, scale, offset, t), degrees)
         tried.append([t, r is not None])
         if r is not None:
             res, t_ok = r, t
@@ -447,8 +350,8 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, ladder_steps=DEFAULT
         # second stage: the smallest weighted squared error of the value within relax * t_ok
         Uo, yo, wo = objective
         to = np.log(yo + offset)
-        f2, info = refine(f, U, *_intervals(y, scale, offset, relax * t_ok), Uo, to, wo * (yo + offset) ** 2,
-                          reweight=_secant_weights(wo))
+        f2, info = refine(f, U, *log_intervals(y, scale, offset, relax * t_ok), Uo, to, wo * (yo + offset) ** 2,
+                          reweight=secant_weights(wo))
         stage = {"kind": "two-stage", "relax": float(relax), "minimax_tolerance": minimax, "minimax_met": t_ok,
                  "objective_points": len(yo), "qp_solves": int(info.get("qp", 0))}
         if f2 is not None:
@@ -493,13 +396,11 @@ def _kept_channel(f, old, U, y, scale, offset):
     return f, rec
 
 
-def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFAULT_DEGREES,
-                theta_h_edges=None, piece_degrees=None, noise_frac=DEFAULT_NOISE_FRAC,
-                grazing_cos=DEFAULT_GRAZING_COS, channel_floor=DEFAULT_CHANNEL_FLOOR, time_limit=DEFAULT_TIME_LIMIT,
-                source=None, objective=None, relax=DEFAULT_RELAX, ladder_steps=DEFAULT_LADDER_STEPS,
-                ceiling=None, noise=None, keep=None, progress=None) -> Fit3D:
+def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d", theta_max=None, source=None,
+                objective=None, ceiling=None, noise=None, keep=None, progress=None, **params) -> Fit3D:
     """3-D fit of data ``X`` ``(N, 3)`` (theta_h, theta_d, |phi_d|, radians) with values ``rho``
-    ``(N, 3)`` (1/sr): pieces along theta_h at ``theta_h_edges`` (inner edges), each channel a
+    ``(N, 3)`` (1/sr) with ``settings`` (:class:`fit.rational.settings.Fit3DSettings`, default
+    its defaults; each of its names is also a keyword argument that overrides it): pieces along theta_h at ``theta_h_edges`` (inner edges), each channel a
     rational function of total degrees ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol``
     (module docstring: the stated bound is what is met). ``ladder_steps``: the tolerance ladder's
     budget (:func:`_fit_channel`). ``time_limit`` (s): the wall-clock safety net only (a
@@ -514,9 +415,13 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
     fitted with their tolerance ladder started one step below the earlier record's
     ``minimax_met``. ``progress(stage, done, total)`` (:mod:`fit.progress`) is told the
     functions (piece x channel) done: stage ``"3-D fit"`` (``"3-D refit"`` with ``keep``)."""
+    s = Fit3DSettings.resolve(settings, **params)
+    tol, degrees, theta_h_edges, piece_degrees = s.tol, s.degrees, s.theta_h_edges, s.piece_degrees
+    noise_frac, grazing_cos, channel_floor = s.noise_frac, s.grazing_cos, s.channel_floor
+    relax, ladder_steps = s.relax, s.ladder_steps
     t0 = time.perf_counter()
     if ceiling is None:
-        ceiling = Ceiling(time_limit)
+        ceiling = Ceiling(s.time_limit)
     X = np.asarray(X, np.float64)
     rho = np.maximum(np.asarray(rho, np.float64), 0.0)
     tm = float(theta_max if theta_max is not None else max(X[:, 0].max(), X[:, 1].max()))
@@ -592,7 +497,7 @@ def fit_samples(X, rho, *, name="brdf3d", theta_max=None, tol=0.03, degrees=DEFA
                                        split_variable="theta_h", edges=edges, pieces=pieces,
                                        fit_info=fit_info, piece_info=piece_info, source=src)
     return Fit3D(model, records, tol_all, valid, elapsed, len(X), tuple(noise.tolist()),
-                 {"edges": edges})
+                 {"edges": edges}, settings=s)
 
 
 def verification_ratio(res, X, rho, per_channel: bool = False) -> np.ndarray:
@@ -616,14 +521,12 @@ def verification_ratio(res, X, rho, per_channel: bool = False) -> np.ndarray:
     return ratio if per_channel else np.max(ratio, axis=1)
 
 
-def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
-            theta_fit_deg: float = DEFAULT_THETA_FIT_DEG, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2,
-            verify_above: float = 1.0, n_objective: int = DEFAULT_OBJECTIVE, albedo: bool = True, albedo_tol: float = DEFAULT_ALBEDO_TOL,
-            albedo_time=DEFAULT_ALBEDO_TIME, albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
-            albedo_total_growth: float = DEFAULT_ALBEDO_TOTAL_GROWTH,
-            albedo_refits: int = DEFAULT_ALBEDO_REFITS, **options) -> Fit3D:
+def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=None, progress=None,
+            **params) -> Fit3D:
     """:func:`fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by :func:`sample_rgl`
-    (the sampling time counts in ``time_s``), then **verified between the data points**: the fit
+    (the sampling time counts in ``time_s``) with ``settings``
+    (:class:`fit.rational.settings.Fit3DSettings`, default its defaults; each of its names is
+    also a keyword argument that overrides it; ``name`` default ``"<material>_3d"``), then **verified between the data points**: the fit
     is evaluated at ``verify`` fresh points (half uniform in the variables, half cosine-distributed
     pairs, new seed each round) and, where it leaves its stated bound there, the worst of them join
     the data and it is fitted again (at most ``verify_rounds`` refits: constraint generation over
@@ -632,48 +535,48 @@ def fit_rgl(brdf, *, grid=DEFAULT_GRID, n_random: int = DEFAULT_RANDOM,
     ``fit_info`` records the last verification (``verify_points``, ``verify_max_ratio``: the
     largest error over the stated bound there, ``verified``: <= 1). ``n_objective`` objective
     points per piece (:func:`objective_points`, evaluated on the RGL reference) drive the second
-    stage (``relax`` in ``options``, default 2; ``n_objective=0`` or ``relax=1``: one stage).
+    stage (``relax``, default 2; ``n_objective=0`` or ``relax=1``: one stage).
     ``albedo`` (default on): the directional-albedo policy last (:func:`_albedo_step`,
     :mod:`fit.rational.albedo3d`: measured at 0-75 deg and the last incidence, corrected where
     outside ``albedo_tol`` with at most ``albedo_refits`` channel corrections at a cost of at most
     ``albedo_rmse_growth`` of a channel's relative RMSE and ``albedo_total_growth`` of the fit's, what stays outside recorded in
     ``fit_info["albedo"]``). Every step stops on a count (module docstring, "Budgets");
-    ``time_limit`` (in ``options``, default :data:`DEFAULT_TIME_LIMIT` = 120 s) is only the
+    ``time_limit`` (default :data:`DEFAULT_TIME_LIMIT` = 120 s) is only the
     wall-clock safety net of the whole fit (``albedo_time``: an extra one of the albedo step),
     recorded as ``fit_info["stopped"] = "time"`` when it is passed. ``progress(stage, done,
-    total)`` (in ``options``; :mod:`fit.progress`): stages ``"sampling the file"``, ``"3-D
+    total)`` (:mod:`fit.progress`): stages ``"sampling the file"``, ``"3-D
     fit"`` (functions done), ``"verification"`` (rounds), ``"3-D refit"``, ``"albedo
     policy"``."""
+    s = Fit3DSettings.resolve(settings, **params)
     t0 = time.perf_counter()
-    ceiling = options.pop("ceiling", None)
-    limit = options.pop("time_limit", DEFAULT_TIME_LIMIT)
-    progress = options.get("progress")
     if ceiling is None:
-        ceiling = Ceiling(limit)
+        ceiling = Ceiling(s.time_limit)
     report(progress, "sampling the file", 0, 1)
-    X, rho, tm = sample_rgl(brdf, grid, n_random, theta_fit_deg)
+    X, rho, tm = sample_rgl(brdf, s.grid, s.n_random, s.theta_fit_deg)
     report(progress, "sampling the file", 1, 1)
     src = {"file": str(getattr(brdf, "source", "") or ""), "sha256": str(getattr(brdf, "source_sha256", "") or "")}
-    options.setdefault("name", f"{brdf.name}_3d")
-    if n_objective and options.get("relax", DEFAULT_RELAX) > 1.0:
-        edges = [0.0] + sorted(float(e) for e in (options.get("theta_h_edges") or [])) + [tm]
-        Xo, wo = objective_points(tm, edges, n_objective)
+    name = name or f"{brdf.name}_3d"
+    objective = None
+    if s.n_objective and s.relax > 1.0:
+        edges = [0.0] + sorted(float(e) for e in (s.theta_h_edges or [])) + [tm]
+        Xo, wo = objective_points(tm, edges, s.n_objective)
         wi, wo_dir = half_diff_to_directions(Xo[:, 0], 0.0, Xo[:, 1], Xo[:, 2])
         ro = np.maximum(np.asarray(brdf.evaluate(wi, wo_dir), np.float64), 0.0)
-        options["objective"] = (Xo, ro, wo)
-    res = fit_samples(X, rho, theta_max=tm, source=src, ceiling=ceiling, **options)
-    res.info["_refit"] = (X, rho, tm, src, options)
-    res = verify_and_refit(brdf, res, verify, verify_rounds, ceiling=ceiling, refit_above=verify_above)
-    if albedo:
+        objective = (Xo, ro, wo)
+    res = fit_samples(X, rho, settings=s, name=name, theta_max=tm, source=src, objective=objective,
+                      ceiling=ceiling, progress=progress)
+    res.data = FitData3D(X, rho, tm, src, objective, name, progress)
+    res = verify_and_refit(brdf, res, s.verify, s.verify_rounds, ceiling=ceiling, refit_above=s.verify_above)
+    if s.albedo:
         report(progress, "albedo policy", 0, 1)
-        _albedo_step(brdf, res, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
-                     refits=albedo_refits, total_growth=albedo_total_growth)
+        _albedo_step(brdf, res, s.albedo_tol, s.albedo_time, s.verify, s.albedo_rmse_growth, ceiling=ceiling,
+                     refits=s.albedo_refits, total_growth=s.albedo_total_growth)
         report(progress, "albedo policy", 1, 1)
     ceiling.record(res.model.fit_info)
     domain_record(res.model.fit_info)
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s
-    res.model.fit_info["grid"] = list(grid)
+    res.model.fit_info["grid"] = list(s.grid)
     res.model.fit_info["theta_measured_deg"] = float(np.degrees(brdf.theta_i_max))
     return res
 
@@ -686,15 +589,11 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time, verify: int,
     largest ratio is measured again on the last round's fresh points (no refit; the points and
     their reference values as :func:`verify_and_refit` kept them), so that ``verify_max_ratio``
     describes the fit that is returned (``verify_after_albedo``)."""
-    import copy
-
-    from .albedo3d import albedo_policy
-
     res.info["model_before_albedo"] = copy.deepcopy(res.model)
     rec = albedo_policy(brdf, res, tol=albedo_tol, time_limit=albedo_time, rmse_growth=rmse_growth,
                         total_growth=total_growth, max_refits=refits, ceiling=ceiling)
-    if rec["refitted"] and verify and "_verify_last" in res.info:
-        Xv, rv = res.info["_verify_last"]
+    if rec["refitted"] and verify and res.verify_points is not None:
+        Xv, rv = res.verify_points
         ratio_max = float(verification_ratio(res, Xv, rv).max())
         res.model.fit_info.update(verify_max_ratio=ratio_max, verified=bool(ratio_max <= 1.0),
                                   verify_after_albedo=True)
@@ -703,7 +602,7 @@ def _albedo_step(brdf, res, albedo_tol: float, albedo_time, verify: int,
 
 def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, time_limit=None,
                      ceiling=None, refit_all: bool = False, refit_above: float = 1.0, progress=None):
-    """The verification of :func:`fit_rgl` on a fit made by it (its data in ``res.info``):
+    """The verification of :func:`fit_rgl` on a fit made by it (its data in ``res.data``):
     returns the fit after at most ``verify_rounds`` refits (the budget: a count). A refit adds
     the worst (at most 2,000) fresh points more than ``refit_above`` times outside the stated
     bound (1: any; 4: spikes only) to the data and fits again only the functions (piece,
@@ -712,13 +611,14 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
     with the noise levels of the first fit; ``fit_info["verify_refitted"]`` lists them per round.
     ``time_limit`` (s; None: none) or a caller's ``ceiling`` (:class:`Ceiling`) is only the
     wall-clock safety net: once passed, no further refit is started (``fit_info["stopped"]``).
-    ``progress(stage, done, total)`` (default: the fit's own, from its options;
+    ``progress(stage, done, total)`` (default: the fit's own, ``res.data.progress``;
     :mod:`fit.progress`): stage ``"verification"``, the rounds done."""
     t0 = time.perf_counter()
     if ceiling is None:
         ceiling = Ceiling(time_limit)
-    X, rho, tm, src, options = res.info["_refit"]
-    progress = progress if progress is not None else options.get("progress")
+    data = res.data
+    X, rho, tm = data.X, data.rho, data.theta_max
+    progress = progress if progress is not None else data.progress
     ratio_max, n_added, refitted = None, 0, []
     n_rounds = verify_rounds + 1 if verify else 0
     for rnd in range(n_rounds):
@@ -730,7 +630,7 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
         ratio = np.max(ratio_c, axis=1)
         ratio_max = float(ratio.max())
         res.info["verify_round"] = rnd
-        res.info["_verify_last"] = (Xv, rv)    # the fresh points the returned fit was checked at
+        res.verify_points = (Xv, rv)    # the fresh points the returned fit was checked at
         bad = np.flatnonzero(ratio > refit_above)
         if len(bad) == 0 or rnd == verify_rounds or ceiling.out("verification"):
             break
@@ -750,9 +650,11 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
             if (k, c) not in redo:
                 keep[(k, c)] = (pieces[k].functions[c], r)
         refitted.append([f"{k}{'RGB'[c]}" for k, c in sorted(redo)])
-        res = fit_samples(X, rho, theta_max=tm, source=src, ceiling=ceiling, noise=res.noise, keep=keep,
-                          **options)
-        res.info["_refit"] = (X, rho, tm, src, options)
+        res = fit_samples(X, rho, settings=res.settings, name=data.name, theta_max=tm, source=data.source,
+                          objective=data.objective, ceiling=ceiling, noise=res.noise, keep=keep,
+                          progress=data.progress)
+        data = replace(data, X=X, rho=rho)
+        res.data = data
     if ratio_max is not None:
         res.model.fit_info.update(verify_points=int(verify // 2 * 2), verify_max_ratio=ratio_max,
                                   verified=bool(ratio_max <= 1.0), verify_points_added=n_added)
@@ -788,6 +690,11 @@ VARIANTS = (
 #: it was 0.045 against 0.043 on the benchmark's pairs and 52.6 against 9.2 times its bound at
 #: the fresh points (a spike between the data points); every other switch was by more than 20 %.
 SELECT_MARGIN = 0.05
+#: Settings of the selection itself (its budgets, verification and albedo policy), not of a
+#: layout's fit: not listed in the layouts' ``"options"`` log.
+_SELECT_SETTINGS = frozenset({"time_limit", "select_share", "verify", "verify_rounds", "verify_above", "albedo",
+                              "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
+                              "albedo_refits", "max_variants"})
 
 
 def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
@@ -804,15 +711,11 @@ def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
     return float(np.mean(np.sqrt(np.mean((f - t) ** 2, axis=0)) / np.maximum(np.sqrt(np.mean(t ** 2, axis=0)), 1e-300)))
 
 
-def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, select_share: float = 0.6,
-                   verify: int = DEFAULT_VERIFY, verify_rounds: int = 2, albedo: bool = True,
-                   albedo_tol: float = DEFAULT_ALBEDO_TOL, albedo_time=DEFAULT_ALBEDO_TIME,
-                   albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH,
-                   albedo_total_growth: float = DEFAULT_ALBEDO_TOTAL_GROWTH,
-                   albedo_refits: int = DEFAULT_ALBEDO_REFITS, max_variants=None, progress=None,
-                   **common) -> Fit3D:
-    """Fit every layout of ``variants`` (each :func:`fit_rgl` keyword arguments, updated with
-    ``common``) and return the one with the lowest :func:`validation_rmse` (a later layout must
+def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = None, progress=None,
+                   **params) -> Fit3D:
+    """Fit every layout of ``variants`` (each a dict of settings that replace those of
+    ``settings``, :class:`fit.rational.settings.Fit3DSettings`, default its defaults, whose
+    names are also keyword arguments that override it) with :func:`fit_rgl` and return the one with the lowest :func:`validation_rmse` (a later layout must
     be :data:`SELECT_MARGIN` lower to replace an earlier one; a layout with ``"if_rmse_below"`` is
     tried only below that RMSE); ``info["variants"]`` logs what each achieved (coefficients,
     stated bound, validation RMSE, seconds). The budgets are counts (module docstring,
@@ -826,25 +729,28 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
     ``stopped_at`` record it. ``time_s`` is the whole selection. ``progress(stage, done,
     total)`` (:mod:`fit.progress`): each layout's stages as in :func:`fit_rgl`, then the chosen
     one's ``"verification"`` and ``"albedo policy"``."""
+    s = Fit3DSettings.resolve(settings, **params)
     t0 = time.perf_counter()
-    ceiling = Ceiling(time_limit)
-    best, log = None, []
+    ceiling = Ceiling(s.time_limit)
+    common = {k: v for k, v in s.changed_params().items() if k not in _SELECT_SETTINGS}
+    best, chosen, log = None, None, []
     for k, v in enumerate(variants):
         v = dict(v)
         below = v.pop("if_rmse_below", None)
-        rounds = v.pop("verify_rounds", verify_rounds)
-        above = v.pop("verify_above", 1.0)
+        rounds = v.pop("verify_rounds", s.verify_rounds)
+        above = v.pop("verify_above", s.verify_above)
         opts = dict(common, **v)
-        if max_variants is not None and k >= int(max_variants):
+        if s.max_variants is not None and k >= int(s.max_variants):
             log.append({"variant": k, "options": _plain(opts), "skipped": "budget"})
             continue
-        if k and (best is None or ceiling.out("selection", select_share)):
+        if k and (best is None or ceiling.out("selection", s.select_share)):
             log.append({"variant": k, "options": _plain(opts), "skipped": "time"})
             continue
         if below is not None and best is not None and best.info["validation_rmse"] >= below:
             log.append({"variant": k, "options": _plain(opts), "skipped": f"validation RMSE >= {below:g}"})
             continue
-        res = fit_rgl(brdf, verify=0, albedo=False, ceiling=ceiling, progress=progress, **opts)
+        layout = s.clone(**v, verify_rounds=rounds, verify_above=above)
+        res = fit_rgl(brdf, settings=layout.clone(verify=0, albedo=False), ceiling=ceiling, progress=progress)
         v_rmse = validation_rmse(brdf, res.model)
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
                     "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse, "time_s": res.time_s})
@@ -852,20 +758,19 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
             best = res
             best.info["validation_rmse"] = v_rmse
             best.info["variant"] = k
-            best.info["verify_rounds_budget"] = int(rounds)
-            best.info["verify_above"] = float(above)
+            chosen = layout
     if best is None:
         raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
-    chosen = best.info
-    best = verify_and_refit(brdf, best, verify, chosen["verify_rounds_budget"], ceiling=ceiling,
-                            refit_above=chosen["verify_above"], progress=progress)
+    info = best.info
+    best = verify_and_refit(brdf, best, s.verify, chosen.verify_rounds, ceiling=ceiling,
+                            refit_above=chosen.verify_above, progress=progress)
     for key in ("validation_rmse", "variant"):
-        best.info[key] = chosen[key]
+        best.info[key] = info[key]
     best.info["validation_rmse"] = validation_rmse(brdf, best.model)
-    if albedo:
+    if s.albedo:
         report(progress, "albedo policy", 0, 1)
-        _albedo_step(brdf, best, albedo_tol, albedo_time, verify, albedo_rmse_growth, ceiling=ceiling,
-                     refits=albedo_refits, total_growth=albedo_total_growth)
+        _albedo_step(brdf, best, s.albedo_tol, s.albedo_time, s.verify, s.albedo_rmse_growth, ceiling=ceiling,
+                     refits=s.albedo_refits, total_growth=s.albedo_total_growth)
         report(progress, "albedo policy", 1, 1)
         v_after = validation_rmse(brdf, best.model) if best.info["albedo"]["refitted"] else best.info["validation_rmse"]
         best.info["albedo"]["validation_rmse_before"] = best.info["validation_rmse"]
@@ -875,13 +780,13 @@ def fit_rgl_select(brdf, variants=VARIANTS, time_limit=DEFAULT_TIME_LIMIT, selec
     best.time_s = time.perf_counter() - t0
     best.model.fit_info.update(time_s=best.time_s, variant=best.info["variant"], variants=log,
                                validation_rmse=best.info["validation_rmse"],
-                               budgets={"max_variants": max_variants, "verify_rounds": chosen["verify_rounds_budget"],
-                                        "albedo_refits": int(albedo_refits),
-                                        "ladder_steps": int(common.get("ladder_steps", DEFAULT_LADDER_STEPS))})
+                               budgets={"max_variants": s.max_variants, "verify_rounds": int(chosen.verify_rounds),
+                                        "albedo_refits": int(s.albedo_refits),
+                                        "ladder_steps": int(s.ladder_steps)})
     ceiling.record(best.model.fit_info)
     domain_record(best.model.fit_info)
-    best.info.pop("_refit", None)
-    best.info.pop("_verify_last", None)
+    best.settings = chosen
+    best.data = best.verify_points = None          # the data and fresh points are not kept
     return best
 
 
