@@ -1,7 +1,8 @@
-"""Shipped ahead-of-time render kernels (warp_rbrdf.shipped_kernels, issue 21 cold start): the
-README main job's kernel loads from the shipped set into an empty kernel cache without a
-compile and renders what a compiled kernel renders; the set is current; a damaged, mismatched
-or unsupported binary is never used (a load failure falls back to compiling)."""
+"""Shipped ahead-of-time render kernels (warp_rbrdf.shipped_kernels, written by
+tools.ship_kernels through Warp's AOT API): the README main job's kernel loads from the shipped
+set with an empty kernel cache without a compile (nothing copied into the cache) and renders
+what a compiled kernel renders; the set is current; a damaged, mismatched or unsupported binary
+is never used (a load failure falls back to compiling)."""
 from __future__ import annotations
 
 import json
@@ -14,10 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tools import ship_kernels as ship
 from warp_rbrdf import shipped_kernels as sk
 
 ROOT = Path(__file__).resolve().parents[1]
-REGENERATE = "python -m warp_rbrdf.shipped_kernels"
+REGENERATE = ship.COMMAND
 
 # one process = a fresh install: render the default scene at 1 spp, report where the render
 # kernel came from and what Warp left in the (empty at start) kernel cache
@@ -72,7 +74,7 @@ def _shipped_copy(tmp_path):
 
 
 def test_shipped_set_is_current():
-    problems = sk.check()
+    problems = ship.check()
     assert not problems, (f"the shipped AOT kernels do not match the default scene's ({problems}); "
                           f"regenerate them with `{REGENERATE}` and commit warp_rbrdf/data/kernels")
 
@@ -82,10 +84,10 @@ def test_fresh_cache_loads_shipped_kernel_and_matches_a_compile(tmp_path, monkey
         pytest.skip(f"this CPU lacks {sk.ISA_LEVEL}: the shipped kernels are not used here")
     info, img = _fresh_render(tmp_path, "shipped")
     assert info["source"] == "shipped", info
-    # no code generation happened: Warp writes the module's .cpp source only when it compiles
-    assert not any(f.endswith(".cpp") for f in info["files"]), info["files"]
-    assert any(f.endswith(".o") for f in info["files"])
-    assert "cache_shipped" in info["binary"]
+    # no code generation happened (Warp writes the module's .cpp source only when it compiles)
+    # and nothing was copied: the object loads in place from the shipped set
+    assert not any(f.endswith((".cpp", ".o", ".meta")) for f in info["files"]), info["files"]
+    assert Path(info["binary"]).is_relative_to(sk.PACKAGE_DATA / "kernels"), info["binary"]
 
     # the same shipped object, damaged, with a manifest that vouches for it: Warp fails to
     # load it, the copied files are removed and the kernel compiles as without a shipped set
@@ -94,7 +96,7 @@ def test_fresh_cache_loads_shipped_kernel_and_matches_a_compile(tmp_path, monkey
     (ident,) = manifest["modules"]
     obj = next(n for n in entry["files"] if n.endswith(".o"))
     (pdir / ident / obj).write_bytes(b"not an object file" * 100)
-    entry["files"][obj] = sk._sha256(pdir / ident / obj)
+    entry["files"][obj] = sk.sha256(pdir / ident / obj)
     (pdir / sk.MANIFEST).write_text(json.dumps(manifest))
     info2, img2 = _fresh_render(tmp_path, "fallback", shipped_root=root)
     assert info2["source"].startswith("compiled (load failed"), info2
@@ -125,9 +127,14 @@ def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, de
     assert sk.find_shipped(module, device) == (None, "hash-mismatch")
 
     bad = json.loads(json.dumps(manifest))
-    bad["toolchain"]["llvm"] = "0.0"
+    bad["warp"] = "0.0.0"
     (pdir / sk.MANIFEST).write_text(json.dumps(bad))
-    assert sk.find_shipped(module, device) == (None, "other-toolchain")
+    assert sk.find_shipped(module, device) == (None, "other-version")
+
+    bad = json.loads(json.dumps(manifest))
+    bad["modules"][ident]["files"] = {"../" + obj: manifest["modules"][ident]["files"][obj]}
+    (pdir / sk.MANIFEST).write_text(json.dumps(bad))
+    assert sk.find_shipped(module, device) == (None, "checksum-mismatch")   # no path outside
 
     bad = json.loads(json.dumps(manifest))
     bad["modules"] = {ident + "x": bad["modules"][ident]}
@@ -140,18 +147,32 @@ def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, de
 
     monkeypatch.setenv(sk.ENV, "")
     assert sk.find_shipped(module, device) == (None, "disabled")
-    monkeypatch.setenv(sk.ENV, str(root))
-    import warp as wp
-
-    monkeypatch.setattr(wp.config, "cache_kernels", False)
-    assert sk.find_shipped(module, device) == (None, "cache-off")
 
 
 def test_render_kernels_use_portable_flags(default_module, monkeypatch):
     module, _ = default_module
     expected = sk.PORTABLE_CPU_FLAGS if sk.cpu_supports_isa() else None
     assert module.options["cpu_compiler_flags"] == expected
+    # the AOT API builds and loads the module default variant: the one a CPU launch uses
+    assert module.options["block_dim"] == sk.CPU_BLOCK_DIM == 1
     assert "-march=native" not in sk.PORTABLE_CPU_FLAGS.split()
     # a CPU without the shipped ISA level keeps Warp's -march=native (never an x86-64-v3 object)
     monkeypatch.setattr(sk, "ISA_FEATURES", sk.ISA_FEATURES | {"no-such-cpu-feature"})
-    assert sk.render_module_options() == {}
+    assert sk.render_module_options() == {"block_dim": 1}
+
+
+def test_isa_level_is_read_from_cpuinfo(tmp_path, monkeypatch):
+    """The x86-64-v3 check reads the CPU's flags (``/proc/cpuinfo``): one flag missing, or no
+    such file, means Warp's -march=native and no shipped object."""
+    f = tmp_path / "cpuinfo"
+    monkeypatch.setattr(sk, "CPUINFO", f)
+    try:
+        for flags, ok in ((sk.ISA_FEATURES - {"avx2"}, False), (sk.ISA_FEATURES | {"sse"}, True), (None, False)):
+            if flags is None:
+                f.unlink()
+            else:
+                f.write_text("processor\t: 0\nflags\t\t: " + " ".join(sorted(flags)) + "\n\nprocessor\t: 1\n")
+            sk.cpu_flags.cache_clear()
+            assert sk.cpu_supports_isa() is ok, flags
+    finally:
+        sk.cpu_flags.cache_clear()

@@ -1,14 +1,19 @@
 """Inverse-CDF tables remembered on disk (warp_rbrdf.techniques.table_cache): the key follows
-the file and the spec, a stored table is the tabulated one bit for bit, and the table shipped
-for the embedded default scene is the one its fit tabulates to today."""
+the table's inputs (the file, the spec, the tabulation's parameters and version), not the
+tabulation's source bytes; a stored table is the tabulated one bit for bit, and the table
+shipped for the embedded default scene (tools.ship_tables) is the one its fit tabulates to
+today."""
 from __future__ import annotations
 
 import dataclasses
+import inspect
 
 import numpy as np
 import pytest
 
+from fit.sampling import table as table_mod
 from fit.sampling.table import tabulate
+from tools import ship_tables
 from warp_rbrdf.defaults import default_scene
 from warp_rbrdf.materials.build import build_material_data
 from warp_rbrdf.registry import material
@@ -75,10 +80,11 @@ def test_round_trip_and_user_cache(tmp_path, monkeypatch):
 
 def test_shipped_default_table_is_current(monkeypatch):
     """The default scene's table is shipped under today's key and equals a fresh tabulation
-    (about 5 s: if this fails, run ``python -m warp_rbrdf.techniques.table_cache``)."""
+    (about 5 s: if this fails, run ``python -m tools.ship_tables``)."""
     spec = _sphere_spec()
     shipped = tc.read(tc.SHIPPED / f"{tc.key(spec)}.npz")
-    assert shipped is not None, "no shipped table for the default fit: python -m warp_rbrdf.techniques.table_cache"
+    assert shipped is not None, f"no shipped table for the default fit: {ship_tables.COMMAND}"
+    assert ship_tables.shipped_path() == tc.SHIPPED / f"{tc.key(spec)}.npz"   # the tool ships this key
     monkeypatch.setattr(tc, "user_dir", lambda: None)
     sc = default_scene()
     md = build_material_data(sc, ["sphere"], log=lambda *a: None)
@@ -89,6 +95,39 @@ def test_shipped_default_table_is_current(monkeypatch):
     # count moves the last bit (2e-15 measured with 2 threads against the table made with one);
     # a table of another fit differs by orders of magnitude more
     _same(tabulate(lm.evaluate), shipped, atol=1e-12)
+
+
+def test_key_ignores_the_tabulation_source_bytes(tmp_path, monkeypatch):
+    """A comment added to fit/sampling/table.py keeps the key (and the shipped table) current."""
+    spec = _sphere_spec()
+    k = tc.key(spec)
+    copy = tmp_path / "table.py"
+    copy.write_text(inspect.getsource(table_mod) + "\n# a comment changes no table\n")
+    monkeypatch.setattr(table_mod, "__file__", str(copy))
+    assert tc.key(spec) == k
+
+
+def test_key_follows_the_tabulation_version_and_parameters(monkeypatch):
+    spec = _sphere_spec()
+    k = tc.key(spec)
+    monkeypatch.setattr(table_mod, "TABULATION_VERSION", table_mod.TABULATION_VERSION + 1)
+    assert tc.key(spec) != k
+    monkeypatch.undo()
+    assert tc.key(spec) == k
+    defaults = inspect.signature(table_mod.tabulate).parameters
+    for name, other in (("n_v", 16), ("sub", 4), ("eps", 0.05), ("noise", 1e-5)):
+        assert defaults[name].default != other
+
+        def changed(evaluate, _name=name, _other=other, **kw):   # tabulate with another default
+            return tabulate(evaluate, **{_name: _other, **kw})
+
+        changed.__signature__ = inspect.signature(tabulate).replace(parameters=[
+            p.replace(default=other) if p.name == name else p for p in defaults.values()])
+        monkeypatch.setattr(table_mod, "tabulate", changed)
+        assert tc.key(spec) != k, name
+        monkeypatch.undo()
+    # how the same table is computed (chunk_rows) and reported (progress) is not part of the key
+    assert set(tc.table_inputs()) == {"version", "n_v", "n_t", "n_p", "sub", "eps", "noise"}
 
 
 @pytest.mark.parametrize("field", ["statistic", "incident", "interpolation"])

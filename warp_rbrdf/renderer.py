@@ -131,13 +131,12 @@ class Renderer:
         return self._kernels
 
     def compile(self):
-        """Generate and compile (or load from the kernel cache, or from the shipped ahead-of-time
-        set when the cache lacks it: :mod:`warp_rbrdf.shipped_kernels`) the scene's render
-        kernel; ``self.kernel_source`` says which."""
+        """Load the scene's render kernel from the shipped ahead-of-time set when it holds it
+        (:mod:`warp_rbrdf.shipped_kernels`), else from the kernel cache, else generate and
+        compile it; ``self.kernel_source`` says which."""
         if self.compile_seconds is not None:
             return self.compile_seconds
         t0 = time.perf_counter()
-        # a shipped ahead-of-time binary when the kernel cache lacks one (issue 21, cold start)
         self.kernel_source = load_render_module(self.kernels.render_tile.module, self.device)
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds

@@ -38,6 +38,10 @@ from ..limits import (
 from ..progress import report
 
 TABULATE_STAGE = "tabulating the CDFs"   # the progress stage of tabulate
+#: Version of the tabulation (:func:`tabulate`): bump it whenever a change makes ``tabulate``
+#: return other arrays for the same arguments (the stored tables of
+#: :mod:`warp_rbrdf.techniques.table_cache` are keyed on it, not on this file's bytes).
+TABULATION_VERSION = 1
 
 
 @dataclass

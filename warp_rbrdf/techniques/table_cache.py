@@ -5,23 +5,26 @@ Tabulating a material's table (:func:`fit.sampling.table.tabulate`: 32 view rows
 start of ``rbrdf render`` on the embedded default scene before this module. The table depends
 only on the material's file and its spec fields, so it is stored once under a key:
 
-* ``key``: SHA-256 of the material's type, the bytes of its file, its other spec fields that
-  change the BRDF (``albedo``, ``statistic``, ``scale``, ``incident``, ``interpolation``,
-  ``unvouched``), the tabulation defaults, :data:`VERSION` and the source of
-  :mod:`fit.sampling.table`; a material given in memory (``spec.data``) or without a readable
-  file is never cached.
+* ``key``: SHA-256 of the table's inputs: the material's type, the bytes of its file, its other
+  spec fields that change the BRDF (``albedo``, ``statistic``, ``scale``, ``incident``,
+  ``interpolation``, ``unvouched``), :data:`VERSION`, and the tabulation's parameters (the
+  defaults of :func:`fit.sampling.table.tabulate`: ``n_v``, ``n_t``, ``n_p``, ``sub``, ``eps``,
+  ``noise``) and version (:data:`fit.sampling.table.TABULATION_VERSION`), not the bytes of its
+  source; a material given in memory (``spec.data``) or without a readable file is never cached.
 * where: the shipped tables of the shipped fits, ``warp_rbrdf/data/tables/<key>.npz`` (written
-  by ``python -m warp_rbrdf.techniques.table_cache``, with one BLAS thread), then the user cache
+  by ``python -m tools.ship_tables`` in a checkout, with one BLAS thread), then the user cache
   ``<Warp kernel cache>/rbrdf-tables/<key>.npz`` (written atomically after a tabulation; it goes
   with the kernel cache, so emptying one empties both).
 
 A stored table is the tabulated one bit for bit (float64 arrays, ``np.savez_compressed``);
 ``tests/test_table_cache.py`` checks it and that the shipped tables match the current key.
-Bump :data:`VERSION` when the evaluation of a material kind changes what a file means.
+Bump :data:`VERSION` when the evaluation of a material kind changes what a file means, and
+:data:`fit.sampling.table.TABULATION_VERSION` when the tabulation changes.
 """
 from __future__ import annotations
 
 import hashlib
+import inspect
 import json
 import os
 from pathlib import Path
@@ -41,10 +44,17 @@ VERSION = 3    # 2: rational fits evaluated on their measured domain (materials/
 SHIPPED = PACKAGE_DATA / "tables"
 _SPEC_FIELDS = ("albedo", "statistic", "scale", "incident", "interpolation", "unvouched")
 _ARRAYS = ("theta_v", "cdf_theta", "cdf_phi", "row_fallback", "albedo")
+#: The parameters of :func:`fit.sampling.table.tabulate` that change the table (not
+#: ``chunk_rows``, ``progress``: how the same table is computed and reported).
+TABLE_PARAMS = ("n_v", "n_t", "n_p", "sub", "eps", "noise")
 
 
-def _source_hash() -> str:
-    return hashlib.sha256(Path(table_mod.__file__).read_bytes()).hexdigest()
+def table_inputs() -> dict:
+    """The tabulation's part of the key: :data:`fit.sampling.table.TABULATION_VERSION` and the
+    defaults of :func:`fit.sampling.table.tabulate` for :data:`TABLE_PARAMS` (the table
+    :func:`cached_tabulate` makes)."""
+    sig = inspect.signature(table_mod.tabulate).parameters
+    return {"version": table_mod.TABULATION_VERSION, **{k: sig[k].default for k in TABLE_PARAMS}}
 
 
 def key(spec) -> str | None:
@@ -61,7 +71,7 @@ def key(spec) -> str | None:
         except OSError:
             return None
     fields = {k: _plain(getattr(spec, k, None)) for k in _SPEC_FIELDS}
-    head = {"version": VERSION, "type": spec.type, "fields": fields, "table": _source_hash(),
+    head = {"version": VERSION, "type": spec.type, "fields": fields, "table": table_inputs(),
             "file": h.hexdigest() if f is not None else None}
     return hashlib.sha256(json.dumps(head, sort_keys=True).encode()).hexdigest()[:32]
 
@@ -125,44 +135,3 @@ def cached_tabulate(spec, evaluate, before_build=None) -> CDFTable:
         except (OSError, RbrdfError):     # a full or read-only cache: the table is still correct
             pass
     return t
-
-
-def ship_default_tables() -> list[Path]:
-    """Tabulate the embedded default scene's fit (the first of the shipped coefficient files,
-    ``warp_rbrdf/data/*.json``, as a rational material with the default spec fields) into
-    ``warp_rbrdf/data/tables/``, removing stale tables (about 1 MB each: only the default's is
-    shipped)."""
-    from ..defaults import shipped_coefficient_files
-    from ..materials.build import build_material_data
-    from ..scene import parse_scene
-
-    written = []
-    for f in shipped_coefficient_files()[:1]:
-        sc = parse_scene(f'[materials.m]\ntype = "rational"\nfile = "pkg:{f.name}"\n'
-                         f'sampler = "mis-tabulated"\n[[shapes]]\ntype = "sphere"\nmaterial = "m"\n',
-                         path="<ship>")
-        spec = sc.materials["m"]
-        k = key(spec)
-        out = SHIPPED / f"{k}.npz"
-        if read(out) is None:
-            md = build_material_data(sc, ["m"], log=lambda *a: None)
-            write(out, md.cdf[0])
-        written.append(out)
-    for p in SHIPPED.glob("*.npz"):
-        if p not in written:
-            p.unlink()
-    return written
-
-
-if __name__ == "__main__":
-    import sys
-
-    from fit.batch.tasks import THREAD_ENV
-
-    # one BLAS thread, as the fitter's batch workers: the tabulation's last bit depends on the
-    # thread count (2e-15 with two), and the shipped table is compared bit for bit
-    if any(os.environ.get(k) != v for k, v in THREAD_ENV.items()):
-        os.execve(sys.executable, [sys.executable, "-m", "warp_rbrdf.techniques.table_cache", *sys.argv[1:]],
-                  {**os.environ, **THREAD_ENV})
-    for p in ship_default_tables():
-        print(p)
