@@ -130,10 +130,12 @@ def test_rows_layout_file_is_refused(lambert_fit, tmp_path):
 def test_warp_renders_agree(lambert_fit):
     """A Lambert plane under a constant sky: every pixel is the albedo, with every sampler."""
     from lab import testing as T
+    from warp_rbrdf import registry
     from warp_rbrdf.renderer import Renderer
 
     _, fit = lambert_fit
-    for sampler in ("tabulated", "rational", "rational-derivative", "mis-tabulated", "mis-rational"):
+    # every registered strategy that samples the material's inverse-CDF data
+    for sampler in registry.TABLE_STRATEGIES:
         spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler=sampler)
         spec.cdf = fit
         img = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=6, spp=64)).render()

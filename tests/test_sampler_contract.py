@@ -15,6 +15,12 @@ For the BSDF sample a sampler's technique draws in Warp (``Renderer.sample_mater
 4. **its pdf** -- the Warp pdf equals the NumPy one; where the registry says the pdf is exact,
    ``pdf(wi) * weight == 1``; where it is approximate, ``pdf > 0`` wherever a sample has weight.
 
+And what differs per strategy, each list taken from the registry (a new strategy joins them):
+every strategy has a material case; a strategy that combines the environment and BSDF samples
+(``mis``) renders a furnace equal to quadrature (its MIS weights sum to one); a strategy with the
+derivative estimator weights by its map's Jacobian and is unbiased; a strategy with a
+``fallback`` renders with it when its fit is flagged.
+
 Materials: an analytic glossy lobe on the MERL grid (in memory, no shared data needed) with
 its tabulated and pieces-layout inverse CDFs, a Lambert material with the paper's global
 layout (a glossy lobe's global fit takes minutes), and, for the samplers that only draw from
@@ -33,8 +39,10 @@ from chi2 import (
     histogram,
     map_cell_probs,
     pdf_cell_probs,
+    quadrature_albedo,
 )
 from conftest import RGL_MATERIALS, data_file
+from lab import testing as T
 
 from fit.analytic import glossy_lobe, lambert
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
@@ -64,7 +72,6 @@ class Case:
     pdf_sub = 24
 
     def __init__(self, name, evaluate, cdf, spec_kw, sampler="mis-rational"):
-        from lab import testing as T
         from warp_rbrdf.renderer import Renderer
         from warp_rbrdf.scene import MaterialSpec
 
@@ -72,23 +79,36 @@ class Case:
         self.name, self.evaluate, self.cdf = name, evaluate, cdf
         spec = MaterialSpec(name="m", sampler=sampler, **spec_kw)
         spec.cdf = None if sampler == "mis-rgl" else cdf
+        self.spec_kw = spec_kw
         self.renderer = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
         self._draws, self._probs = {}, {}
 
-    def draws(self, technique: str, theta_v: float, n: int, seed: int = 11):
-        """Warp samples of ``technique`` at view ``theta_v`` (phi_v = 0): (xi, wi, weight),
-        cached per (technique, view, n)."""
-        key = (technique, theta_v, n)
+    def spec(self, sampler: str, cdf=None):
+        """A fresh scene material ``m`` of this case with ``sampler`` and inverse-CDF data
+        ``cdf`` (None: none given)."""
+        from warp_rbrdf.scene import MaterialSpec
+
+        spec = MaterialSpec(name="m", sampler=sampler, **self.spec_kw)
+        spec.cdf = cdf
+        return spec
+
+    def draws(self, strategy: str, theta_v: float, n: int, seed: int = 11, xi=None):
+        """Warp samples of ``strategy``'s BSDF sample at view ``theta_v`` (phi_v = 0):
+        (xi, wo, wi, weight), cached per (strategy, view, n) unless ``xi`` (N, 2) is given."""
+        if xi is not None:   # the caller's uniforms: not cached
+            return self._sample(strategy, theta_v, np.asarray(xi, float))
+        key = (strategy, theta_v, n)
         if key not in self._draws:
-            rng = np.random.default_rng(seed)
-            xi = rng.random((n, 2))
+            xi = np.random.default_rng(seed).random((n, 2))
             if self.xi_margin:   # keep the uniforms off the square's edges (see Case)
                 xi = xi * (1.0 - 2.0 * self.xi_margin) + self.xi_margin
-            wo = np.broadcast_to(spherical_to_direction(theta_v, 0.0), (n, 3))
-            strategy = next(s.name for s in registry.STRATEGIES if s.technique == technique)
-            wi, w = self.renderer.sample_material("m", wo, xi, strategy)
-            self._draws[key] = (xi, wo, wi.astype(float), w.astype(float))
+            self._draws[key] = self._sample(strategy, theta_v, xi)
         return self._draws[key]
+
+    def _sample(self, strategy, theta_v, xi):
+        wo = np.broadcast_to(spherical_to_direction(theta_v, 0.0), (len(xi), 3))
+        wi, w = self.renderer.sample_material("m", wo, xi, strategy)
+        return xi, wo, wi.astype(float), w.astype(float)
 
     def cell_probs(self, tech, theta_v: float):
         """Probabilities of the chi-square cells under the technique's own density (cached)."""
@@ -165,7 +185,7 @@ def test_chi2_against_own_density(request, strategy, which):
     tech = registry.technique(registry.strategy(strategy).technique)
     for tv_deg in THETA_V_DEG:
         tv = np.radians(tv_deg)
-        _, _, wi, w = case.draws(tech.name, tv, N_CHI2)
+        _, _, wi, w = case.draws(strategy, tv, N_CHI2)
         counts = histogram(*direction_to_spherical(wi[w > 0]), T_EDGES, P_EDGES)
         probs = case.cell_probs(tech, tv)
         # the density's mass over the hemisphere is the fraction of draws that give a sample
@@ -182,10 +202,9 @@ def test_chi2_against_own_density(request, strategy, which):
 @pytest.mark.parametrize("strategy,which", CASES)
 def test_unbiased_against_quadrature(request, strategy, which):
     case = _case(request, which)
-    tech = registry.strategy(strategy).technique
     for tv_deg in THETA_V_DEG:
         tv = np.radians(tv_deg)
-        _, wo, wi, w = case.draws(tech, tv, N_CHI2)
+        _, wo, wi, w = case.draws(strategy, tv, N_CHI2)
         assert_unbiased(case.evaluate, tv, wi, wo, w, (strategy, which, tv_deg))
 
 
@@ -198,7 +217,7 @@ def test_warp_equals_numpy_and_pdf(request, strategy, which):
     tech = registry.technique(registry.strategy(strategy).technique)
     impl = tech.impl()
     for tv_deg in THETA_V_DEG:
-        xi, wo, wi, w = case.draws(tech.name, np.radians(tv_deg), 4000, seed=5)
+        xi, wo, wi, w = case.draws(strategy, np.radians(tv_deg), 4000, seed=5)
         ref_wi, ref_w = impl.numpy_sample(case.cdf, wo, xi)
         np.testing.assert_allclose(wi, ref_wi, atol=2e-4, err_msg=f"{strategy} {tv_deg}")
         np.testing.assert_allclose(w, ref_w, rtol=2e-3, atol=1e-5, err_msg=f"{strategy} {tv_deg}")
@@ -209,6 +228,159 @@ def test_warp_equals_numpy_and_pdf(request, strategy, which):
             np.testing.assert_allclose(pdf[ok] * w[ok], 1.0, rtol=2e-3)
         else:
             assert np.all(pdf[ok] > 0)
+
+
+# --------------------------------------------------------------------------------------------
+# What differs per strategy: coverage, MIS weights, the derivative estimator, the fallback
+# --------------------------------------------------------------------------------------------
+def _first_case(strategy):
+    return next(w for s, w in CASES if s == strategy)
+
+
+def test_every_registered_strategy_runs_the_contract():
+    """A strategy added to the registry gets the contract (and the tests below) or fails here:
+    every one has a material case, and the per-strategy lists are the registry's."""
+    assert sorted({s for s, _ in CASES}) == sorted(registry.STRATEGY_NAMES)
+    assert MIS_STRATEGIES == [s.name for s in registry.STRATEGIES if s.light_sample and s.bsdf_sample]
+    assert DERIVATIVE_STRATEGIES and FALLBACK_STRATEGIES and MIS_STRATEGIES
+
+
+MIS_STRATEGIES = [s.name for s in registry.STRATEGIES if s.mis]
+DERIVATIVE_STRATEGIES = [s.name for s in registry.STRATEGIES if s.estimator == "derivative"]
+FALLBACK_STRATEGIES = [s.name for s in registry.STRATEGIES if s.fallback]
+MIS_THETA_V_DEG = 50.0
+MIS_SPP = 4096
+
+
+def _furnace_render(case, strategy, theta_v_deg=MIS_THETA_V_DEG, spp=MIS_SPP):
+    """Render the case's material on a plane under a unit constant environment with its
+    scene ``sampler = strategy``, seen from ``theta_v_deg`` through a 1 deg field of view (every
+    pixel sees the same view within 0.5 deg): ``(luminance of the image mean, its standard
+    error)``, the estimate of the integral of f cos over the light."""
+    from fit.formats.colour import LUMINANCE
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import CameraSpec, IntegratorSpec, Scene, ShapeSpec
+
+    cdf = None if registry.technique(registry.strategy(strategy).technique).material else case.cdf
+    tv = np.radians(theta_v_deg)
+    cam = CameraSpec(origin=(0.0, np.cos(tv), np.sin(tv)), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
+                     fov=1.0, resolution=(4, 4))
+    sc = Scene(camera=cam, integrator=IntegratorSpec(spp=spp, seed=1, tile_size=8),
+               materials={"m": case.spec(strategy, cdf)},
+               shapes=[ShapeSpec(type="plane", material="m", size=(100.0, 100.0))],
+               lights=[T.constant_env(1.0)],
+               path="<test scene>")
+    r = Renderer(sc)
+    assert r.material_data.strategies == [strategy]   # no fallback: the strategy itself renders
+    img, var = r.render(return_variance=True)
+    n = img.shape[0] * img.shape[1]
+    se = np.sqrt(var.mean(axis=(0, 1)) / spp / n)
+    return float(img.mean(axis=(0, 1)) @ LUMINANCE), float(np.abs(LUMINANCE) @ se)
+
+
+@pytest.mark.parametrize("strategy", MIS_STRATEGIES)
+def test_mis_weights_sum_to_one(request, strategy):
+    """A strategy that combines the environment sample and its BSDF sample weights the two by
+    the power heuristic; the combination is unbiased for every integrand exactly when the two
+    weights of every direction sum to one (the same BSDF density on both sides: ``1 / weight``
+    where the technique's pdf is exact, its pdf function otherwise). The render of a plane
+    under a unit constant environment (both pdfs comparable over the whole hemisphere: the
+    environment's is uniform) equals the quadrature of f cos within 4 standard errors."""
+    case = _case(request, _first_case(strategy))
+    m, se = _furnace_render(case, strategy)
+    q, dq = quadrature_albedo(case.evaluate, np.radians(MIS_THETA_V_DEG))
+    assert abs(m - q) < 4 * se + 2 * dq + 1e-6, (strategy, case.name, m, q, se, dq)
+
+
+@pytest.mark.slow
+def test_mis_check_catches_weights_that_do_not_sum_to_one(request, monkeypatch):
+    """Negative control of :func:`test_mis_weights_sum_to_one` (slow: it compiles a kernel): a
+    power heuristic whose two weights sum to 1.25 where the pdfs are equal makes the check fail."""
+    import warp as wp
+
+    from warp_rbrdf import integrator
+
+    @wp.func
+    def broken_heuristic(pa: float, pb: float) -> float:
+        if pa <= 0.0:
+            return 0.0
+        if pb <= 0.0:
+            return 1.0
+        return wp.min(1.0, 1.25 * pa * pa / (pa * pa + pb * pb))
+
+    monkeypatch.setattr(integrator, "power_heuristic", broken_heuristic)
+    case = _case(request, _first_case("mis"))
+    m, se = _furnace_render(case, "mis")
+    q, dq = quadrature_albedo(case.evaluate, np.radians(MIS_THETA_V_DEG))
+    assert abs(m - q) > 4 * se + 2 * dq + 1e-6, (m, q, se, dq)
+
+
+def _jacobian_weight(case, strategy, theta_v, xi, h=1e-3):
+    """|d(theta_l, phi_l) / d(xi_1, xi_2)| sin(theta_l) of the strategy's Warp sample at the
+    uniforms ``xi`` (N, 2), by central differences of step ``h``: the inverse density of the
+    map, which the derivative estimator's weight alpha must be (eq. 3-4 of the supplementary
+    text)."""
+    ang = []
+    for d in ((h, 0), (-h, 0), (0, h), (0, -h)):
+        _, _, wi, _ = case.draws(strategy, theta_v, 0, xi=xi + np.array(d))
+        ang.append(direction_to_spherical(wi))
+    (t1, p1), (t2, p2), (t3, p3), (t4, p4) = ang
+    wrap = lambda a: (a + np.pi) % (2 * np.pi) - np.pi  # noqa: E731
+    dt1, dp1 = (t1 - t2) / (2 * h), wrap(p1 - p2) / (2 * h)
+    dt2, dp2 = (t3 - t4) / (2 * h), wrap(p3 - p4) / (2 * h)
+    _, _, wi, _ = case.draws(strategy, theta_v, 0, xi=xi)
+    return np.abs(dt1 * dp2 - dt2 * dp1) * np.sin(direction_to_spherical(wi)[0])
+
+
+def _matches(weight, ref, tol=0.02, share=0.9):
+    """``weight`` equals ``ref`` within ``tol`` (relative) at ``share`` of the points or more
+    (central differences straddle the pieces' and the table cells' edges at the others)."""
+    return float(np.mean(np.abs(weight / ref - 1.0) < tol)) >= share
+
+
+@pytest.mark.parametrize("strategy,which", [(s, w) for s, w in CASES if s in DERIVATIVE_STRATEGIES])
+def test_derivative_estimator_weight_is_the_maps_jacobian(request, strategy, which):
+    """A strategy with ``estimator = "derivative"`` weights its sample by alpha, the derivative
+    of its inverse-CDF map (not 1 / a tabulated pdf): alpha equals the map's Jacobian by central
+    differences, and ``f cos alpha`` is unbiased (mean equal to the quadrature within 3
+    standard errors, :func:`chi2.assert_unbiased`). Negative control: the same checks reject a
+    weight off by 3 %."""
+    case = _case(request, which)
+    rng = np.random.default_rng(3)
+    for tv_deg in THETA_V_DEG:
+        tv = np.radians(tv_deg)
+        xi = 0.05 + 0.9 * rng.random((2000, 2))
+        _, _, _, w = case.draws(strategy, tv, 0, xi=xi)
+        ok = w > 0
+        assert ok.mean() > 0.99, (strategy, tv_deg)
+        ref = _jacobian_weight(case, strategy, tv, xi)[ok]
+        assert _matches(w[ok], ref), (strategy, which, tv_deg)
+        assert not _matches(1.03 * w[ok], ref), (strategy, which, tv_deg)
+        _, wo, wi, w = case.draws(strategy, tv, N_CHI2)
+        assert_unbiased(case.evaluate, tv, wi, wo, w, (strategy, which, tv_deg))
+        with pytest.raises(AssertionError):
+            assert_unbiased(case.evaluate, tv, wi, wo, 1.03 * w, (strategy, which, tv_deg))
+
+
+@pytest.mark.parametrize("strategy", FALLBACK_STRATEGIES)
+def test_fallback_switches_to_the_fallback_strategy(request, strategy):
+    """A strategy with a ``fallback`` renders with it when its inverse CDFs failed verification
+    (``CDFFit.fallback``): the material's strategy, technique and combine code are the
+    fallback's, its data the fit's table; with the verified fit it keeps its own."""
+    import dataclasses
+
+    from warp_rbrdf.renderer import Renderer
+
+    case = _case(request, _first_case(strategy))
+    own, fb = registry.strategy(strategy), registry.strategy(registry.strategy(strategy).fallback)
+    flagged = dataclasses.replace(case.cdf, fallback=True, reason="flagged by the test")
+    for cdf, expect in ((case.cdf, own), (flagged, fb)):
+        sc = T.plane_scene(case.spec(strategy, cdf), [T.constant_env(1.0)], resolution=4, spp=1)
+        md = Renderer(sc).material_data
+        assert md.strategies == [expect.name], (strategy, cdf.fallback)
+        assert md.techniques_used() == [registry.technique(expect.technique).code], (strategy, cdf.fallback)
+        assert list(md.combine) == [registry.combine_code(expect)], (strategy, cdf.fallback)
+        assert (md.cdf[0] is case.cdf) if expect is own else (md.cdf[0] is case.cdf.table)
 
 
 # --------------------------------------------------------------------------------------------
@@ -227,7 +399,8 @@ def test_contract_on_rgl_materials(material):
             continue
         for tv_deg in THETA_V_DEG:
             tv = np.radians(tv_deg)
-            xi, wo, wi, w = case.draws(tech.name, tv, N_CHI2)
+            strategy = next(s.name for s in registry.STRATEGIES if s.technique == tech.name)
+            xi, wo, wi, w = case.draws(strategy, tv, N_CHI2)
             counts = histogram(*direction_to_spherical(wi[w > 0]), T_EDGES, P_EDGES)
             assert chi2_pvalue(counts, case.cell_probs(tech, tv), N_CHI2) > P_VALUE, (material, tech.name, tv_deg)
             # + 0.5 % of the value: the midpoint quadrature of the clear coats' near-normal mirror
