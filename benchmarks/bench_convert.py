@@ -66,7 +66,7 @@ def _mitsuba_vs(path, func, n, seed=7):
 
 
 def run(materials, pairs: int, mitsuba_pairs: int, work: Path) -> dict:
-    from fit import analytic
+    from lab import analytic
     from fit.convert import convert
     from fit.convert.sources import load_source
     from fit.convert.summary import compare

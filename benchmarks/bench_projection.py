@@ -34,7 +34,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     files = list(args.files)
     if not files:
-        from fit.analytic import glossy_lobe
+        from lab.analytic import glossy_lobe
 
         tmp = Path(tempfile.mkdtemp()) / "analytic_glossy.binary"
         write_merl(MeasuredBRDF.from_function(glossy_lobe(phi_mod=0.3), name="analytic_glossy"), tmp)

@@ -102,7 +102,7 @@ def main(argv=None):
     import warp as wp
 
     wp.config.quiet = True
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.formats import load_measured
     from fit.sampling.cdf_file import fit_cdf, load
     from lab import testing as T

@@ -4,6 +4,8 @@
   plugin's eval / pdf / sample, the reference sphere scene, Mitsuba's LLVM variant for timed
   renders); needs the optional extra ``reference``.
 * :mod:`lab.testing`: small in-memory scenes for tests and examples.
+* :mod:`lab.analytic`: analytic reference BRDFs (``lambert``, ``glossy_lobe``) for exact-layout
+  MERL files in tests and benchmarks.
 
 Reference harnesses, test helpers and superseded variants live here. The package runs from a
 checkout (``pythonpath = ["."]`` for pytest, ``python -m studies.<name>`` / ``python -m

@@ -82,7 +82,7 @@ def assert_unchanged(before: dict, folder) -> None:
 # ----------------------------------------------------------------------------------------------
 def lambert_merl(path, albedo=(0.8, 0.5, 0.2)) -> Path:
     """An exact-layout MERL file of a Lambertian BRDF (35 MB)."""
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.formats.measured import MeasuredBRDF
     from fit.formats.merl import write_merl
 
@@ -121,7 +121,7 @@ def small_rational_dict(piecewise: bool = True) -> dict:
 def small_cdf_dict() -> dict:
     """The JSON object of a small valid ``rbrdf-cdf`` file, pieces layout (a glossy lobe on a
     4 x 8 x 8 table; the pieces are built from the table, no variance gate)."""
-    from fit.analytic import glossy_lobe
+    from lab.analytic import glossy_lobe
     from fit.sampling.cdf_file import DEFAULTS, CDFFit
     from fit.sampling.pieces import build_pieces
     from fit.sampling.table import tabulate

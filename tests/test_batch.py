@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.batch.keys import BrdfOptions, CdfOptions, brdf_key, cdf_key, output_key
 from fit.batch.report import COLUMNS, BatchReport, plot_coefficients, rows_from_results
 from fit.cli import main

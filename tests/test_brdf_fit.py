@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import data_file
-from fit.analytic import glossy_lobe
+from lab.analytic import glossy_lobe
 from fit.formats.measured import MeasuredBRDF
 from fit.formats.merl import write_merl
 from fit.rational.brdf_fit import THETA_D_MAX_DEG, channel_data, fit_brdf, project_for_fit, white_sky_albedo
@@ -66,7 +66,7 @@ def test_model_policy_and_file(lobe_fit, tmp_path):
 
 def test_absolute_floor_is_the_luminance_lambertian(lobe_file, tmp_path):
     """A = albedo exactly for a Lambertian file; floor = tol * A_Y / pi in every channel."""
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.formats import load_measured
 
     path = tmp_path / "lambert.binary"

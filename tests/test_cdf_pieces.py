@@ -10,7 +10,7 @@ import pytest
 from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs
 from conftest import RGL_MATERIALS, data_file
 
-from fit.analytic import lambert
+from lab.analytic import lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
 from fit.sampling.cdf_file import fit_cdf, load, verify

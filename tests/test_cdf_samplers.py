@@ -16,7 +16,7 @@ from chi2 import (
 )
 from conftest import RGL_MATERIALS, data_file
 
-from fit.analytic import lambert
+from lab.analytic import lambert
 from fit.formats.angles import spherical_to_direction
 from fit.sampling.cdf_file import fit_cdf, verify
 from fit.sampling.table import tabulate

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from chi2 import chi2_pvalue, edges, histogram, table_cell_probs
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.formats.angles import spherical_to_direction
 from fit.formats.colour import LUMINANCE
 from fit.projection.albedo import directional_albedo

@@ -5,7 +5,7 @@ import sys
 import numpy as np
 import pytest
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.cli import main
 from fit.formats.measured import MeasuredBRDF
 from fit.projection.projected import ProjectedBRDF

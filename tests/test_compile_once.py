@@ -316,7 +316,7 @@ def test_a_new_fit_compiles_nothing():
 @pytest.fixture(scope="module")
 def global_fits():
     """Two different verified global-layout fits (a Lambert material's CDFs on two tables)."""
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.sampling.cdf_file import fit_cdf
 
     f = lambert((0.8, 0.6, 0.4))
@@ -331,7 +331,7 @@ def global_fits():
 def test_a_new_cdf_file_compiles_nothing(global_fits):
     """Global-layout fits and a pieces-layout fit of the same material: the same kernels, and
     the Warp samples equal the NumPy reference for each."""
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.sampling.cdf_file import fit_cdf
     from lab import testing as T
     from warp_rbrdf.renderer import Renderer

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import data_file
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.cli import main
 from fit.convert import convert
 from fit.convert.merl_writer import tabulate_merl

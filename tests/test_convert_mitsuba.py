@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from conftest import data_file, require_mitsuba
 
-from fit.analytic import glossy_lobe
+from lab.analytic import glossy_lobe
 from fit.convert import convert
 from fit.convert.summary import compare
 from fit.formats.measured import MeasuredBRDF

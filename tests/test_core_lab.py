@@ -132,27 +132,25 @@ def test_built_wheel_holds_core_code_only(tmp_path):
 
 # --------------------------------------------------------------------------------------------
 # the lab marker
-def _imports(tree: ast.Module):
-    """Every absolutely imported module name of ``tree``, wherever the statement stands."""
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            yield from (a.name for a in node.names)
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            yield node.module
-
-
-def is_lab_test(tree: ast.Module) -> bool:
-    """A test module of lab code only: it imports ``studies`` or ``benchmarks`` (anywhere), or the
-    Mitsuba harness module ``lab.mitsuba_reference`` itself at module level (``import
-    lab.mitsuba_reference``, ``from lab import mitsuba_reference``; a core test may use one of its
-    scene builders, e.g. ``from lab.mitsuba_reference import sphere_scene``)."""
-    if any(n.split(".")[0] in ("studies", "benchmarks") for n in _imports(tree)):
+def is_lab_test(name: str, tree: ast.Module) -> bool:
+    """A test module of lab code only: named ``test_bench*``, or importing at module level
+    ``studies`` or ``benchmarks``, or the Mitsuba harness module ``lab.mitsuba_reference`` itself
+    (``import lab.mitsuba_reference``, ``from lab import mitsuba_reference``). A core test may
+    still import lab code inside a test function or use one of the harness's scene builders
+    (``from lab.mitsuba_reference import sphere_scene``)."""
+    if name.startswith("test_bench"):
         return True
     for node in tree.body:
-        if isinstance(node, ast.Import) and any(a.name == "lab.mitsuba_reference" for a in node.names):
-            return True
-        if (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module == "lab"
-                and any(a.name == "mitsuba_reference" for a in node.names)):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            if node.module.startswith("lab.mitsuba_reference"):   # names from it: a scene builder
+                names = []
+        else:
+            continue
+        if any(n.split(".")[0] in ("studies", "benchmarks") or n == "lab.mitsuba_reference"
+               for n in names):
             return True
     return False
 
@@ -173,10 +171,11 @@ def test_lab_tests_carry_the_lab_marker():
     lab, unmarked = [], []
     for p in sorted((ROOT / "tests").glob("test_*.py")):
         tree = ast.parse(p.read_text(encoding="utf-8"), filename=str(p))
-        if is_lab_test(tree):
+        if is_lab_test(p.name, tree):
             lab.append(p.name)
             if not has_lab_mark(tree):
                 unmarked.append(p.name)
     assert {"test_parity_mitsuba.py", "test_convert_mitsuba.py", "test_studies.py",
-            "test_benchmarks.py"} <= set(lab), lab
+            "test_benchmarks.py", "test_profile_render.py"} <= set(lab), lab
+    assert "test_grazing.py" not in lab   # a core test using the harness's scene builder
     assert not unmarked, f"tests of lab code without pytestmark = pytest.mark.lab: {unmarked}"

@@ -33,7 +33,7 @@ def merl(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def glossy(tmp_path_factory):
-    from fit.analytic import glossy_lobe
+    from lab.analytic import glossy_lobe
     from fit.formats.measured import MeasuredBRDF
     from fit.formats.merl import write_merl
 

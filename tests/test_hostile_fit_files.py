@@ -519,7 +519,7 @@ def test_cdf_valid_small_file_loads(tmp_path, cdf_dict):
 # ----------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def npz_arrays():
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.formats.measured import MeasuredBRDF
     from fit.projection.project import project
 

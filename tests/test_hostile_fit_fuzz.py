@@ -138,7 +138,7 @@ def test_fuzz_cdf_json(tmp_path):
 # ----------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def npz_bytes(tmp_path_factory):
-    from fit.analytic import glossy_lobe
+    from lab.analytic import glossy_lobe
     from fit.formats.measured import MeasuredBRDF
     from fit.projection.project import project
 

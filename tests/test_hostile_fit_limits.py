@@ -99,7 +99,7 @@ def bombs(tmp_path_factory):
     import io
     import zipfile
 
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.formats.measured import MeasuredBRDF
     from fit.projection.project import project
 

@@ -310,7 +310,7 @@ def test_fit_cli_write_failure(capsys, monkeypatch, work, inputs, name, argv, ou
 
 @functools.lru_cache(maxsize=1)
 def _merl_brdf():
-    from fit.analytic import lambert
+    from lab.analytic import lambert
     from fit.formats.measured import MeasuredBRDF
 
     return MeasuredBRDF.from_function(lambert())
@@ -336,7 +336,7 @@ def _write_tensor(path):
 
 
 def _write_table(path):
-    from fit.analytic import glossy_lobe
+    from lab.analytic import glossy_lobe
     from fit.sampling.table import tabulate
     from warp_rbrdf.techniques.table_cache import write
 

@@ -4,7 +4,7 @@ import os
 import numpy as np
 import pytest
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.errors import BRDFFileError
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.formats.grid import (MERL_SHAPE, phi_d_centres, phi_d_index, theta_d_centres, theta_d_index,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import data_file
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.errors import BRDFFileError
 from fit.formats.angles import half_diff_to_directions
 from fit.formats.grid import (

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fit.analytic import lambert
+from lab.analytic import lambert
 from tests.hostile import lambert_merl, run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,7 +30,7 @@ def merl(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def glossy(tmp_path_factory):
-    from fit.analytic import glossy_lobe
+    from lab.analytic import glossy_lobe
     from fit.formats.measured import MeasuredBRDF
     from fit.formats.merl import write_merl
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.formats.angles import half_diff_to_directions
 from fit.formats.grid import MERL_SHAPE, phi_d_centres, theta_d_centres, theta_h_centres
 from fit.formats.measured import MeasuredBRDF

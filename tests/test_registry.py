@@ -85,7 +85,7 @@ def test_every_sampler_parses_in_a_scene(sampler):
 # --------------------------------------------------------------------------------------------
 def _specs():
     """One in-memory instance of every registered material kind (a new kind must add one)."""
-    from fit.analytic import glossy_lobe
+    from lab.analytic import glossy_lobe
     from fit.rational.coefficient_file import load
     from warp_rbrdf.paths import PACKAGE_DATA
 

@@ -44,7 +44,7 @@ from chi2 import (
 from conftest import RGL_MATERIALS, data_file
 from lab import testing as T
 
-from fit.analytic import glossy_lobe, lambert
+from lab.analytic import glossy_lobe, lambert
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
 from fit.formats.measured import MeasuredBRDF
 from fit.sampling.cdf_file import fit_cdf

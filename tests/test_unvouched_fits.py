@@ -17,7 +17,7 @@ import shutil
 import numpy as np
 import pytest
 
-from fit.analytic import glossy_lobe
+from lab.analytic import glossy_lobe
 from fit.formats.angles import (
     directions_to_half_diff,
     half_diff_to_directions,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .formats.angles import directions_to_half_diff
+from fit.formats.angles import directions_to_half_diff
 
 
 def lambert(albedo=(0.8, 0.5, 0.2)):
