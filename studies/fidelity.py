@@ -4,7 +4,7 @@ the ``.bsdf`` file evaluated exactly with the format's own interpolation) agains
 (``measured`` 3-D table, ``projected`` 2-D table, ``rational`` fit at 5 %), and the ``rgl``
 render against Mitsuba 3 itself.
 
-Scene (:mod:`warp_rbrdf.mitsuba_reference`, ``sphere_scene`` / ``render_sphere``): unit sphere,
+Scene (:mod:`lab.mitsuba_reference`, ``sphere_scene`` / ``render_sphere``): unit sphere,
 camera at (0, 0, 4) looking at the origin, +Y up, 30 deg vertical field of view, hidden
 environment map at scale 1 (``studio`` = studio_small_03_1k, ``rooitou`` = rooitou_park_1k),
 direct lighting with one environment sample and one BSDF sample per camera sample combined by
@@ -203,7 +203,7 @@ def render_halves(scene, spp: int) -> dict:
 def mitsuba_halves(path, envmap, spp: int, resolution: int) -> dict:
     """Mitsuba's render (``mitsuba_reference.render_sphere``) as the mean of two renders of
     ``spp / 2`` samples (seeds :data:`MITSUBA_SEEDS`)."""
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     t0 = time.perf_counter()
     imgs = [np.asarray(MR.render_sphere(path, envmap, spp=spp // 2, resolution=resolution, seed=s), np.float64)
@@ -223,7 +223,7 @@ def rim_band(resolution: int, mask) -> np.ndarray:
     """(H, W) bool: the pixels of ``mask`` within :func:`rim_width` px of the sphere's
     silhouette (a circle about the image centre: the sphere is centred on the optical axis; its
     radius is tan(asin(r / d)) / tan(fov / 2) half-widths)."""
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
 
     n = int(resolution)
     d = float(np.linalg.norm(MR.CAMERA_ORIGIN))
@@ -299,7 +299,7 @@ def run(preset="full", out="results/fidelity", materials=None, maps=None, resolu
         quiet=False) -> dict:
     from fit.formats import load_measured
     from fit.projection.project import project
-    from warp_rbrdf import mitsuba_reference as MR
+    from lab import mitsuba_reference as MR
     from warp_rbrdf.scene import MaterialSpec
 
     allm = rgl_materials()
@@ -614,7 +614,7 @@ def explain_rational(rows, tol) -> str:
         out.append(f"On {len(ceiling)} missed cases the projected table itself misses the same statistic, so a fit "
                    f"of it is not expected to meet the target there: the projection's ceiling (φd and non-reciprocity "
                    f"folded into a median; at the limb, what any function of (θh, θd) alone leaves: "
-                   f"[study_limb.md](study_limb.md); the 3-D fits of issue 25 keep φd, "
+                   f"[study_limb.md](study_limb.md); the 3-D fits keep φd, "
                    f"[fit_accuracy.md](fit_accuracy.md)): {', '.join(ceiling)}.")
     if fit_only:
         out.append(f"On {len(fit_only)} the table meets it and the fit does not (the fit's own "
