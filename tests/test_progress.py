@@ -240,3 +240,23 @@ def test_infeasible_brdf_verdict_on_stderr(capsys, glossy, tmp_path):
     line, = err.splitlines()
     assert line.startswith("rbrdf-fit brdf: ") and "nothing written" in line
     assert "theta_d deg" in out and "nothing written" not in out
+
+
+# --- rbrdf render's setup ------------------------------------------------------------------------
+def test_render_setup_reports_its_stages():
+    """A Renderer tells its progress callback each setup stage (materials counted up to their
+    number, geometry, environment map) and the kernel load."""
+    from warp_rbrdf.defaults import default_scene
+    from warp_rbrdf.renderer import Renderer
+
+    calls = []
+    scene = default_scene()
+    r = Renderer(scene, progress=lambda s, d, t: calls.append((s, d, t)))
+    r.compile()
+    stages = [c[0] for c in calls]
+    for want in ("loading materials", "building the geometry", "environment map", "loading the render kernel"):
+        assert want in stages, (want, stages)
+    loads = [(d, t) for s, d, t in calls if s == "loading materials"]
+    n = len({sh.material for sh in scene.shapes})
+    assert loads[0] == (0, n) and loads[-1] == (n, n)
+    assert [d for d, _ in loads] == sorted(d for d, _ in loads)

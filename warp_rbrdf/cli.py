@@ -81,7 +81,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="PNG exposure in stops (default 0)")
     r.add_argument("--resolution", type=integer(1, limits.MAX_RESOLUTION_SIDE), nargs=2, metavar=("W", "H"),
                    help="override camera.resolution")
-    r.add_argument("--no-progress", action="store_true", help="no progress bar")
+    r.add_argument("--no-progress", action="store_true",
+                   help="no progress on stderr (setup stages, kernel load and image tiles)")
     sub.add_parser("scene-format", help="print the scene-file reference")
     return p
 
@@ -198,8 +199,12 @@ def cmd_render(a) -> int:
     _init_warp_quietly()
     from .renderer import Renderer  # imports Warp: only when rendering
 
-    r = Renderer(scene, device=a.device)
+    from fit.progress import CLIProgress
+
+    setup_progress = CLIProgress("rbrdf render", enabled=not a.no_progress)
+    r = Renderer(scene, device=a.device, progress=setup_progress)
     r.compile()
+    setup_progress.close()
     img = r.render(spp=spp, seed=a.seed, threads=a.threads, progress=not a.no_progress)
     n_bad, first = nonfinite_pixels(img)
     if n_bad:

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fit.progress import one_step
+
 from . import camera, geometry, integrator, lights, registry, sample_patterns
 from .defaults import default_scene
 from .errors import RenderError, SceneError
@@ -51,15 +53,21 @@ class Renderer:
 
     ``analytic_spheres``: intersect ``sphere`` shapes analytically where their transform keeps
     them spheres (default); False tessellates every sphere into its icosphere of
-    ``subdivisions`` (for comparisons; :mod:`warp_rbrdf.geometry`)."""
+    ``subdivisions`` (for comparisons; :mod:`warp_rbrdf.geometry`).
 
-    def __init__(self, scene: Scene, device: str = "cpu", analytic_spheres: bool = True):
+    ``progress(stage, done, total)`` (:mod:`fit.progress`; None: silent) is told the setup's
+    stages: ``"loading materials"`` (materials), the inverse-CDF tabulation and fits a material
+    needs (rows), ``"building the geometry"`` and ``"environment map"`` (one step each), and
+    :meth:`compile`'s ``"loading the render kernel"``."""
+
+    def __init__(self, scene: Scene, device: str = "cpu", analytic_spheres: bool = True, progress=None):
         wp = init_warp()
         self.wp = wp
         self.scene = scene
         self.analytic_spheres = bool(analytic_spheres)
         self.device = get_device(device)
         t0 = time.perf_counter()
+        self.progress = progress
         self._build()
         self.setup_seconds = time.perf_counter() - t0
         self.compile_seconds = None
@@ -73,11 +81,12 @@ class Renderer:
         for sh in sc.shapes:
             if sh.material not in used:
                 used.append(sh.material)
-        self.material_data = build_material_data(sc, used)
+        self.material_data = build_material_data(sc, used, progress=self.progress)
         index = {n: i for i, n in enumerate(used)}
-        geom = geometry.build_geometry(sc, index, analytic_spheres=self.analytic_spheres)
-        self.geometry = geom
-        self.mesh = geometry.make_warp_mesh(geom, dev)   # None: no triangle, no BVH
+        with one_step(self.progress, "building the geometry"):
+            geom = geometry.build_geometry(sc, index, analytic_spheres=self.analytic_spheres)
+            self.geometry = geom
+            self.mesh = geometry.make_warp_mesh(geom, dev)   # None: no triangle, no BVH
         self.scene_geometry = geometry.make_geometry_struct(geom, self.mesh, dev)
         eps = sc.integrator.ray_epsilon
         if eps <= 0:
@@ -89,8 +98,9 @@ class Renderer:
         env_spec = sc.environment
         self.env_data = None
         if env_spec is not None:
-            img = lights.environment_image(env_spec, sc.path, f"lights[{sc.lights.index(env_spec)}]")
-            self.env_data = lights.build_env_distribution(img, env_spec.rotation)
+            with one_step(self.progress, "environment map"):
+                img = lights.environment_image(env_spec, sc.path, f"lights[{sc.lights.index(env_spec)}]")
+                self.env_data = lights.build_env_distribution(img, env_spec.rotation)
         self.env = lights.make_env_struct(self.env_data, dev)
         dirs, irr = [], []
         o = np.asarray(sc.camera.origin, float)
@@ -137,7 +147,8 @@ class Renderer:
         if self.compile_seconds is not None:
             return self.compile_seconds
         t0 = time.perf_counter()
-        self.kernel_source = load_render_module(self.kernels.render_tile.module, self.device)
+        with one_step(self.progress, "loading the render kernel"):
+            self.kernel_source = load_render_module(self.kernels.render_tile.module, self.device)
         self.compile_seconds = time.perf_counter() - t0
         return self.compile_seconds
 

@@ -6,13 +6,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from fit.progress import report
+
 from .. import registry
 from ..techniques import cdf_data
 from .data import MaterialData, Pool
 
+LOAD_STAGE = "loading materials"   # the progress stage of build_material_data
 
-def build_material_data(scene, used_names=None, log=print) -> MaterialData:
-    """Load and pack the materials ``used_names`` (default: all of the scene's) in that order."""
+
+def build_material_data(scene, used_names=None, log=print, progress=None) -> MaterialData:
+    """Load and pack the materials ``used_names`` (default: all of the scene's) in that order.
+    ``progress(stage, done, total)`` (:mod:`fit.progress`) is told ``"loading materials"``
+    (materials done) and the inverse-CDF builds' own stages (rows)."""
     names = list(scene.materials) if used_names is None else list(used_names)
     n = max(len(names), 1)
     kind = np.zeros(n, np.int32)
@@ -26,6 +32,7 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
     loaded, strategies, cdfs = [], [], []
     index_of_kind: dict = {}
     budget = cdf_data.BuildBudget()   # inverse-CDF builds this load may start
+    report(progress, LOAD_STAGE, 0, len(names))
     for i, name in enumerate(names):
         spec = scene.materials[name]
         key = f"materials.{name}"
@@ -47,12 +54,13 @@ def build_material_data(scene, used_names=None, log=print) -> MaterialData:
         else:   # kinds without a table index their own functions
             offset[i] = index_of_kind.get(kd.code, 0)
             index_of_kind[kd.code] = offset[i] + 1
-        strat, cdf = cdf_data.prepare(spec, lm, scene.path, key, log, budget)
+        strat, cdf = cdf_data.prepare(spec, lm, scene.path, key, log, budget, progress=progress)
         technique[i] = registry.technique(strat.technique).code
         combine[i] = registry.combine_code(strat)
         loaded.append(lm)
         strategies.append(strat.name)
         cdfs.append(cdf)
+        report(progress, LOAD_STAGE, i + 1, len(names))
     md = MaterialData(names=names, kind=kind, technique=technique, combine=combine, scale=scale,
                       offset=offset, tables=tables.array(), loaded=loaded, strategies=strategies,
                       cdf=cdfs, param=param, rgl_f=rgl_f.array(), rgl_i=rgl_i.array())

@@ -78,11 +78,13 @@ class BuildBudget:
         self.used += 1
 
 
-def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print, budget=None):
+def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print, budget=None, progress=None):
     """``(strategy actually used, inverse-CDF data)`` of one material: data None (hemisphere
     techniques), a :class:`fit.sampling.table.CDFTable` (tabulated) or a verified
     :class:`fit.sampling.cdf_file.CDFFit` (rational). ``budget`` (a :class:`BuildBudget`, one
-    per scene load; default: a fresh one) bounds the builds a scene's load may start."""
+    per scene load; default: a fresh one) bounds the builds a scene's load may start.
+    ``progress(stage, done, total)`` (:mod:`fit.progress`) is passed to the tabulation and the
+    fit of the inverse CDFs when one is built."""
     budget = BuildBudget() if budget is None else budget
     strat = registry.strategy(spec.sampler)
     tech = registry.technique(strat.technique)
@@ -101,7 +103,7 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print, budg
                 f"from `rbrdf-fit cdf` to skip this)")
             from fit.sampling.cdf_file import fit_cdf
 
-            fitobj = fit_cdf(loaded.evaluate, name=spec.name)
+            fitobj = fit_cdf(loaded.evaluate, name=spec.name, progress=progress)
         if fitobj.fallback:
             fb = registry.strategy(strat.fallback)
             log(f"material {spec.name!r}: rational sampler FALLBACK to {fb.name!r} ({fitobj.reason})")
@@ -111,7 +113,8 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print, budg
         return strat, fitobj.table
     return strat, cached_tabulate(spec, loaded.evaluate,
                                   before_build=lambda: budget.take(scene_file, key,
-                                                                   "tabulating inverse CDFs"))
+                                                                   "tabulating inverse CDFs"),
+                                  progress=progress)
 
 
 def pack(cdfs) -> dict:

@@ -109,17 +109,18 @@ def write(path: Path, t: CDFTable) -> None:
         np.savez_compressed(f, **{k: getattr(t, k) for k in _ARRAYS}, eps=np.float64(t.eps))
 
 
-def cached_tabulate(spec, evaluate, before_build=None) -> CDFTable:
+def cached_tabulate(spec, evaluate, before_build=None, progress=None) -> CDFTable:
     """:func:`fit.sampling.table.tabulate` of ``evaluate`` (the material of ``spec``), read from
     the shipped or the user cache when stored there, else tabulated and stored in the user
     cache (a cache that cannot be written is skipped silently: the table is still correct).
     ``before_build()``, when given, is called just before a table is tabulated (not on a cache
-    hit): the scene's load-time budget (:class:`warp_rbrdf.techniques.cdf_data.BuildBudget`)."""
+    hit): the scene's load-time budget (:class:`warp_rbrdf.techniques.cdf_data.BuildBudget`).
+    ``progress(stage, done, total)`` (:mod:`fit.progress`) is told the tabulation's rows."""
     k = key(spec)
     if k is None:
         if before_build is not None:
             before_build()
-        return tabulate(evaluate)
+        return tabulate(evaluate, progress=progress)
     udir = user_dir()
     for d in (SHIPPED, udir):
         if d is not None:
@@ -128,7 +129,7 @@ def cached_tabulate(spec, evaluate, before_build=None) -> CDFTable:
                 return t
     if before_build is not None:
         before_build()
-    t = tabulate(evaluate)
+    t = tabulate(evaluate, progress=progress)
     if udir is not None:
         try:
             write(udir / f"{k}.npz", t)
