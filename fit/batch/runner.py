@@ -253,7 +253,7 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
     report = BatchReport(rows, wall_s=time.perf_counter() - t0, counts=counts, workers=n_workers)
     with OutputSet() as outputs:
         report.to_csv(outputs.stage(out / REPORT_FILES[0]))
-        (Path(outputs.stage(out / REPORT_FILES[1]))).write_text(report.to_markdown(), encoding="utf-8")
+        outputs.write_text(out / REPORT_FILES[1], report.to_markdown())
         plot_coefficients(rows, out / REPORT_FILES[2], outputs=outputs)
         outputs.commit()
     report.wall_s = time.perf_counter() - t0

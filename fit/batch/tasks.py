@@ -137,9 +137,7 @@ def _write(output: Path, save, manifest: dict) -> None:
         tmp = outputs.stage(output)
         save(tmp)
         manifest = dict(manifest, output=output.name, output_sha256=file_sha256(tmp))
-        mtmp = outputs.stage(manifest_path(output))
-        with open(mtmp, "w", encoding="utf-8", newline="\n") as f:
-            f.write(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+        outputs.write_text(manifest_path(output), json.dumps(manifest, indent=1, allow_nan=False) + "\n")
         outputs.commit()
 
 
