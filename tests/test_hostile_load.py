@@ -146,8 +146,6 @@ RATIONAL_CASES = [
      "fit.grazing_cutoff_deg"),
     ("grazing-cutoff-200", "silent", _edit(_v1, lambda d: d.setdefault("fit", {}).update(grazing_cutoff_deg=200.0)),
      "fit.grazing_cutoff_deg"),
-    ("tolerance-string", "traceback", _edit(_v2, lambda d: d.setdefault("fit", {}).update(tolerance="0.05\n#x")),
-     "fit.tolerance"),
     ("name-nul", "unclear", _edit(_v2, lambda d: d.update(name="a\u0000b")), "key name"),
     ("name-escape", "unclear", _edit(_v1, lambda d: d.update(name="x\u001b[2J")), "U+001B"),
     ("name-newline", "unclear", _edit(_v3_dict, lambda d: d.update(name="a\nb")), "key name"),

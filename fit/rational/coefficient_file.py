@@ -508,15 +508,13 @@ def _model(d: dict, path, key: str, depth: int, budget: _Budget, three_d: bool =
 def _fit_info(d: dict, key: str) -> dict:
     """The file's ``fit`` record (how the fit was made), with the fields that readers act on
     checked: ``grazing_cutoff_deg`` (the projection's grazing cut-off, degrees, in [0, 90] or
-    null: :mod:`fit.rational.domain`, :mod:`fit.rational.fallback`) and ``tolerance`` (a
-    non-negative number or null, quoted by the exports). Other fields are kept as they are."""
+    null: :mod:`fit.rational.domain`, :mod:`fit.rational.fallback`). Other fields are kept as
+    they are (what reaches generated code is escaped by :mod:`fit.export.escape`)."""
     info = dict(F.obj(d.get("fit", {}), F.sub(key, "fit")))
     fkey = F.sub(key, "fit")
     if info.get("grazing_cutoff_deg") is not None:
         info["grazing_cutoff_deg"] = F.number(info["grazing_cutoff_deg"], F.sub(fkey, "grazing_cutoff_deg"),
                                               lo=0.0, hi=90.0)
-    if info.get("tolerance") is not None and not isinstance(info["tolerance"], list):
-        info["tolerance"] = F.number(info["tolerance"], F.sub(fkey, "tolerance"), lo=0.0)
     return info
 
 
