@@ -130,6 +130,20 @@ def name(v, key: str, optional: bool = False, max_len: int = MAX_NAME_CHARS):
     return s
 
 
+def source_record(v, key: str) -> dict:
+    """The ``source`` record of a coefficient or CDF file (informative: where the fit came
+    from) as a dict: its ``file`` a :func:`name` and its ``sha256`` a hexadecimal digest (at
+    most 128 digits) when given; other members are kept for the caller to check."""
+    src = dict(obj(v, key))
+    if src.get("file") is not None:
+        name(src["file"], sub(key, "file"))
+    sha = src.get("sha256")
+    if sha is not None and (not isinstance(sha, str) or len(sha) > 128
+                            or any(ch not in "0123456789abcdefABCDEF" for ch in sha)):
+        raise Invalid(sub(key, "sha256"), "expected a hexadecimal digest")
+    return src
+
+
 def flag(v, key: str) -> bool:
     """A JSON ``true`` / ``false``."""
     if not isinstance(v, bool):

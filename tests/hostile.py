@@ -90,6 +90,17 @@ def lambert_merl(path, albedo=(0.8, 0.5, 0.2)) -> Path:
     return Path(path)
 
 
+def glossy_merl(path) -> Path:
+    """A MERL ``.binary`` of the analytic glossy lobe (:func:`lab.analytic.glossy_lobe`) at
+    ``path``: a fit of it at a tight tolerance is infeasible at low degree."""
+    from lab.analytic import glossy_lobe
+    from fit.formats.measured import MeasuredBRDF
+    from fit.formats.merl import write_merl
+
+    write_merl(MeasuredBRDF.from_function(glossy_lobe(), name="glossy"), path)
+    return Path(path)
+
+
 def small_rational_dict(piecewise: bool = True) -> dict:
     """The JSON object of a small valid BRDF coefficient file (version 2 with two theta_d
     pieces, or version 1): Q = 1 + 0.2 T_1(t_h) > 0."""

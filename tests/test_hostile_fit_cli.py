@@ -17,6 +17,7 @@ from hostile import (
     CLASSES,
     assert_bad_input,
     assert_unchanged,
+    glossy_merl,
     lambert_merl,
     run,
     small_cdf_dict,
@@ -33,13 +34,7 @@ def merl(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def glossy(tmp_path_factory):
-    from lab.analytic import glossy_lobe
-    from fit.formats.measured import MeasuredBRDF
-    from fit.formats.merl import write_merl
-
-    p = tmp_path_factory.mktemp("input") / "glossy.binary"
-    write_merl(MeasuredBRDF.from_function(glossy_lobe(), name="glossy"), p)
-    return p
+    return glossy_merl(tmp_path_factory.mktemp("input") / "glossy.binary")
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from lab.analytic import lambert
-from tests.hostile import lambert_merl, run
+from tests.hostile import glossy_merl, lambert_merl, run
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ["--n-v", "8", "--n-t", "8", "--n-p", "8"]
@@ -30,13 +30,7 @@ def merl(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def glossy(tmp_path_factory):
-    from lab.analytic import glossy_lobe
-    from fit.formats.measured import MeasuredBRDF
-    from fit.formats.merl import write_merl
-
-    p = tmp_path_factory.mktemp("input") / "glossy.binary"
-    write_merl(MeasuredBRDF.from_function(glossy_lobe(), name="glossy"), p)
-    return p
+    return glossy_merl(tmp_path_factory.mktemp("input") / "glossy.binary")
 
 
 def _recorder():

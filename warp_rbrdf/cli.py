@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fit.cli.flags import OneLineParser, integer, number
+from fit.cli.flags import OneLineParser, integer, number, quiet_stdout
 from fit.errors import FlagError, RbrdfError, display_path
 from fit.outputs import OutputSet, check_output_file
 
@@ -271,19 +271,8 @@ def main(argv=None) -> int:
         print("rbrdf: interrupted (no output written)", file=sys.stderr)
         return 130
     except BrokenPipeError:          # stdout closed early (rbrdf scene-format | head -1)
-        _quiet_stdout()
+        quiet_stdout()
         return 141                   # as a tool killed by SIGPIPE; the outputs were committed
-
-
-def _quiet_stdout() -> None:
-    """Point stdout at /dev/null, so the interpreter's final flush does not print a second
-    BrokenPipeError."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-    except (OSError, ValueError):
-        pass
 
 
 if __name__ == "__main__":

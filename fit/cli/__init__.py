@@ -20,7 +20,6 @@ command quietly with status 141, as a tool killed by SIGPIPE.
 """
 from __future__ import annotations
 
-import os
 import sys
 import warnings
 
@@ -29,7 +28,7 @@ import numpy as np
 from ..errors import RbrdfError
 from ..progress import CLIProgress
 from . import batch, brdf, cdf, convert, export, measured
-from .flags import OneLineParser
+from .flags import OneLineParser, quiet_stdout
 
 DESCRIPTION = """\
 Fit measured isotropic BRDFs with rational functions (Rational BRDF, Pacanowski et al. 2012).
@@ -97,12 +96,3 @@ def main(argv=None) -> int:
         return 141                   # as a tool killed by SIGPIPE; outputs were committed first
 
 
-def quiet_stdout() -> None:
-    """Point stdout at /dev/null, so that the interpreter's final flush of a stdout whose reader
-    has gone does not print a second ``BrokenPipeError``."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-    except (OSError, ValueError):
-        pass

@@ -14,6 +14,8 @@ from __future__ import annotations
 import argparse
 import difflib
 import math
+import os
+import sys
 
 from ..errors import display_text
 
@@ -177,3 +179,15 @@ def add_run_flags(p) -> None:
                    help="no progress on stderr (default: a bar on a terminal, otherwise one line per "
                         "stage with an estimate of the time left)")
     p.add_argument("--verbose", action="store_true", help="show the LP solver's (HiGHS) banner and log")
+
+
+def quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's final flush of a stdout whose reader
+    has gone (``rbrdf-fit info FILE | head -1``) does not print a second ``BrokenPipeError``;
+    both command lines call it before they exit with status 141."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass

@@ -452,14 +452,7 @@ def _value(d, key: str, kind: str) -> dict:
 
 def _source(d, key: str) -> dict:
     """The ``source`` record (informative), its ``file`` a name and its ``sha256`` hex when given."""
-    src = dict(F.obj(d.get("source", {"file": "", "sha256": ""}), key))
-    if src.get("file") is not None:
-        F.name(src["file"], F.sub(key, "file"))
-    sha = src.get("sha256")
-    if sha is not None and (not isinstance(sha, str) or len(sha) > 128
-                            or any(ch not in "0123456789abcdefABCDEF" for ch in sha)):
-        raise F.Invalid(F.sub(key, "sha256"), "expected a hexadecimal digest")
-    return src
+    return F.source_record(d.get("source", {"file": "", "sha256": ""}), key)
 
 
 def _domain_policy(d, key: str) -> dict:

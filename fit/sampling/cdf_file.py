@@ -290,13 +290,7 @@ def _table_params(tp, table: CDFTable, key: str = "table") -> dict:
 def _source(src, key: str = "source") -> dict:
     """The ``source`` record (informative): ``file`` a name, ``sha256`` a hexadecimal digest,
     ``incident`` ``view`` or ``light``, when given."""
-    src = dict(F.obj(src, key))
-    if src.get("file") is not None:
-        F.name(src["file"], F.sub(key, "file"))
-    sha = src.get("sha256")
-    if sha is not None and (not isinstance(sha, str) or len(sha) > 128
-                            or any(ch not in "0123456789abcdefABCDEF" for ch in sha)):
-        raise F.Invalid(F.sub(key, "sha256"), "expected a hexadecimal digest")
+    src = F.source_record(src, key)
     if src.get("incident") is not None:
         F.string(src["incident"], F.sub(key, "incident"), choices=("view", "light"))
     return src
