@@ -64,7 +64,7 @@ def test_round_trip_and_user_cache(tmp_path, monkeypatch):
     monkeypatch.setattr(tc, "user_dir", lambda: tmp_path / "user")
     calls = []
 
-    def counting(evaluate):
+    def counting(evaluate, progress=None):
         calls.append(1)
         return tabulate(evaluate, n_v=4, n_t=8, n_p=8)
 
@@ -158,7 +158,7 @@ def test_load_time_builds_are_bounded(tmp_path, monkeypatch):
     built = []
     shipped = tc.read(next(tc.SHIPPED.glob("*.npz")))
 
-    def fake_tabulate(evaluate):   # the real table of another material: only the count matters
+    def fake_tabulate(evaluate, progress=None):   # the real table of another material: only the count matters
         built.append(1)
         return shipped
 
