@@ -12,7 +12,11 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
+DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data")).absolute()
+if "RBRDF_DATA" in os.environ:
+    # a relative RBRDF_DATA means the folder where pytest started (warp_rbrdf.paths reads it
+    # against the working directory, which tests that run in a temporary folder change)
+    os.environ["RBRDF_DATA"] = str(DATA)
 IN_CI = os.environ.get("CI", "").lower() in ("1", "true", "yes")
 
 RGL_MATERIALS = (
