@@ -53,11 +53,9 @@ def make_options(tols=(0.05,), cdf: bool = True, brdf_options: dict | None = Non
 
 
 def _check_options(options: BatchOptions) -> None:
-    from ..rational.brdf_fit import _check_fit_args
-
-    for bo in options.brdf_options():
-        _check_fit_args(bo.tol, bo.max_degree, bo.max_den_degree, bo.floor_frac, bo.core_theta_d_deg,
-                        bo.intervals, bo.band_intervals)
+    """``ValueError`` for a fit setting out of range at any tolerance: building each
+    :class:`fit.rational.settings.BRDFFitSettings` validates it."""
+    options.brdf_options()
 
 
 def default_workers() -> int:

@@ -331,13 +331,6 @@ def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None 
     return BRDFFit(model, pieces, total, settings=s)
 
 
-def _check_fit_args(tol, max_degree, max_den_degree, floor_frac, core, intervals, band_intervals) -> None:
-    """``ValueError`` for arguments outside the ranges of :mod:`fit.limits` (the checks of
-    :class:`fit.rational.settings.BRDFFitSettings`)."""
-    BRDFFitSettings(tol=tol, max_degree=max_degree, max_den_degree=max_den_degree, floor_frac=floor_frac,
-                    core_theta_d_deg=core, intervals=intervals, band_intervals=band_intervals)
-
-
 def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,
                max_degree, max_den_degree, floor_frac, spread_k, rho_ref, progress,
                stop_on_infeasible=False, partial=None, theta_h_range_deg=(0.0, 90.0)) -> PieceFit:
