@@ -1,7 +1,7 @@
-"""Fit-accuracy benchmark (issue 25): how close each representation of an RGL measurement is to
+"""Fit-accuracy benchmark: how close each representation of an RGL measurement is to
 the measurement itself, on the direction pairs a renderer meets.
 
-Metric (the issue's, exactly): ``--pairs`` (200,000) direction pairs, the light ``wi`` and the
+Metric (the accuracy targets', exactly): ``--pairs`` (200,000) direction pairs, the light ``wi`` and the
 view ``wo`` each cosine-distributed over the upper hemisphere (seed ``--seed``); the truth is the
 RGL reference evaluation (:meth:`fit.formats.rgl.RGLBRDF.evaluate`, the file's own (light,
 view) roles, negatives clamped to 0); per channel the relative RMSE of ``rho cos(theta_i)
@@ -34,9 +34,10 @@ Representations (columns):
   fit, the same fit before it is measured too (``fit3d_before_albedo`` in results.json, printed
   as "before the albedo policy") and the policy's record is ``fit3d.albedo_policy``;
 * ``neural``: the published neural BRDF (Sztrajman et al. 2021, 675 weights) relative RMSE as
-  quoted in the issue (six materials; not re-measured here).
+  published (six materials; not re-measured here).
 
-The render ΔE2000 column of the issue is not computed here (see docs/fit_accuracy.md).
+The render ΔE2000 of the 3-D fits against the ``rgl`` material is a separate step:
+``--render-from RESULTS_JSON`` renders the fits a run saved (docs/fit_accuracy.md).
 
     OMP_NUM_THREADS=1 taskset -c 0 python -m benchmarks.bench_fit_accuracy --docs
     python -m benchmarks.bench_fit_accuracy --materials satin_rosaline --pairs 20000
@@ -58,12 +59,12 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: The issue's six materials and the published neural BRDF's relative RMSE (675 weights).
+#: The six materials with a published neural BRDF, and its relative RMSE (675 weights).
 NEURAL = {"paper_white": 0.010, "colodur_napoli_4f": 0.031, "satin_rosaline": 0.089,
           "cc_ibiza_sunset": 0.099, "cc_iris_purple_gem": 0.096, "vch_golden_yellow": 0.088}
 NEURAL_WEIGHTS = 675
-#: The issue's table (measured by its author on the code before this benchmark): phi_d-median
-#: table and 2-D rational 5 % relative RMSE, for a cross-check of this benchmark's numbers.
+#: The reference table quoted with the accuracy targets (measured independently of this benchmark):
+#: phi_d-median table and 2-D rational 5 % relative RMSE, a cross-check of this benchmark's numbers.
 ISSUE_TABLE = {"paper_white": (0.019, 0.027), "colodur_napoli_4f": (0.028, 0.050),
                "satin_rosaline": (0.189, 0.235), "cc_ibiza_sunset": (0.287, 0.295),
                "cc_iris_purple_gem": (0.270, 0.489), "vch_golden_yellow": (0.133, 0.154)}

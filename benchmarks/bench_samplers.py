@@ -1,4 +1,4 @@
-"""Benchmark of the BRDF samplers (issue 6).
+"""Benchmark of the BRDF samplers.
 
 1. Samples per second of each sampler alone in Warp (a kernel that only samples: tabulated
    binary search vs the rational inverse CDFs vs cosine), on the Warp CPU device unless

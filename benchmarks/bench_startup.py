@@ -1,5 +1,5 @@
 """Benchmark: start-up of ``rbrdf render`` with a rational material sampled by ``mis-rational``
-(issue 21, item 4: fits and inverse-CDF files are data, so a new one compiles nothing), against
+(fits and inverse-CDF files are data, so a new one compiles nothing), against
 a baseline revision of the renderer (default: the last one that generated code per fit).
 
 Each run is one ``python -m warp_rbrdf render`` process (what a user pays: Python and Warp

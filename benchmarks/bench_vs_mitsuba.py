@@ -1,4 +1,4 @@
-"""Benchmark (issue 21): time to 1 % error of our renderer against Mitsuba 3, per RGL material
+"""Benchmark: time to 1 % error of our renderer against Mitsuba 3, per RGL material
 and environment map, on the reference scene of Mitsuba's ``measured`` plugin.
 
 Scene (:mod:`lab.mitsuba_reference`): unit sphere at the origin, camera at (0, 0, 4)
@@ -25,7 +25,7 @@ from the last rung with RMSE proportional to N^-1/2 at that rung's samples/s
 d log RMSE / d log N between the last two rungs (-0.5 for independent samples; steeper means
 stratification still helps and the extrapolation is pessimistic for that renderer).
 
-Extension (issue 21, heavy-tailed cases; ``--no-extend`` turns it off): near-mirror materials
+Extension (heavy-tailed cases; ``--no-extend`` turns it off): near-mirror materials
 under a small bright source (the sun of ``rooitou``) have fireflies, and a 64-spp seed-pair
 estimate is then dominated by the few that were drawn (relative RMSE 0.7-2.5, extrapolated over a
 factor 5000-60000 in time). After the base ladder a renderer's top rung is *untrusted* when its
@@ -91,7 +91,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "bench_vs_mitsuba.md"
 
-#: The maps of the issue (files under $RBRDF_DATA/envmaps).
+#: The two maps (files under $RBRDF_DATA/envmaps): a few compact lights, a tiny strong sun.
 MAPS = {"studio": "envmaps/studio_small_03_1k.hdr", "rooitou": "envmaps/rooitou_park_1k.hdr"}
 #: --quick: one glossy and one diffuse file, one map.
 QUICK_MATERIALS = ("cc_ibiza_sunset_rgb", "paper_white_rgb")
@@ -102,7 +102,7 @@ OUR_PATTERN = "stratified"
 MITSUBA_SAMPLER = "multijitter"
 #: Largest Mitsuba pass of the check's reference (spp; keeps the LLVM wavefront in memory).
 MAX_PASS_SPP = 64
-#: The issue's targets (for the lead's final run; reported, never asserted).
+#: The accuracy-speed targets (reported, never asserted).
 TARGETS = {"median_ratio": 3.0, "max_ratio": 10.0, "rate_ratio": 0.4}
 
 

@@ -1,5 +1,5 @@
 """Where a shaded sample's time goes: a sampling profile of the render kernel, attributed to the
-Warp functions it inlines (issue 21, "profile where the time goes").
+Warp functions it inlines.
 
     python -m benchmarks.profile_render [--material cc_ibiza_sunset_rgb] [--envmap rooitou_park_1k]
                                         [--spp 256] [--resolution 128] [--json FILE] [--lines]

@@ -1,4 +1,4 @@
-"""Resource limits of everything the fitter reads or is asked to compute (issue 22).
+"""Resource limits of everything the fitter reads or is asked to compute.
 
 Rule: an input of at most 10 MB -- a file or a command-line value -- may not make ``rbrdf-fit``
 (or the renderer, which reads rational and CDF files through :mod:`fit`) use more than about

@@ -7,7 +7,7 @@
 * :mod:`lab.analytic`: analytic reference BRDFs (``lambert``, ``glossy_lobe``) for exact-layout
   MERL files in tests and benchmarks.
 
-Reference harnesses, test helpers and superseded variants live here. The package runs from a
+Reference harnesses, test helpers and variants kept for comparison live here. The package runs from a
 checkout (``pythonpath = ["."]`` for pytest, ``python -m studies.<name>`` / ``python -m
 benchmarks.<name>`` from the repository root) and is not in the wheel (``pyproject.toml`` packages
 only ``fit*`` and ``warp_rbrdf*``). ``fit/`` and ``warp_rbrdf/`` never import it

@@ -1,4 +1,4 @@
-"""Fidelity to the measurement (issue 20): every shared RGL-EPFL material, rendered in the
+"""Fidelity to the measurement: every shared RGL-EPFL material, rendered in the
 reference scene of Mitsuba 3's ``measured`` plugin, with the reference representation (``rgl``:
 the ``.bsdf`` file evaluated exactly with the format's own interpolation) against the others
 (``measured`` 3-D table, ``projected`` 2-D table, ``rational`` fit at 5 %), and the ``rgl``

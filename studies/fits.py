@@ -13,10 +13,9 @@ Order of preference (the first that works):
    measured file with the options ``rbrdf-fit brdf`` passes by default (:data:`FIT_OPTIONS`),
    saved with :func:`fit.rational.coefficient_file.save`: the same fit and file as
    ``rbrdf-fit brdf FILE --tol t --out X.json``. Its source is labelled ``"cli"`` and its cache
-   file ends in ``_cli.json``, as when the studies ran that command, so fits cached by earlier
-   runs are reused. A fit has no time limit (the studies used to run the command in a child
-   process with a timeout, and their ``--fit-timeout`` options are gone): it runs to its end,
-   and the fit study reports its seconds;
+   file ends in ``_cli.json``, so fits cached by earlier runs are reused. A fit has no time
+   limit (no child process, no timeout): it runs to its end, and the fit study reports its
+   seconds;
 4. only with ``allow_direct=True`` (the fit study's ``--direct-fallback``): a stand-in made here
    with :class:`fit.rational.fitter.IntervalRationalFitter` on the median projection (one function per
    channel over (sqrt theta_h, theta_d), theta_d <= 80 deg, intervals ``y +- max(t |y|, floor)``).

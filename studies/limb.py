@@ -1,4 +1,4 @@
-"""The limb of the 2-D representations (issue 20): how much of the error that ``projected`` and
+"""The limb of the 2-D representations: how much of the error that ``projected`` and
 ``rational`` show along the sphere's silhouette under a sunny map is the median's, how much any
 function of (theta_h, theta_d) alone must leave, and what a fit that keeps phi_d shows there.
 
@@ -20,7 +20,7 @@ alone:
 * ``rational``: the 2-D fit at 5 % (:func:`studies.fidelity.rational_fit`: cached or shipped
   fits; new fits only with ``--fit``), flagged pieces shown as the projected table (the
   renderer's default);
-* ``rational-3d``: a 3-D fit of (theta_h, theta_d, |phi_d|) (:mod:`fit.rational.fit3d`, issue 25)
+* ``rational-3d``: a 3-D fit of (theta_h, theta_d, |phi_d|) (:mod:`fit.rational.fit3d`)
   read from ``--fits3d`` (``<stem>_3d.json``, as ``python -m benchmarks.bench_fit_accuracy``
   writes them), when the folder has one.
 

@@ -1,4 +1,4 @@
-"""Inline replacements for libm functions the render kernels call per sample (issue 21):
+"""Inline replacements for libm functions the render kernels call per sample:
 :func:`atan2` and :func:`sincos`.
 
 ``wp.atan2`` compiles to a call of libm's ``atan2f``: 8 % of a shaded sample's time on the

@@ -1,4 +1,4 @@
-"""Resource and range limits of everything ``rbrdf`` reads or is asked to render (issue 22).
+"""Resource and range limits of everything ``rbrdf`` reads or is asked to render.
 
 Rule (as :mod:`fit.limits`, whose memory budget is shared): an input of at most 10 MB -- a
 scene, a mesh, an environment map or a command-line value -- may not make ``rbrdf`` use more
@@ -31,7 +31,7 @@ MAX_ENV_BYTES = 256 << 20
 MAX_RESOLUTION_SIDE = 16384
 MAX_PIXELS = 1 << 24
 #: Most camera samples per pixel (integrator.spp, --spp): the kernels count samples in 32-bit
-#: integers (2^31 used to wrap into an all-black image).
+#: integers (unchecked, 2^31 wraps into an all-black image).
 MAX_SPP = 1 << 20
 #: Most camera samples of one render, width x height x spp (e.g. 2048 x 2048 at 2048 spp);
 #: at the CPU's ~1-3 M samples/s of a simple scene that is already about a day.

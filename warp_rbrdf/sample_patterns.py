@@ -22,7 +22,7 @@ light sample and one for the BSDF sample.
 Streams. The render kernel's ``pattern`` argument (:func:`kernel_pattern`) carries, above the
 pattern code, a key of the scene's sampling strategies (:func:`stream_key`) that re-scrambles every
 dimension but the camera's. So one user seed gives independent light / BSDF samples for
-different samplers (a 'light' and a 'mis' render with the same seed no longer share their
+different samplers (a 'light' and a 'mis' render with the same seed do not share their
 environment samples), the same camera rays for every sampler (a delta-light-only scene renders
 identically with any sampler), and common random numbers for different materials rendered with
 the same sampler (the fidelity and comparison studies' paired renders rely on that).

@@ -1,4 +1,4 @@
-"""Batch fitting of a whole database on dask.distributed (issue 24).
+"""Batch fitting of a whole database on dask.distributed.
 
 * :mod:`fit.batch.inputs`: the measured files of INPUTS, each checked with ``stat`` before it is read;
 * :mod:`fit.batch.scheduler`: a ``--scheduler`` address, checked and reached within seconds;

@@ -1,5 +1,5 @@
 """``rbrdf-fit cdf`` and ``rbrdf-fit plot-cdf``: importance-sampling tables and rational inverse
-CDFs (issue 6, :mod:`fit.sampling`). Registered by :mod:`fit.cli`.
+CDFs (:mod:`fit.sampling`). Registered by :mod:`fit.cli`.
 
 The table flags are bounded (:mod:`fit.limits`: rows, cells and the estimated memory are
 checked before anything is tabulated); outputs are written only when the run succeeds

@@ -64,7 +64,7 @@ static inline RBRDF_REAL rbrdf_clamp_(RBRDF_REAL x, RBRDF_REAL lo, RBRDF_REAL hi
 #endif
 """
 
-# only in files of fits with a measured domain (the files of other fits are as they were)
+# only in files of fits with a measured domain (other fits' files hold none of it)
 DOMAIN_PRELUDE = r"""#ifndef RBRDF_DOMAIN_PRELUDE_
 #define RBRDF_DOMAIN_PRELUDE_
 #ifdef RBRDF_REAL_DOUBLE

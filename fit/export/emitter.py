@@ -13,7 +13,7 @@ step, as :meth:`RationalModel.__call__` does in NumPy:
    (:func:`fit.rational.domain.onto_measured_domain`): ``theta_h = min(theta_h, c)``, then
    ``theta_d = min(theta_d, acos(min(cos c / cos theta_h, 1)))`` (the value at the domain's edge
    at the same theta_h; beyond it the fit has no data and would extrapolate). Fits that record
-   no cut-off get no such statements (their output is what it was before the rule existed);
+   no cut-off get no such statements (their output holds no domain code);
 1. clamp ``theta_h`` and ``theta_d`` (radians) onto the model's box; pick the piece
    (``x <= edge`` selects the lower piece at a shared edge, recursively for nested splits) and
    clamp onto the piece's box;

@@ -96,7 +96,7 @@ def plan(model, cdf=None) -> dict:
     out = {"name": str(model.name), "box": [list(map(float, v.domain)) for v in model.variables],
            "root": node(model), "cdf": cdf_plan(cdf)}
     cut = measured_domain(model)
-    if cut is not None:                  # a plan without it is what it was before the rule
+    if cut is not None:                  # a fit without a cut-off: no domain rule in the plan
         out["cutoff_deg"] = cut
     return out
 

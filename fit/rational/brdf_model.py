@@ -105,7 +105,7 @@ def brdf_model(p, name, pieces, kw, intervals, band_intervals, total, source_fil
                 "spread_k": kw["spread_k"], "abs_floor": floors, "floor_frac": kw["floor_frac"],
                 "white_sky_albedo": [float(np.pi * r) for r in kw["rho_ref"]],
                 "statistic": "median", "grazing_cutoff_deg": GRAZING_CUTOFF_DEG, "time_s": total,
-                # (the fitter's name as the files have always recorded it, now fit.rational.fitter)
+                # (the fitter's name as every file records it; the module is fit.rational.fitter)
                 "fitter": "fit.fitter.IntervalRationalFitter (LP, HiGHS, constraint generation)",
                 "max_degree": kw["max_degree"], "max_den_degree": kw["max_den_degree"],
                 "core_theta_d_deg": core,

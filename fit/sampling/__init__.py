@@ -1,4 +1,4 @@
-"""Importance sampling of measured BRDFs with tabulated and rational inverse CDFs (issue 6).
+"""Importance sampling of measured BRDFs with tabulated and rational inverse CDFs.
 
 * :mod:`fit.sampling.table`: the tabulated sampler (``CDFTable``) and its inverse CDFs;
 * :mod:`fit.sampling.maps`: what the rational layouts share (normalized maps, ``sample_maps``);

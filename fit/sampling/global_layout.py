@@ -296,7 +296,7 @@ def fit_global_layout(table: CDFTable, theta_kw: dict | None = None, phi_kw: dic
     log = log or (lambda s: None)
     theta_kw = dict(theta_kw or {})
     phi_kw = dict(phi_kw or {})
-    # (the fitter's name as the files have always recorded it, now fit.rational.fitter)
+    # (the fitter's name as every file records it; the module is fit.rational.fitter)
     info: dict = {"fitter": "fit.fitter.IntervalRationalFitter", "rounds": []}
     t0 = time.perf_counter()
     if deadline is not None:

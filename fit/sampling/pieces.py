@@ -1,11 +1,11 @@
-"""Piecewise rational inverse CDFs with pieces uniform in the CDF variable (issue 6): the
+"""Piecewise rational inverse CDFs with pieces uniform in the CDF variable: the
 default ``"pieces"`` layout of :mod:`fit.sampling.cdf_file` (its construction, checks and
 reference sampler; the variance gate that decides which rows use it is
 :mod:`fit.sampling.variance_gate`).
 
 Why this layout. A sampler with ONE rational function per inverse CDF (the paper's
-``"global"`` layout, :mod:`fit.sampling.global_layout`, or one per view row, the former
-``"rows"`` layout) costs one long Horner chain per sample; on glossy materials the degree the
+``"global"`` layout, :mod:`fit.sampling.global_layout`, or one per view row, a ``"rows"``
+layout measured and not kept) costs one long Horner chain per sample; on glossy materials the degree the
 variance target needs makes it slower than the table's binary search (measured with the
 per-cell experiment ``benchmarks/experiment_cdf_cells.py``, removed since). Here each inverse CDF is
 split into pieces of EQUAL MASS -- uniform in the CDF variable -- so a sample finds its piece

@@ -173,7 +173,7 @@ def fit_pieces_layout(table: CDFTable, evaluate=None, log=None, **kw):
     rational and why the others are sampled with the table."""
     log = log or (lambda s: None)
     pm, info = fit_pieces(table, evaluate, log=log, **kw)
-    # (the construction's module as the files have always recorded it, now fit.sampling.pieces)
+    # (the construction's name as every file records it; the module is fit.sampling.pieces)
     info.update(layout="pieces", construction="fit.cdf_pieces (monotone rational-quadratic pieces)")
     n_ok, n = info["verified_rows"], info["n_rows"]
     why = "; ".join(sorted({r.get("reason", "?") for r in info["rows"] if not r["ok"]}))

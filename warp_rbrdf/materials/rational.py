@@ -145,7 +145,7 @@ def _table_from_source(model, spec, scene_file, key, head) -> tuple:
     except Exception as e:  # noqa: BLE001 - BRDFFileError etc., one line
         raise SceneError(scene_file, f"{key}.file", f"{head}; cannot read its source measurement {src} "
                                                     f"({e})") from None
-    model = copy.deepcopy(model)            # ranges of old files are added to a copy
+    model = copy.deepcopy(model)            # ranges missing from the file are added to a copy
     for r in flagged_regions(model):
         leaf = r["model"]
         for c in r["channels"]:
