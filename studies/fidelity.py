@@ -100,7 +100,14 @@ PRESETS = {
 #: ``--docs``: the study's key, title and charts ({file in --out: name under docs/images/}).
 DOCS = dict(name="fidelity", title="Fidelity to the measurement (rgl reference, Mitsuba 3, measured / projected / rational)",
             charts={"fidelity_studio.png": "study_fidelity_studio.png",
-                    "fidelity_rooitou.png": "study_fidelity_rooitou.png"})
+                    "fidelity_rooitou.png": "study_fidelity_rooitou.png"},
+            about=("What it measures: how faithfully each representation renders the measurement, on every "
+                   "shared RGL-EPFL file under two maps (`studio`, `rooitou`) in the reference scene of "
+                   "Mitsuba 3's `measured` plugin. The `rgl` material (the `.bsdf` file evaluated exactly) "
+                   "is the reference; the 3-D table (`measured`), the 2-D projection (`projected`) and the "
+                   "5 % rational fit (`rational`) are compared with it on the same rays (CIE ΔE2000 mean and "
+                   "99th percentile against their noise floors, rim pixels above the reference's range), and "
+                   "the `rgl` render with Mitsuba 3's (channel means, ΔE2000)."))
 TIMEOUTS_FILE = "fidelity_fit_timeouts.json"
 
 

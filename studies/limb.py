@@ -47,14 +47,21 @@ from studies import common as C
 from studies import fidelity as FI
 from studies import metrics as M
 from studies import publish as P
-from warp_rbrdf.lights import LUMINANCE as LUMA
+from warp_rbrdf.lights.latlong import LUMINANCE as LUMA
 
 REPS = ("measured", "projected", "projected-mean", "rational", "rational-3d")
 REGIONS = ("inside", "grazing_sun_rim", "other_rim")
 SUN_GRAZING = 0.3                # |n . s| below it: the sun within 17.5 deg of the local horizon
 FIT_TIME_LIMIT_S = 300.0         # a new 2-D fit (``--fit``), as the fidelity study bounds it
 DOCS = dict(name="limb", title="The limb of the 2-D representations (median, mean, 2-D and 3-D fits)",
-            charts={"limb.png": "study_limb.png"})
+            charts={"limb.png": "study_limb.png"},
+            about=("What it measures: the error of the 2-D representations along the sphere's silhouette "
+                   "under a sunny map (`rooitou`), where light and view both graze: the luminance ratio and "
+                   "CIE ΔE2000 against the `rgl` material (same rays) on the grazing-sun rim, the rest of the "
+                   "rim and the inside of the disc, for the 3-D table, the φd-median and φd-mean (θh, θd) "
+                   "tables, the 2-D rational fit and the 3-D rational fit: how much of the error is the "
+                   "median's, how much any function of (θh, θd) alone must leave, and what a fit that keeps "
+                   "φd shows there."))
 PRESETS = {
     "full": dict(resolution=256, spp=128, maps=["rooitou"], materials=None, tol=0.05,
                  fits3d="results/fit_accuracy", allow_fit=False),
@@ -65,13 +72,14 @@ PRESETS = {
 
 def sun_direction(envmap) -> np.ndarray:
     """World direction (3,) of the brightest texel (Rec.709 luminance) of a lat-long map, by the
-    conventions of :mod:`warp_rbrdf.lights` (identity rotation)."""
-    from warp_rbrdf import lights
+    conventions of :mod:`warp_rbrdf.lights.latlong` (identity rotation)."""
+    from warp_rbrdf.lights.env_file import read_latlong
+    from warp_rbrdf.lights.latlong import uv_to_direction
 
-    img = lights.read_latlong(envmap)
+    img = read_latlong(envmap)
     H, W = img.shape[:2]
     j, i = np.unravel_index(np.argmax(img[..., :3] @ LUMA), (H, W))
-    return lights.uv_to_direction((i + 0.5) / W, (j + 0.5) / H)
+    return uv_to_direction((i + 0.5) / W, (j + 0.5) / H)
 
 
 def pixel_normals(scene) -> np.ndarray:
