@@ -164,8 +164,8 @@ def cmj_2d(s: int, n_samples: int, p: wp.uint32) -> wp.vec2:
     unbiased. (Kensler's original permutes the sample index over ``[0, n_samples)`` only, which
     always keeps the first ``n_samples`` cells in row order: the last row and the last columns
     are under-sampled and the mean of ``x`` over a 128-sample pattern is 0.490: rendered channel
-    means were up to 4.5 % too bright under a small bright sun; issue 20.) For ``n_samples = m * n``
-    both are the same permutation, so those patterns are unchanged."""
+    means are then up to 4.5 % too bright under a small bright sun.) For ``n_samples = m * n``
+    both are the same permutation."""
     N = wp.uint32(n_samples)
     m = wp.uint32(wp.max(1, int(wp.floor(wp.sqrt(float(n_samples))))))
     n = (N + m - wp.uint32(1)) // m
