@@ -1,15 +1,17 @@
-"""Benchmark of environment-map importance sampling (issue 21 item 2).
+"""Benchmark of environment-map importance sampling schemes.
 
 The reference scene of :mod:`lab.mitsuba_reference` (unit sphere, camera at (0, 0, 4),
 30 deg vertical fov, hidden map at scale 1, direct lighting) with a **Lambert** sphere and
 **environment-map sampling only** (sampler ``light``: one environment sample and its shadow ray
 per camera sample, no BSDF sample), under each map, rendered by
 
-* ours, with each environment sampling scheme of :mod:`warp_rbrdf.lights`
-  (``piecewise-constant``: the sampler before issue 21; ``marginal`` and ``hierarchical``: density
-  exactly proportional to the bilinear lookup, two warps; ``hierarchical`` is the default) and
-  each sample pattern of :mod:`warp_rbrdf.sample_patterns` (``stratified``: padded correlated
-  multi-jitter, the default; ``sobol``: Owen-scrambled Sobol; ``independent``);
+* ours, with each environment sampling scheme of :mod:`lab.env_schemes` (``hierarchical``: the
+  renderer's; ``marginal``: the same density, exactly proportional to the bilinear lookup, by
+  another warp; ``piecewise-constant``: one constant density per texel cell) and each sample
+  pattern of :mod:`warp_rbrdf.sample_patterns` (``stratified``: padded correlated multi-jitter,
+  the default; ``sobol``: Owen-scrambled Sobol; ``independent``), rendered by the light-only
+  kernel of :mod:`lab.env_scheme_render` (the renderer's estimator for this scene, with the
+  scheme's environment sample; with ``hierarchical`` it renders what the renderer renders);
 * Mitsuba 3 (``scalar_rgb``, ``envmap`` emitter, ``direct`` integrator with
   ``emitter_samples = 1, bsdf_samples = 0``, box filter), samplers ``multijitter`` and
   ``independent``.
@@ -21,9 +23,10 @@ RMSE = sqrt(mean((X1 - X2)^2) / 2), divided by the mean of (X1 + X2) / 2 over th
 the median over ``--pairs`` pairs (seeds 2k+1, 2k+2). No reference render is needed, and the
 error is the noise only (every estimator here is unbiased).
 
-Cost: env_sample alone (a kernel that only samples, 10^6 uniforms, one thread, best of 3) per
-scheme and map, and the render's wall time at the largest spp (all cores, best of 5 renders,
-the schemes interleaved; the per-value seconds printed with the errors are medians).
+Cost: the environment sample alone (a kernel that only samples, 10^6 uniforms, one thread, best
+of 3) per scheme and map, and the light-only kernel's render wall time at the largest spp (all
+cores, best of 5 renders, the schemes interleaved; the per-value seconds printed with the errors
+are medians).
 
 Usage: python -m benchmarks.bench_env_sampling [--quick] [--res 256] [--spp 1,16] [--pairs 3]
        [--maps studio,rooitou] [--schemes piecewise-constant,marginal,hierarchical]
@@ -33,7 +36,6 @@ Usage: python -m benchmarks.bench_env_sampling [--quick] [--res 256] [--spp 1,16
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import platform
@@ -53,43 +55,39 @@ def rel_rmse_pair(a: np.ndarray, b: np.ndarray, mask: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2) / 2) / np.mean(0.5 * (a + b)))
 
 
-def light_only_scene(path, res: int, pattern: str):
-    """The reference sphere scene (ours), Lambert, sampler ``light``."""
-    from lab import mitsuba_reference as MR
+def scheme_struct(image, name: str, device):
+    """The Warp struct of scheme ``name`` (:data:`lab.env_schemes.SCHEME_NAMES`) for ``image``."""
+    from lab import env_schemes as S
 
-    sc = MR.sphere_scene(("lambert", ALBEDO), path, 1, res, pattern=pattern)
-    mat = dataclasses.replace(sc.materials["obj"], sampler="light")
-    return dataclasses.replace(sc, materials={"obj": mat},
-                               integrator=dataclasses.replace(sc.integrator, sampler="light"))
+    return S.make_scheme_struct(S.build_scheme(image, S.SCHEME_NAMES[name]), device)
 
 
-def use_scheme(renderer, image, scheme: int):
-    """Replace ``renderer``'s environment distribution by the one of ``scheme``."""
-    from warp_rbrdf import lights
+def light_only_renderer(path, res: int, pattern: str):
+    """The reference sphere scene, Lambert, sampler ``light``, built, its light-only kernel loaded."""
+    from lab import env_scheme_render as ER
+    from warp_rbrdf.renderer import Renderer
 
-    renderer.env_data = lights.build_env_distribution(image, None, _scheme=scheme)
-    renderer.env = lights.make_env_struct(renderer.env_data, renderer.device)
+    r = Renderer(ER.light_only_scene(path, res, pattern, ALBEDO))
+    ER.compile_light_only(r.device)
+    return r
 
 
 def ours(path, image, res, spps, pairs, schemes, patterns):
-    from warp_rbrdf import lights
+    from lab import env_scheme_render as ER
     from lab import mitsuba_reference as MR
-    from warp_rbrdf.renderer import Renderer
 
     mask = MR.sphere_mask(res)
     rows = []
     for pattern in patterns:
-        r = Renderer(light_only_scene(path, res, pattern))
-        r.compile()
+        r = light_only_renderer(path, res, pattern)
         for name in schemes:
-            use_scheme(r, image, lights.SCHEME_NAMES[name])
+            env = scheme_struct(image, name, r.device)
             for spp in spps:
                 errs, secs = [], []
                 for k in range(pairs):
-                    a = r.render(spp=spp, seed=2 * k + 1)
-                    secs.append(r.stats.render_seconds)
-                    b = r.render(spp=spp, seed=2 * k + 2)
-                    secs.append(r.stats.render_seconds)
+                    a, sa = ER.render_light_only(r, env, spp, 2 * k + 1)
+                    b, sb = ER.render_light_only(r, env, spp, 2 * k + 2)
+                    secs += [sa, sb]
                     errs.append(rel_rmse_pair(a, b, mask))
                 rows.append(dict(renderer="ours", scheme=name, pattern=pattern, spp=spp,
                                  rel_rmse=float(np.median(errs)), seconds=float(np.median(secs))))
@@ -126,21 +124,22 @@ def mitsuba(path, res, spps, pairs, samplers):
     return rows
 
 
-def sample_rate(image, scheme: int, n: int = 1_000_000, reps: int = 3) -> float:
-    """env_sample calls per second (one Warp CPU launch = one thread), best of ``reps``."""
+def sample_rate(image, name: str, n: int = 1_000_000, reps: int = 3) -> float:
+    """Environment samples per second of scheme ``name`` (one Warp CPU launch = one thread),
+    best of ``reps``."""
     import warp as wp
 
-    from warp_rbrdf import lights
+    from lab import env_schemes as S
 
-    env = lights.make_env_struct(lights.build_env_distribution(image, None, _scheme=scheme), "cpu")
+    env = scheme_struct(image, name, "cpu")
     xi = wp.array(np.random.default_rng(0).random((n, 2)).astype(np.float32), dtype=wp.vec2, device="cpu")
     out = wp.zeros(n, dtype=wp.vec4, device="cpu")
-    wp.launch(lights.env_sample_kernel, dim=1000, inputs=[env, xi], outputs=[out], device="cpu")  # compile
+    wp.launch(S.scheme_sample_kernel, dim=1000, inputs=[env, xi], outputs=[out], device="cpu")  # compile
     best = np.inf
     for _ in range(reps):
         wp.synchronize()
         t0 = time.perf_counter()
-        wp.launch(lights.env_sample_kernel, dim=n, inputs=[env, xi], outputs=[out], device="cpu")
+        wp.launch(S.scheme_sample_kernel, dim=n, inputs=[env, xi], outputs=[out], device="cpu")
         wp.synchronize()
         best = min(best, time.perf_counter() - t0)
     return n / best
@@ -149,17 +148,15 @@ def sample_rate(image, scheme: int, n: int = 1_000_000, reps: int = 3) -> float:
 def render_times(path, image, res, spp, schemes, rounds=5) -> dict:
     """Best-of-``rounds`` render seconds (all cores, default pattern) per scheme, the schemes
     interleaved round by round so that load changes hit them alike."""
-    from warp_rbrdf import lights
-    from warp_rbrdf.renderer import Renderer
+    from lab import env_scheme_render as ER
 
-    r = Renderer(light_only_scene(path, res, "stratified"))
-    r.compile()
+    r = light_only_renderer(path, res, "stratified")
+    envs = {name: scheme_struct(image, name, r.device) for name in schemes}
     best = {}
     for k in range(rounds):
         for name in schemes:
-            use_scheme(r, image, lights.SCHEME_NAMES[name])
-            r.render(spp=spp, seed=k)
-            best[name] = min(best.get(name, np.inf), r.stats.render_seconds)
+            _, sec = ER.render_light_only(r, envs[name], spp, k)
+            best[name] = min(best.get(name, np.inf), sec)
     return best
 
 
@@ -205,13 +202,14 @@ def main(argv=None):
     import warp as wp
 
     wp.config.quiet = True
-    from warp_rbrdf import lights
+    from lab import env_schemes as S
     from lab import mitsuba_reference as MR
+    from warp_rbrdf.lights.env_file import read_latlong
     from warp_rbrdf.paths import require_data_root
 
     for s in schemes:
-        if s not in lights.SCHEME_NAMES:
-            ap.error(f"unknown scheme {s!r} (one of {', '.join(lights.SCHEME_NAMES)})")
+        if s not in S.SCHEME_NAMES:
+            ap.error(f"unknown scheme {s!r} (one of {', '.join(S.SCHEME_NAMES)})")
     root = require_data_root()
     use_mitsuba = not args.no_mitsuba and MR.available()
     print(f"warp {wp.__version__}; {res}x{res} px, spp {spps}, {pairs} seed pair(s); Lambert sphere, sampler "
@@ -220,7 +218,7 @@ def main(argv=None):
     rows, rates = [], []
     for m in args.maps.split(","):
         path = root / MAPS[m]
-        image = lights.read_latlong(path)
+        image = read_latlong(path)
         print(f"{m} ({image.shape[1]}x{image.shape[0]}):", flush=True)
         for r in ours(path, image, res, spps, pairs, schemes, patterns):
             rows.append(dict(r, map=m))
@@ -230,7 +228,7 @@ def main(argv=None):
         if not args.no_rate:
             times = render_times(path, image, res, max(spps), schemes, rounds=2 if args.quick else 5)
             for s in schemes:
-                rate = sample_rate(image, lights.SCHEME_NAMES[s], n=100_000 if args.quick else 1_000_000)
+                rate = sample_rate(image, s, n=100_000 if args.quick else 1_000_000)
                 rates.append(dict(map=m, scheme=s, samples_per_second=rate, render_seconds=times[s]))
                 print(f"  env_sample {s:18s} {rate / 1e6:.2f} M samples/s (one thread); render "
                       f"{max(spps)} spp {times[s]:.2f} s (best of {2 if args.quick else 5})", flush=True)

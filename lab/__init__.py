@@ -4,6 +4,9 @@
   plugin's eval / pdf / sample, the reference sphere scene, Mitsuba's LLVM variant for timed
   renders); needs the optional extra ``reference``.
 * :mod:`lab.testing`: small in-memory scenes for tests and examples.
+* :mod:`lab.env_kernels`: per-direction / per-uniform kernels over the renderer's environment.
+* :mod:`lab.env_schemes`, :mod:`lab.env_scheme_render`: environment sampling schemes kept for
+  comparison (``benchmarks.bench_env_sampling``) and the light-only render that compares them.
 * :mod:`lab.analytic`: analytic reference BRDFs (``lambert``, ``glossy_lobe``) for exact-layout
   MERL files in tests and benchmarks.
 

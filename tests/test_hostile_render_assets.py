@@ -223,7 +223,7 @@ def test_env_too_large(capsys, tmp_path, work):
 def test_non_utf8_env_map_name(capsys, tmp_path, work):
     """A map whose file name is not UTF-8 (valid in TOML only through the folder: a relative
     name is written in UTF-8) loads: OpenImageIO's binding used to raise TypeError."""
-    from warp_rbrdf.lights import read_latlong
+    from warp_rbrdf.lights.env_file import read_latlong
 
     folder = tmp_path / os.fsdecode(b"r\xe9p")
     folder.mkdir()
@@ -238,7 +238,7 @@ def test_non_utf8_env_map_name(capsys, tmp_path, work):
 
 def test_valid_env_maps_load(tmp_path):
     """Positive control: finite maps load, one channel is grey, a zero texel is fine."""
-    from warp_rbrdf.lights import read_latlong
+    from warp_rbrdf.lights.env_file import read_latlong
 
     img = _map(0.0)
     assert np.array_equal(read_latlong(write_image_file(tmp_path / "a.exr", img)), img)

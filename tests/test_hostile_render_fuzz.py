@@ -161,7 +161,7 @@ def test_fuzz_mesh(capfd, tmp_path, fmt, mutator):
 
 
 def _env_or_refuse(tmp_path, data: bytes, suffix: str, i: int) -> bool:
-    from warp_rbrdf.lights import read_latlong
+    from warp_rbrdf.lights.env_file import read_latlong
 
     p = tmp_path / f"e{i}{suffix}"
     p.write_bytes(data)

@@ -132,7 +132,7 @@ def test_camera_orientation():
 def test_environment_seen_by_camera_matches_numpy_lookup():
     """Camera rays that miss return the map with the conventions' lookup (u, v and rows)."""
     from warp_rbrdf.camera import camera_rays_numpy
-    from warp_rbrdf.lights import direction_to_uv, lookup_numpy
+    from warp_rbrdf.lights.latlong import direction_to_uv, lookup_numpy
 
     H, W = 32, 64
     v = np.arange(H)[:, None] / (H - 1)

@@ -6,8 +6,13 @@ import numpy as np
 import pytest
 
 from conftest import data_file
-from warp_rbrdf import lights, transforms
+from lab import env_kernels as K
 from lab import testing as T
+from warp_rbrdf import transforms
+from warp_rbrdf.lights.env_distribution import build_env_distribution, env_pdf_numpy
+from warp_rbrdf.lights.env_file import constant_image, read_latlong
+from warp_rbrdf.lights.env_map import make_env_struct
+from warp_rbrdf.lights.latlong import direction_to_uv, lookup_numpy, uv_to_direction
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.runtime import init_warp
 
@@ -24,21 +29,21 @@ def spot_map(H=32, W=64, seed=0):
 
 
 def _env(img, rot=None):
-    return lights.build_env_distribution(img, rot)
+    return build_env_distribution(img, rot)
 
 
 def warp_pdf(env, dirs):
-    s = lights.make_env_struct(env, "cpu")
+    s = make_env_struct(env, "cpu")
     out = wp.zeros(len(dirs), dtype=float, device="cpu")
-    wp.launch(lights.env_pdf_kernel, dim=len(dirs), inputs=[s, wp.array(dirs.astype(np.float32), dtype=wp.vec3)],
+    wp.launch(K.env_pdf_kernel, dim=len(dirs), inputs=[s, wp.array(dirs.astype(np.float32), dtype=wp.vec3)],
               outputs=[out], device="cpu")
     return out.numpy()
 
 
 def warp_sample(env, xi):
-    s = lights.make_env_struct(env, "cpu")
+    s = make_env_struct(env, "cpu")
     out = wp.zeros(len(xi), dtype=wp.vec4, device="cpu")
-    wp.launch(lights.env_sample_kernel, dim=len(xi), inputs=[s, wp.array(xi.astype(np.float32), dtype=wp.vec2)],
+    wp.launch(K.env_sample_kernel, dim=len(xi), inputs=[s, wp.array(xi.astype(np.float32), dtype=wp.vec2)],
               outputs=[out], device="cpu")
     return out.numpy()
 
@@ -66,7 +71,7 @@ def patch_quadrature(H, W, nx=2, nt=6):
     wyy = np.tile(0.5 * wt, H - 1)
     u = np.mod((x + 0.5) / W, 1.0)
     v = y / (H - 1)
-    d = lights.uv_to_direction(u[None, :], v[:, None]).reshape(-1, 3)
+    d = uv_to_direction(u[None, :], v[:, None]).reshape(-1, 3)
     w = (2 * np.pi ** 2 * np.sin(np.pi * v)[:, None] / (W * (H - 1)) * wyy[:, None] * wxx[None, :]).ravel()
     return d, w
 
@@ -75,7 +80,7 @@ def test_pdf_integrates_to_one_exactly():
     env = _env(spot_map())
     d, w = patch_quadrature(*env.lum.shape)
     assert abs(w.sum() - 4 * np.pi) < 1e-10
-    assert abs((lights.env_pdf_numpy(env, d) * w).sum() - 1.0) < 1e-10
+    assert abs((env_pdf_numpy(env, d) * w).sum() - 1.0) < 1e-10
 
 
 @pytest.mark.parametrize("rotated", [False, True])
@@ -90,7 +95,7 @@ def test_warp_pdf_integrates_to_one_and_matches_numpy(rotated):
     # and at arbitrary directions the Warp density is the NumPy reference's (float32 lookups)
     d, _ = sphere_grid(256, 512)
     p = warp_pdf(env, d)
-    ref = lights.env_pdf_numpy(env, d)
+    ref = env_pdf_numpy(env, d)
     np.testing.assert_allclose(p, ref, rtol=2e-4, atol=1e-6 * ref.max())
 
 
@@ -99,16 +104,16 @@ def test_pdf_positive_exactly_where_lookup_is_positive():
     img[5, 7] = 1.0  # one texel: its bilinear footprint covers the 4 patches around it
     env = _env(img)
     d, _ = sphere_grid(256, 512)
-    L = lights.lookup_numpy(img, *lights.direction_to_uv(d))[:, 0]
-    p = lights.env_pdf_numpy(env, d)
+    L = lookup_numpy(img, *direction_to_uv(d))[:, 0]
+    p = env_pdf_numpy(env, d)
     assert np.all(p[L > 1e-9] > 0) and np.all(p[L <= 0] == 0)
     assert (L > 1e-9).sum() > 100
 
 
 def test_constant_map_is_uniform():
-    env = _env(lights.constant_image((0.3, 0.5, 0.7)))
+    env = _env(constant_image((0.3, 0.5, 0.7)))
     d, _ = sphere_grid(64, 128)
-    np.testing.assert_allclose(lights.env_pdf_numpy(env, d), 1 / (4 * np.pi), rtol=1e-12)
+    np.testing.assert_allclose(env_pdf_numpy(env, d), 1 / (4 * np.pi), rtol=1e-12)
     np.testing.assert_allclose(warp_pdf(env, d), 1 / (4 * np.pi), rtol=1e-6)
 
 
@@ -123,14 +128,14 @@ def test_samples_follow_pdf():
     s = warp_sample(env, rng.random((n, 2)))
     d, pdf = s[:, :3], s[:, 3]
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-5)
-    np.testing.assert_allclose(lights.env_pdf_numpy(env, d), pdf, rtol=2e-4, atol=1e-6 * pdf.max())
+    np.testing.assert_allclose(env_pdf_numpy(env, d), pdf, rtol=2e-4, atol=1e-6 * pdf.max())
     H, W = env.lum.shape
-    u, v = lights.direction_to_uv(d)
+    u, v = direction_to_uv(d)
     c = np.floor(np.mod(u * W - 0.5, W)).astype(int) % W
     r = np.clip(np.floor(v * (H - 1)).astype(int), 0, H - 2)
     counts = np.bincount(r * W + c, minlength=(H - 1) * W).reshape(H - 1, W)
     q, w = patch_quadrature(H, W)
-    expected = n * (lights.env_pdf_numpy(env, q) * w).reshape(H - 1, -1, W, 2).sum(axis=(1, 3))
+    expected = n * (env_pdf_numpy(env, q) * w).reshape(H - 1, -1, W, 2).sum(axis=(1, 3))
     assert counts[expected == 0].sum() == 0
     m = expected > 50
     z = (counts[m] - expected[m]) / np.sqrt(expected[m])
@@ -181,7 +186,7 @@ def test_irradiance_synthetic_sun(sampler):
 @pytest.mark.parametrize("sampler", ["light", "mis"])
 def test_irradiance_rooitou_park(sampler):
     path = data_file("envmaps/rooitou_park_1k.hdr")
-    img = lights.read_latlong(path)
+    img = read_latlong(path)
     from warp_rbrdf.scene import LightSpec
 
     m, E, se = check_irradiance(img, sampler, spp=64, light=LightSpec(type="envmap", file=path))

@@ -7,7 +7,7 @@ strategy of the material hit (:data:`warp_rbrdf.registry.STRATEGIES`, stored as
 
 * every directional light: one shadow ray (delta light, always sampled);
 * ``COMBINE_LIGHT`` / ``COMBINE_MIS``: one environment sample (hierarchical warp of the
-  looked-up luminance x sin theta, :mod:`warp_rbrdf.lights`) with one shadow ray;
+  looked-up luminance x sin theta, :mod:`warp_rbrdf.lights.env_sampling`) with one shadow ray;
 * ``COMBINE_BSDF`` / ``COMBINE_MIS``: one BSDF sample from the material's technique
   (:data:`warp_rbrdf.registry.TECHNIQUES`) with one ray; if it escapes, the environment is
   added, weighted by the power heuristic for ``COMBINE_MIS``. The MIS weights use the
@@ -35,8 +35,10 @@ import warp as wp
 
 from . import camera as C
 from . import geometry as G
-from . import lights as L
 from . import sample_patterns as P
+from .lights.directional import Directional
+from .lights.env_map import EnvMap, env_dir_to_uv, env_eval_uv, env_pdf_uv
+from .lights.env_sampling import env_sample_uv
 from .materials.data import Materials
 from .registry import COMBINE_BSDF, COMBINE_LIGHT, COMBINE_MIS
 from .shipped_kernels import render_module_options
@@ -190,7 +192,7 @@ def make_fused(techniques):
     """``(bsdf_sample_f, bsdf_eval_pdf)`` over ``techniques`` (tuples as for
     :func:`make_bsdf_sampling`, optionally with two more entries: the technique's fused
     ``sample_f(mats, m, wo, xi) -> (vec4, vec3 f, 1)`` and ``eval_pdf(mats, m, wi, wo) -> (vec3
-    f, float pdf, 0 | 1)``, or None; :func:`warp_rbrdf.techniques.rgl.kernel_fused`).
+    f, float pdf, 0 | 1)``, or None; :func:`warp_rbrdf.materials.rgl.kernel_fused`).
 
     ``bsdf_sample_f(mats, m, t, wo, xi) -> (sample, f, has_f)``: the technique's sample, with
     f_r at its direction where the technique computes it on the way (``has_f`` 1), else
@@ -261,7 +263,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     sample_2d = P.sample_2d
 
     @G.inline_func
-    def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
+    def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: EnvMap, dl: Directional, mats: Materials,
                         pseed: wp.uint32, s: int, spp: int, pattern: int, max_depth: int,
                         hide_env: int, eps: float, px: int, py: int) -> wp.vec3:
         Lsum = wp.vec3(0.0)
@@ -291,11 +293,11 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                 hit, t, ng, ns, m = closest_hit(geo, o, d)
             if hit == 0:
                 if mode == 1 or mode == 2 or (mode == 0 and hide_env == 0):
-                    uv = L.env_dir_to_uv(env, d)   # once for the radiance and the pdf
+                    uv = env_dir_to_uv(env, d)   # once for the radiance and the pdf
                     w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
                     if mode == 2:
-                        w = power_heuristic(prev_pdf, L.env_pdf_uv(env, uv))
-                    Lsum = Lsum + wp.cw_mul(thr, L.env_eval_uv(env, uv)) * w
+                        w = power_heuristic(prev_pdf, env_pdf_uv(env, uv))
+                    Lsum = Lsum + wp.cw_mul(thr, env_eval_uv(env, uv)) * w
                 break
             if shadow == 1:
                 break
@@ -334,7 +336,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                 if li < n_dl:
                     wl = dl.to_light[li]
                 elif li < n_light:
-                    ls, luv = L.env_sample_uv(env, sample_2d(pattern, pseed, s, spp, dim))
+                    ls, luv = env_sample_uv(env, sample_2d(pattern, pseed, s, spp, dim))
                     wl = wp.vec3(ls[0], ls[1], ls[2])
                     pl = ls[3]
                 fv = wp.vec3(0.0)
@@ -382,7 +384,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                             w = float(1.0)  # noqa: UP018 - a Warp loop-carried variable
                             if comb == COMBINE_MIS:
                                 w = power_heuristic(pl, pb)
-                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, L.env_eval_uv(env, luv))) * (wi[2] * w / pl)
+                            Lsum = Lsum + wp.cw_mul(thr, wp.cw_mul(fv, env_eval_uv(env, luv))) * (wi[2] * w / pl)
                         else:
                             go_on = 1
                             mode = 1
@@ -407,7 +409,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
         return Lsum
 
     @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
-    def render_tile(geo: G.SceneGeometry, cam: C.Camera, env: L.EnvMap, dl: L.Directional, mats: Materials,
+    def render_tile(geo: G.SceneGeometry, cam: C.Camera, env: EnvMap, dl: Directional, mats: Materials,
                     spp: int, seed: int, pattern: int, max_depth: int, hide_env: int, eps: float,
                     x0: int, y0: int, tile_w: int,
                     out_mean: wp.array(dtype=wp.vec3), out_sq: wp.array(dtype=wp.vec3)):

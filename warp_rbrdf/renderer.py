@@ -16,10 +16,14 @@ import numpy as np
 
 from fit.progress import one_step
 
-from . import camera, geometry, integrator, lights, registry, sample_patterns
+from . import camera, geometry, integrator, registry, sample_patterns
 from .defaults import default_scene
 from .errors import RenderError, SceneError
 from .limits import check_render_size
+from .lights.directional import make_directional_struct
+from .lights.env_distribution import build_env_distribution
+from .lights.env_file import environment_image
+from .lights.env_map import make_env_struct
 from .materials.build import build_material_data
 from .materials.data import make_materials_struct
 from .runtime import get_device, init_warp
@@ -99,9 +103,9 @@ class Renderer:
         self.env_data = None
         if env_spec is not None:
             with one_step(self.progress, "environment map"):
-                img = lights.environment_image(env_spec, sc.path, f"lights[{sc.lights.index(env_spec)}]")
-                self.env_data = lights.build_env_distribution(img, env_spec.rotation)
-        self.env = lights.make_env_struct(self.env_data, dev)
+                img = environment_image(env_spec, sc.path, f"lights[{sc.lights.index(env_spec)}]")
+                self.env_data = build_env_distribution(img, env_spec.rotation)
+        self.env = make_env_struct(self.env_data, dev)
         dirs, irr = [], []
         o = np.asarray(sc.camera.origin, float)
         t = np.asarray(sc.camera.target, float)
@@ -109,8 +113,8 @@ class Renderer:
             to_light = (o - t) if l.colinear_with_view else -np.asarray(l.direction, float)
             dirs.append(to_light / np.linalg.norm(to_light))
             irr.append(l.irradiance)
-        self.directional = lights.make_directional_struct(np.array(dirs, np.float32).reshape(-1, 3),
-                                                          np.array(irr, np.float32).reshape(-1, 3), dev)
+        self.directional = make_directional_struct(np.array(dirs, np.float32).reshape(-1, 3),
+                                                   np.array(irr, np.float32).reshape(-1, 3), dev)
         self.materials = make_materials_struct(self.material_data, dev)
 
     def _make_kernels(self, all_techniques: bool = False):
@@ -166,7 +170,7 @@ class Renderer:
         spp = int(it.spp if spp is None else spp)
         seed = int(it.seed if seed is None else seed)
         if (problem := check_render_size(*self.scene.camera.resolution, spp)) is not None:
-            raise RenderError(problem)   # bounds: warp_rbrdf.limits (issue 22)
+            raise RenderError(problem)   # bounds: warp_rbrdf.limits
         if not 0 <= seed < 2**32:
             raise RenderError(f"seed must be in [0, 2^32), got {seed}")
         threads = int(threads or os.cpu_count() or 1)
