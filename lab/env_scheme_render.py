@@ -82,7 +82,9 @@ def light_only_tile(geo: G.SceneGeometry, cam: C.Camera, env: SchemeEnvMap, mats
                     fv = lambert_eval(mats, m, wi, wo)
                     if integrator.max3(fv) > 0.0:  # noqa: SIM102 - Warp evaluates both sides of `and`
                         if not _any_hit(geo, org, wl, 1.0e30):
-                            Lsum = wp.cw_mul(wp.vec3(1.0), wp.cw_mul(fv, env_eval_uv(env.env, luv))) * (wi[2] * 1.0 / pl)
+                            # the renderer's expression with throughput 1 and MIS weight 1
+                            Lsum = (wp.cw_mul(wp.vec3(1.0), wp.cw_mul(fv, env_eval_uv(env.env, luv)))
+                                    * (wi[2] * 1.0 / pl))
         acc = acc + Lsum
     out_mean[pix] = acc * (1.0 / float(spp))
 
