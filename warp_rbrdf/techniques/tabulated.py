@@ -1,5 +1,6 @@
 """``tabulated`` technique: the material's tabulated inverse CDFs of rho cos (luminance) per
-view row (:class:`fit.sampling.table.CDFTable`), inverted by binary search, exactly as
+view row (:class:`fit.sampling.table.CDFTable`), sampled as piecewise-constant distributions
+(:func:`warp_rbrdf.distribution.pc1d_sample`: binary search, continuous in the cell), exactly as
 :meth:`CDFTable.sample` (its NumPy reference). Weight 1/pdf with the table's exact density.
 
 Frame: ``theta_v, phi_v`` of ``wo`` in the local frame; the sampled light's azimuth ``phi_l`` is
@@ -13,6 +14,7 @@ import warp as wp
 
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
 
+from ..distribution import pc1d_mass, pc1d_sample
 from ..materials.data import (
     CDF_N_P,
     CDF_N_T,
@@ -25,55 +27,27 @@ from ..materials.data import (
 
 
 @wp.func
-def _count_le(cdf: wp.array(dtype=float), start: int, n: int, x: float) -> int:
-    """Number of entries <= x among cdf[start .. start + n] (n + 1 increasing entries)."""
-    lo = int(0)
-    hi = n + 1
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if cdf[start + mid] <= x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@wp.func
 def tab_row(theta_v: float, n_v: int) -> int:
     return wp.clamp(int(wp.floor(theta_v / wp.HALF_PI * float(n_v))), 0, n_v - 1)
 
 
 @wp.func
-def _invert_cells(cdf: wp.array(dtype=float), start: int, n: int, x: float) -> wp.vec3:
-    """Inverse of the piecewise-linear CDF cdf[start .. start + n] at x: (cell index, position
-    in the cell in [0, 1] (1/2 in a cell of no mass), the cell's mass)."""
-    j = wp.clamp(_count_le(cdf, start, n, x) - 1, 0, n - 1)
-    c0 = cdf[start + j]
-    m = cdf[start + j + 1] - c0
-    frac = 0.5
-    if m > 0.0:
-        frac = wp.clamp((x - c0) / m, 0.0, 1.0)
-    return wp.vec3(float(j), frac, m)
-
-
-@wp.func
 def tab_sample(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
                n_v: int, n_t: int, n_p: int, theta_v: float, mu: float, tau: float) -> wp.vec3:
-    """(theta_l, phi_l, pdf) exactly as fit.sampling.table.CDFTable.sample (binary search)."""
+    """(theta_l, phi_l, pdf) exactly as fit.sampling.table.CDFTable.sample: the view row's
+    piecewise-constant theta_l CDF, then the |phi_l| CDF of the theta_l cell (the sign from
+    ``tau < 1/2``, ``|2 tau - 1|`` the uniform), each continuous in its cell."""
     v = tab_row(theta_v, n_v)
-    ct = _invert_cells(cdf_t, off_t + v * (n_t + 1), n_t, mu)
-    j = int(ct[0])
-    m_t = ct[2]
+    j, frac_t, m_t = pc1d_sample(cdf_t, off_t + v * (n_t + 1), n_t, mu)
     dt = wp.HALF_PI / float(n_t)
-    theta_l = (float(j) + ct[1]) * dt
+    theta_l = (float(j) + frac_t) * dt
     s = 1.0
     if tau < 0.5:
         s = -1.0
     u = wp.abs(2.0 * tau - 1.0)
-    cp = _invert_cells(cdf_p, off_p + (v * n_t + j) * (n_p + 1), n_p, u)
-    m_p = cp[2]
+    k, frac_p, m_p = pc1d_sample(cdf_p, off_p + (v * n_t + j) * (n_p + 1), n_p, u)
     dp = wp.pi / float(n_p)
-    phi_l = s * (cp[0] + cp[1]) * dp
+    phi_l = s * (float(k) + frac_p) * dp
     pdf = (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
     return wp.vec3(theta_l, phi_l, pdf)
 
@@ -91,8 +65,8 @@ def tab_pdf(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: i
     k = wp.clamp(int(wp.floor(phi_abs / dp)), 0, n_p - 1)
     st = off_t + v * (n_t + 1)
     sp = off_p + (v * n_t + j) * (n_p + 1)
-    m_t = cdf_t[st + j + 1] - cdf_t[st + j]
-    m_p = cdf_p[sp + k + 1] - cdf_p[sp + k]
+    m_t = pc1d_mass(cdf_t, st, j)
+    m_p = pc1d_mass(cdf_p, sp, k)
     return (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
 
 
@@ -138,8 +112,6 @@ def rel_phi_abs(wi: wp.vec3, phi_v: float) -> float:
     if p < -wp.pi:
         p = p + 2.0 * wp.pi
     return wp.abs(p)
-
-
 
 
 @wp.func
