@@ -10,7 +10,7 @@ is imported only when a scene uses it (:meth:`MaterialKind.impl`, :meth:`Techniq
   ``evaluate``) and ``kernel_eval(loaded) -> wp.func (mats, m, wi, wo) -> vec3``: rho in 1/sr
   without the cosine, local shading frame (z = normal), 0 at or below the horizon.
 * A **technique** is one way of drawing the BSDF sample: one module under
-  :mod:`warp_rbrdf.techniques` with ``sample (mats, m, wo, xi) -> vec4(wi, weight)`` (weight =
+  :mod:`warp_rbrdf.techniques` (a material kind's own sampling: that kind's module, ``rgl``) with ``sample (mats, m, wo, xi) -> vec4(wi, weight)`` (weight =
   1/pdf, or alpha for the derivative estimator; <= 0: no sample), ``pdf (mats, m, wi, wo) ->
   float`` (1/sr) and their NumPy references. ``pdf_exact`` False says that ``pdf`` is only an
   approximation of the density ``sample`` draws from (the rational inverse CDFs: their weight is
@@ -131,7 +131,7 @@ TECHNIQUES = (
               "exact, pdf = the table's (approximate)", False, needs_table=True, needs_fit=True,
               module="warp_rbrdf.techniques.rational"),
     Technique("rgl", 4, "the RGL format's own importance sampling: luminance warp, then VNDF "
-              "warp, exact pdf (rgl materials only)", True, module="warp_rbrdf.techniques.rgl",
+              "warp, exact pdf (rgl materials only)", True, module="warp_rbrdf.materials.rgl",
               material="rgl"),
 )
 

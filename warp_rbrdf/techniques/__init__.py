@@ -1,4 +1,6 @@
-"""BSDF sampling techniques, one module each, listed in :data:`warp_rbrdf.registry.TECHNIQUES`.
+"""BSDF sampling techniques, one module each, listed in :data:`warp_rbrdf.registry.TECHNIQUES`
+(the ``rgl`` technique, the format's own sampling, is in its material's module
+:mod:`warp_rbrdf.materials.rgl`).
 
 Every technique module has ``kernel_functions(global_fits) -> (sample, pdf)``, the Warp
 functions for a scene's materials (every technique returns two fixed module functions: its data,
