@@ -7,6 +7,12 @@ with this project's render of the same fit, and ``rbrdf-fit export``.
 Tools: ``cc`` and ``glslangValidator`` (Debian ``glslang-tools``, installed by .ci/run) and
 Mitsuba (the ``reference`` extra). Locally a missing tool skips; under CI it fails.
 
+3-D fits (coefficient file version 3, (theta_h, theta_d, |phi_d|), not reciprocal) go through the
+same checks: a small 3-D fit of a synthetic non-reciprocal lobe (``fit_samples``, two theta_h
+pieces) and a copy with a flagged channel, compiled in C and compared with
+:func:`fit.rational.variables3d.evaluate_directions` (light and view roles kept), GLSL / HLSL /
+``.brdf`` compiled, the Mitsuba plugin's ``eval`` (``wo`` the light, ``si.wi`` the viewer).
+
 Tolerances (measured, docs/exports.md, over 20 fits and 20 000 pairs each). C in double: the
 NumPy recipe to rounding (max relative 1.5e-10 where a value is above 1e-2 of its channel's
 maximum; required 1e-7 above 1e-3 of it, and 1e-9 of the maximum absolute). C in float (what
@@ -18,6 +24,7 @@ from __future__ import annotations
 
 import copy
 import ctypes
+import functools
 import importlib.util
 import re
 import shutil
@@ -37,6 +44,7 @@ from fit.export.glsl import GLSL
 from fit.rational import model as M
 from fit.rational.coefficient_file import load
 from fit.rational.domain import measured_domain
+from fit.rational.variables3d import evaluate_directions, is_3d
 
 FITS = [ROOT / "warp_rbrdf" / "data" / "paper_white_rgb.json",
         ROOT / "warp_rbrdf" / "data" / "satin_rosaline_rgb.json"]
@@ -95,15 +103,55 @@ def single_linear_model():
     return m
 
 
+def lobe3d(X):
+    """A synthetic RGB BRDF (1/sr) of (theta_h, theta_d, |phi_d|) rows that depends on phi_d
+    and is not reciprocal (cos phi_d changes sign when light and view are swapped)."""
+    th, td, pd = X[:, 0], X[:, 1], X[:, 2]
+    spec = 2.5 * np.exp(-(th / 0.3) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + 0.4 * np.sin(td) ** 2)
+    base = np.array([0.1, 0.14, 0.22]) * (1.0 + 0.3 * (np.cos(pd) * np.sin(td))[:, None])
+    return base + spec[:, None] * [1.0, 0.85, 0.7]
+
+
+@functools.lru_cache(maxsize=1)
+def _fit3d():
+    from fit.rational.fit3d import fit_samples, sample_grid
+
+    tm = np.radians(80.0)
+    X = sample_grid(tm, grid=(10, 9, 7), n_random=300, seed=3)
+    res = fit_samples(X, lobe3d(X), name="lobe3d", theta_max=tm, degrees=(4, 2), theta_h_edges=[0.2],
+                      tol=0.01, time_limit=60.0, grazing_cos=0.0, channel_floor=0.0)
+    assert res.valid and is_3d(res.model)
+    return res.model
+
+
+def fit3d_model():
+    """A 3-D fit (version 3: two theta_h pieces, log values, sqrt theta_h, vouched ranges) of
+    :func:`lobe3d`, made by the fitter (about 2 s, once per session)."""
+    return copy.deepcopy(_fit3d())
+
+
+def fit3d_flagged_model():
+    """:func:`fit3d_model` with the green channel of its peak piece flagged and a measured range
+    that cuts into its values (the flagged clamp of a 3-D fit)."""
+    m = fit3d_model()
+    info = m.pieces[0].function_info
+    info[1] = dict(info[1], valid=False, measured_range=[0.2, 1.5])
+    return m
+
+
 MODELS = {"paper_white": lambda: load(FITS[0]), "satin": lambda: load(FITS[1]), "tricky": tricky_model,
-          "single_linear": single_linear_model}
+          "single_linear": single_linear_model, "fit3d": fit3d_model, "fit3d_flagged": fit3d_flagged_model}
 
 
 def reference(model):
     """What every export computes, ``f(wi, wo) -> rho (..., 3)``: the renderer's NumPy reference
     (``warp_rbrdf.materials.rational.evaluate_at_angles``): the file's recipe, on the fit's
     measured domain when it records its grazing cut-off (fit.rational.domain: paper_white,
-    satin and tricky record 79 deg; single_linear, a piece, records none)."""
+    satin and tricky record 79 deg; single_linear, a piece, records none); for a 3-D fit
+    :func:`fit.rational.variables3d.evaluate_directions` (``wi`` the light, ``wo`` the viewer),
+    what the renderer evaluates too."""
+    if is_3d(model):
+        return functools.partial(evaluate_directions, model)
     from warp_rbrdf.materials.rational import evaluate_at_angles
 
     return evaluate_at_angles(model, None, measured_domain(model))
@@ -190,6 +238,25 @@ def test_c_matches_numpy(tmp_path, which, real):
         assert rel < 1e-2 and absmax < 3e-3, (rel, absmax)
 
 
+@pytest.mark.parametrize("real", ["double", "float"])
+def test_c_3d_keeps_the_roles_of_light_and_view(tmp_path, real):
+    """A 3-D fit is not reciprocal: the C export at (wo, wi) is the NumPy fit at (wo, wi), which
+    differs from its value at (wi, wo) (median 10 % and more on this lobe); mirrored pairs (y ->
+    -y, the isotropy fold |phi_d|) give the same value."""
+    model = MODELS["fit3d"]()
+    f = compile_c(model, tmp_path, real)
+    wi, wo = directions(5000, seed=7)
+    got, a, b = f(wi, wo)
+    swapped, _, _ = f(wo, wi)
+    ref_swapped = reference(model)(b, a)
+    rel, _ = agreement(swapped, ref_swapped, 1e-2)
+    assert rel < (1e-7 if real == "double" else 1e-2), rel
+    lit = (got > 0.05) & (swapped > 0.05)
+    assert np.median(np.abs(swapped - got)[lit] / got[lit]) > 0.1
+    mirrored, _, _ = f(a * [1, -1, 1], b * [1, -1, 1])
+    np.testing.assert_allclose(mirrored, got, rtol=1e-9 if real == "double" else 1e-4, atol=1e-12)
+
+
 def test_c_frame_function_and_cpp(tmp_path):
     """``_frame`` (world-space L, V and a rotated frame) equals the local-frame function, and
     the header compiles as C++."""
@@ -226,7 +293,7 @@ def c_to_glsl(line: str) -> str:
     line = re.sub(r"RBRDF_K\(([0-9.eE+-]+)\)", lambda m: glsl_literal(float(m.group(1))), line)
     for c, g in (("RBRDF_REAL", "float"), ("RBRDF_MIN", "min"), ("RBRDF_MAX", "max"),
                  ("rbrdf_clamp_", "clamp"), ("RBRDF_SQRT", "sqrt"), ("RBRDF_EXP", "exp"),
-                 ("RBRDF_ACOS", "acos"), ("RBRDF_COS", "cos")):
+                 ("RBRDF_ACOS", "acos"), ("RBRDF_COS", "cos"), ("RBRDF_ABS", "abs")):
         line = line.replace(c, g)
     return line
 
@@ -267,6 +334,21 @@ def test_glsl_compiles(tmp_path, version):
     assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
 
 
+@pytest.mark.parametrize("version", ["330 core", "410 core", "300 es", "400 core double"])
+def test_glsl_3d_compiles(tmp_path, version):
+    """A 3-D fit's GLSL (``_angles`` takes phi_d too; its flagged channel's clamp included), in
+    float and, as GLSL 4.00, in double."""
+    model = MODELS["fit3d_flagged"]()
+    fn = "rbrdf_" + model.name
+    call = (f"{fn}(normalize(vec3(0.3, 0.1, 0.9)), normalize(vec3(-0.2, 0.1, 0.9))) + "
+            f"{fn}_frame(vec3(0.0, 0.0, 1.0), vec3(0.0, 0.6, 0.8), vec3(0.0, 0.0, 1.0), "
+            f"vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)) + {fn}_angles(0.1, 0.2, -2.5)")
+    src = to_glsl(model, precision="double" if version.endswith("double") else "float")
+    assert f"vec3 {fn}_angles(float theta_h, float theta_d, float phi_d)" in src
+    r = glslang(fragment(version.removesuffix(" double"), src, call), tmp_path)
+    assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
+
+
 def test_glsl_double_compiles(tmp_path):
     """The double variant: GLSL 4.00 (the C build with -DRBRDF_REAL_DOUBLE -DRBRDF_EXP_FLOAT runs
     its arithmetic, test_c_matches_numpy)."""
@@ -299,6 +381,21 @@ def test_hlsl_compiles(tmp_path):
         assert (r.returncode == 0) == ok, (r.stdout + r.stderr)[-3000:]
 
 
+def test_hlsl_3d_compiles(tmp_path):
+    """A 3-D fit's HLSL: the GLSL statements verbatim, compiled by glslang's HLSL front end."""
+    model = MODELS["fit3d"]()
+    src = to_hlsl(model)
+    assert "\n".join(Emitter(GLSL).rho(model)) in src
+    fn = "rbrdf_" + model.name
+    main = (f"float4 main(float4 pos : SV_Position) : SV_Target\n{{\n    return float4({fn}(normalize(pos.xyz), "
+            f"normalize(float3(-0.2, 0.1, 0.9))) + {fn}_angles(0.1, 0.2, pos.w), 1.0);\n}}\n")
+    p = tmp_path / "shader.hlsl"
+    p.write_text(src + "\n" + main)
+    r = subprocess.run([need("glslangValidator"), "-D", "-V", "-e", "main", "-S", "frag", "-o",
+                        str(tmp_path / "s.spv"), str(p)], check=False, capture_output=True, text=True)
+    assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
+
+
 def test_glsl_validator_sees_errors(tmp_path):
     """The compile check can fail: a statement without its semicolon and an undeclared name."""
     model = MODELS["paper_white"]()
@@ -325,12 +422,30 @@ def test_brdf_explorer_file(tmp_path):
         assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
 
 
+def test_brdf_explorer_file_3d(tmp_path):
+    """A 3-D fit's ``.brdf`` file: BRDF(L, V, ...) passes L as the light (the fit's wi), and the
+    shader block compiles."""
+    model = MODELS["fit3d"]()
+    text = to_brdf_explorer(model)
+    shader = extract_shader(text)
+    assert f"return scale * rbrdf_{model.name}_frame(L, V, N, X, Y);" in shader
+    assert "# Fit 'lobe3d': rho(wi, wo) in 1/sr (no cosine), RGB, isotropic, NOT reciprocal:" in text
+    call = "BRDF(vec3(0.0, 0.0, 1.0), vec3(0.0, 0.6, 0.8), vec3(0.0, 0.0, 1.0), vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0))"
+    r = glslang(fragment("410 core", shader, call, "uniform float scale;\n"), tmp_path)
+    assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
+
+
 def test_policy_in_comments():
     m = MODELS["tricky"]()
     assert flagged_summary(m) == [(0, [("G", (0.05, 3.0))])]
     for text in (to_glsl(m), to_c(m), to_hlsl(m)):
         assert "below the horizon" in text and "clamped onto it" in text and "piece 0, channel G" in text
     assert "Every piece is valid" in to_glsl(MODELS["paper_white"]())
+    m3 = MODELS["fit3d_flagged"]()
+    assert flagged_summary(m3) == [(0, [("G", (0.2, 1.5))])]
+    for text in (to_glsl(m3), to_c(m3), to_hlsl(m3)):
+        assert "NOT reciprocal" in text and "|phi_d| in [0, 180] deg" in text and "piece 0, channel G" in text
+        assert "grazing cut-off" not in text and "renderer refuses" in text
 
 
 def test_unsupported_fit_is_refused():
@@ -373,6 +488,37 @@ def test_mitsuba_plugin_eval_matches_numpy():
             wx = np.array(bs.wo, float)
             assert np.isclose(bs.pdf, wx[2] / np.pi, rtol=1e-5)
             assert np.allclose(np.array(w, float), reference(model)(wx, b[k]) * np.pi, rtol=1e-4, atol=1e-7)
+    MR.set_variant(MR.VARIANT)
+
+
+@pytest.mark.parametrize("which", ["fit3d", "fit3d_flagged"])
+def test_mitsuba_plugin_3d_eval_matches_numpy(which):
+    """A 3-D fit in the plugin: ``evaluate`` against NumPy, and ``eval`` through the BSDF
+    interface with Mitsuba's roles (``si.wi`` the viewer, ``wo`` the light): f(light = wo,
+    view = si.wi) cos(theta_wo); the swapped roles would differ (not reciprocal)."""
+    MR = need_mitsuba()
+    import mitsuba as mi
+
+    from fit.export import mitsuba_plugin as MP
+
+    model = MODELS[which]()
+    bsdf = mi.load_dict({"type": MP.register(f"rbrdf_test_{which}", model)})
+    wi, wo = directions(400, seed=3)
+    a, b = wi.astype(np.float32).astype(float), wo.astype(np.float32).astype(float)
+    ref = reference(model)(a, b)
+    rel, absmax = agreement(MP.evaluate(model, a, b), ref)
+    print(f"3-D plugin vs NumPy: max rel {rel:.3g}, max abs/max {absmax:.3g}")
+    assert rel < 1e-4 and absmax < 1e-5, (rel, absmax)
+    ctx = mi.BSDFContext()
+    swapped = reference(model)(b, a)
+    differ = 0
+    for k in range(60):
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*b[k])
+        e = np.array(bsdf.eval(ctx, si, mi.Vector3f(*a[k])), float)
+        assert np.allclose(e, ref[k] * max(a[k, 2], 0.0), rtol=1e-4, atol=1e-7), (k, e, ref[k])
+        differ += not np.allclose(swapped[k], ref[k], rtol=1e-2)
+    assert differ > 20
     MR.set_variant(MR.VARIANT)
 
 
@@ -444,6 +590,25 @@ def test_standalone_plugin_module(tmp_path):
     name = import_file(path, "satin_plugin").register()
     assert name == "rbrdf_satin_rosaline_rgb"
     bsdf = mi.load_dict({"type": name})
+    wi, wo = directions(50, seed=4)
+    ctx = mi.BSDFContext()
+    for a, b in zip(wi.astype(np.float32).astype(float), wo.astype(np.float32).astype(float)):
+        si = mi.SurfaceInteraction3f()
+        si.wi = mi.Vector3f(*b)
+        e = np.array(bsdf.eval(ctx, si, mi.Vector3f(*a)), float)
+        assert np.allclose(e, reference(model)(a, b) * max(a[2], 0.0), rtol=1e-4, atol=1e-7)
+
+
+def test_standalone_plugin_module_3d(tmp_path):
+    """The exported .py of a 3-D fit needs only Mitsuba and keeps the roles."""
+    need_mitsuba()
+    import mitsuba as mi
+
+    model = MODELS["fit3d"]()
+    path = tmp_path / "lobe_plugin.py"
+    path.write_text(to_mitsuba_plugin(model))
+    assert "not reciprocal" in path.read_text()
+    bsdf = mi.load_dict({"type": import_file(path, "lobe_plugin").register("rbrdf_test_lobe_standalone")})
     wi, wo = directions(50, seed=4)
     ctx = mi.BSDFContext()
     for a, b in zip(wi.astype(np.float32).astype(float), wo.astype(np.float32).astype(float)):
@@ -525,6 +690,20 @@ def test_cli_export(tmp_path, capsys, ext):
     assert cli_main(["export", str(FITS[1]), str(out), "--name", "satin"]) == 0
     text = out.read_text()
     assert "satin" in text and "below the horizon" in text
+    assert f"wrote {out}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("ext", ["glsl", "hlsl", "h", "c", "brdf", "py"])
+def test_cli_export_3d(tmp_path, capsys, ext):
+    """``rbrdf-fit export`` of a version-3 file, every format."""
+    from fit.rational.coefficient_file import save
+
+    fit = tmp_path / "lobe3d.json"
+    save(MODELS["fit3d"](), fit)
+    out = tmp_path / f"lobe.{ext}"
+    assert cli_main(["export", str(fit), str(out)]) == 0
+    text = out.read_text()
+    assert "rbrdf_lobe3d" in text and "not reciprocal" in text.lower()
     assert f"wrote {out}" in capsys.readouterr().out
 
 

@@ -19,6 +19,8 @@ fit exported under a plain name (the function name aside), and that plain export
 
 And the text is still there, readable: the comment's quoted form reads back (``ast.literal_eval``)
 as the text (its first 200 characters for a longer one), the plugin's docstring holds it.
+Version-3 fits (3-D: theta_h, theta_d, |phi_d|), whose exports have their own header lines and
+functions, go through the same cases, against the plain 3-D fit's export.
 The loader may refuse some texts (control characters, long names): then the run must be one
 line naming the file, exit 2, nothing written -- and the same fit with the text set in memory
 is exported through the library and checked as above.
@@ -81,11 +83,12 @@ PLAIN = "plain"
 
 def case_counts() -> dict:
     """Named cases per class (docs/robustness.md): code in an output with exit 0 is a silent
-    wrong result (each case exports to every format its text reaches); a version-3 fit to .brdf
-    and a cut-off record that is not a number were tracebacks; a ``--name`` whose identifiers
-    hold ``__`` (reserved in GLSL) or run to any length was accepted."""
+    wrong result (each case exports to every format its text reaches, as a 2-D and as a 3-D
+    fit); a version-3 fit to .brdf and a cut-off record that is not a number were tracebacks; a
+    ``--name`` whose identifiers hold ``__`` (reserved in GLSL) or run to any length was
+    accepted."""
     out = dict.fromkeys(CLASSES, 0)
-    out["silent"] += len(HOSTILE) + len(LIBRARY) + len(BAD_NAMES)
+    out["silent"] += 2 * (len(HOSTILE) + len(LIBRARY)) + len(BAD_NAMES)
     out["traceback"] += 2
     return out
 
@@ -103,11 +106,21 @@ def fit_dict(text: str) -> dict:
     return d
 
 
-def library_model(text: str, channel: bool):
-    """The model of :func:`fit_dict` (plain texts) with ``text`` as every leaf's first channel
-    name (``channel``), or as its name, source file and tolerance record, set in memory (no
-    loader in the way)."""
-    m = from_dict(fit_dict(PLAIN), "plain.json")
+def fit3d_dict(text: str) -> dict:
+    """A small valid version-3 (3-D) BRDF file with ``text`` as its name, source file and
+    tolerance record, and one flagged channel."""
+    d = v3_dict(text)
+    d["source"] = {"file": text, "sha256": ""}
+    d["fit"] = {"tolerance": text}
+    d["functions"][1].update(valid=False, measured_range=[0.0, 1.0])
+    return d
+
+
+def library_model(text: str, channel: bool, three: bool = False):
+    """The model of :func:`fit_dict` (:func:`fit3d_dict` if ``three``; plain texts) with
+    ``text`` as every leaf's first channel name (``channel``), or as its name, source file and
+    tolerance record, set in memory (no loader in the way)."""
+    m = from_dict(fit3d_dict(PLAIN) if three else fit_dict(PLAIN), "plain.json")
     if channel:
         for leaf in leaves(m):
             leaf.outputs = (text,) + tuple(leaf.outputs[1:])
@@ -270,59 +283,65 @@ def python_check(text: str, original: str) -> None:
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """``ref(ext)``: what the tools see of the plain fit's export (compiled once per format)."""
+    """``ref(ext, three=False)``: what the tools see of the plain fit's export (the plain 3-D
+    fit's if ``three``; compiled once per format)."""
     folder = tmp_path_factory.mktemp("plain")
     cache = {}
 
-    def ref(ext: str) -> list:
-        if ext not in cache:
-            text = export_text(from_dict(fit_dict(PLAIN), "plain.json"), ext)
-            cache[ext] = python_view(text) if ext == ".py" else tool_view(text, ext, folder, build=True)
-        return cache[ext]
+    def ref(ext: str, three: bool = False) -> list:
+        if (ext, three) not in cache:
+            d = fit3d_dict(PLAIN) if three else fit_dict(PLAIN)
+            text = export_text(from_dict(d, "plain.json"), ext)
+            cache[ext, three] = python_view(text) if ext == ".py" else tool_view(text, ext, folder, build=True)
+        return cache[ext, three]
 
     return ref
 
 
-def check_output(text: str, ext: str, tmp_path, reference, original: str) -> None:
+def check_output(text: str, ext: str, tmp_path, reference, original: str, three: bool = False) -> None:
     """The proof for one output (module docstring): what the tools see equals the plain
-    export's; the .c is compiled (symbols), the .glsl compiled; the text is readable."""
+    export's (of the plain 3-D fit if ``three``); the .c is compiled (symbols), the .glsl
+    compiled; the text is readable."""
     if ext == ".py":
-        assert python_view(text) == reference(ext), "top-level statements differ from the plain export's"
+        assert python_view(text) == reference(ext, three), "top-level statements differ from the plain export's"
         python_check(text, original)
         return
     if ext == ".brdf":
         brdf_structure(text)
     view = tool_view(text, ext, tmp_path, build=ext in (".c", ".glsl"))
-    assert view == reference(ext), f"the preprocessed {ext} differs from the plain export's"
+    assert view == reference(ext, three), f"the preprocessed {ext} differs from the plain export's"
     assert_readable(text, original)
 
 
 # ----------------------------------------------------------------------------------------------
 # the cases
+@pytest.mark.parametrize("three", [False, True], ids=["2d", "3d"])
 @pytest.mark.parametrize("text", [c[1] for c in HOSTILE], ids=[c[0] for c in HOSTILE])
-def test_cli_export_holds_no_code_beyond_the_fit(tmp_path, capsys, reference, text):
-    """``rbrdf-fit export FIT OUT`` to every format (:data:`HOSTILE` says what each text broke).
-    Where the loader refuses the text, the same fit with that text set in memory is exported
-    by the library and checked the same way."""
-    fit = write_json(tmp_path / "hostile.json", fit_dict(text))
+def test_cli_export_holds_no_code_beyond_the_fit(tmp_path, capsys, reference, text, three):
+    """``rbrdf-fit export FIT OUT`` to every format (:data:`HOSTILE` says what each text broke),
+    for a 2-D and a 3-D (version-3) fit. Where the loader refuses the text, the same fit with
+    that text set in memory is exported by the library and checked the same way."""
+    fit = write_json(tmp_path / "hostile.json", fit3d_dict(text) if three else fit_dict(text))
     for ext in FORMATS:
         out = tmp_path / f"out{ext}"
         rc, stdout, err = run(capsys, ["export", fit, out])
         if rc != 0:      # the loader refuses this text: one line naming the file, nothing written;
             assert_bad_input(rc, err, "hostile.json")      # the emitters must be safe regardless:
             assert not out.exists()
-            check_output(export_text(library_model(text, channel=False), ext), ext, tmp_path, reference, text)
+            check_output(export_text(library_model(text, channel=False, three=three), ext), ext, tmp_path,
+                         reference, text, three)
             continue
         assert err == "" and f"wrote {out}" in stdout
-        check_output(out.read_text(encoding="utf-8"), ext, tmp_path, reference, text)
+        check_output(out.read_text(encoding="utf-8"), ext, tmp_path, reference, text, three)
 
 
+@pytest.mark.parametrize("three", [False, True], ids=["2d", "3d"])
 @pytest.mark.parametrize("where, text, formats", [c[1:] for c in LIBRARY], ids=[c[0] for c in LIBRARY])
-def test_library_export_holds_no_code_beyond_the_fit(tmp_path, reference, where, text, formats):
+def test_library_export_holds_no_code_beyond_the_fit(tmp_path, reference, where, text, formats, three):
     channel = where == "channel"
-    model = library_model(text, channel)
+    model = library_model(text, channel, three)
     for ext in formats:
-        check_output(export_text(model, ext), ext, tmp_path, reference, PLAIN if channel else text)
+        check_output(export_text(model, ext), ext, tmp_path, reference, PLAIN if channel else text, three)
 
 
 def v3_dict(name: str) -> dict:
@@ -340,17 +359,17 @@ def v3_dict(name: str) -> dict:
     return to_dict(RationalModel(name=name, variables=var, functions=fs))
 
 
-def test_version_3_fit_is_refused_in_one_line(tmp_path, capsys):
-    """Version-3 fits (phi_d) are not exported, the emitters having no phi_d term: one line naming
-    the file and why, for every format (.brdf was a traceback); an earlier output stays."""
-    fit = write_json(tmp_path / "v3.json", v3_dict(HOSTILE[0][1]))
+def test_version_3_fit_is_exported_in_its_own_variables(tmp_path, capsys):
+    """A version-3 fit (phi_d; .brdf was a traceback, then a one-line refusal) is exported to
+    every format with phi_d in its functions, and an earlier output is replaced."""
+    fit = write_json(tmp_path / "v3.json", v3_dict(PLAIN))
     for ext in FORMATS:
         out = tmp_path / f"old{ext}"
         out.write_text("earlier output\n")
-        before = snapshot(tmp_path)
         rc, stdout, err = run(capsys, ["export", fit, out])
-        assert_bad_input(rc, err, "v3.json", "version-3", "phi_d", out=stdout)
-        assert_unchanged(before, tmp_path)
+        assert rc == 0 and err == "" and f"wrote {out}" in stdout
+        text = out.read_text(encoding="utf-8")
+        assert "phi_d" in text and "earlier output" not in text
 
 
 def test_cutoff_record_not_a_number_is_refused(tmp_path, capsys):

@@ -8,7 +8,12 @@ A *plan* is the JSON-able form of a fit that :func:`fit.export.mitsuba_plugin.pl
 ``{"box", "transforms": [t_h, t_d], "value": {"transform", "offset", "min", "max"},
 "functions": [{"domain", "num": [[e_h, e_d, c], ...], "den": [...], "range": [lo, hi] | None}
 x 3]}``: the recipe of :mod:`fit.rational.coefficient_file` with each function's step-7 range
-already chosen (vouched range if valid, measured range if flagged). A fit that records the
+already chosen (vouched range if valid, measured range if flagged). A 3-D fit (coefficient file
+version 3) has a third variable, ``|phi_d|``, everywhere: a third box entry and transform, a
+third exponent in each term (``[e_h, e_d, e_p, c]``), ``"phi_d"`` as a split variable; phi_d
+is folded by the mirror symmetry of isotropy (:mod:`fit.rational.variables3d`), and since such
+a fit is not reciprocal the light and the view keep their roles: the BSDF evaluates it with
+Mitsuba's sampled direction ``wo`` as the light and ``si.wi`` as the viewer. A fit that records the
 grazing cut-off of its projection adds ``"cutoff_deg": c``: the angles are moved onto its
 measured domain first (:func:`fit.rational.domain.onto_measured_domain`: ``theta_h = min(theta_h,
 c)``, then ``theta_d = min(theta_d, acos(min(cos c / cos theta_h, 1)))``); without the key they
@@ -16,8 +21,9 @@ are not moved.
 
 Evaluation is vectorised Dr.Jit arithmetic (every piece is evaluated and the right one
 selected), in ``Float64`` for the polynomial part; it works in every variant (scalar or JIT).
-The BSDF is rho(theta_h, theta_d) times cos(theta_o) (Mitsuba's ``eval`` includes the
-cosine), symmetric in its two directions, 0 below the horizon. It is sampled by the cosine
+The BSDF is rho(theta_h, theta_d) (a 3-D fit: rho(theta_h, theta_d, |phi_d|)) times
+cos(theta_o) (Mitsuba's ``eval`` includes the cosine; theta_o is the angle of its ``wo``), 0
+below the horizon; a 2-D fit is symmetric in its two directions. It is sampled by the cosine
 distribution (``pdf = cos(theta_o) / pi``), or, when the plan holds ``"cdf"``, by the tabulated
 inverse CDFs of an ``rbrdf-cdf`` file (:class:`fit.sampling.table.CDFTable`: rows by the view
 angle ``theta_v`` of ``si.wi``, ``theta_l`` by the row's marginal CDF, ``|phi_l - phi_v|`` by
@@ -29,12 +35,18 @@ import bisect
 import math
 
 
-def _rho(mi, dr, plan, th, td):
-    """rho (1/sr) as three Float64 at Rusinkiewicz angles (Float64, radians)."""
+VARIABLE_INDEX = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
+
+
+def _rho(mi, dr, plan, th, td, pd=None):
+    """rho (1/sr) as three Float64 at Rusinkiewicz angles (Float64, radians; ``pd``: phi_d of
+    a 3-D plan, folded here)."""
     if plan.get("cutoff_deg") is not None:
         th, td = _onto_measured_domain(dr, plan["cutoff_deg"], th, td)
-    (hl, hh), (dl, dh) = plan["box"]
-    x = [dr.clip(th, hl, hh), dr.clip(td, dl, dh)]
+    box = plan["box"]
+    x = [dr.clip(th, box[0][0], box[0][1]), dr.clip(td, box[1][0], box[1][1])]
+    if len(box) == 3:
+        x.append(dr.clip(dr.abs(pd), box[2][0], box[2][1]))
     return _node(mi, dr, plan["root"], x)
 
 
@@ -50,7 +62,7 @@ def _onto_measured_domain(dr, cutoff_deg, th, td):
 def _node(mi, dr, node, x):
     if "split" not in node:
         return _leaf(mi, dr, node, x)
-    v = 0 if node["split"] == "theta_h" else 1
+    v = VARIABLE_INDEX[node["split"]]
     vals = [_node(mi, dr, p, x) for p in node["pieces"]]
     out = vals[-1]
     for k in range(len(vals) - 2, -1, -1):      # x <= edge k + 1: piece k (the lower at an edge)
@@ -61,7 +73,7 @@ def _node(mi, dr, node, x):
 
 def _leaf(mi, dr, leaf, x):
     u = []
-    for v in range(2):
+    for v in range(len(leaf["box"])):
         lo, hi = leaf["box"][v]
         xv = dr.clip(x[v], lo, hi)
         if leaf["transforms"][v] == "sqrt":
@@ -85,8 +97,11 @@ def _leaf(mi, dr, leaf, x):
 
         def poly(terms):
             acc = 0.0
-            for eh, ed, c in terms:
-                acc = acc + c * table(0, eh)[eh] * table(1, ed)[ed]
+            for term in terms:          # [e_h, e_d, (e_p,) c]
+                p = term[-1]
+                for v, e in enumerate(term[:-1]):
+                    p = p * table(v, e)[e]
+                acc = acc + p
             return acc
 
         y = poly(f["num"]) / poly(f["den"])
@@ -112,10 +127,33 @@ def angles(mi, dr, wi, wo):
     return mi.Float64(th), mi.Float64(td)
 
 
+def angles_3d(mi, dr, wi, wo):
+    """(theta_h, theta_d, phi_d) in radians (Float64; phi_d in (-pi, pi], 0 where undefined) of
+    local directions ``wi`` (the light) and ``wo`` (the viewer): ``wi`` rotated by ``-phi_h``
+    about z, then by ``-theta_h`` about y (the rotations of the renderer and of
+    ``fit.formats.angles.directions_to_half_diff``)."""
+    h = dr.normalize(wi + wo)
+    r = dr.sqrt(h.x * h.x + h.y * h.y)
+    th = dr.atan2(r, h.z)
+    ok = r > 1e-12
+    cp = dr.select(ok, h.x / dr.select(ok, r, 1.0), 1.0)
+    sp = dr.select(ok, h.y / dr.select(ok, r, 1.0), 0.0)
+    x1 = cp * wi.x + sp * wi.y
+    y1 = cp * wi.y - sp * wi.x
+    x2 = h.z * x1 - r * wi.z
+    z2 = r * x1 + h.z * wi.z
+    td = dr.atan2(dr.sqrt(x2 * x2 + y1 * y1), z2)
+    pd = dr.select(dr.abs(x2) + dr.abs(y1) > 1e-12, dr.atan2(y1, x2), 0.0)
+    return mi.Float64(th), mi.Float64(td), mi.Float64(pd)
+
+
 def evaluate(mi, dr, plan, wi, wo):
-    """rho (1/sr) as a Color3f at local unit directions (Vector3f); 0 below the horizon."""
-    th, td = angles(mi, dr, wi, wo)
-    r = _rho(mi, dr, plan, th, td)
+    """rho (1/sr) as a Color3f at local unit directions (Vector3f) ``wi`` (the light) and ``wo``
+    (the viewer); 0 below the horizon."""
+    if len(plan["box"]) == 3:
+        r = _rho(mi, dr, plan, *angles_3d(mi, dr, wi, wo))
+    else:
+        r = _rho(mi, dr, plan, *angles(mi, dr, wi, wo))
     active = (mi.Frame3f.cos_theta(wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
     c = mi.Color3f(mi.Float(r[0]), mi.Float(r[1]), mi.Float(r[2]))
     return dr.select(active, c, mi.Color3f(0.0))
@@ -210,6 +248,10 @@ def bsdf_class(mi, dr):
             self.m_flags = flags
 
         def _f(self, si, wo):
+            # Mitsuba's si.wi points to the viewer, wo to the light: a 3-D fit keeps these roles
+            # (a 2-D fit is symmetric in them)
+            if len(self.plan["box"]) == 3:
+                return evaluate(mi, dr, self.plan, wo, si.wi) * self.scale
             return evaluate(mi, dr, self.plan, si.wi, wo) * self.scale
 
         def sample(self, ctx, si, sample1, sample2, active=True):

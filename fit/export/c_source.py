@@ -10,23 +10,29 @@ Emitted functions (``N`` = :func:`fit.export.escape.identifier` of the name), al
     void rbrdf_N_frame(const RBRDF_REAL L[3], const RBRDF_REAL V[3], const RBRDF_REAL N[3],
                        const RBRDF_REAL X[3], const RBRDF_REAL Y[3], RBRDF_REAL rho[3]);
 
+A 3-D fit's ``rbrdf_N_angles`` takes ``phi_d`` too (``RBRDF_REAL theta_h, RBRDF_REAL theta_d,
+RBRDF_REAL phi_d, RBRDF_REAL rho[3]``; phi_d of the pair (light, view), folded to ``|phi_d|``);
+``wi`` is the light, ``wo`` the viewer (such a fit is not reciprocal).
+
 Same meaning as the GLSL functions (:mod:`fit.export.glsl`; the statements come from the same
 :class:`~fit.export.emitter.Emitter`): rho in 1/sr, radians, local frame with z = normal, 0
 below the horizon, the fit's clamps, and for a fit that records its grazing cut-off the angles
 moved onto its measured domain first (:mod:`fit.export.emitter`, step 0; ``cos`` and ``acos``
 through ``RBRDF_COS`` / ``RBRDF_ACOS``, defined by a second guarded prelude only in such
 files; with ``-DRBRDF_EXP_FLOAT`` they run in float as well, as GLSL's double variant does).
-Needs ``<math.h>`` (link with ``-lm``).
+The ``fabs`` of a 3-D fit's fold is ``RBRDF_ABS``, defined by a third guarded prelude only in
+3-D files. Needs ``<math.h>`` (link with ``-lm``).
 """
 from __future__ import annotations
 
 from ..rational.domain import measured_domain
-from .emitter import Emitter, Language, c_literal, policy_text
+from .emitter import Emitter, Language, c_literal, is_3d, policy_text
 from .escape import identifier
 
 C = Language(real="RBRDF_REAL", literal=c_literal,
              funcs={"min": "RBRDF_MIN", "max": "RBRDF_MAX", "clamp": "rbrdf_clamp_",
-                    "sqrt": "RBRDF_SQRT", "exp": "RBRDF_EXP", "cos": "RBRDF_COS", "acos": "RBRDF_ACOS"})
+                    "sqrt": "RBRDF_SQRT", "exp": "RBRDF_EXP", "cos": "RBRDF_COS", "acos": "RBRDF_ACOS",
+                    "abs": "RBRDF_ABS"})
 
 PRELUDE = r"""#include <math.h>
 
@@ -82,6 +88,17 @@ DOMAIN_PRELUDE = r"""#ifndef RBRDF_DOMAIN_PRELUDE_
 #endif
 """
 
+# only in files of 3-D fits (the fold of phi_d; other fits' files hold none of it)
+PHI_PRELUDE = r"""#ifndef RBRDF_PHI_PRELUDE_
+#define RBRDF_PHI_PRELUDE_
+#ifdef RBRDF_REAL_DOUBLE
+#define RBRDF_ABS fabs
+#else
+#define RBRDF_ABS fabsf
+#endif
+#endif
+"""
+
 
 def function_name(model, name: str | None = None) -> str:
     return "rbrdf_" + identifier(name or model.name)
@@ -94,6 +111,7 @@ def to_c(model, name: str | None = None, header: bool = True) -> str:
     fn = function_name(model, name)
     guard = fn.upper() + "_H_"
     R = "RBRDF_REAL"
+    three = is_3d(model)
     em = Emitter(C)
     body = em.rho(model, "theta_h", "theta_d")
     out = ["/*"] + policy_text(model) + [
@@ -104,13 +122,16 @@ def to_c(model, name: str | None = None, header: bool = True) -> str:
         out += [f"#ifndef {guard}", f"#define {guard}"]
     else:
         out += ["#ifndef RBRDF_API", "#define RBRDF_API", "#endif"]
-    out += [PRELUDE] + ([DOMAIN_PRELUDE] if measured_domain(model) is not None else []) + [
+    args = f"{R} theta_h, {R} theta_d, {R} phi_d" if three else f"{R} theta_h, {R} theta_d"
+    out += [PRELUDE] + ([DOMAIN_PRELUDE] if measured_domain(model) is not None else []) + (
+            [PHI_PRELUDE] if three else []) + [
             "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
-            f"RBRDF_API void {fn}_angles({R} theta_h, {R} theta_d, {R} rho[3])", "{",
+            f"RBRDF_API void {fn}_angles({args}, {R} rho[3])", "{",
             f"    {R} rho0 = RBRDF_K(0.0);", f"    {R} rho1 = RBRDF_K(0.0);", f"    {R} rho2 = RBRDF_K(0.0);"]
     out += body
     out += ["    rho[0] = rho0;", "    rho[1] = rho1;", "    rho[2] = rho2;", "}", "",
-            f"RBRDF_API void {fn}(const {R} wi[3], const {R} wo[3], {R} rho[3])", "{",
+            f"RBRDF_API void {fn}(const {R} wi[3], const {R} wo[3], {R} rho[3])", "{"]
+    out += _directions_3d(fn) if three else [
             f"    {R} h[3], n, c[3], theta_h, theta_d;",
             "    if (wi[2] <= RBRDF_K(0.0) || wo[2] <= RBRDF_K(0.0)) {",
             "        rho[0] = rho[1] = rho[2] = RBRDF_K(0.0);", "        return;", "    }",
@@ -123,7 +144,8 @@ def to_c(model, name: str | None = None, header: bool = True) -> str:
             "    c[2] = wi[0] * h[1] - wi[1] * h[0];",
             "    theta_d = RBRDF_ATAN2(RBRDF_SQRT(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]),",
             "                          wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]);",
-            f"    {fn}_angles(theta_h, theta_d, rho);", "}", "",
+            f"    {fn}_angles(theta_h, theta_d, rho);"]
+    out += ["}", "",
             f"static inline void {fn}_local_(const {R} D[3], const {R} N[3], const {R} X[3],",
             f"                               const {R} Y[3], {R} w[3])", "{",
             "    w[0] = D[0] * X[0] + D[1] * X[1] + D[2] * X[2];",
@@ -143,3 +165,34 @@ def to_c(model, name: str | None = None, header: bool = True) -> str:
     if header:
         out += [f"#endif /* {guard} */"]
     return "\n".join(out) + "\n"
+
+
+def _directions_3d(fn: str) -> list:
+    """The body of a 3-D fit's ``rbrdf_N(wi, wo, rho)``: (theta_h, theta_d, phi_d) of the pair
+    by the renderer's rotations (:func:`fit.export.glsl.directions_3d`, the same statements)."""
+    R = "RBRDF_REAL"
+    return [
+        f"    {R} h[3], n, r, cp, sp, x1, y1, x2, z2, theta_h, theta_d, phi_d;",
+        "    if (wi[2] <= RBRDF_K(0.0) || wo[2] <= RBRDF_K(0.0)) {",
+        "        rho[0] = rho[1] = rho[2] = RBRDF_K(0.0);", "        return;", "    }",
+        "    h[0] = wi[0] + wo[0]; h[1] = wi[1] + wo[1]; h[2] = wi[2] + wo[2];",
+        "    n = RBRDF_SQRT(h[0] * h[0] + h[1] * h[1] + h[2] * h[2]);",
+        "    h[0] /= n; h[1] /= n; h[2] /= n;",
+        "    r = RBRDF_SQRT(h[0] * h[0] + h[1] * h[1]);",
+        "    theta_h = RBRDF_ATAN2(r, h[2]);",
+        "    cp = RBRDF_K(1.0);",
+        "    sp = RBRDF_K(0.0);",
+        "    if (r > RBRDF_K(1.0e-12)) {",
+        "        cp = h[0] / r;",
+        "        sp = h[1] / r;",
+        "    }",
+        "    x1 = cp * wi[0] + sp * wi[1];",
+        "    y1 = cp * wi[1] - sp * wi[0];",
+        "    x2 = h[2] * x1 - r * wi[2];",
+        "    z2 = r * x1 + h[2] * wi[2];",
+        "    theta_d = RBRDF_ATAN2(RBRDF_SQRT(x2 * x2 + y1 * y1), z2);",
+        "    phi_d = RBRDF_K(0.0);",
+        "    if (RBRDF_ABS(x2) + RBRDF_ABS(y1) > RBRDF_K(1.0e-12)) {",
+        "        phi_d = RBRDF_ATAN2(y1, x2);",
+        "    }",
+        f"    {fn}_angles(theta_h, theta_d, phi_d, rho);"]

@@ -1,20 +1,29 @@
 """The one expression emitter that the GLSL and C exports share: a rational BRDF fit
 (:class:`fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`,
 nested pieces included) as straight-line statements in the C-like subset common to GLSL and
-C99 (declarations, ``if``/``else``, ``+=``, calls of ``min``/``max``/``clamp``/``sqrt``/``exp``
-and, for the measured domain, ``cos``/``acos``, through a per-language name table).
+C99 (declarations, ``if``/``else``, ``+=``, calls of ``min``/``max``/``clamp``/``sqrt``/``exp``,
+for the measured domain ``cos``/``acos`` and for 3-D fits ``abs``, through a per-language name
+table).
+
+Two kinds of fits are exported: 2-D fits of ``(theta_h, theta_d)`` (coefficient file versions
+1 and 2) and 3-D fits of ``(theta_h, theta_d, |phi_d|)`` (version 3,
+:mod:`fit.rational.variables3d`: phi_d folded by the mirror symmetry of isotropy, not by
+reciprocity, so the light and the view keep their roles). The block :meth:`Emitter.rho` emits
+reads the angles in radians and assigns ``rho0, rho1, rho2``; the direction functions around it
+(:mod:`fit.export.glsl`, :mod:`fit.export.c_source`, :mod:`fit.export.hlsl`) compute the angles.
 
 The statements follow the evaluation recipe of :mod:`fit.rational.coefficient_file` step by
 step, as :meth:`RationalModel.__call__` does in NumPy:
 
-0. for a fit that records the grazing cut-off c of its projection
+0. for a 3-D fit, ``phi_d`` folded to ``|phi_d|`` (:func:`fit.rational.variables3d.fold_phi_d`);
+   for a 2-D fit that records the grazing cut-off c of its projection
    (:func:`fit.rational.domain.measured_domain`), move the angles onto its measured domain
    ``cos theta_h cos theta_d >= cos c`` as the renderer does
    (:func:`fit.rational.domain.onto_measured_domain`): ``theta_h = min(theta_h, c)``, then
    ``theta_d = min(theta_d, acos(min(cos c / cos theta_h, 1)))`` (the value at the domain's edge
    at the same theta_h; beyond it the fit has no data and would extrapolate). Fits that record
    no cut-off get no such statements (their output holds no domain code);
-1. clamp ``theta_h`` and ``theta_d`` (radians) onto the model's box; pick the piece
+1. clamp the angles (radians) onto the model's box; pick the piece
    (``x <= edge`` selects the lower piece at a shared edge, recursively for nested splits) and
    clamp onto the piece's box;
 2. input transform (``identity`` / ``sqrt``);
@@ -28,8 +37,9 @@ step, as :meth:`RationalModel.__call__` does in NumPy:
 
 Everything runs in the language's ``real`` type (GLSL ``float``; C ``RBRDF_REAL``, float by
 default): the coefficients are printed with 17 significant digits so that a double build
-reproduces the NumPy evaluation to rounding. Only fits in ``(theta_h, theta_d)`` with 3
-outputs and ``"outside": "clamp"`` are exported (:func:`check_exportable`).
+reproduces the NumPy evaluation to rounding. Only BRDF fits in ``(theta_h, theta_d)`` or
+``(theta_h, theta_d, phi_d)`` with 3 outputs and ``"outside": "clamp"`` are exported
+(:func:`check_exportable`).
 """
 from __future__ import annotations
 
@@ -39,6 +49,7 @@ import numpy as np
 
 from ..rational.domain import measured_domain
 from ..rational.model import flagged, output_clamp
+from ..rational.variables3d import VARIABLES_3D
 from .escape import comment_text, literal
 
 VARIABLES = ("theta_h", "theta_d")
@@ -54,7 +65,7 @@ class Language:
 
     real: str                         # scalar type
     literal: callable                 # float -> source literal
-    funcs: dict = field(default_factory=dict)   # min, max, clamp, sqrt, exp, cos, acos -> names
+    funcs: dict = field(default_factory=dict)   # min, max, clamp, sqrt, exp, cos, acos, abs -> names
 
     def call(self, f: str, *args) -> str:
         return f"{self.funcs.get(f, f)}({', '.join(args)})"
@@ -91,24 +102,27 @@ def leaves(model) -> list:
     return [leaf for p in pieces for leaf in leaves(p)]
 
 
+def is_3d(model) -> bool:
+    """Whether ``model`` is a 3-D fit (variables ``theta_h, theta_d, phi_d``, file version 3)."""
+    return tuple(v.name for v in model.variables) == VARIABLES_3D
+
+
 def check_exportable(model) -> None:
-    """ExportError unless ``model`` is a BRDF fit in (theta_h, theta_d) with 3 outputs and the
-    clamp policy, every leaf with finite coefficients, and a grazing cut-off record (if any)
-    that is a number."""
+    """ExportError unless ``model`` is a BRDF fit in (theta_h, theta_d) or (theta_h, theta_d,
+    phi_d) with 3 outputs and the clamp policy, every leaf in the model's variables with finite
+    coefficients, and a grazing cut-off record (if any) that is a number."""
     names = [v.name for v in model.variables]
-    if names == ["theta_h", "theta_d", "phi_d"]:
-        raise ExportError("a version-3 fit of (theta_h, theta_d, phi_d): the exports evaluate fits in "
-                          "(theta_h, theta_d) only (version 1 or 2)")
     if getattr(model, "kind", "brdf") != "brdf":
         raise ExportError(f"kind {model.kind!r}: only BRDF fits (kind 'brdf') are exported")
-    if names != list(VARIABLES):
-        raise ExportError(f"variables {names}: only fits in (theta_h, theta_d) are exported")
+    if names not in (list(VARIABLES), list(VARIABLES_3D)):
+        raise ExportError(f"variables {names}: only fits in (theta_h, theta_d) or (theta_h, theta_d, phi_d) "
+                          "are exported")
     if len(model.outputs) != 3:
         raise ExportError(f"{len(model.outputs)} outputs: a BRDF fit has 3 (R, G, B)")
     for leaf in leaves(model):
         if leaf.domain_policy.get("outside", "clamp") != "clamp":
             raise ExportError("domain policy 'outside' is not 'clamp'")
-        if [v.name for v in leaf.variables] != list(VARIABLES):
+        if [v.name for v in leaf.variables] != names:
             raise ExportError(f"a piece has variables {[v.name for v in leaf.variables]}")
         for f in leaf.functions:
             for a in (f.num_coef, f.den_coef, f.domain):
@@ -148,7 +162,9 @@ class Emitter:
         return self.lang.literal(v)
 
     def rho(self, model, th: str = "theta_h", td: str = "theta_d",
-            out=("rho0", "rho1", "rho2"), depth: int = 1) -> list:
+            out=("rho0", "rho1", "rho2"), depth: int = 1, pd: str = "phi_d") -> list:
+        """The block's lines; ``th``, ``td`` (and ``pd`` for a 3-D fit: phi_d in radians, any
+        sign, folded here) name the angles it reads."""
         check_exportable(model)
         L, R = self.lang, self.lang.real
         pad = self.ind * depth
@@ -157,10 +173,16 @@ class Emitter:
         if cut is not None:
             lines, th, td = self.onto_measured_domain(cut, th, td, depth)
         xh, xd = self._fresh("xh"), self._fresh("xd")
-        (hl, hh), (dl, dh) = (v.domain for v in model.variables)
+        (hl, hh), (dl, dh) = (v.domain for v in model.variables[:2])
         lines += [f"{pad}{R} {xh} = {L.call('clamp', th, self.lit(hl), self.lit(hh))};",
                   f"{pad}{R} {xd} = {L.call('clamp', td, self.lit(dl), self.lit(dh))};"]
-        lines += self._node(model, xh, xd, out, depth)
+        xs = {"theta_h": xh, "theta_d": xd}
+        if is_3d(model):      # |phi_d|: the mirror fold (fit.rational.variables3d)
+            xp = self._fresh("xp")
+            pl, ph = model.variables[2].domain
+            lines.append(f"{pad}{R} {xp} = {L.call('clamp', L.call('abs', pd), self.lit(pl), self.lit(ph))};")
+            xs["phi_d"] = xp
+        lines += self._node(model, xs, out, depth)
         return lines
 
     def onto_measured_domain(self, cutoff_deg: float, th: str, td: str, depth: int = 1):
@@ -177,12 +199,12 @@ class Emitter:
                  f"{pad}{R} {mh} = {L.call('min', th, self.lit(c))};",
                  f"{pad}{R} {md} = {L.call('min', td, tdmax)};"], mh, md)
 
-    def _node(self, model, xh, xd, out, depth) -> list:
+    def _node(self, model, xs: dict, out, depth) -> list:
         pieces = getattr(model, "pieces", None)
         if pieces is None:
-            return self._leaf(model, xh, xd, out, depth)
+            return self._leaf(model, [xs[v.name] for v in model.variables], out, depth)
         pad = self.ind * depth
-        x = xh if model.split_variable == "theta_h" else xd
+        x = xs[model.split_variable]
         lines = []
         for k, piece in enumerate(pieces):
             last = k == len(pieces) - 1
@@ -195,16 +217,17 @@ class Emitter:
             if len(pieces) == 1:
                 head = "{"
             lines.append(pad + head)
-            lines += self._node(piece, xh, xd, out, depth + 1)
+            lines += self._node(piece, xs, out, depth + 1)
         lines.append(pad + "}")
         return lines
 
-    def _leaf(self, leaf, xh, xd, out, depth) -> list:
+    def _leaf(self, leaf, xs: list, out, depth) -> list:
         L, R = self.lang, self.lang.real
         pad = self.ind * depth
+        nv = len(leaf.variables)
         lines = []
         us = []
-        for x, var in zip((xh, xd), leaf.variables):
+        for x, var in zip(xs, leaf.variables):
             u = self._fresh("u")
             v = L.call("clamp", x, self.lit(var.domain[0]), self.lit(var.domain[1]))
             if var.transform == "sqrt":
@@ -229,19 +252,19 @@ class Emitter:
             return t
 
         def poly(f, exps, coefs, name):
-            degs = exps.max(axis=0) if len(exps) else np.zeros(2, int)
+            degs = exps.max(axis=0) if len(exps) else np.zeros(nv, int)
             names = [table(v, f.domain[v][0], f.domain[v][1], int(degs[v])) if degs[v] > 0 else None
-                     for v in range(2)]
+                     for v in range(nv)]
             lines.append(f"{pad}{R} {name} = {self.lit(0.0)};")
             for e, c in zip(exps, coefs):
                 if c == 0.0:
                     continue
-                factors = [f"{names[v]}_{int(e[v])}" for v in range(2) if e[v] > 0]
+                factors = [f"{names[v]}_{int(e[v])}" for v in range(nv) if e[v] > 0]
                 lines.append(f"{pad}{name} += {' * '.join([self.lit(c)] + factors)};")
 
         for f in leaf.functions:        # every table once, at the largest degree used
             exps = np.concatenate([f.num_exponents, f.den_exponents])
-            for v in range(2):
+            for v in range(nv):
                 lo, hi = f.domain[v]
                 key = (v, float(lo), float(hi))
                 need = int(exps[:, v].max())
@@ -280,19 +303,41 @@ def policy_text(model, prefix: str = " * ") -> list:
     of the file (name, channel names, source, tolerance) only through :mod:`fit.export.escape`.
     ExportError for a fit the emitters do not translate (:func:`check_exportable`)."""
     check_exportable(model)
-    (hl, hh), (dl, dh) = (v.domain for v in model.variables)
+    three = is_3d(model)
+    (hl, hh), (dl, dh) = (v.domain for v in model.variables[:2])
     deg = np.degrees
-    lines = [
-        f"Fit {literal(model.name)}: rho(wi, wo) in 1/sr (no cosine), RGB, isotropic; local shading frame",
-        "z = normal; wi towards the light, wo towards the viewer, unit vectors.",
-        (f"Fitted domain: theta_h in [{deg(hl):.4g}, {deg(hh):.4g}] deg, theta_d in [{deg(dl):.4g}, "
-         f"{deg(dh):.4g}] deg (Rusinkiewicz angles)."),
+    if three:
+        pl, ph = model.variables[2].domain
+        lines = [
+            f"Fit {literal(model.name)}: rho(wi, wo) in 1/sr (no cosine), RGB, isotropic, NOT reciprocal:",
+            "wi is the direction towards the light, wo towards the viewer (swapping them changes the",
+            "value); local shading frame z = normal, unit vectors.",
+            (f"Fitted domain: theta_h in [{deg(hl):.4g}, {deg(hh):.4g}] deg, theta_d in [{deg(dl):.4g}, "
+             f"{deg(dh):.4g}] deg, |phi_d| in [{deg(pl):.4g}, {deg(ph):.4g}] deg"),
+            "(Rusinkiewicz angles of (wi, wo); phi_d folded to |phi_d| by the mirror symmetry of",
+            "isotropy, not by reciprocity).",
+        ]
+    else:
+        lines = [
+            f"Fit {literal(model.name)}: rho(wi, wo) in 1/sr (no cosine), RGB, isotropic; local shading frame",
+            "z = normal; wi towards the light, wo towards the viewer, unit vectors.",
+            (f"Fitted domain: theta_h in [{deg(hl):.4g}, {deg(hh):.4g}] deg, theta_d in [{deg(dl):.4g}, "
+             f"{deg(dh):.4g}] deg (Rusinkiewicz angles)."),
+        ]
+    lines += [
         "Policy: below the horizon (wi.z <= 0 or wo.z <= 0): 0. Outside the fitted domain the",
-        "angles are clamped onto it (e.g. theta_d beyond the grazing cut-off returns the value at",
-        "the cut-off). Values are clamped to [min, max] of the fit and, per function, to its",
+        ("angles are clamped onto it (beyond the largest fitted theta_h or theta_d the value at that"
+         if three else "angles are clamped onto it (e.g. theta_d beyond the grazing cut-off returns the value at"),
+        ("edge). Values are clamped to [min, max] of the fit and, per function, to its"
+         if three else "the cut-off). Values are clamped to [min, max] of the fit and, per function, to its"),
         "vouched range (valid functions) or measured range (flagged ones): never negative, never",
         "above what the data of its piece vouch for.",
     ]
+    if three:
+        lines += [
+            "Bound: every data point of the fit is within its stated bound and Q > 0 is certified on",
+            "every piece; between the data points the bound is checked at fresh points, not proved.",
+        ]
     cut = measured_domain(model)
     if cut is not None:
         lines += [
@@ -303,10 +348,15 @@ def policy_text(model, prefix: str = " * ") -> list:
             "does (fit.rational.domain); the fit is not extrapolated there.",
         ]
     fl = flagged_summary(model)
-    if fl:
+    if fl and three:
+        lines.append("FLAGGED pieces (the fit is not within its bound there; warp-rbrdf's renderer refuses")
+        lines.append("such a 3-D fit): this code evaluates the fitted function there, clamped to the")
+        lines.append("measured range:")
+    elif fl:
         lines.append("FLAGGED pieces (the fit is not within its tolerance there; the renderer of")
         lines.append("warp-rbrdf reads the measured table instead, which is not exported): this")
         lines.append("code evaluates the fitted function there, clamped to the measured range:")
+    if fl:
         for k, chans in fl:
             for name, rng in chans:
                 r = "no range recorded: unclamped" if rng is None else f"[{rng[0]:.4g}, {rng[1]:.4g}] 1/sr"

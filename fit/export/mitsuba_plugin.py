@@ -17,7 +17,10 @@ domain when it records its grazing cut-off (:func:`fit.rational.domain.onto_meas
 as the renderer's NumPy reference ``evaluate_at_angles``), 0 below the horizon,
 flagged functions clamped to their measured range (the renderer's projected table is not
 exported) -- times ``cos(theta_o)`` as Mitsuba's ``eval`` includes it; property ``scale``
-(float, default 1) multiplies it. Sampling: cosine-weighted (``pdf = cos(theta_o) / pi``), or,
+(float, default 1) multiplies it. A 3-D fit (coefficient file version 3, ``(theta_h, theta_d,
+|phi_d|)``, :func:`fit.rational.variables3d.evaluate_directions`) is not reciprocal: the plugin
+evaluates it with Mitsuba's ``wo`` (the sampled direction, towards the light) as the fit's
+light and ``si.wi`` as its viewer. Sampling: cosine-weighted (``pdf = cos(theta_o) / pi``), or,
 given an ``rbrdf-cdf`` file (``cdf=``, ``--cdf``), its tabulated inverse CDFs
 (:class:`fit.sampling.table.CDFTable`, sample and closed-form pdf, as Mitsuba's MIS needs;
 the file's rational maps give a pdf only by inversion and are not used). The runtime
@@ -83,8 +86,8 @@ def plan(model, cdf=None) -> dict:
             rng = output_clamp(info)
             funcs.append({
                 "domain": [[float(a), float(b)] for a, b in f.domain],
-                "num": [[int(e[0]), int(e[1]), float(c)] for e, c in zip(f.num_exponents, f.num_coef) if c != 0],
-                "den": [[int(e[0]), int(e[1]), float(c)] for e, c in zip(f.den_exponents, f.den_coef) if c != 0],
+                "num": [[*(int(x) for x in e), float(c)] for e, c in zip(f.num_exponents, f.num_coef) if c != 0],
+                "den": [[*(int(x) for x in e), float(c)] for e, c in zip(f.den_exponents, f.den_coef) if c != 0],
                 "range": None if rng is None else [float(rng[0]), float(rng[1])]})
         return {"box": [list(map(float, v.domain)) for v in m.variables],
                 "transforms": [v.transform for v in m.variables],
@@ -120,8 +123,9 @@ def register(name: str, fit, cdf=None) -> str:
 
 def evaluate(fit, wi, wo):
     """rho (1/sr) ``(n, 3)`` of the plugin's evaluation at local unit directions ``(n, 3)``
-    in the current Mitsuba variant (one call per pair in a scalar variant): what
-    ``bsdf.eval`` returns divided by cos(theta_o)."""
+    (``wi`` the light, ``wo`` the viewer) in the current Mitsuba variant (one call per pair in a
+    scalar variant): what ``bsdf.eval`` returns divided by cos(theta_o), with ``si.wi = wo``
+    and ``wi`` as its direction."""
     import drjit as dr
     import mitsuba as mi
 
@@ -152,6 +156,9 @@ def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
            + ("" if p.get("cutoff_deg") is None else
               f"angles first moved onto\nthe measured domain (grazing cut-off c = {p['cutoff_deg']:.6g} deg: "
               "cos theta_h cos theta_d >= cos c); ")
+           + ("" if len(p["box"]) != 3 else
+              "a 3-D fit of (theta_h, theta_d, |phi_d|), not reciprocal: eval's wo is the light,\n"
+              "si.wi the viewer; ")
            + "sampling: "
            f"{'tabulated inverse CDFs' if p['cdf'] else 'cosine'}.\n"
            'Property ``scale`` (float) multiplies it."""\n')
