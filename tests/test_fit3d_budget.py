@@ -16,11 +16,13 @@ import time as _time
 import numpy as np
 import pytest
 
-from fit.rational import albedo3d, ceiling, fit3d
+from fit.rational import albedo3d, ceiling, fit3d, ladder3d, rgl3d, select3d, verify3d
 from fit.rational.fit3d import fit_rgl_select
 from test_albedo3d import Synthetic  # the synthetic glossy lobe as an RGL-like object
 
 
+#: every module of the 3-D fits that reads the clock
+CLOCKED = (ladder3d, verify3d, rgl3d, select3d, albedo3d, ceiling)
 #: two small layouts, a verification with refits and the albedo policy at a tight tolerance (it
 #: corrects on this lobe): every loop that used to stop on time runs
 VARIANTS = ({"theta_h_edges": [0.15], "degrees": (4, 2)}, {"theta_h_edges": [], "degrees": (4, 2)})
@@ -67,9 +69,8 @@ def test_same_inputs_give_identical_coefficients(normal):
 
 def test_a_slow_clock_changes_nothing(normal, monkeypatch):
     clock = JumpingClock(10.0)
-    monkeypatch.setattr(fit3d, "time", clock)
-    monkeypatch.setattr(albedo3d, "time", clock)
-    monkeypatch.setattr(ceiling, "time", clock)
+    for module in CLOCKED:
+        monkeypatch.setattr(module, "time", clock)
     slow = select(time_limit=1e7)       # the ceiling far beyond the clock's jumps: only the budgets stop
     assert clock.n > 10                  # the clock was read, and ran ahead by minutes
     assert np.array_equal(coefficients(slow), coefficients(normal))
@@ -81,9 +82,8 @@ def test_a_slow_clock_changes_nothing(normal, monkeypatch):
 
 def test_the_safety_ceiling_is_recorded(monkeypatch):
     clock = JumpingClock(1.0)
-    monkeypatch.setattr(fit3d, "time", clock)
-    monkeypatch.setattr(albedo3d, "time", clock)
-    monkeypatch.setattr(ceiling, "time", clock)
+    for module in CLOCKED:
+        monkeypatch.setattr(module, "time", clock)
     res = select(time_limit=2.0)
     fi = res.model.fit_info
     assert fi["stopped"] == "time" and fi["time_limit"] == 2.0

@@ -1,85 +1,13 @@
-"""Directional albedo of 3-D fits (issue 25): its measurement and the fit's albedo policy.
+"""Directional albedo of 3-D fits: its measurement (:func:`albedo_quadrature`,
+:func:`albedo_errors`: the same fixed half-vector quadrature for the fit and the truth, a relative
+error per channel with a 5 % channel floor) and the fits' albedo policy (:func:`albedo_policy`,
+applied last by :func:`fit.rational.rgl3d.fit_rgl` and :func:`fit.rational.select3d.fit_rgl_select`
+unless ``albedo=False``: a channel outside ``albedo_tol`` refitted by its second stage with the
+albedo of every angle in the objective, the data intervals unchanged, kept only without a spike
+and within the cost limits; budgets are counts; what stays outside is recorded).
 
-Measurement (:func:`albedo_errors`)
-===================================
-The directional albedo ``a_c(theta_i) = int rho_c(wi, wo) cos(theta_o) d omega_o`` (light
-``wi`` at ``theta_i`` in the xz plane) is computed by a fixed quadrature
-(:func:`albedo_quadrature`, 96 x 96 = 9,216 points per angle), **the same points for the fit and the
-truth**: views that are the reflections of half vectors on a grid dense at the specular peak
-(``theta_h = (pi/2) s^2``), so that a glossy film's narrow grazing lobe and the 3-D fits' peak
-piece hold many points (with a grid of 64 x 64 views uniform in ``(theta_o, phi_o)``, a
-correction of vch_golden_yellow met 2.8 % at 75 deg on its own views and was 8.1 % on a
-256 x 256 grid: it had fitted the views, not the albedo; on the half-vector grid the two agree). Angles:
-:data:`ANGLES_DEG` (0, 15, 30, 45, 60, 75 deg) and the file's last measured incidence
-(``theta_i_max``) when it lies beyond 75 deg. The error is relative per channel,
-
-    err_c(theta_i) = |a_fit,c - a_true,c| / max(a_true,c, floor_frac * max_c' a_true,c'),
-
-``floor_frac`` = 0.05: a channel darker than 5 % of the brightest channel at that incidence is
-measured relative to that 5 % (the same channel floor as the bound of
-:mod:`fit.rational.fit3d`), so a black channel does not divide by 0. A Lambertian
-``rho = a / pi`` gets the albedo ``a`` within 0.03 % at every angle (the quadrature's error).
-
-Policy (:func:`albedo_policy`, applied last by :func:`fit.rational.fit3d.fit_rgl` and
-:func:`fit.rational.fit3d.fit_rgl_select` unless ``albedo=False``)
-===================================================================================
-**Rule.** The tolerance is ``albedo_tol`` (default :data:`DEFAULT_ALBEDO_TOL` = 5 %, separate
-from the fit's ``tol``, which is only where its tolerance ladder starts). Where an (incidence,
-channel) is outside it, that channel is corrected by constraint generation on the albedo: every
-piece's function of the channel is refitted by its second stage
-(:func:`fit.rational.refine.refine`, started from the function it has) with the albedo of
-**every** angle added as one squared-sum term each (the linearised relative albedo error at that
-incidence over the quadrature points in the piece, the other pieces' part a constant; all
-angles, so that the ones within do not drift out), weighted ``lam`` times the piece's own
-relative squared metric, ``lam`` on the ladder :data:`WEIGHTS` (0.01, 0.03, ..., 100: the
-smallest weight that brings the channel within costs the least average error) in rounds while
-some incidence is still out. The data intervals are not changed: every data point stays within
-the tolerance the piece's channel met before (``tolerance_met``), so the stated bound does not
-grow, and Q > 0 is certified again on every refitted function (``refine`` fails otherwise and
-the function is kept). Two guards, both sampled (nothing is proved between the data points):
-
-* **no spike**: a piece's refitted function is refused where, at 200,000 fresh points (uniform
-  in the variables and cosine pairs, seed 4242), it moves more than ``spike_factor`` (4) times
-  ``T`` error units from the function the fit had before the policy (the data bound allows 2
-  ``T``); without it one of cc_iris_purple_gem's red functions reached 39,455 /sr against 2.7
-  between its data points (benchmark relative RMSE 70.7);
-* **bounded cost**: a channel's new functions are kept only where they lower that channel's
-  largest albedo error over the angles **and** raise its relative RMSE of ``rho cos cos`` on
-  100,000 cosine pairs (seed 12345, the layout selection's) by at most ``rmse_growth`` (50 %)
-  **and** the fit's (the mean over R, G, B, the benchmark's metric) by at most
-  ``total_growth`` (15 %) over the pre-policy fit; otherwise they are put back, and after a too
-  costly round the channel stops (a larger weight costs more): its miss is recorded. Measured
-  on the three glossy films of issue 25 (benchmark, 200,000 pairs; largest albedo error, fit
-  relative RMSE): with one per-channel limit of 10 % (the rule before) cc_ibiza_sunset stayed
-  7.4 % and vch_golden_yellow 8.3 % off at 75 deg; a per-channel 30 % brought ibiza within
-  (3.7 %, RMSE 0.070 -> 0.074; its green correction costs 10.07 % of the fit's RMSE on the
-  check pairs), 50 % vch (4.5 %, 0.043 -> 0.046) but also let cc_iris_purple_gem's red at
-  0 deg (an albedo of 0.010 against 0.32 in blue) be corrected at +16 % of the fit's RMSE on
-  the check pairs and +34 % on the benchmark's (0.104, above the neural BRDF's 0.096), while
-  still 10 % off. The fit-wide 15 % keeps the first two and refuses the third.
-
-The correction's budget is a count: the rounds of the weight ladder and at most
-``max_refits`` channel corrections (a channel's pieces refitted at one weight; 27 =
-:data:`fit.rational.settings.DEFAULT_ALBEDO_REFITS`, the whole ladder for three channels; ``stopped``
-= "budget" when they run out). The wall clock is only a safety net (the fit's
-:class:`fit.rational.ceiling.Ceiling` and ``time_limit``, None by default; ``stopped`` = "time").
-On the 20 RGL materials the policy took 0.1-17 s (chm_mint 24 corrections, 15.8 s; ilm_solo_m_68
-26, 16.9 s; before, both were cut by a 15 s wall-clock limit). It costs average error (at
-most 15 % of the fit's relative RMSE on its check pairs, 50 % of a channel's; measured in
-docs/fit_accuracy.md).
-
-**What is recorded.** ``fit_info["albedo"]``: the rule, the tolerance, the angles, the
-quadrature, the truth's albedo, the errors before and after (per angle and channel), ``within``
-(every angle and channel within the tolerance after the correction), ``outside`` (a list of
-``{theta_i_deg, channel, error}`` where it is not), ``max_error`` and ``max_error_before``, the
-rounds, the channels refitted, the per-channel RMSE on the check pairs before and after, the
-refused refits (``spikes``) and too costly rounds (``rejected``), ``max_refits`` and
-``channel_refits`` (the corrections tried), seconds and ``stopped``; :func:`fit.rational.fit3d.fit_rgl_select`
-adds the validation RMSE before and after. A refitted function's record carries
-``stage["albedo"]`` (its weight). A miss is recorded, not hidden, but the renderer does not act
-on it: its ``unvouched`` fallback (warp_rbrdf/materials/rational.py) is per piece of the
-variables and replaces a flagged piece by the phi_d-median table, while an albedo miss is per
-incidence and the table is no better there; the record is the user's to read.
+The specification (quadrature, rule, guards, budget, the record's keys, measurements) is
+docs/fitting.md, "The directional-albedo policy in full".
 """
 from __future__ import annotations
 
@@ -137,7 +65,7 @@ def albedo_quadrature(angles_deg, n: int = DEFAULT_VIEWS) -> tuple:
     rows) and ``phi_h`` on the half circle ``[0, pi]`` (exact for functions symmetric about the
     plane of incidence, which isotropic BRDFs and fits of ``|phi_d|`` are), weights
     ``2 cos(theta_o) 4 (wi . h) sin(theta_h) d theta_h d phi_h`` (``d omega_o = 4 (wi . h) d
-    omega_h``), 0 where ``wo`` is not above the horizon (module docstring: a grid of views
+    omega_h``), 0 where ``wo`` is not above the horizon (docs/fitting.md: a grid of views
     uniform in ``(theta_o, phi_o)`` was too coarse in the glossy lobes)."""
     k = max(round(float(n) ** 0.5), 2)
     m = (np.arange(k) + 0.5) / k
@@ -167,7 +95,7 @@ def albedo_from_values(rho, weights) -> np.ndarray:
 
 
 def relative_errors(a_fit, a_true, floor_frac: float = FLOOR_FRAC) -> np.ndarray:
-    """``(A, 3)`` ``|a_fit - a_true| / max(a_true, floor_frac * max_c a_true)`` (module docstring)."""
+    """``(A, 3)`` ``|a_fit - a_true| / max(a_true, floor_frac * max_c a_true)`` (docs/fitting.md)."""
     a_fit, a_true = np.asarray(a_fit, np.float64), np.asarray(a_true, np.float64)
     den = np.maximum(a_true, np.maximum(floor_frac * a_true.max(axis=1, keepdims=True), 1e-12))
     return np.abs(a_fit - a_true) / den
@@ -176,7 +104,7 @@ def relative_errors(a_fit, a_true, floor_frac: float = FLOOR_FRAC) -> np.ndarray
 def albedo_errors(fit_eval, truth_eval, angles_deg=ANGLES_DEG, n: int = DEFAULT_VIEWS,
                   floor_frac: float = FLOOR_FRAC) -> dict:
     """Directional albedo of ``fit_eval(wi, wo)`` against ``truth_eval(wi, wo)`` (both rho
-    ``(N, 3)``) at ``angles_deg`` on the quadrature of ``n`` points per angle (module docstring):
+    ``(N, 3)``) at ``angles_deg`` on the quadrature of ``n`` points per angle (docs/fitting.md):
     ``{"angles_deg", "truth" (A, 3), "fit" (A, 3), "error" (A, 3)}``."""
     wi, wo, qw = albedo_quadrature(angles_deg, n)
     at = albedo_from_values(np.maximum(np.asarray(truth_eval(wi, wo), np.float64), 0.0), qw)
@@ -209,9 +137,9 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                   spike_factor: float = DEFAULT_SPIKE_FACTOR, n_spike: int = 200_000,
                   max_refits: int = DEFAULT_MAX_REFITS, ceiling=None) -> dict:
     """Measure and, where it is outside ``tol``, correct the directional albedo of a
-    :class:`fit.rational.fit3d.Fit3D` made by :func:`fit.rational.fit3d.fit_rgl` (its data in
-    ``res.data``, :class:`fit.rational.fit3d.FitData3D`) in place (module docstring); returns the record, also written to
-    ``res.model.fit_info["albedo"]`` and ``res.info["albedo"]``. Budgets (counts): the rounds of
+    :class:`fit.rational.result3d.Fit3D` made by :func:`fit.rational.rgl3d.fit_rgl` (its data in
+    ``res.data``, :class:`fit.rational.result3d.FitData3D`) in place (docs/fitting.md); returns
+    the record, also written to ``res.model.fit_info["albedo"]`` and ``res.albedo``. Budgets (counts): the rounds of
     ``weights`` and at most ``max_refits`` channel corrections (a channel's pieces refitted at
     one weight); ``time_limit`` (s; None: none) and a caller's ``ceiling``
     (:class:`fit.rational.ceiling.Ceiling`) are only wall-clock safety nets (``stopped`` =
@@ -253,11 +181,11 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
         noise = np.asarray(res.noise, np.float64)
         g = grazing_weight(X, float(fi.get("grazing_cos", 0.25)))
         cfloor = float(fi.get("channel_floor", 0.05))
-        edges = res.info["edges"]
+        edges = res.edges
         ka = _piece_of(model, Xa)
         by_key = {(r["piece"], "RGB".index(r["channel"])): r for r in res.records}
         # the guard: per channel relative RMSE of rho cos cos on n_check cosine pairs (the
-        # validation pairs of fit.rational.fit3d.validation_rmse): a correction that raises it by
+        # validation pairs of fit.rational.select3d.validation_rmse): a correction that raises it by
         # more than rmse_growth is put back (a refit can spike between its data points: one of
         # cc_iris_purple_gem went from 0.071 to 70.7 on the benchmark's pairs without it)
         rng = np.random.default_rng(12345)
@@ -406,7 +334,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
     rec.update(error=err.tolist(), within=not out, outside=out, max_error=float(err.max()),
                max_error_before=float(err0.max()), time_s=time.perf_counter() - t0)
     fi["albedo"] = rec
-    res.info["albedo"] = rec
+    res.albedo = rec
     return rec
 
 
