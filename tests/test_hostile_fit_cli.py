@@ -299,14 +299,14 @@ def test_plot_failing_at_its_second_figure_leaves_nothing(capsys, merl, work, mo
 def test_disk_full_while_writing_keeps_the_old_file(capsys, merl, work, monkeypatch):
     import builtins
 
-    import fit.outputs
+    import fit.atomic_files
 
     def full(path, mode="r", *a, **k):
         if "w" in mode:
             raise OSError(28, "No space left on device")
         return builtins.open(path, mode, *a, **k)
 
-    monkeypatch.setattr(fit.outputs, "open", full, raising=False)
+    monkeypatch.setattr(fit.atomic_files, "open", full, raising=False)
     before = snapshot(work)
     rc, _, err = run(capsys, ["cdf", merl, "--out", work / "old.json", "--table-only", "--n-v", "2",
                                 "--n-t", "4", "--n-p", "4"])

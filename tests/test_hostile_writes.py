@@ -229,16 +229,16 @@ class _Lossy:
 
 
 def _lossy_writes(monkeypatch):
-    """Every file :mod:`fit.outputs` opens for writing is :class:`_Lossy`."""
+    """Every file :mod:`fit.atomic_files` opens for writing is :class:`_Lossy`."""
     import builtins
 
-    import fit.outputs
+    import fit.atomic_files
 
     def lossy_open(path, mode="r", *a, **k):
         f = builtins.open(path, mode, *a, **k)
         return _Lossy(f) if "w" in mode else f
 
-    monkeypatch.setattr(fit.outputs, "open", lossy_open, raising=False)
+    monkeypatch.setattr(fit.atomic_files, "open", lossy_open, raising=False)
 
 
 def _oiio_writes_nothing(monkeypatch, fmt):

@@ -119,7 +119,7 @@ def read_done(output: Path, key: str):
 
 def _sweep_temporaries(output: Path) -> None:
     """Remove hidden temporary files of ``output`` and its manifest left by a killed run
-    (:func:`fit.outputs._temp_in` names them ``.NAME.XXXX.part.json``)."""
+    (:func:`fit.atomic_files.temp_in` names them ``.NAME.XXXX.part.json``)."""
     for name in (output.name, manifest_path(output).name):
         for tmp in output.parent.glob(f".{name[:80]}.*.part.json"):
             with contextlib.suppress(OSError):
