@@ -1,0 +1,373 @@
+"""Prototype: the render kernel's sample over K lanes per Warp thread, against one sample per
+thread, on Warp's CPU backend (samples/s, same image, vector instructions in the object).
+
+    python -m benchmarks.lanes_prototype [--quick] [--material cc_ibiza_sunset_rgb]
+        [--envmap studio_small_03_1k] [--resolution 128] [--spp 64] [--repeats 5]
+        [--lanes 1 4 8 16] [--threads 1 2] [--json FILE]
+
+The scene is the reference sphere of ``benchmarks/bench_vs_mitsuba.py`` (unit sphere, camera at
+z = 4, 30 deg vertical field of view, hidden map, direct light): per camera sample one
+environment sample and one BSDF sample of the ``rgl`` material, two shadow rays, MIS
+(:mod:`benchmarks.lanes_kernels`, :mod:`benchmarks.lanes_scene`, :mod:`benchmarks.lanes_shading`).
+Variants:
+
+* ``scalar``: one sample per loop iteration with the production ``rgl`` technique and the
+  distribution module's 2-D sampler (branches, early-exit binary searches), as the integrator;
+* ``lanes K=k``: ``k`` samples of a pixel per step, branch-free, the searches as fixed halving
+  steps over all lanes at once, the lane loops unrolled by Warp (``K=1``: the same branch-free
+  code, one sample per step);
+* ``loop K=k``: the same with the lane loops left as loops (LLVM's loop vectorizer).
+
+Each variant renders the same image (same seed) through 16-px tiles launched from a thread pool
+(``--threads``, as the renderer's ``launch_tiles``); the timings are interleaved (every repeat
+runs every variant and thread count, the variants' order rotated), the table gives the median
+samples/s (camera samples, hits and misses, per second of wall clock), the ratio to ``scalar``
+in the same run, the image's agreement with ``scalar``'s (same random numbers: the same values
+up to float rounding) and instruction counts of the compiled object (``objdump -d``: ymm
+instructions, packed single-precision arithmetic on xmm/ymm, gathers, scalar single-precision
+arithmetic). Every kernel has the render kernels' module options
+(:func:`warp_rbrdf.shipped_kernels.render_module_options`: ``-target-cpu x86-64-v3``).
+
+``--quick``: 32 px, 16 spp, ``loop K=4`` and ``hybrid K=4``, 1 thread, 1 repeat (the smoke test). Needs
+``$RBRDF_DATA`` (``rgl/<material>.bsdf``, ``envmaps/<map>.hdr``) and, for the instruction
+counts, ``objdump``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
+TILE = 16
+FOV_Y_DEG = 30.0
+
+
+# --------------------------------------------------------------------------------------------
+# scene data
+def env_distribution(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(marg (H + 1), cond (H (W + 1))) float32 CDFs of the H x W texel cells weighted by
+    luminance x sin(theta) of the row's centre (a row of no mass gets a uniform conditional)."""
+    H, W = image.shape[:2]
+    lum = np.maximum(image[..., :3].astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722]), 0.0)
+    w = lum * np.sin(np.pi * (np.arange(H) + 0.5) / H)[:, None]
+    rows = w.sum(1)
+    cond = np.zeros((H, W + 1))
+    cond[:, 1:] = np.cumsum(np.where(rows[:, None] > 0, w, 1.0), 1)
+    cond /= cond[:, -1:]
+    marg = np.concatenate([[0.0], np.cumsum(rows)]) / rows.sum()
+    cond[:, -1] = 1.0
+    marg[-1] = 1.0
+    return marg.astype(np.float32), cond.astype(np.float32).ravel()
+
+
+def load_scene(material: Path, envmap: Path):
+    """``(tables, materials, env)``: the lane kernels' :class:`~benchmarks.lanes_scene.Tables`,
+    the production :class:`~warp_rbrdf.materials.data.Materials` of the same material (index 0)
+    and the map's :class:`~benchmarks.lanes_scene.Env`."""
+    import warp as wp
+
+    from benchmarks import lanes_scene as S
+    from fit.formats.rgl import read_rgl
+    from warp_rbrdf.image_io import read_image
+    from warp_rbrdf.materials import rgl as R
+    from warp_rbrdf.materials.data import Materials
+    from warp_rbrdf.registry import material as kind_of
+
+    floats, header = R.pack(read_rgl(material))
+    h = header(0)
+    if h[R.RGL_N_THETA] < 2 or h[R.RGL_JACOBIAN] != 1 or h[R.RGL_VIEW_INCIDENT] != 1:
+        raise SystemExit(f"{material.name}: the prototype needs >= 2 theta_i slices, the Jacobian "
+                         f"and the view as incident direction")
+    f = wp.array(floats, dtype=float)
+    tb = S.Tables()
+    tb.f = f
+    names = ("n_theta theta vndf_ny vndf_nx vndf_data vndf_cond vndf_marg lum_ny lum_nx lum_data lum_cond "
+             "lum_marg rgb ndf_ny ndf_nx ndf sigma_ny sigma_nx sigma").split()
+    for i, name in enumerate(names):
+        setattr(tb, name, int(h[i]))
+    m = Materials()
+    ints = {"kind": [kind_of("rgl").code], "technique": [0], "combine": [0], "offset": [0], "param": [0],
+            "rgl_i": h, "cdf_row_ok": [0], "cdf_info": [0], "coef_i": [0], "cdf_gi": [0]}
+    for name, v in ints.items():
+        setattr(m, name, wp.array(np.asarray(v, np.int32), dtype=int))
+    m.scale = wp.array(np.ones((1, 3), np.float32), dtype=wp.vec3)
+    m.tables = wp.zeros(1, dtype=wp.vec3)
+    m.rgl_f = f
+    for name in ("cdf_t", "cdf_p", "cdf_pw"):
+        setattr(m, name, wp.zeros(1, dtype=float))
+    m.coef_f = wp.zeros(1, dtype=wp.float64)
+    m.cdf_gf = wp.zeros(1, dtype=wp.float64)
+    m.coef_q = wp.zeros(1, dtype=Materials.vars["coef_q"].type.dtype)
+    m.cdf_gq = wp.zeros(1, dtype=wp.vec2d)
+    image = read_image(envmap)
+    marg, cond = env_distribution(image)
+    env = S.Env()
+    env.rgb = wp.array(np.ascontiguousarray(image[..., :3], np.float32).ravel(), dtype=float)
+    env.marg = wp.array(marg, dtype=float)
+    env.cond = wp.array(cond, dtype=float)
+    env.h, env.w = image.shape[:2]
+    return tb, m, env
+
+
+# --------------------------------------------------------------------------------------------
+# variants
+#: lane variants: (Warp unrolls the lane loops, branches around the per-lane shading, extra
+#: compiler flags)
+KINDS = {
+    "lanes": (True, False, ""),
+    "loop": (False, False, ""),
+    "hybrid": (False, True, ""),
+    "gather": (False, False, " -target-feature +fast-gather"),
+}
+
+
+def variant_names(lanes, kinds) -> list[str]:
+    return ["scalar"] + [f"{kind} K={k}" for kind in kinds for k in lanes if kind == "lanes" or k > 1]
+
+
+def build(name: str, stages: int = 3):
+    """The kernel of variant ``name`` with the render kernels' module options (``stages``:
+    the cost breakdown's early stop, :func:`benchmarks.lanes_kernels.make_scalar_kernel`)."""
+    from benchmarks import lanes_kernels as LK
+    from warp_rbrdf.shipped_kernels import render_module_options
+
+    opts = render_module_options()
+    if name == "scalar":
+        return LK.make_scalar_kernel(opts, stages)
+    kind, k = name.split(" K=")
+    k = int(k)
+    unroll, branchy, flags = KINDS[kind]
+    opts["max_unroll"] = max(k, 16) if unroll else 0
+    if flags:
+        opts["cpu_compiler_flags"] = opts.get("cpu_compiler_flags", "") + flags
+    return LK.make_lane_kernel(k, opts, stages, branchy)
+
+
+def render(kernel, first_arg, env, view, threads: int) -> np.ndarray:
+    """(res, res, 3) image of one variant: 16-px tiles on ``threads`` threads."""
+    import warp as wp
+
+    res = view.res
+    out = wp.zeros(res * res, dtype=wp.vec3)
+    tiles = [(x, y, min(TILE, res - x), min(TILE, res - y)) for y in range(0, res, TILE) for x in range(0, res, TILE)]
+
+    def one(t):
+        wp.launch(kernel, dim=t[2] * t[3], inputs=[first_arg, env, view, t[0], t[1], t[2]], outputs=[out])
+
+    if threads <= 1:
+        for t in tiles:
+            one(t)
+    else:
+        with ThreadPoolExecutor(max_workers=threads) as ex:
+            list(ex.map(one, tiles))
+    wp.synchronize()
+    return out.numpy().reshape(res, res, 3)
+
+
+def agreement(img: np.ndarray, ref: np.ndarray) -> dict:
+    """How one image differs from the reference rendered with the same random numbers."""
+    scale = float(np.mean(ref))
+    d = np.abs(img - ref)
+    return {"mean_rel": float(d.mean() / scale), "max_rel": float(d.max() / scale),
+            "pixels_off": int(np.count_nonzero(d.max(-1) > 1e-4 * scale)),
+            "image_mean_ratio": float(np.mean(img) / scale)}
+
+
+# --------------------------------------------------------------------------------------------
+# the compiled object
+def object_file(kernel) -> Path | None:
+    import warp as wp
+
+    folder = Path(wp.config.kernel_cache_dir) / kernel.module.get_module_identifier()
+    objs = sorted(folder.glob("*.o"))
+    return objs[0] if objs else None
+
+
+#: instruction classes counted in the disassembly
+PACKED = re.compile(r"^v(?:add|sub|mul|div|fmadd\w*|fmsub\w*|fnmadd\w*|fnmsub\w*|min|max|sqrt|rcp|rsqrt|cmp\w*|blendv|round)ps$")
+SCALAR = re.compile(r"^v(?:add|sub|mul|div|fmadd\w*|fmsub\w*|fnmadd\w*|fnmsub\w*|min|max|sqrt|cmp\w*|round)ss$")
+
+
+def instruction_counts(path: Path | None) -> dict:
+    """Counts in ``objdump -d`` of the object: all instructions, those on ymm registers, packed
+    single-precision arithmetic (xmm or ymm), gathers, scalar single-precision arithmetic."""
+    if path is None or shutil.which("objdump") is None:
+        return {}
+    text = subprocess.run(["objdump", "-d", "--no-show-raw-insn", str(path)], capture_output=True, text=True,
+                          check=True).stdout
+    return count_instructions(text)
+
+
+def count_instructions(text: str) -> dict:
+    """:func:`instruction_counts` of ``objdump -d --no-show-raw-insn`` output."""
+    counts = {"instructions": 0, "ymm": 0, "packed_ps": 0, "packed_ps_ymm": 0, "gathers": 0, "scalar_ss": 0}
+    for line in text.splitlines():
+        parts = line.split("\t")
+        if len(parts) < 2 or not re.match(r"^\s*[0-9a-f]+:$", parts[0]):
+            continue
+        ins = parts[1].strip()
+        op = ins.split(" ", 1)[0]
+        counts["instructions"] += 1
+        ymm = "%ymm" in ins
+        counts["ymm"] += ymm
+        if PACKED.match(op):
+            counts["packed_ps"] += 1
+            counts["packed_ps_ymm"] += ymm
+        counts["gathers"] += "gather" in op
+        counts["scalar_ss"] += bool(SCALAR.match(op))
+    return counts
+
+
+# --------------------------------------------------------------------------------------------
+def machine() -> dict:
+    import warp as wp
+
+    cpu = ""
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                   if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(), "warp": wp.config.version,
+            "date": time.strftime("%Y-%m-%d %H:%M")}
+
+
+def timed_render(kernel, first_arg, env, view, threads: int) -> tuple[np.ndarray, float, float]:
+    """``(image, wall s, cpu s)``; the CPU time is the calling thread's, which runs every
+    launch when ``threads`` is 1 (unlike the wall clock, it leaves out the other processes'
+    share of a loaded machine)."""
+    w0, c0 = time.perf_counter(), time.thread_time()
+    img = render(kernel, first_arg, env, view, threads)
+    return img, time.perf_counter() - w0, time.thread_time() - c0
+
+
+def run(a) -> dict:
+    from benchmarks.lanes_scene import View
+    from warp_rbrdf.runtime import init_warp
+
+    init_warp()
+    tb, mats, env = load_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr")
+    if any(a.spp % k for k in a.lanes):
+        raise SystemExit(f"--spp {a.spp} must be a multiple of every K")
+    view = View()
+    view.res, view.spp, view.seed = a.resolution, a.spp, 7
+    view.tan_half = float(np.tan(np.radians(FOV_Y_DEG / 2)))
+    names = variant_names(a.lanes, a.kinds)
+    # (variant, stages): the full kernels, and the early stops of the breakdown
+    jobs = [(n, 3) for n in names] + [(n, st) for n in (a.breakdown or []) for st in (1, 2)]
+    kernels, compile_s, ref = {}, {}, None
+    for job in jobs:
+        t0 = time.perf_counter()
+        kernels[job] = build(*job)
+        img = render(kernels[job], mats if job[0] == "scalar" else tb, env, view, 1)   # compiles, warms up
+        compile_s[job] = time.perf_counter() - t0
+        print(f"{job[0]} (stages {job[1]}): compiled and rendered in {compile_s[job]:.1f} s", file=sys.stderr,
+              flush=True)
+        if job == ("scalar", 3):
+            ref = img
+    load_before = os.getloadavg()
+    wall = {(j, t): [] for j in jobs for t in a.threads}
+    cpu = {j: [] for j in jobs}
+    images = {}
+    for rep in range(a.repeats):
+        order = jobs[rep % len(jobs):] + jobs[:rep % len(jobs)]
+        for job in order:
+            for th in (a.threads if job[1] == 3 else [1]):
+                img, w, c = timed_render(kernels[job], mats if job[0] == "scalar" else tb, env, view, th)
+                wall[job, th].append(w)
+                if th == 1:
+                    cpu[job].append(c)
+                images[job] = img
+    n = a.resolution ** 2 * a.spp
+    rows = []
+    for name in names:
+        job = (name, 3)
+        rate = {th: n / statistics.median(wall[job, th]) for th in a.threads}
+        base = {th: n / statistics.median(wall[("scalar", 3), th]) for th in a.threads}
+        row = {"variant": name, "samples_per_s": rate, "ratio": {th: rate[th] / base[th] for th in a.threads},
+               "agreement": agreement(images[job], ref), "compile_s": compile_s[job],
+               "counts": instruction_counts(object_file(kernels[job]))}
+        if cpu[job]:
+            row["cpu_samples_per_s"] = n / statistics.median(cpu[job])
+            row["cpu_ratio"] = statistics.median(cpu[("scalar", 3)]) / statistics.median(cpu[job])
+        rows.append(row)
+    breakdown = {name: [statistics.median(cpu[name, st]) / n * 1e9 for st in (1, 2, 3)]
+                 for name in (a.breakdown or []) if cpu[name, 1]}
+    return {"machine": machine(), "load": [load_before, os.getloadavg()],
+            "command": " ".join(["python -m benchmarks.lanes_prototype", *(a.argv or [])]),
+            "settings": {"material": a.material, "envmap": a.envmap, "resolution": a.resolution, "spp": a.spp,
+                         "repeats": a.repeats, "threads": a.threads}, "rows": rows, "breakdown_ns": breakdown,
+            "image_mean": float(ref.mean())}
+
+
+def table(res: dict) -> str:
+    """The results as a Markdown table (rates in millions of camera samples per second)."""
+    th = res["settings"]["threads"]
+    head = (["variant", "M/s per CPU s, 1 thr", "ratio"] + [f"M/s wall, {t} thr" for t in th]
+            + [f"ratio, {t} thr" for t in th]
+            + ["ymm", "packed ps (ymm)", "gathers", "scalar ss", "image vs scalar (mean / max rel.)"])
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in res["rows"]:
+        c = r["counts"]
+        g = r["agreement"]
+        cells = ([r["variant"], f"{r.get('cpu_samples_per_s', 0) / 1e6:.2f}", f"{r.get('cpu_ratio', 0):.2f}"]
+                 + [f"{r['samples_per_s'][t] / 1e6:.2f}" for t in th]
+                 + [f"{r['ratio'][t]:.2f}" for t in th]
+                 + [str(c.get("ymm", "-")), f"{c.get('packed_ps', '-')} ({c.get('packed_ps_ymm', '-')})",
+                    str(c.get("gathers", "-")), str(c.get("scalar_ss", "-")),
+                    f"{g['mean_rel']:.1e} / {g['max_rel']:.1e}"])
+        lines.append("| " + " | ".join(cells) + " |")
+    if res["breakdown_ns"]:
+        lines += ["", "| variant | camera, hit, frame (ns/sample) | + environment sample | + BSDF sample (all) |",
+                  "|---|---|---|---|"]
+        for name, v in res["breakdown_ns"].items():
+            lines.append(f"| {name} | {v[0]:.0f} | {v[1] - v[0]:+.0f} | {v[2] - v[1]:+.0f} ({v[2]:.0f}) |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks.lanes_prototype",
+                                description=__doc__.split("\n\n")[0])
+    p.add_argument("--quick", action="store_true", help="32 px, 16 spp, loop and hybrid K = 4, 1 thread, 1 repeat")
+    p.add_argument("--material", default="cc_ibiza_sunset_rgb")
+    p.add_argument("--envmap", default="studio_small_03_1k")
+    p.add_argument("--resolution", type=int, default=128)
+    p.add_argument("--spp", type=int, default=64)
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--lanes", type=int, nargs="+", default=[1, 4, 8, 16])
+    p.add_argument("--kinds", nargs="+", choices=list(KINDS), default=list(KINDS),
+                   help="lane variants: Warp-unrolled, loop, loop with branches, loop with gathers")
+    p.add_argument("--threads", type=int, nargs="+", default=[1, 2])
+    p.add_argument("--breakdown", nargs="*", metavar="VARIANT",
+                   help="variants (e.g. scalar 'hybrid K=16') also timed stopped after each stage")
+    p.add_argument("--json", type=Path)
+    a = p.parse_args(argv)
+    a.argv = list(sys.argv[1:] if argv is None else argv)
+    if a.quick:
+        a.resolution, a.spp, a.lanes, a.threads, a.repeats = 32, 16, [4], [1], 1
+        a.kinds, a.breakdown = ["loop", "hybrid"], []
+    res = run(a)
+    m = res["machine"]
+    print(f"{m['cpu']} ({m['cores']} cores), warp {m['warp']}, {m['date']}, "
+          f"load {res['load'][0][0]:.1f} -> {res['load'][1][0]:.1f}")
+    print(table(res))
+    if a.json:
+        a.json.write_text(json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
