@@ -114,3 +114,184 @@ def test_cdf_of_an_rgl_file_records_its_roles_and_a_scene_checks_them(tmp_path, 
     with pytest.raises(SceneError, match="built with incident = 'light', the material has 'view'"):
         Renderer(parse_scene(text.format("view"), path=tmp_path / "s.toml"))
     Renderer(parse_scene(text.format("light"), path=tmp_path / "s.toml"))   # same roles: accepted
+
+
+# --- rbrdf-fit brdf --model: the 3-D fit as a command, and fits that render from the file alone ---
+SMALL_3D = ["--layout", "single", "--degrees", "3,1", "--grid", "8,6,5", "--random", "200", "--verify", "1000",
+            "--no-albedo"]
+
+
+@pytest.fixture(scope="module")
+def fit3d_file(tmp_path_factory):
+    """``rbrdf-fit brdf paper_white_rgb.bsdf`` (``--model auto``: 3-D for an RGL file) on a small
+    budget (one piece of degrees (3, 1), about 500 data points, 1000 fresh points, no albedo
+    policy; a few seconds), with every stage's progress line: ``(path, rc, stdout, stderr)``."""
+    import io
+    from contextlib import redirect_stderr, redirect_stdout
+
+    from conftest import data_file
+
+    import fit.progress
+
+    out = tmp_path_factory.mktemp("fit3d") / "paper3d.json"
+    so, se = io.StringIO(), io.StringIO()
+    saved = fit.progress.MIN_SECONDS
+    fit.progress.MIN_SECONDS = 0.0          # a line for every stage, however short
+    try:
+        with redirect_stdout(so), redirect_stderr(se):
+            rc = main(["brdf", str(data_file("rgl/paper_white_rgb.bsdf")), "--out", str(out), *SMALL_3D])
+    finally:
+        fit.progress.MIN_SECONDS = saved
+    return out, rc, so.getvalue(), se.getvalue()
+
+
+def test_brdf_3d_writes_a_version_3_fit_with_progress(fit3d_file):
+    """The 3-D command: exit 0, a version-3 file of (theta_h, theta_d, phi_d) whose every function
+    is valid (its bound met at every data point, Q > 0 certified) and carries its vouched range,
+    no fallback table; the summary table on stdout, one progress line per stage on stderr."""
+    import json
+
+    from fit.rational.coefficient_file import load
+
+    out, rc, stdout, stderr = fit3d_file
+    assert rc == 0, stderr
+    d = json.loads(out.read_text())
+    assert d["version"] == 3 and [v["name"] for v in d["variables"]] == ["theta_h", "theta_d", "phi_d"]
+    assert d["source"]["file"] == "paper_white_rgb.bsdf" and "fallback" not in d
+    model = load(out)
+    assert model.n_coefficients == 3 * (20 + 4)                  # degrees (3, 1) in three variables
+    assert all(i["valid"] and i["vouched_range"] for i in model.function_info)
+    assert model.fit_info["valid"] and model.fit_info["domain"]["proved"] is False
+    assert model.fit_info["time_limit"] > 0 and model.fit_info["stopped"] is None
+    lines = stdout.splitlines()
+    assert lines[0].startswith("paper_white_rgb: 3-D (theta_h, theta_d, |phi_d|), ladder from 0.01")
+    assert [ln.split()[1] for ln in lines[2:5]] == ["R", "G", "B"] and "(3,1)" in lines[2]
+    assert "largest error at 1000 fresh points" in lines[5]
+    assert lines[-1].startswith("3-D fit paper_white_rgb_3d: 72 coefficients") and lines[-1].endswith(f"wrote {out}")
+    stages = {ln.split(": ")[1] for ln in stderr.splitlines()}
+    assert {"reading the file", "sampling the file", "3-D fit", "verification"} <= stages, stderr
+
+
+def test_brdf_3d_fit_renders_without_its_source(fit3d_file, tmp_path, monkeypatch):
+    """What the renderer shows of a 3-D fit is in the file: alone in a folder, its source
+    measurement nowhere ($RBRDF_DATA empty), it loads with no note, its Warp evaluation equals the
+    NumPy one (evaluate_directions) and a render is finite and lit."""
+    import shutil
+
+    from lab import testing as T
+    from fit.rational.coefficient_file import load
+    from fit.rational.variables3d import evaluate_directions
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import MaterialSpec
+
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "alone").mkdir()
+    monkeypatch.setenv("RBRDF_DATA", str(tmp_path / "empty"))
+    path = tmp_path / "alone" / "paper3d.json"
+    shutil.copy(fit3d_file[0], path)
+    assert not list(tmp_path.rglob("*.bsdf"))
+    r = Renderer(T.plane_scene(MaterialSpec(name="m", type="rational", file=path), [T.constant_env(1.0)],
+                               resolution=8, spp=2))
+    rng = np.random.default_rng(2)
+    wi = rng.normal(size=(3000, 3))
+    wo = rng.normal(size=(3000, 3))
+    wi[:, 2], wo[:, 2] = np.abs(wi[:, 2]), np.abs(wo[:, 2])
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    ref = evaluate_directions(load(path), wi, wo)
+    np.testing.assert_allclose(r.eval_material("m", wi, wo), ref, rtol=2e-4, atol=1e-6)
+    img = r.render()
+    assert np.all(np.isfinite(img)) and 0.5 < float(np.mean(img)) < 1.0     # albedo of paper_white
+
+
+def test_brdf_2d_flagged_fit_carries_what_the_renderer_shows(tmp_path, monkeypatch, capsys):
+    """``rbrdf-fit brdf --allow-infeasible`` writes a flagged 2-D fit with its fallback table
+    (fit.rational.fallback) covering every flagged piece: it renders with its source measurement
+    absent, from the embedded table."""
+    import json
+    import shutil
+
+    from hostile import glossy_merl
+
+    from fit.rational.coefficient_file import load
+    from fit.rational.fallback import region_blocks
+    from fit.rational.flagged import flagged_regions
+    from warp_rbrdf.materials import rational
+    from warp_rbrdf.scene import MaterialSpec
+
+    src = glossy_merl(tmp_path / "glossy.binary")
+    out = tmp_path / "fits" / "glossy.json"
+    assert main(["brdf", str(src), "--out", str(out), "--tol", "0.01", "--max-degree", "2", "--max-den-degree", "1",
+                 "--core-theta-d", "78.5", "--allow-infeasible", "--no-progress"]) == 0
+    capsys.readouterr()
+    model = load(out)
+    assert flagged_regions(model) and json.loads(out.read_text())["fallback"]
+    assert sorted(region_blocks(model)) and model.fallback is not None
+    (tmp_path / "empty").mkdir()
+    monkeypatch.setenv("RBRDF_DATA", str(tmp_path / "empty"))
+    (tmp_path / "alone").mkdir()
+    shutil.copy(out, tmp_path / "alone" / "glossy.json")
+    src.unlink()
+    m = rational.load(MaterialSpec(name="g", type="rational", file=tmp_path / "alone" / "glossy.json"))
+    assert "embedded in glossy.json" in m.notes[0]
+    v = m.evaluate(np.array([[0.3, 0.1, 0.9486833]]), np.array([[-0.2, -0.1, 0.9746794]]))
+    assert np.all(np.isfinite(v)) and np.all(v > 0)
+
+
+def test_brdf_3d_that_is_not_valid_writes_nothing(fit3d_file, tmp_path, capsys, monkeypatch):
+    """A 3-D fit with a function outside its bound (here the real fit with one function's
+    record made invalid after the fact) is not written: exit 1, an earlier file unchanged, the
+    verdict on stderr; no layout valid at all (the fitter's RuntimeError) likewise."""
+    import copy
+
+    from conftest import data_file
+
+    from fit.cli import brdf3d
+
+    real = brdf3d.fit_rgl_select
+
+    def one_invalid(*a, **kw):
+        res = real(*a, **kw)
+        res.model = copy.deepcopy(res.model)
+        res.model.function_info[1] = dict(res.model.function_info[1], valid=False)
+        res.valid = False
+        return res
+
+    out = tmp_path / "old.json"
+    out.write_text("earlier\n")
+    argv = ["brdf", str(data_file("rgl/paper_white_rgb.bsdf")), "--out", str(out), *SMALL_3D, "--no-progress"]
+    monkeypatch.setattr(brdf3d, "fit_rgl_select", one_invalid)
+    assert main(argv) == 1
+    captured = capsys.readouterr()
+    assert "NOT valid" in captured.err and "nothing written" in captured.err and "G " in captured.out
+    assert out.read_text() == "earlier\n"
+
+    def none_valid(brdf, *a, **kw):
+        raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
+
+    monkeypatch.setattr(brdf3d, "fit_rgl_select", none_valid)
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert err.strip() == f"rbrdf-fit brdf: no valid 3-D fit of paper_white_rgb; nothing written to {out}"
+    assert out.read_text() == "earlier\n"
+
+
+@pytest.mark.parametrize("argv, flag, words", [
+    (["{merl}", "--model", "3d"], "--model", "needs an RGL .bsdf file"),
+    (["{rgl}", "--core-theta-d", "60"], "--core-theta-d", "--model auto picks 3d"),
+    (["{rgl}", "--model", "3d", "--max-degree", "4"], "--max-degree", "this run fits in 3d"),
+    (["{merl}", "--layout", "single"], "--layout", "a flag of the 3d fit"),
+    (["{rgl}", "--model", "2d", "--time-limit", "10"], "--time-limit", "this run fits in 2d"),
+    (["{rgl}", "--allow-infeasible"], "--allow-infeasible", "applies to --model 2d"),
+    (["{rgl}", "--degrees", "3,1"], "--degrees", "--layout single only"),
+    (["{rgl}", "--grid", "3,3"], "--grid", "expected NH,ND,NP"),
+])
+def test_brdf_model_flags_are_one_line_errors(lambert_file, tmp_path, capsys, argv, flag, words):
+    """Flags of the other model, a 3-D fit of a MERL file and malformed 3-D flags: one line,
+    exit 2, before the file is read (the RGL path need not exist), nothing written."""
+    out = tmp_path / "x.json"
+    argv = [a.format(merl=lambert_file, rgl=tmp_path / "absent.bsdf") for a in argv]
+    assert main(["brdf", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and flag in err and words in err, err
+    assert "Traceback" not in err and not out.exists()

@@ -1,19 +1,39 @@
-"""``rbrdf-fit brdf FILE --tol 0.05 --out material.json``: rational fit of a measured BRDF
-(:func:`fit.rational.brdf_fit.fit_brdf`), written as an ``rbrdf-rational`` coefficient file
-(:mod:`fit.rational.coefficient_file`), with a per-piece, per-channel summary table.
+"""``rbrdf-fit brdf FILE --out material.json``: rational fit of a measured BRDF, written as an
+``rbrdf-rational`` coefficient file (:mod:`fit.rational.coefficient_file`), with a per-piece,
+per-channel summary table. ``--model`` picks the fit:
 
-Registered by :mod:`fit.cli` (it calls :func:`register` with its sub-parsers). The output is
-written only when the run succeeds: a fit that misses its tolerance exits with status 1 and
-writes nothing (an existing file stays as it was; the summary table on stdout, the verdict on
-stderr) unless ``--allow-infeasible`` is given. Progress (reading, projecting, each piece's
-channels) goes to stderr (:class:`fit.progress.CLIProgress`).
+* ``2d``: the (theta_h, theta_d) fit of the median projection within ``--tol``
+  (:func:`fit.rational.brdf_fit.fit_brdf`, file version 1 or 2);
+* ``3d``: the (theta_h, theta_d, |phi_d|) fit of an RGL ``.bsdf`` measurement
+  (:mod:`fit.cli.brdf3d`, :func:`fit.rational.fit3d.fit_rgl_select`, file version 3);
+* ``auto`` (default): ``3d`` for an RGL ``.bsdf`` file, ``2d`` for a MERL ``.binary`` file.
+
+Why ``3d`` where it exists (docs/fitting.md, "Which model"): the product renders measured
+materials, so the default is the fit closest to the measurement where the time and the
+coefficients stay moderate. On the 20 RGL materials of docs/fit_accuracy.md the 3-D fit's
+relative RMSE (rho cos cos over cosine-distributed pairs) is 1.05-4.6x lower than the 2-D fit's
+at 5 % (median 2.8x), below the phi_d-median table that bounds every 2-D fit on 19 of them; its
+directional albedo is within 5 % at 0/30/60/75 deg on 16 of them (2-D: 5); it has 420 or 666
+coefficients (2-D: 160-835, median 358) and takes 13-40 s on one core (median 29 s; 2-D: 3-31
+s, median 9 s). A MERL table is reciprocal and folded over phi_d; the 3-D fit is made from an
+RGL file's own evaluation (with its light and view roles), so ``--model 3d`` refuses a
+``.binary`` file in one line.
+
+The flags of the other model are refused in one line (exit status 2). Registered by
+:mod:`fit.cli` (it calls :func:`register` with its sub-parsers). The output is written only
+when the run succeeds: a fit that misses its tolerance (2-D) or has a function outside its
+bound (3-D) exits with status 1 and writes nothing (an existing file stays as it was; the
+summary table on stdout, the verdict on stderr) unless ``--allow-infeasible`` is given (2-D
+only). Progress (reading, projecting, each piece's channels; for 3-D each layout's sampling
+and fit, the verification and the albedo policy) goes to stderr
+(:class:`fit.progress.CLIProgress`).
 """
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
-from ..errors import BRDFFileError, display_path, display_text
+from ..errors import BRDFFileError, FlagError, display_path, display_text
 from ..formats import load_measured
 from ..limits import (
     MAX_FIT_DEGREE,
@@ -24,21 +44,53 @@ from ..limits import (
     MIN_TOLERANCE,
 )
 from ..outputs import OutputSet, check_output_file
-from ..progress import one_step
+from ..progress import Deadline, one_step
 from ..rational.brdf_fit import fit_brdf
 from ..rational.domain import THETA_D_MAX_DEG
 from ..rational.coefficient_file import save
 from ..rational.settings import INTERVALS, THETA_H_TRANSFORMS, VALUE_TRANSFORMS, BRDFFitSettings
+from . import brdf3d
 from .flags import add_run_flags, core_angle, integer, number
+
+MODELS = ("auto", "2d", "3d")
+#: The flags of the 2-D fit (argparse destinations), refused with ``--model 3d``.
+FLAGS_2D = {"intervals": "--intervals", "core_theta_d": "--core-theta-d", "band_intervals": "--band-intervals",
+            "theta_h": "--theta-h", "value": "--value", "floor_frac": "--floor-frac", "max_degree": "--max-degree",
+            "max_den_degree": "--max-den-degree"}
+
+
+def chosen_model(args) -> str:
+    """``"2d"`` or ``"3d"``: ``--model`` (``auto``: 3d for an RGL ``.bsdf`` file, 2d otherwise);
+    a FlagError for ``3d`` of another file type or for a flag of the other model."""
+    path = Path(args.file)
+    rgl = path.suffix.lower() == ".bsdf"
+    model = getattr(args, "model", "auto")
+    if model == "auto":
+        model = "3d" if rgl else "2d"
+    elif model == "3d" and not rgl:
+        raise FlagError("--model", f"3d needs an RGL .bsdf file, got {display_path(path.name)}: the 3-D fit is made "
+                                   "from an RGL file's own evaluation with its light and view roles, and a MERL "
+                                   ".binary table is reciprocal, folded over phi_d (fit it with --model 2d)")
+    other = brdf3d.given(args) if model == "2d" else [f for d, f in FLAGS_2D.items() if getattr(args, d, None) is not None]
+    if other:
+        why = "--model 3d" if model == "2d" else "--model 2d"
+        picked = "" if getattr(args, "model", "auto") != "auto" else f" (--model auto picks {model} for this file)"
+        raise FlagError(other[0], f"a flag of the {why[8:]} fit ({why}); this run fits in {model}{picked}")
+    return model
 
 
 def _cmd_brdf(args) -> int:
+    limit = getattr(args, "time_limit", None)
+    deadline = Deadline(None if limit == 0 else brdf3d.DEFAULT_TIME_LIMIT if limit is None else limit)
     out = check_output_file(args.out, "--out", (".json",))
+    if chosen_model(args) == "3d":
+        return brdf3d.run(args, out, deadline)
+    settings = settings_from_args(args)
     progress = getattr(args, "progress", None)
     with one_step(progress, "reading the file"):
         b = load_measured(args.file)
     try:
-        fit = fit_brdf(b, settings_from_args(args), progress=progress, source_file=Path(args.file).name)
+        fit = fit_brdf(b, settings, progress=progress, source_file=Path(args.file).name)
     except ValueError as e:
         raise BRDFFileError(args.file, str(e)) from None
     write = fit.valid or args.allow_infeasible
@@ -46,7 +98,8 @@ def _cmd_brdf(args) -> int:
         with OutputSet() as outputs:
             save(fit.model, outputs.stage(out))
             outputs.commit()
-    print(f"{display_text(b.name)}: tol {args.tol:g}, theta_h {args.theta_h}, value {args.value}, "
+    print(f"{display_text(b.name)}: tol {settings.tol:g}, theta_h {settings.theta_h_transform}, "
+          f"value {settings.value_transform}, "
           f"floor {fit.model.fit_info['abs_floor'][0]:.3g} 1/sr")
     print(f"{'theta_d deg':16s}{'intervals':>11s}{'ch':>3s}{'degrees':>9s}{'coefs':>7s}{'max rel':>9s}"
           f"{'rms rel':>9s}{'inside':>8s}{'Q>0':>5s}{'time s':>8s}")
@@ -69,56 +122,76 @@ def _cmd_brdf(args) -> int:
 
 
 def settings_from_args(args) -> BRDFFitSettings:
-    """The :class:`fit.rational.settings.BRDFFitSettings` of parsed ``rbrdf-fit brdf`` flags."""
-    return BRDFFitSettings(tol=args.tol, intervals=args.intervals, core_theta_d_deg=args.core_theta_d,
-                           band_intervals=args.band_intervals, theta_h_transform=args.theta_h,
-                           value_transform=args.value, max_degree=args.max_degree,
-                           max_den_degree=args.max_den_degree, floor_frac=args.floor_frac)
+    """The :class:`fit.rational.settings.BRDFFitSettings` of parsed ``rbrdf-fit brdf`` flags
+    (a flag not given: the class default)."""
+    given = {k: getattr(args, a) for k, a in (
+        ("tol", "tol"), ("intervals", "intervals"), ("core_theta_d_deg", "core_theta_d"),
+        ("band_intervals", "band_intervals"), ("theta_h_transform", "theta_h"), ("value_transform", "value"),
+        ("max_degree", "max_degree"), ("max_den_degree", "max_den_degree"), ("floor_frac", "floor_frac"))
+        if getattr(args, a, None) is not None}
+    return BRDFFitSettings(**given)
 
 
 def register(subparsers) -> None:
-    """Add ``brdf`` to the sub-parsers ``subparsers`` (defaults: :class:`BRDFFitSettings`'s)."""
+    """Add ``brdf`` to the sub-parsers ``subparsers`` (defaults: :class:`BRDFFitSettings`'s and,
+    for 3-D, :mod:`fit.cli.brdf3d`'s; a model's flags default to None, so that a flag of the
+    other model can be refused when it is given)."""
     d = BRDFFitSettings()
     p = subparsers.add_parser(
-        "brdf", help="fit R, G, B with rational functions inside a tolerance; write JSON coefficients",
-        description="Project the BRDF onto (theta_h, theta_d) (median, grazing samples beyond 79 deg "
-                    "dropped), fit each channel with the rational function with the fewest "
-                    "coefficients inside the intervals (LP with constraint generation) on a "
-                    "guaranteed core theta_d <= core and, separately, on the grazing band up to "
-                    "78.5 deg; certify Q > 0 and write an rbrdf-rational JSON file (version 2 when "
-                    "piecewise; see fit.rational.coefficient_file). Absolute floor: tol * A_Y / pi (A_Y = white-"
-                    "sky luminance albedo).")
+        "brdf", help="fit R, G, B with rational functions (3-D for an RGL file, else 2-D); write JSON coefficients",
+        description="Fit R, G and B of a measured BRDF with rational functions P/Q, Q > 0 certified, and write "
+                    "an rbrdf-rational JSON file (see fit.rational.coefficient_file). --model 3d (the default "
+                    "for an RGL .bsdf file): rational functions of (theta_h, theta_d, |phi_d|) fitted to the "
+                    "file's own evaluation, the tolerance the outcome (version 3; 420 or 666 coefficients, "
+                    "13-40 s on one core): the most accurate form, its relative RMSE 1.05-4.6x (median 2.8x) "
+                    "below the 2-D fit's at 5 % on the 20 RGL materials of docs/fit_accuracy.md. --model 2d "
+                    "(the default for a "
+                    "MERL .binary file, which is reciprocal and has no 3-D fit): project onto (theta_h, "
+                    "theta_d) (median, grazing samples beyond 79 deg dropped), fit each channel with the "
+                    "fewest coefficients inside the intervals (LP with constraint generation) on a guaranteed "
+                    "core theta_d <= core and, separately, on the grazing band up to 78.5 deg (version 1 or "
+                    "2; 3-31 s). Absolute floor of the 2-D fit: tol * A_Y / pi (A_Y = white-sky luminance "
+                    "albedo). The flags of the other model are refused.")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
-    p.add_argument("--tol", type=number(MIN_TOLERANCE, MAX_TOLERANCE), default=d.tol,
-                   help=f"relative tolerance in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}] (default {d.tol:g})")
     p.add_argument("--out", required=True, help="output .json coefficient file (replaced only if the run succeeds)")
-    p.add_argument("--intervals", choices=INTERVALS, default=d.intervals,
+    p.add_argument("--model", choices=MODELS, default="auto",
+                   help="auto (default): 3d for an RGL .bsdf file (its most accurate form), 2d for a MERL "
+                        ".binary file; 2d: (theta_h, theta_d) within --tol; 3d: (theta_h, theta_d, |phi_d|), "
+                        "RGL .bsdf files only")
+    p.add_argument("--tol", type=number(MIN_TOLERANCE, MAX_TOLERANCE), default=None,
+                   help=f"relative tolerance in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}]; 2-D: guaranteed on the "
+                        f"core (default {d.tol:g}); 3-D: the first tolerance of the ladder, the bound the file "
+                        f"states is the one met (default {brdf3d.TOL_3D:g})")
+    g = p.add_argument_group("2-D fit (--model 2d; auto for a MERL .binary)")
+    g.add_argument("--intervals", choices=INTERVALS, default=None,
                    help="interval policy of the guaranteed core: 'tol' (default) = y +- max(tol y, floor); "
                         "'tol+spread' also widens to the cluster's phi_d standard deviation")
-    p.add_argument("--core-theta-d", dest="core_theta_d", default=d.core_theta_d_deg, metavar="DEG|auto",
+    g.add_argument("--core-theta-d", dest="core_theta_d", default=None, metavar="DEG|auto",
                    type=core_angle(MIN_CORE_THETA_D_DEG, THETA_D_MAX_DEG),
                    help="theta_d (deg) up to which the tolerance is guaranteed; the grazing band above "
                         "it, up to 78.5 deg, gets its own functions; in [5, 78.5]. 'auto' (default): the "
                         "largest of 60, 50, 40 that every channel meets; 78.5: one function per channel")
-    p.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default=d.band_intervals,
+    g.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default=None,
                    help="interval policy of the grazing band: 'tol' (default), the core's pure tolerance, "
-                        "flagged where not met (the renderer then shows the projected table there); "
-                        "'tol+spread' also widens to the cluster's phi_d spread (met more often, vouches "
-                        "for less)")
-    p.add_argument("--theta-h", dest="theta_h", choices=THETA_H_TRANSFORMS, default=d.theta_h_transform,
-                   help="input transform of theta_h (default sqrt)")
-    p.add_argument("--value", choices=VALUE_TRANSFORMS, default=d.value_transform, help="value transform (default log)")
-    p.add_argument("--floor-frac", dest="floor_frac", type=number(0.0, MAX_FLOOR_FRAC), default=d.floor_frac,
+                        "flagged where not met (the renderer then shows the projected table there, which "
+                        "the file carries); 'tol+spread' also widens to the cluster's phi_d spread (met more "
+                        "often, vouches for less)")
+    g.add_argument("--theta-h", dest="theta_h", choices=THETA_H_TRANSFORMS, default=None,
+                   help=f"input transform of theta_h (default {d.theta_h_transform})")
+    g.add_argument("--value", choices=VALUE_TRANSFORMS, default=None,
+                   help=f"value transform (default {d.value_transform})")
+    g.add_argument("--floor-frac", dest="floor_frac", type=number(0.0, MAX_FLOOR_FRAC), default=None,
                    help="absolute floor = FLOOR_FRAC * tol * A_Y / pi (A_Y: white-sky luminance albedo; "
-                        f"default 1, at most {MAX_FLOOR_FRAC:g}). Smaller keeps dark off-specular values relative "
-                        "(better colour on "
-                        "dark glossy materials) at the price of feasibility")
-    p.add_argument("--max-degree", type=integer(0, MAX_FIT_DEGREE), default=d.max_degree,
+                        f"default {d.floor_frac:g}, at most {MAX_FLOOR_FRAC:g}). Smaller keeps dark off-specular "
+                        "values relative (better colour on dark glossy materials) at the price of feasibility")
+    g.add_argument("--max-degree", type=integer(0, MAX_FIT_DEGREE), default=None,
                    help=f"largest numerator total degree, 0-{MAX_FIT_DEGREE} (default {d.max_degree})")
-    p.add_argument("--max-den-degree", type=integer(0, MAX_FIT_DEN_DEGREE), default=d.max_den_degree,
+    g.add_argument("--max-den-degree", type=integer(0, MAX_FIT_DEN_DEGREE), default=None,
                    help=f"largest denominator total degree, 0-{MAX_FIT_DEN_DEGREE} (default {d.max_den_degree})")
-    p.add_argument("--allow-infeasible", action="store_true",
+    g.add_argument("--allow-infeasible", action="store_true",
                    help="write the file and exit 0 even when no fit meets the tolerance (the file is "
-                        "flagged); without it such a run writes nothing and exits 1")
+                        "flagged and carries the projected table the renderer shows there); without it such "
+                        "a run writes nothing and exits 1")
+    brdf3d.add_flags(p)
     add_run_flags(p)
     p.set_defaults(func=_cmd_brdf)

@@ -1,0 +1,219 @@
+"""``rbrdf-fit brdf FILE.bsdf --model 3d --out material.json``: the 3-D rational fit of an RGL
+``.bsdf`` measurement in (theta_h, theta_d, |phi_d|) (:func:`fit.rational.fit3d.fit_rgl_select`),
+written as an ``rbrdf-rational`` version-3 coefficient file, with a per-piece, per-channel
+summary table. :mod:`fit.cli.brdf` registers the flags (:func:`add_flags`) and calls :func:`run`
+when the model is ``3d`` (``--model auto`` picks it for an RGL file).
+
+What the flags set (:class:`fit.rational.settings.Fit3DSettings`; docs/fitting.md, "The 3-D
+method"):
+
+* ``--tol``: the first tolerance of the ladder (default :data:`TOL_3D`, the benchmark's); the
+  bound the file states is the one met;
+* ``--layout``: ``select`` (default: both layouts of :data:`fit.rational.fit3d.VARIANTS` fitted,
+  the lower validation RMSE kept), ``pieces`` (four theta_h pieces, 666 coefficients) or
+  ``single`` (one piece of ``--degrees``, default (7, 3): 420 coefficients);
+* ``--time-limit S`` (default 120 s, 0: none): one :class:`fit.progress.Deadline` from the
+  start of the command (reading the file included); what is left of it after reading is the
+  fit's wall-clock safety net (``time_limit``, checked between steps: a step under way
+  finishes): once passed, no further layout, refit or albedo round starts and the ladder
+  squares its steps, and the file records ``fit_info["stopped"] = "time"``;
+* ``--grid``, ``--random``, ``--verify``, ``--no-albedo``: the data grid, the random points of
+  each kind, the fresh points of the verification and the directional-albedo policy.
+
+There is no seed: every random draw of a 3-D fit has a fixed seed, so the same file and flags
+give the same coefficients, bit for bit (docs/fitting.md, "Budgets").
+
+A fit is written only when every function is valid (within its stated bound at every data
+point, Q > 0 certified): what the renderer shows of it is then the file alone, each function
+clamped to its vouched range, with no table to stand in anywhere (a 2-D fit's flagged pieces
+carry their projected table instead, :mod:`fit.rational.fallback`). Otherwise the command
+writes nothing and exits with status 1 (``--allow-infeasible`` is a 2-D flag).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import BRDFFileError, FlagError, display_path, display_text
+from ..limits import MAX_FIT_DEGREE, MAX_TIME_LIMIT_S
+from ..outputs import OutputSet
+from ..progress import one_step
+from ..rational.coefficient_file import save
+from ..rational.fit3d import (
+    DEFAULT_GRID,
+    DEFAULT_RANDOM,
+    DEFAULT_TIME_LIMIT,
+    DEFAULT_VERIFY,
+    VARIANTS,
+    Fit3DSettings,
+    fit_rgl_select,
+)
+from .flags import integer, number
+
+#: The first tolerance of the 3-D ladder when ``--tol`` is not given: the benchmark's
+#: (docs/fit_accuracy.md), whose fits the accuracy table measures.
+TOL_3D = 0.01
+#: ``--layout``: the layouts fitted (:data:`fit.rational.fit3d.VARIANTS`; ``single`` with ``--degrees``).
+LAYOUTS = ("select", "pieces", "single")
+#: The flags of the 3-D fit (argparse destinations), refused with ``--model 2d``.
+FLAGS = {"layout": "--layout", "degrees": "--degrees", "time_limit": "--time-limit", "grid": "--grid",
+         "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo"}
+MAX_GRID = 200            # per dimension of --grid (8 million points at most)
+MAX_POINTS = 1_000_000    # --random (each kind) and --verify
+
+
+def integers(n: int, lo: int, hi: int, what: str):
+    """Converter of ``n`` comma-separated integers in ``[lo, hi]`` (a tuple)."""
+    one = integer(lo, hi)
+
+    def convert(text: str) -> tuple:
+        parts = text.split(",")
+        if len(parts) != n:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {display_text(text)[:40]!r}")
+        return tuple(one(p.strip()) for p in parts)
+
+    convert.__name__ = what
+    return convert
+
+
+def add_flags(p) -> None:
+    """The 3-D fit's flags on the ``brdf`` sub-parser ``p`` (defaults None: given or not)."""
+    d = Fit3DSettings()
+    g = p.add_argument_group("3-D fit (--model 3d; auto for an RGL .bsdf)")
+    g.add_argument("--layout", choices=LAYOUTS, default=None,
+                   help="select (default): four theta_h pieces (666 coefficients) and, below a validation "
+                        "RMSE of 0.065, one piece of degrees (7, 3) (420), the lower validation RMSE kept; "
+                        "pieces: the four pieces only; single: one piece of --degrees only")
+    g.add_argument("--degrees", type=integers(2, 0, MAX_FIT_DEGREE, "NUM,DEN"), default=None, metavar="NUM,DEN",
+                   help="total degrees of numerator and denominator of --layout single (default "
+                        f"{','.join(map(str, VARIANTS[1]['degrees']))}; fewer coefficients, larger error)")
+    g.add_argument("--time-limit", dest="time_limit", type=number(0.0, MAX_TIME_LIMIT_S), default=None, metavar="S",
+                   help=f"bound on the whole command in seconds (default {DEFAULT_TIME_LIMIT:g}; 0: none; a fit "
+                        "takes 13-40 s on one idle core): a safety net checked between the fit's steps (a step "
+                        "under way finishes); once passed, no further layout, refit or albedo round starts, the "
+                        "tolerance ladder squares its steps, and the file records it")
+    g.add_argument("--grid", type=integers(3, 2, MAX_GRID, "NH,ND,NP"), default=None, metavar="NH,ND,NP",
+                   help=f"theta_h, theta_d, phi_d sizes of the data grid (default {','.join(map(str, DEFAULT_GRID))})")
+    g.add_argument("--random", dest="n_random", type=integer(0, MAX_POINTS), default=None, metavar="N",
+                   help=f"random data points of each kind: uniform in the variables and cosine-distributed "
+                        f"pairs (default {DEFAULT_RANDOM})")
+    g.add_argument("--verify", type=integer(0, MAX_POINTS), default=None, metavar="N",
+                   help=f"fresh points the fit is checked at, the worst refitted (default {DEFAULT_VERIFY}; "
+                        "0: none)")
+    g.add_argument("--no-albedo", dest="no_albedo", action="store_true", default=None,
+                   help=f"no directional-albedo policy (default: channels outside {100 * d.albedo_tol:g} %% "
+                        "refitted)")
+
+
+def given(args) -> list:
+    """The 3-D flags given on the command line (their names)."""
+    return [flag for dest, flag in FLAGS.items() if getattr(args, dest, None) is not None]
+
+
+def settings_from_args(args, time_limit=None) -> tuple:
+    """``(Fit3DSettings, layouts)`` of parsed flags; ``time_limit``: the fit's safety net in
+    seconds (None: none; :func:`run` gives it what is left of the command's deadline)."""
+    layout = args.layout or "select"
+    if args.degrees is not None and layout != "single":
+        raise FlagError("--degrees", "sets the degrees of --layout single only")
+    d = Fit3DSettings()
+    s = Fit3DSettings(tol=TOL_3D if args.tol is None else args.tol, time_limit=time_limit,
+                      grid=d.grid if args.grid is None else tuple(args.grid),
+                      n_random=d.n_random if args.n_random is None else args.n_random,
+                      verify=d.verify if args.verify is None else args.verify,
+                      albedo=not args.no_albedo)
+    if layout == "select":
+        return s, VARIANTS
+    if layout == "pieces":
+        return s, (VARIANTS[0],)
+    single = dict(VARIANTS[1])
+    single.pop("if_rmse_below")               # the only layout: always fitted
+    if args.degrees is not None:
+        single["degrees"] = tuple(args.degrees)
+    return s, (single,)
+
+
+def _layout_progress(progress, n: int):
+    """``progress`` with the layout named in the stages of each layout's fit (``layout k/n:``)."""
+    if progress is None:
+        return None
+    k = [0]
+
+    def report(stage, done, total):
+        if stage == "sampling the file" and done == 0:
+            k[0] += 1
+        if stage in ("sampling the file", "3-D fit") and n > 1:
+            stage = f"layout {k[0]}/{n}: {stage}"
+        progress(stage, done, total)
+
+    return report
+
+
+def run(args, out: Path, deadline) -> int:
+    """The 3-D fit of ``args.file`` written to ``out`` (checked); ``deadline``: the command's
+    :class:`fit.progress.Deadline`. Returns the exit status (0 written, 1 not valid)."""
+    from ..formats.rgl import read_rgl
+
+    if getattr(args, "allow_infeasible", False):
+        raise FlagError("--allow-infeasible", "applies to --model 2d: a 3-D fit is written only when every "
+                                              "function is within its bound (no table stands in for one that is not)")
+    settings, layouts = settings_from_args(args, None)       # every flag checked before the file is read
+    progress = getattr(args, "progress", None)
+    with one_step(progress, "reading the file"):
+        b = read_rgl(args.file)
+    b.source = Path(args.file).name          # the source record names the file, as a 2-D fit's does
+    left = deadline.left()                   # the deadline's rest is the fit's safety net
+    settings = settings.clone(time_limit=None if left is None else max(left, 1e-3))
+    try:
+        res = fit_rgl_select(b, layouts, settings=settings, progress=_layout_progress(progress, len(layouts)))
+    except RuntimeError as e:                # no layout valid
+        print(f"rbrdf-fit brdf: {display_text(e)}; nothing written to {display_path(out)}", file=sys.stderr)
+        return 1
+    except ValueError as e:
+        raise BRDFFileError(args.file, str(e)) from None
+    if res.valid:
+        with OutputSet() as outputs:
+            save(res.model, outputs.stage(out))
+            outputs.commit()
+    _print_table(b.name, res, settings)
+    if res.valid:
+        print(f"{res.summary()}; wrote {display_path(out)}")
+        return 0
+    sys.stdout.flush()
+    print(f"rbrdf-fit brdf: {res.summary()}; a function is not within its bound: nothing written to "
+          f"{display_path(out)}", file=sys.stderr)
+    return 1
+
+
+def _print_table(name: str, res, settings) -> None:
+    """The summary of a 3-D fit on stdout: the layout, then per piece and channel its degrees,
+    coefficients, stated bound and RMS error (fractions of the error unit s), stage and Q > 0."""
+    info = res.model.fit_info
+    layouts = info.get("variants") or []
+    tried = ", ".join(f"{v['variant']}: {v.get('coefficients', '-')} coef, validation RMSE "
+                      f"{v['validation_rmse']:.4g}" if "validation_rmse" in v else f"{v['variant']}: {v['skipped']}"
+                      for v in layouts)
+    print(f"{display_text(name)}: 3-D (theta_h, theta_d, |phi_d|), ladder from {settings.tol:g}, "
+          f"{res.n_points} data points up to {info.get('theta_max_deg', 0):.4g} deg; layouts {tried}")
+    print(f"{'theta_h deg':14s}{'ch':>3s}{'degrees':>9s}{'coefs':>7s}{'bound':>9s}{'rms':>8s}"
+          f"{'stage':>11s}{'Q>0':>5s}")
+    pieces = getattr(res.model, "pieces", None) or [res.model]
+    for leaf in pieces:
+        lo, hi = np.degrees(leaf.variables[0].domain)
+        for ch, f, r in zip(leaf.outputs, leaf.functions, leaf.function_info):
+            deg = r.get("degrees", ["?", "?"])
+            print(f"{f'{lo:.3g}-{hi:.3g}':14s}{display_text(ch):>3s}{f'({deg[0]},{deg[1]})':>9s}"
+                  f"{f.n_coefficients:7d}{100 * r['tolerance']:8.2f}%{100 * r['rms_rel_error']:7.2f}%"
+                  f"{r['stage']['kind']:>11s}{'yes' if r['q_certificate']['certified'] else 'NO':>5s}")
+    ratio = info.get("verify_max_ratio")
+    alb = info.get("albedo") or {}
+    parts = [f"validation RMSE {res.validation_rmse:.4g}" if res.validation_rmse is not None else None,
+             (f"largest error at {info.get('verify_points')} fresh points {ratio:.3g} x the bound"
+              if ratio is not None else "no verification"),
+             (f"directional albedo within {100 * alb['tol']:g} %" if alb.get("within") else
+              f"directional albedo off by up to {100 * alb['max_error']:.3g} %") if alb else "no albedo policy",
+             "time limit reached" if info.get("stopped") == "time" else None]
+    print("; ".join(p for p in parts if p))
