@@ -9,7 +9,10 @@
 * :func:`to_mitsuba_plugin` / :func:`fit.export.mitsuba_plugin.register`
   (:mod:`fit.export.mitsuba_plugin`): a Mitsuba 3 BSDF plugin (Python, ``mi.register_bsdf``).
 
-The GLSL, HLSL and C code come from one statement emitter (:mod:`fit.export.emitter`) that follows
+Both kinds of fit are exported: 2-D fits of (theta_h, theta_d) (file versions 1 and 2) and 3-D
+fits of (theta_h, theta_d, |phi_d|) (version 3, :mod:`fit.rational.variables3d`; not reciprocal,
+so every exported function takes the light's direction first and the viewer's second). The
+GLSL, HLSL and C code come from one statement emitter (:mod:`fit.export.emitter`) that follows
 the file's evaluation recipe, on the fit's measured domain when it records the grazing cut-off
 of its projection (:mod:`fit.rational.domain`, the renderer's rule: no extrapolation where the
 fit has no data; fits without a recorded cut-off export as before); the Mitsuba plugin's
