@@ -62,6 +62,9 @@ from .brdf_model import brdf_model, split_core
 from .coefficient_file import save as save_model
 from .domain import CHANNELS, THETA_D_MAX_DEG
 from .fitter import FitResult, IntervalRationalFitter
+from .proved_bound import prove_brdf
+from .proved_bound import records as bound_records
+from .proved_bound import summary as bound_summary
 from .model import (
     Variable,
     apply_input_transform,
@@ -102,6 +105,9 @@ class BRDFFit:
     pieces: list
     time_s: float = 0.0
     settings: BRDFFitSettings | None = None        # the settings that made it
+    #: per leaf piece and channel, the error between the clusters proved by
+    #: :func:`fit.rational.proved_bound.prove_brdf` (None: not proved)
+    bounds: list | None = None
 
     @property
     def core_pieces(self) -> list:
@@ -159,6 +165,11 @@ class BRDFFit:
         if band:
             status += ("; grazing band met" if band[0].valid
                        else "; grazing band best effort (NOT within its intervals, flagged)")
+        if self.bounds:     # "guaranteed" above is at the clusters; between them, what is proved
+            b = bound_summary(self.bounds)
+            proved = "none (Q inconclusive)" if b["proved"] is None else f"<= {100 * b['proved']:.3g} %"
+            status += (f"; between the clusters proved {proved} on the whole box "
+                       f"(within the tolerance on {100 * b['proved_fraction']:.3g} % of it)")
         return f"total {self.n_coefficients} coefficients, {self.time_s:.1f} s, {status}"
 
 
@@ -167,7 +178,7 @@ PRECHECK_ROUNDS = 6
 
 
 def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None = None, progress=None,
-             source_file: str = "", **params) -> BRDFFit:
+             source_file: str = "", prove_bound: bool = True, **params) -> BRDFFit:
     """Fit R, G, B of a measured (or already projected) BRDF over theta_h x theta_d with
     ``settings`` (:class:`fit.rational.settings.BRDFFitSettings`, default its defaults; each of
     its names is also a keyword argument that overrides it, e.g. ``fit_brdf(b, tol=0.1)``).
@@ -245,7 +256,13 @@ def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None 
     total = time.perf_counter() - t0
     model = brdf_model(p, name, pieces, dict(kw, value_max=value_max), intervals, band_intervals, total,
                        source_file)
-    return BRDFFit(model, pieces, total, settings=s)
+    bounds = None
+    if prove_bound:     # the error between the clusters, proved (fit.rational.proved_bound)
+        report(progress, "proving the bound", 0, 1)
+        bounds = prove_brdf(model, p)
+        model.fit_info["bound"] = bound_records(bounds)
+        report(progress, "proving the bound", 1, 1)
+    return BRDFFit(model, pieces, time.perf_counter() - t0, settings=s, bounds=bounds)
 
 
 def _fit_piece(p, theta_d_range_deg, intervals, *, tol, theta_h_transform, value_transform, offset,

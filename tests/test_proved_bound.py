@@ -1,0 +1,92 @@
+"""The proved bound between data points (fit.rational.proved_bound) against a brute-force check.
+
+A rational function with a lobe and a multilinear measurement on a grid: the proved bound must
+never be below the largest error found at dense random points; an enclosure that only looks at
+the corners of each cell (a plausible bug) is caught by the same check."""
+import numpy as np
+import pytest
+
+from fit.rational.function import RationalFunction
+from fit.rational.model import RationalModel, Variable
+from fit.rational.proved_bound import _grid_cells, _multilinear, prove_cells
+
+
+def _model(value_transform="linear"):
+    # P/Q with a bump near (0.3, 0.6): Q = 1.2 - 0.8 T1(x) T0 + 0.3 T2(y) ... > 0 on the box
+    num_e = [[0, 0], [1, 0], [0, 1], [2, 1], [3, 0], [1, 2]]
+    num_c = [1.0, 0.4, -0.3, 0.25, 0.2, -0.15]
+    den_e = [[0, 0], [1, 0], [0, 2], [1, 1]]
+    den_c = [1.3, 0.5, 0.3, 0.2]
+    fn = RationalFunction([[0.0, 1.0], [0.0, 2.0]], num_e, num_c, den_e, den_c)
+    assert fn.certify_denominator().certified
+    variables = [Variable("a", "", "identity", (0.0, 1.0)), Variable("b", "", "identity", (0.0, 2.0))]
+    return RationalModel("t", variables, [fn], outputs=("R",), kind="function",
+                         value_transform=value_transform, value_min=None)
+
+
+def _measurement(seed=3, n=(9, 7)):
+    rng = np.random.default_rng(seed)
+    axes = (np.linspace(0.0, 1.0, n[0]), np.linspace(0.0, 2.0, n[1]))
+    m = _model()
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    values = m(X) * (1.0 + 0.05 * rng.standard_normal(X.shape[:-1] + (1,)))   # the fit +- 5 %
+    return axes, values
+
+
+def _brute_force(model, axes, values, n=200000, seed=5):
+    """The largest |fit - m| / max(m, 0.1) at ``n`` random points (m bilinear on the grid)."""
+    rng = np.random.default_rng(seed)
+    x = rng.random((n, 2)) * np.array([1.0, 2.0])
+    i = np.clip(np.searchsorted(axes[0], x[:, 0]) - 1, 0, len(axes[0]) - 2)
+    j = np.clip(np.searchsorted(axes[1], x[:, 1]) - 1, 0, len(axes[1]) - 2)
+    corners = np.stack([values[i + a, j + b] for a in (0, 1) for b in (0, 1)], axis=1)
+    loc = np.stack([(x[:, 0] - axes[0][i]) / (axes[0][i + 1] - axes[0][i]),
+                    (x[:, 1] - axes[1][j]) / (axes[1][j + 1] - axes[1][j])], axis=1)
+    m = _multilinear(corners, loc)[:, 0]
+    return float(np.max(np.abs(model(x)[:, 0] - m) / np.maximum(m, 0.1)))
+
+
+def _prove(model, axes, values, **kw):
+    c_lo, c_hi, corners = _grid_cells(axes, values, np.ones(values.shape[:-1], bool))
+    return prove_cells(model, 0, c_lo, c_hi, corners, lambda cr: np.maximum(cr[..., 0].min(axis=1), 0.1),
+                       tolerance=0.01, **kw)
+
+
+@pytest.mark.parametrize("value_transform", ["linear", "log"])
+def test_proved_bound_is_never_below_the_observed_error(value_transform):
+    model = _model(value_transform)
+    if value_transform == "log":       # the same values through exp: fit exp(P/Q)
+        axes = (np.linspace(0.0, 1.0, 9), np.linspace(0.0, 2.0, 7))
+        X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+        values = model(X) * (1.0 + 0.05 * np.random.default_rng(3).standard_normal(X.shape[:-1] + (1,)))
+    else:
+        axes, values = _measurement()
+    b = _prove(model, axes, values)
+    observed = _brute_force(model, axes, values)
+    assert b.proved is not None and b.verified <= b.proved
+    assert observed <= b.proved
+    assert b.proved <= 1.25 * observed          # and the proof is not vacuous: subdivision tightens it
+    assert 0.0 <= b.proved_fraction <= 1.0 and b.cells > 0
+
+
+def test_a_corner_only_enclosure_is_caught():
+    """The enclosure of P/Q by its values at the cell's corners misses interior extremes: on a
+    coarse grid (one cell, two halvings) its "bound" falls below the error the brute-force check
+    finds, while the Bernstein enclosure stays above it."""
+    model = _model()
+    axes = (np.array([0.0, 1.0]), np.array([0.0, 2.0]))
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    values = np.full(X.shape[:-1] + (1,), float(np.mean(model(X))))
+
+    def corners_only(fn, t_lo, t_hi):
+        pts = [np.stack([np.where(a, t_hi[:, 0], t_lo[:, 0]), np.where(b, t_hi[:, 1], t_lo[:, 1])], axis=1)
+               for a in (0, 1) for b in (0, 1)]
+        phys = [0.5 * (p + 1.0) * (fn.domain[:, 1] - fn.domain[:, 0]) + fn.domain[:, 0] for p in pts]
+        v = np.stack([fn(p) for p in phys], axis=1)
+        return v.min(axis=1), v.max(axis=1)
+
+    observed = _brute_force(model, axes, values)
+    wrong = _prove(model, axes, values, max_rounds=2, enclose=corners_only)
+    right = _prove(model, axes, values, max_rounds=2)
+    assert wrong.proved < observed              # the check catches the wrong enclosure
+    assert right.proved >= observed
