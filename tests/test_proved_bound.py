@@ -90,3 +90,26 @@ def test_a_corner_only_enclosure_is_caught():
     right = _prove(model, axes, values, max_rounds=2)
     assert wrong.proved < observed              # the check catches the wrong enclosure
     assert right.proved >= observed
+
+
+def test_reader_checks_the_bound_records():
+    """A file's ``bound`` records are read back; a proved bound below the verified error or a
+    fraction outside [0, 1] is a one-line error."""
+    import copy
+
+    from fit.errors import BRDFFileError
+    from fit.rational.coefficient_file import load, to_dict
+    from fit.rational.coefficient_reader import from_dict
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    m = load(sorted(PACKAGE_DATA.glob("paper_white*.json"))[0])
+    rec = {"piece": 0, "channel": "R", "proved": 0.06, "proved_fraction": 0.9, "verified": 0.057,
+           "verified_points": 100, "tolerance": 0.05, "unit": "relative", "cells": 50, "time_s": 0.1}
+    m.fit_info["bound"] = [rec]
+    d = to_dict(m)
+    assert from_dict(d).fit_info["bound"] == [rec]
+    for field, value in (("proved", 0.01), ("proved_fraction", 1.5), ("channel", "X")):
+        bad = copy.deepcopy(d)
+        bad["fit"]["bound"][0][field] = value
+        with pytest.raises(BRDFFileError, match=f"bound.0..{field}"):
+            from_dict(bad)

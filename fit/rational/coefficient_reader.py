@@ -26,7 +26,16 @@ from ..limits import (
     MAX_SPLIT_DEPTH,
 )
 from .coefficient_certify import FileBudget, recertify
-from .coefficient_format import BRDF_VARIABLES_3D, FORMAT, VERSION, VERSION_3D, VERSION_PIECEWISE, VERSIONS
+from .coefficient_format import (
+    BRDF_VARIABLES_3D,
+    FORMAT,
+    SAMPLER_KEY,
+    VERSION,
+    VERSION_3D,
+    VERSION_PIECEWISE,
+    VERSIONS,
+    content_sha256,
+)
 from .fallback import table_from_record
 from .function import RationalFunction
 from .model import (
@@ -243,7 +252,27 @@ def _fit_info(d: dict, key: str) -> dict:
     if info.get("grazing_cutoff_deg") is not None:
         info["grazing_cutoff_deg"] = F.number(info["grazing_cutoff_deg"], F.sub(fkey, "grazing_cutoff_deg"),
                                               lo=0.0, hi=90.0)
+    if "bound" in info:
+        _bound_records(info["bound"], F.sub(fkey, "bound"))
     return info
+
+
+def _bound_records(recs, key: str) -> None:
+    """The ``bound`` records (:mod:`fit.rational.proved_bound`): per piece and channel ``proved``
+    (>= 0 or null), ``proved_fraction`` in [0, 1], ``verified`` >= 0 and never above ``proved``."""
+    if not isinstance(recs, list) or len(recs) > 3 * MAX_PIECES:
+        raise F.Invalid(key, f"expected a list of at most {3 * MAX_PIECES} records")
+    for i, r in enumerate(recs):
+        ki = F.sub(key, i)
+        F.obj(r, ki)
+        F.string(F.get(r, "channel", ki), F.sub(ki, "channel"), choices=["R", "G", "B"])
+        F.string(F.get(r, "unit", ki), F.sub(ki, "unit"))
+        F.number(F.get(r, "proved_fraction", ki), F.sub(ki, "proved_fraction"), lo=0.0, hi=1.0)
+        verified = F.number(F.get(r, "verified", ki), F.sub(ki, "verified"), lo=0.0)
+        if F.get(r, "proved", ki) is not None:
+            proved = F.number(r["proved"], F.sub(ki, "proved"), lo=0.0)
+            if verified > proved * (1 + 1e-9):
+                raise F.Invalid(F.sub(ki, "proved"), f"{proved:.6g} is below the error verified, {verified:.6g}")
 
 
 def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
@@ -311,6 +340,13 @@ def from_dict(d: dict, path=None, certify: bool = True):
                 raise F.Invalid("fallback.blocks", f"holds {float(table.max()):.3g} 1/sr, above {MAX_BRDF_VALUE:g} "
                                                    "(fit.limits.MAX_BRDF_VALUE)")
             model.fallback = d["fallback"]
+        if SAMPLER_KEY in d:      # optional: the fit's own inverse CDFs, bound to this content
+            rec = F.obj(d[SAMPLER_KEY], SAMPLER_KEY)
+            if rec.get("fit_sha256") != content_sha256(d):
+                raise F.Invalid(f"{SAMPLER_KEY}.fit_sha256", "not the sha256 of this fit: the sampler was made "
+                                                             "from other coefficients (make it again: rbrdf-fit "
+                                                             "cdf FIT.json --out FIT.json)")
+            model.sampler = rec   # checked whole where it is used (fit.sampling.embedded)
     except F.Invalid as e:
         raise BRDFFileError(path, f"invalid {FORMAT} {label}coefficient file: {e}") from None
     except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as e:
