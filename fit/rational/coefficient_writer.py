@@ -10,7 +10,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .coefficient_format import FORMAT, VERSION, VERSION_3D, VERSION_PIECEWISE, is_3d
+from .coefficient_format import (
+    FORMAT,
+    SAMPLER_KEY,
+    VERSION,
+    VERSION_3D,
+    VERSION_PIECEWISE,
+    content_sha256,
+    is_3d,
+)
 from .model import PiecewiseRationalModel
 
 
@@ -22,6 +30,12 @@ def to_dict(model) -> dict:
         d["version"] = VERSION_3D
     if getattr(model, "fallback", None) is not None:    # only flagged 2-D fits: others as before
         d["fallback"] = jsonable(model.fallback)
+    sampler = getattr(model, "sampler", None)
+    if sampler is not None:     # the fit's own inverse CDFs (fit.sampling.embedded), made from d
+        if sampler.get("fit_sha256") != content_sha256(jsonable(d)):
+            raise ValueError("the model's sampler was made from other coefficients: make it again "
+                             "(fit.sampling.embedded.attach)")
+        d[SAMPLER_KEY] = sampler
     return d
 
 

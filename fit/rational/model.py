@@ -171,6 +171,9 @@ class RationalModel(_BRDFEvaluation):
     #: the file's optional "fallback" record (fit.rational.fallback: the projected table of a
     #: flagged 2-D fit, so that it renders without its source measurement); None: none
     fallback: dict | None = None
+    #: the file's optional "sampler" record (fit.sampling.embedded: the fit's own inverse CDFs,
+    #: bound to the rest of the file by its sha256); None: none
+    sampler: dict | None = None
 
     def __post_init__(self):
         self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]
@@ -267,6 +270,7 @@ class PiecewiseRationalModel(_BRDFEvaluation):
     piece_info: list = field(default_factory=list)
     source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
     fallback: dict | None = None         # as RationalModel.fallback
+    sampler: dict | None = None          # as RationalModel.sampler
 
     def __post_init__(self):
         self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]

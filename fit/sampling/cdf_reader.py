@@ -14,6 +14,7 @@ from ..errors import BRDFFileError
 from ..formats.angles import HALF_PI
 from ..inputs import read_json
 from ..limits import MAX_CDF_PHI_PIECES, MAX_CDF_PIECES, MAX_CDF_ROWS, check_memory
+from . import binary_arrays
 from .cdf_fit import FORMAT, VERSION, CDFFit
 from .global_layout import GlobalMaps
 from .pieces import PieceMaps
@@ -49,18 +50,22 @@ def _table_from_dict(td, key: str = "table_data") -> CDFTable:
     if not 2 <= n_v <= MAX_CDF_ROWS:
         raise F.Invalid(k(key, "theta_v"), f"{n_v} rows, outside [2, {MAX_CDF_ROWS}] (fit.limits.MAX_CDF_ROWS)")
     raw_t = F.get(td, "cdf_theta", key)
-    n_t = (len(raw_t[0]) - 1) if isinstance(raw_t, list) and raw_t and isinstance(raw_t[0], list) else -1
     raw_p = F.get(td, "cdf_phi", key)
+    if binary_arrays.is_encoded(raw_t):
+        n_t = binary_arrays.encoded_shape(raw_t, k(key, "cdf_theta"))[-1] - 1
+    else:
+        n_t = (len(raw_t[0]) - 1) if isinstance(raw_t, list) and raw_t and isinstance(raw_t[0], list) else -1
     try:
-        n_p = len(raw_p[0][0]) - 1
+        n_p = (binary_arrays.encoded_shape(raw_p, k(key, "cdf_phi"))[-1] - 1 if binary_arrays.is_encoded(raw_p)
+               else len(raw_p[0][0]) - 1)
     except (TypeError, IndexError, KeyError):
         n_p = -1
     try:
         check_table_size(n_v, n_t, n_p)
     except ValueError as e:
         raise F.Invalid(key, f"table of the wrong size: {e}") from None
-    ct = F.array(raw_t, k(key, "cdf_theta"), (n_v, n_t + 1))
-    cp = F.array(raw_p, k(key, "cdf_phi"), (n_v, n_t, n_p + 1))
+    ct = _float_array(raw_t, k(key, "cdf_theta"), (n_v, n_t + 1))
+    cp = _float_array(raw_p, k(key, "cdf_phi"), (n_v, n_t, n_p + 1))
     fb = F.array(F.get(td, "row_fallback", key), k(key, "row_fallback"), (n_v,), kind="bool")
     eps = F.number(F.get(td, "eps", key), k(key, "eps"))
     if not 0.0 < eps <= 1.0:
@@ -80,6 +85,14 @@ def _table_from_dict(td, key: str = "table_data") -> CDFTable:
             raise F.Invalid(k(key, name), f"not strictly increasing (at index {where}): a decreasing CDF or a "
                                           "cell of zero mass")
     return CDFTable(theta_v=tv, cdf_theta=ct, cdf_phi=cp, row_fallback=fb, eps=eps, albedo=albedo)
+
+
+def _float_array(raw, key: str, shape: tuple) -> np.ndarray:
+    """A table's float array: nested JSON lists, or an encoded array object
+    (:mod:`fit.sampling.binary_arrays`: a coefficient file's sampler record), of ``shape``."""
+    if binary_arrays.is_encoded(raw):
+        return binary_arrays.decode(raw, key, shape, max_size=int(np.prod(shape)))
+    return F.array(raw, key, shape)
 
 
 def _table_params(tp, table: CDFTable, key: str = "table") -> dict:
@@ -128,12 +141,21 @@ def _pieces_from_dict(pd, table: CDFTable, key: str = "pieces") -> PieceMaps:
     return PieceMaps.from_dict(out, table)
 
 
-def from_dict(d: dict, path=None) -> CDFFit:
+def _prefixed(e: F.Invalid, prefix: str) -> str:
+    """The message of ``e`` with its key under ``prefix`` (a record inside another file)."""
+    if not prefix or not e.key:
+        return str(e)
+    return f"key {prefix}.{e.key}: {str(e)[len(f'key {e.key}: '):]}"
+
+
+def from_dict(d: dict, path=None, what: str = f"{FORMAT} file", prefix: str = "") -> CDFFit:
     """A :class:`CDFFit` from a parsed ``rbrdf-cdf`` file, with every value checked
     (:func:`_table_from_dict`, the limits of :mod:`fit.limits`) and nothing taken on trust:
     the pieces are rebuilt from the table and verified, and a global layout's maps are
     re-verified (monotone, covering, Q > 0) unless the file falls back to the table.
-    :class:`BRDFFileError` naming the file and the key on any problem."""
+    :class:`BRDFFileError` naming the file and the key on any problem: ``what`` names the
+    record (an ``rbrdf-cdf`` file, or a coefficient file's sampler record) and ``prefix`` is
+    put before its keys (``sampler``)."""
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise BRDFFileError(path, f"not an {FORMAT} file")
     ver = d.get("version")
@@ -175,9 +197,15 @@ def from_dict(d: dict, path=None) -> CDFFit:
     except BRDFFileError:
         raise
     except F.Invalid as e:
-        raise BRDFFileError(path, f"invalid {FORMAT} file: {e}") from None
+        raise BRDFFileError(path, f"invalid {what}: {_prefixed(e, prefix)}") from None
     except (KeyError, TypeError, ValueError, IndexError, ArithmeticError) as e:
-        raise BRDFFileError(path, f"invalid {FORMAT} file ({e.__class__.__name__}: {e})") from None
+        raise BRDFFileError(path, f"invalid {what} ({e.__class__.__name__}: {e})") from None
+
+
+def table_from_dict(td, key: str = "table_data") -> CDFTable:
+    """The tabulated sampler of a file's ``table_data`` record, every array checked (the
+    ``_table_from_dict`` checks); :class:`fit.jsonfields.Invalid` naming the key."""
+    return _table_from_dict(td, key)
 
 
 def load(path) -> CDFFit:

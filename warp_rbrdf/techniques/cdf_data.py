@@ -2,9 +2,11 @@
 where they come from, and how they are packed into :class:`warp_rbrdf.materials.data.Materials`.
 
 A material whose strategy's technique needs a table (``tabulated``, ``rational``) gets one:
-from its ``cdf = "file.json"`` (an ``rbrdf-cdf`` file of ``rbrdf-fit cdf``), or tabulated from
-the material itself at load (remembered on disk: :mod:`.table_cache`). A technique that needs verified rational inverse CDFs gets them
-from the same file, or fitted at load (printed: it takes seconds). A fit that failed its
+from its ``cdf = "file.json"`` (an ``rbrdf-cdf`` file of ``rbrdf-fit cdf``), else from the
+sampler record its rational fit carries (:mod:`fit.sampling.embedded`: nothing is built, no
+source file is read; a grey ``scale`` only), or tabulated from the material itself at load
+(remembered on disk: :mod:`.table_cache`). A technique that needs verified rational inverse CDFs gets them
+from the same file or the fit's record, or fitted at load (printed: it takes seconds). A fit that failed its
 verification (``CDFFit.fallback``) switches the material to its strategy's ``fallback``
 (printed, never silent).
 
@@ -18,6 +20,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
+from fit.sampling.table import CDFTable
 
 from .. import registry
 from ..chebyshev import FlatData
@@ -56,6 +60,26 @@ def _read_cdf(spec, scene_file, key):
         raise SceneError(scene_file, f"{key}.cdf", f"cannot read CDF file ({e})") from None
 
 
+def _own_sampler(spec, loaded, scene_file, key, maps: bool):
+    """The inverse CDFs a rational fit carries in its file (:mod:`fit.sampling.embedded`): a
+    :class:`fit.sampling.cdf_file.CDFFit` (``maps``) or its :class:`CDFTable`, None when it
+    carries none or when the material's ``scale`` is not grey (the luminance of a tinted fit is
+    another density: its table is tabulated as for any material). A damaged or edited record is a
+    one-line :class:`SceneError` naming the file."""
+    model = getattr(loaded, "data", None)
+    if getattr(model, "sampler", None) is None:
+        return None
+    scale = np.asarray(getattr(spec, "scale", (1.0, 1.0, 1.0)), float).ravel()
+    if scale.size and not np.all(scale == scale[0]):
+        return None
+    from fit.sampling.embedded import read   # scipy: imported only when needed
+
+    try:
+        return read(model, getattr(spec, "file", None), maps=maps)
+    except Exception as e:  # noqa: BLE001 - BRDFFileError, one line
+        raise SceneError(scene_file, f"{key}.file", f"the fit's sampler record is unusable ({e})") from None
+
+
 class BuildBudget:
     """How many inverse-CDF builds (a table tabulated, rational inverse CDFs fitted) a scene's
     load may still start: :data:`warp_rbrdf.limits.MAX_CDF_BUILDS_AT_LOAD` by default. A build
@@ -91,6 +115,11 @@ def prepare(spec, loaded, scene_file="<scene>", key="materials", log=print, budg
     if not tech.needs_table:
         return strat, None
     fitobj = _read_cdf(spec, scene_file, key)
+    if fitobj is None:
+        own = _own_sampler(spec, loaded, scene_file, key, tech.needs_fit)
+        if isinstance(own, CDFTable):
+            return strat, own
+        fitobj = own
     made_with = (getattr(fitobj, "source", None) or {}).get("incident")
     if made_with is not None and made_with != getattr(spec, "incident", "view"):
         raise SceneError(scene_file, f"{key}.cdf", f"the CDF file was built with incident = "
