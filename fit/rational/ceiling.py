@@ -1,7 +1,7 @@
 """The last-resort wall-clock safety net of a 3-D fit (:class:`Ceiling`).
 
 No rule of a fit reads the clock otherwise: every loop of :mod:`fit.rational.fit3d` and
-:mod:`fit.rational.albedo3d` stops on a count (``fit3d``'s module docstring, "Budgets").
+:mod:`fit.rational.albedo3d` stops on a count (docs/fitting.md, "Budgets").
 """
 from __future__ import annotations
 

@@ -181,8 +181,8 @@ def _optional_positive(x) -> bool:
 
 @dataclass
 class Fit3DSettings(_Settings):
-    """Settings of the 3-D fits (:mod:`fit.rational.fit3d`, whose module docstring says what
-    each does). Angles in radians unless the name ends in ``_deg``; times in seconds.
+    """Settings of the 3-D fits (:mod:`fit.rational.fit3d`; docs/fitting.md, "The 3-D method",
+    says what each does). Angles in radians unless the name ends in ``_deg``; times in seconds.
 
     The fit (:func:`~fit.rational.fit3d.fit_samples`):
 
