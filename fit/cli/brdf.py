@@ -50,6 +50,7 @@ from ..rational.domain import THETA_D_MAX_DEG
 from ..rational.coefficient_file import save
 from ..rational.settings import INTERVALS, THETA_H_TRANSFORMS, VALUE_TRANSFORMS, BRDFFitSettings
 from . import brdf3d
+from .cdf import add_sampler_flags, attach_sampler
 from .flags import add_run_flags, core_angle, integer, number
 
 MODELS = ("auto", "2d", "3d")
@@ -94,6 +95,7 @@ def _cmd_brdf(args) -> int:
     except ValueError as e:
         raise BRDFFileError(args.file, str(e)) from None
     write = fit.valid or args.allow_infeasible
+    sampler_line = attach_sampler(fit.model, args, progress) if write else ""
     if write:
         with OutputSet() as outputs:
             save(fit.model, outputs.stage(out))
@@ -113,6 +115,8 @@ def _cmd_brdf(args) -> int:
                   f"{100 * e['inside_fraction']:7.1f}%"
                   f"{'yes' if r.certificate and r.certificate.certified else 'NO':>5s}{r.time_s:8.2f}")
     if write:
+        if sampler_line:
+            print(sampler_line)
         print(f"{fit.summary()}; wrote {display_path(out)}")
         return 0
     sys.stdout.flush()      # the table first, then the verdict on stderr
@@ -154,6 +158,7 @@ def register(subparsers) -> None:
                     "albedo). The flags of the other model are refused.")
     p.add_argument("file", help="MERL .binary or RGL .bsdf file")
     p.add_argument("--out", required=True, help="output .json coefficient file (replaced only if the run succeeds)")
+    add_sampler_flags(p)
     p.add_argument("--model", choices=MODELS, default="auto",
                    help="auto (default): 3d for an RGL .bsdf file (its most accurate form), 2d for a MERL "
                         ".binary file; 2d: (theta_h, theta_d) within --tol; 3d: (theta_h, theta_d, |phi_d|), "

@@ -51,6 +51,7 @@ from ..rational.fit3d import (
     Fit3DSettings,
     fit_rgl_select,
 )
+from .cdf import attach_sampler
 from .flags import integer, number
 
 #: The first tolerance of the 3-D ladder when ``--tol`` is not given: the benchmark's
@@ -174,12 +175,15 @@ def run(args, out: Path, deadline) -> int:
         return 1
     except ValueError as e:
         raise BRDFFileError(args.file, str(e)) from None
+    sampler_line = attach_sampler(res.model, args, progress) if res.valid else ""
     if res.valid:
         with OutputSet() as outputs:
             save(res.model, outputs.stage(out))
             outputs.commit()
     _print_table(b.name, res, settings)
     if res.valid:
+        if sampler_line:
+            print(sampler_line)
         print(f"{res.summary()}; wrote {display_path(out)}")
         return 0
     sys.stdout.flush()

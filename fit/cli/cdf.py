@@ -6,12 +6,17 @@ checked before anything is tabulated); outputs are written only when the run suc
 (:class:`fit.outputs.OutputSet`). ``--time-limit S`` bounds the whole command: one
 :class:`fit.progress.Deadline`, started with the command, is shared by reading, tabulating and
 fitting; the table is always completed, and what is not verified when it runs out is sampled
-with the table (the printed reason says so). Progress goes to stderr."""
+with the table (the printed reason says so). Progress goes to stderr.
+
+A rational fit (``rbrdf-rational`` .json) as the input makes the fit's own inverse CDFs from the
+fit and writes the fit with them stored in it (:mod:`fit.sampling.embedded`); ``rbrdf-fit
+brdf`` does the same at the end of every fit (:func:`attach_sampler`; ``--no-sampler``,
+``--sampler-time-limit``: :func:`add_sampler_flags`)."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import FlagError, display_path, display_text
+from ..errors import BRDFFileError, FlagError, display_path, display_text
 from ..formats import load_measured
 from ..limits import (
     MAX_CDF_PHI_CELLS,
@@ -46,6 +51,49 @@ def _check_sizes(args) -> None:
                               int(max(PIECES_DEFAULTS["n_u"])))
     except ValueError as e:
         raise FlagError("--n-v/--n-t/--n-p", str(e)) from None
+
+
+#: Default bound (s) on making the sampler a fit carries at the end of ``rbrdf-fit brdf``.
+SAMPLER_TIME_LIMIT_S = 60.0
+
+
+def add_sampler_flags(p) -> None:
+    """``--no-sampler`` and ``--sampler-time-limit S`` on a fit command's parser ``p``."""
+    p.add_argument("--no-sampler", dest="no_sampler", action="store_true",
+                   help="do not store the fit's own inverse CDFs in the file (a renderer then "
+                        "tabulates them at load; `rbrdf-fit cdf FIT.json --out FIT.json` adds them later)")
+    p.add_argument("--sampler-time-limit", dest="sampler_time_limit", type=number(0.0, MAX_TIME_LIMIT_S),
+                   default=SAMPLER_TIME_LIMIT_S, metavar="S",
+                   help=f"bound on making the fit's inverse CDFs in seconds (default {SAMPLER_TIME_LIMIT_S:g}; "
+                        "0: none): the table is always completed; view rows not verified by then are "
+                        "sampled with the table")
+
+
+def attach_sampler(model, args, progress=None) -> str:
+    """Make the inverse CDFs of ``model`` from the fit itself and store them in it
+    (:func:`fit.sampling.model_sampler.embed_sampler`) unless ``args.no_sampler``; returns the line
+    the command prints ("" when skipped). A fit with nothing vouched to sample (a flagged fit
+    without a fallback table) is written without one, and the line says so."""
+    if getattr(args, "no_sampler", False):
+        return ""
+    from ..sampling.model_sampler import embed_sampler
+
+    limit = getattr(args, "sampler_time_limit", SAMPLER_TIME_LIMIT_S)
+    try:
+        cdf = embed_sampler(model, time_limit_s=None if limit <= 0 else limit, progress=progress)
+    except ValueError as e:
+        return f"no sampler stored ({display_text(e)})"
+    what = "table only" if cdf.fallback else "verified rational inverse CDFs"
+    return f"sampler: {what} ({display_text(cdf.reason)}), stored in the fit"
+
+
+def _is_fit_file(path: Path) -> bool:
+    """True when ``path`` is an ``rbrdf-rational`` coefficient file (not an ``rbrdf-cdf`` file)."""
+    from ..inputs import read_json
+    from ..rational.coefficient_format import FORMAT as FIT_FORMAT
+
+    d = read_json(path, "JSON file")
+    return isinstance(d, dict) and d.get("format") == FIT_FORMAT
 
 
 def _load_or_fit(args, log=print, deadline: Deadline | None = None):
@@ -95,10 +143,40 @@ def _add_table_args(p):
     add_run_flags(p)
 
 
+def _cmd_fit_sampler(args, out: Path, deadline: Deadline) -> int:
+    """``rbrdf-fit cdf FIT.json --out OUT.json``: the fit with its own inverse CDFs stored in it
+    (:mod:`fit.sampling.embedded`), made from the fit's vouched values with the default table
+    and ``--layout``; ``--out`` may name the fit itself (replaced only on success)."""
+    from ..rational.coefficient_file import load as load_fit
+    from ..rational.coefficient_file import save as save_fit
+    from ..sampling.model_sampler import embed_sampler
+
+    if (args.n_v, args.n_t, args.n_p, args.eps) != (32, 64, 64, 0.02) or args.table_only:
+        raise FlagError("--n-v/--n-t/--n-p/--eps/--table-only", "a fit's own sampler has the default table "
+                                                                 "(the table a renderer would tabulate)")
+    progress = getattr(args, "progress", None)
+    with one_step(progress, "reading the file"):
+        model = load_fit(args.file)
+    try:
+        cdf = embed_sampler(model, layout=args.layout, deadline=deadline, progress=progress, log=print)
+    except ValueError as e:
+        raise BRDFFileError(args.file, f"no sampler can be made from this fit ({e})") from None
+    with OutputSet() as outputs:
+        save_fit(model, outputs.stage(out))
+        outputs.commit()
+    name = display_text(model.name)
+    what = "table only" if cdf.fallback else "rational inverse CDFs verified"
+    print(f"{name}: {what} ({display_text(cdf.reason)}); stored in the fit")
+    print(f"wrote {display_path(out)}")
+    return 0
+
+
 def _cmd_cdf(args) -> int:
     deadline = Deadline(None if args.time_limit <= 0 else args.time_limit)
     out = check_output_file(args.out, "--out", (".json",))
     _check_sizes(args)
+    if Path(args.file).suffix.lower() == ".json" and _is_fit_file(Path(args.file)):
+        return _cmd_fit_sampler(args, out, deadline)
     fit = _load_or_fit(args, deadline=deadline)
     with OutputSet() as outputs:
         fit.save(outputs.stage(out))
@@ -140,7 +218,9 @@ def register(sub) -> None:
                                    "derivative estimator exceeds 1.2x the table's variance to the table, "
                                    "and write a versioned rbrdf-cdf JSON (fallback flag and per-row "
                                    "reasons included).")
-    p.add_argument("file", help="MERL .binary or RGL .bsdf file")
+    p.add_argument("file", help="MERL .binary or RGL .bsdf file, or a rational fit .json (rbrdf-rational): "
+                                "then --out is the fit with its own inverse CDFs stored in it (it may be the "
+                                "fit itself)")
     p.add_argument("--out", required=True, help="output .json (replaced only if the run succeeds)")
     _add_table_args(p)
     p.set_defaults(func=_cmd_cdf)
