@@ -1,9 +1,11 @@
 """Prototype: the render kernel's sample over K lanes per Warp thread, against one sample per
 thread, on Warp's CPU backend (samples/s, same image, vector instructions in the object).
+Results and conclusion: docs/cpu_lanes.md.
 
     python -m benchmarks.lanes_prototype [--quick] [--material cc_ibiza_sunset_rgb]
         [--envmap studio_small_03_1k] [--resolution 128] [--spp 64] [--repeats 5]
-        [--lanes 1 4 8 16] [--threads 1 2] [--json FILE]
+        [--lanes 1 4 8 16] [--kinds lanes loop hybrid gather slp] [--no-guided]
+        [--threads 1 2] [--breakdown VARIANT ...] [--remarks VARIANT] [--json FILE]
 
 The scene is the reference sphere of ``benchmarks/bench_vs_mitsuba.py`` (unit sphere, camera at
 z = 4, 30 deg vertical field of view, hidden map, direct light): per camera sample one
@@ -11,26 +13,32 @@ environment sample and one BSDF sample of the ``rgl`` material, two shadow rays,
 (:mod:`benchmarks.lanes_kernels`, :mod:`benchmarks.lanes_scene`, :mod:`benchmarks.lanes_shading`).
 Variants:
 
-* ``scalar``: one sample per loop iteration with the production ``rgl`` technique and the
+* ``scalar``: one sample per loop iteration with the production ``rgl`` functions and the
   distribution module's 2-D sampler (branches, early-exit binary searches), as the integrator;
 * ``lanes K=k``: ``k`` samples of a pixel per step, branch-free, the searches as fixed halving
   steps over all lanes at once, the lane loops unrolled by Warp (``K=1``: the same branch-free
-  code, one sample per step);
-* ``loop K=k``: the same with the lane loops left as loops (LLVM's loop vectorizer).
+  code, one sample per step); ``slp K=k``: the same with LLVM's default SLP depth;
+* ``loop K=k``: the lane loops left as loops (LLVM's loop vectorizer); ``hybrid K=k``: loops,
+  the scalar kernel's branches kept around each lane's shading; ``gather K=k``: loops, LLVM
+  allowed to emit gathers (``+fast-gather``);
+* ``unguided`` / ``guided``: one sample per iteration, the same shading with branches, the
+  binary searches over every interval / started from guide tables (:mod:`benchmarks.lanes_guides`).
 
 Each variant renders the same image (same seed) through 16-px tiles launched from a thread pool
 (``--threads``, as the renderer's ``launch_tiles``); the timings are interleaved (every repeat
-runs every variant and thread count, the variants' order rotated), the table gives the median
-samples/s (camera samples, hits and misses, per second of wall clock), the ratio to ``scalar``
-in the same run, the image's agreement with ``scalar``'s (same random numbers: the same values
-up to float rounding) and instruction counts of the compiled object (``objdump -d``: ymm
-instructions, packed single-precision arithmetic on xmm/ymm, gathers, scalar single-precision
-arithmetic). Every kernel has the render kernels' module options
+runs every variant and thread count, the variants' order rotated). The table gives the median
+camera samples (hits and misses) per second: per CPU second of the launching thread on one
+thread, and per second of wall clock on each ``--threads``; the ratios to ``scalar`` in the
+same run; the image's agreement with ``scalar``'s (same random numbers: the same values up to
+float rounding); instruction counts of the compiled object (:mod:`benchmarks.lanes_codegen`).
+``--breakdown``: those variants also stopped after the setup and after the environment sample
+(ns per sample per stage). ``--remarks``: LLVM's loop-vectorizer remarks for one variant, by
+Warp source line. Every kernel has the render kernels' module options
 (:func:`warp_rbrdf.shipped_kernels.render_module_options`: ``-target-cpu x86-64-v3``).
 
-``--quick``: 32 px, 16 spp, ``loop K=4`` and ``hybrid K=4``, 1 thread, 1 repeat (the smoke test). Needs
-``$RBRDF_DATA`` (``rgl/<material>.bsdf``, ``envmaps/<map>.hdr``) and, for the instruction
-counts, ``objdump``.
+``--quick``: 32 px, 16 spp, ``loop K=4``, ``hybrid K=4`` and the guide variants, 1 thread, 1
+repeat (the smoke test). Needs ``$RBRDF_DATA`` (``rgl/<material>.bsdf``, ``envmaps/<map>.hdr``)
+and, for the instruction counts, ``objdump``.
 """
 from __future__ import annotations
 
@@ -38,16 +46,16 @@ import argparse
 import json
 import os
 import platform
-import re
-import shutil
+import shlex
 import statistics
-import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
+
+from benchmarks.lanes_codegen import instruction_counts, object_file, vectorizer_remarks
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
@@ -74,12 +82,15 @@ def env_distribution(image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def load_scene(material: Path, envmap: Path):
-    """``(tables, materials, env)``: the lane kernels' :class:`~benchmarks.lanes_scene.Tables`,
-    the production :class:`~warp_rbrdf.materials.data.Materials` of the same material (index 0)
-    and the map's :class:`~benchmarks.lanes_scene.Env`."""
+    """``(tables, materials, env, guides)``: the lane kernels'
+    :class:`~benchmarks.lanes_scene.Tables`, the production
+    :class:`~warp_rbrdf.materials.data.Materials` of the same material (index 0), the map's
+    :class:`~benchmarks.lanes_scene.Env` and the guide tables of both
+    (:class:`~benchmarks.lanes_guides.Guides`)."""
     import warp as wp
 
     from benchmarks import lanes_scene as S
+    from benchmarks.lanes_guides import make_guides
     from fit.formats.rgl import read_rgl
     from warp_rbrdf.image_io import read_image
     from warp_rbrdf.materials import rgl as R
@@ -119,45 +130,58 @@ def load_scene(material: Path, envmap: Path):
     env.marg = wp.array(marg, dtype=float)
     env.cond = wp.array(cond, dtype=float)
     env.h, env.w = image.shape[:2]
-    return tb, m, env
+    return tb, m, env, make_guides(floats, h, marg, cond, env.h, env.w, R)
 
 
 # --------------------------------------------------------------------------------------------
 # variants
-#: lane variants: (Warp unrolls the lane loops, branches around the per-lane shading, extra
-#: compiler flags)
+#: lane variants: (Warp unrolls the lane loops, branches around the per-lane shading, the
+#: compiler flags from the render kernels'): Warp-unrolled, as loops, as loops with the
+#: scalar kernel's branches in the shading, as loops with LLVM allowed to emit gathers
+#: (``fast-gather``: an x86-64-v3 target has none), Warp-unrolled with LLVM's default SLP
+#: depth (the render kernels' flags limit it to 4)
 KINDS = {
-    "lanes": (True, False, ""),
-    "loop": (False, False, ""),
-    "hybrid": (False, True, ""),
-    "gather": (False, False, " -target-feature +fast-gather"),
+    "lanes": (True, False, lambda f: f),
+    "loop": (False, False, lambda f: f),
+    "hybrid": (False, True, lambda f: f),
+    "gather": (False, False, lambda f: f + " -target-feature +fast-gather"),
+    "slp": (True, False, lambda f: f.replace("-slp-recursion-max-depth=4", "-slp-recursion-max-depth=12")),
 }
+#: the kinds run by default
+DEFAULT_KINDS = ("lanes", "loop", "hybrid", "gather")
 
 
-def variant_names(lanes, kinds) -> list[str]:
-    return ["scalar"] + [f"{kind} K={k}" for kind in kinds for k in lanes if kind == "lanes" or k > 1]
+def variant_names(lanes, kinds, guided: bool = False) -> list[str]:
+    return (["scalar"] + [f"{kind} K={k}" for kind in kinds for k in lanes if kind == "lanes" or k > 1]
+            + (["unguided", "guided"] if guided else []))
 
 
-def build(name: str, stages: int = 3):
+def build(name: str, stages: int = 3, extra_flags: str = ""):
     """The kernel of variant ``name`` with the render kernels' module options (``stages``:
-    the cost breakdown's early stop, :func:`benchmarks.lanes_kernels.make_scalar_kernel`)."""
+    the cost breakdown's early stop, :func:`benchmarks.lanes_kernels.make_scalar_kernel`;
+    ``extra_flags`` appended to the compiler flags)."""
     from benchmarks import lanes_kernels as LK
     from warp_rbrdf.shipped_kernels import render_module_options
 
     opts = render_module_options()
+    opts["cpu_compiler_flags"] = opts.get("cpu_compiler_flags", "") + extra_flags
     if name == "scalar":
         return LK.make_scalar_kernel(opts, stages)
+    if name in ("guided", "unguided"):
+        from benchmarks.lanes_guides import make_guided_kernel
+
+        return make_guided_kernel(opts, stages, name == "guided")
     kind, k = name.split(" K=")
     k = int(k)
     unroll, branchy, flags = KINDS[kind]
     opts["max_unroll"] = max(k, 16) if unroll else 0
-    if flags:
-        opts["cpu_compiler_flags"] = opts.get("cpu_compiler_flags", "") + flags
+    opts["cpu_compiler_flags"] = flags(opts["cpu_compiler_flags"])
     return LK.make_lane_kernel(k, opts, stages, branchy)
 
 
-def render(kernel, first_arg, env, view, threads: int) -> np.ndarray:
-    """(res, res, 3) image of one variant: 16-px tiles on ``threads`` threads."""
+def render(kernel, first_arg, env, view, threads: int, extra=()) -> np.ndarray:
+    """(res, res, 3) image of one variant: 16-px tiles on ``threads`` threads (``extra``: the
+    kernel's arguments after the image)."""
     import warp as wp
 
     res = view.res
@@ -165,7 +189,8 @@ def render(kernel, first_arg, env, view, threads: int) -> np.ndarray:
     tiles = [(x, y, min(TILE, res - x), min(TILE, res - y)) for y in range(0, res, TILE) for x in range(0, res, TILE)]
 
     def one(t):
-        wp.launch(kernel, dim=t[2] * t[3], inputs=[first_arg, env, view, t[0], t[1], t[2]], outputs=[out])
+        wp.launch(kernel, dim=t[2] * t[3], inputs=[first_arg, env, view, t[0], t[1], t[2]],
+                  outputs=[out, *extra])
 
     if threads <= 1:
         for t in tiles:
@@ -187,51 +212,6 @@ def agreement(img: np.ndarray, ref: np.ndarray) -> dict:
 
 
 # --------------------------------------------------------------------------------------------
-# the compiled object
-def object_file(kernel) -> Path | None:
-    import warp as wp
-
-    folder = Path(wp.config.kernel_cache_dir) / kernel.module.get_module_identifier()
-    objs = sorted(folder.glob("*.o"))
-    return objs[0] if objs else None
-
-
-#: instruction classes counted in the disassembly
-PACKED = re.compile(r"^v(?:add|sub|mul|div|fmadd\w*|fmsub\w*|fnmadd\w*|fnmsub\w*|min|max|sqrt|rcp|rsqrt|cmp\w*|blendv|round)ps$")
-SCALAR = re.compile(r"^v(?:add|sub|mul|div|fmadd\w*|fmsub\w*|fnmadd\w*|fnmsub\w*|min|max|sqrt|cmp\w*|round)ss$")
-
-
-def instruction_counts(path: Path | None) -> dict:
-    """Counts in ``objdump -d`` of the object: all instructions, those on ymm registers, packed
-    single-precision arithmetic (xmm or ymm), gathers, scalar single-precision arithmetic."""
-    if path is None or shutil.which("objdump") is None:
-        return {}
-    text = subprocess.run(["objdump", "-d", "--no-show-raw-insn", str(path)], capture_output=True, text=True,
-                          check=True).stdout
-    return count_instructions(text)
-
-
-def count_instructions(text: str) -> dict:
-    """:func:`instruction_counts` of ``objdump -d --no-show-raw-insn`` output."""
-    counts = {"instructions": 0, "ymm": 0, "packed_ps": 0, "packed_ps_ymm": 0, "gathers": 0, "scalar_ss": 0}
-    for line in text.splitlines():
-        parts = line.split("\t")
-        if len(parts) < 2 or not re.match(r"^\s*[0-9a-f]+:$", parts[0]):
-            continue
-        ins = parts[1].strip()
-        op = ins.split(" ", 1)[0]
-        counts["instructions"] += 1
-        ymm = "%ymm" in ins
-        counts["ymm"] += ymm
-        if PACKED.match(op):
-            counts["packed_ps"] += 1
-            counts["packed_ps_ymm"] += ymm
-        counts["gathers"] += "gather" in op
-        counts["scalar_ss"] += bool(SCALAR.match(op))
-    return counts
-
-
-# --------------------------------------------------------------------------------------------
 def machine() -> dict:
     import warp as wp
 
@@ -245,12 +225,12 @@ def machine() -> dict:
             "date": time.strftime("%Y-%m-%d %H:%M")}
 
 
-def timed_render(kernel, first_arg, env, view, threads: int) -> tuple[np.ndarray, float, float]:
+def timed_render(kernel, first_arg, env, view, threads: int, extra=()) -> tuple[np.ndarray, float, float]:
     """``(image, wall s, cpu s)``; the CPU time is the calling thread's, which runs every
     launch when ``threads`` is 1 (unlike the wall clock, it leaves out the other processes'
     share of a loaded machine)."""
     w0, c0 = time.perf_counter(), time.thread_time()
-    img = render(kernel, first_arg, env, view, threads)
+    img = render(kernel, first_arg, env, view, threads, extra)
     return img, time.perf_counter() - w0, time.thread_time() - c0
 
 
@@ -259,20 +239,26 @@ def run(a) -> dict:
     from warp_rbrdf.runtime import init_warp
 
     init_warp()
-    tb, mats, env = load_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr")
+    tb, mats, env, guides = load_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr")
     if any(a.spp % k for k in a.lanes):
         raise SystemExit(f"--spp {a.spp} must be a multiple of every K")
     view = View()
     view.res, view.spp, view.seed = a.resolution, a.spp, 7
     view.tan_half = float(np.tan(np.radians(FOV_Y_DEG / 2)))
-    names = variant_names(a.lanes, a.kinds)
+
+    def args(name):
+        """A variant's launch arguments: ((tables, map, view), arguments after the image)."""
+        return ({"scalar": mats}.get(name, tb), env, view), (guides,) if name.endswith("guided") else ()
+
+    names = variant_names(a.lanes, a.kinds, not a.no_guided)
     # (variant, stages): the full kernels, and the early stops of the breakdown
     jobs = [(n, 3) for n in names] + [(n, st) for n in (a.breakdown or []) for st in (1, 2)]
     kernels, compile_s, ref = {}, {}, None
     for job in jobs:
         t0 = time.perf_counter()
         kernels[job] = build(*job)
-        img = render(kernels[job], mats if job[0] == "scalar" else tb, env, view, 1)   # compiles, warms up
+        first, extra = args(job[0])
+        img = render(kernels[job], *first, 1, extra)   # compiles, warms up
         compile_s[job] = time.perf_counter() - t0
         print(f"{job[0]} (stages {job[1]}): compiled and rendered in {compile_s[job]:.1f} s", file=sys.stderr,
               flush=True)
@@ -286,7 +272,8 @@ def run(a) -> dict:
         order = jobs[rep % len(jobs):] + jobs[:rep % len(jobs)]
         for job in order:
             for th in (a.threads if job[1] == 3 else [1]):
-                img, w, c = timed_render(kernels[job], mats if job[0] == "scalar" else tb, env, view, th)
+                first, extra = args(job[0])
+                img, w, c = timed_render(kernels[job], *first, th, extra)
                 wall[job, th].append(w)
                 if th == 1:
                     cpu[job].append(c)
@@ -307,7 +294,7 @@ def run(a) -> dict:
     breakdown = {name: [statistics.median(cpu[name, st]) / n * 1e9 for st in (1, 2, 3)]
                  for name in (a.breakdown or []) if cpu[name, 1]}
     return {"machine": machine(), "load": [load_before, os.getloadavg()],
-            "command": " ".join(["python -m benchmarks.lanes_prototype", *(a.argv or [])]),
+            "command": "python -m benchmarks.lanes_prototype " + shlex.join(a.argv or []),
             "settings": {"material": a.material, "envmap": a.envmap, "resolution": a.resolution, "spp": a.spp,
                          "repeats": a.repeats, "threads": a.threads}, "rows": rows, "breakdown_ns": breakdown,
             "image_mean": float(ref.mean())}
@@ -338,6 +325,24 @@ def table(res: dict) -> str:
     return "\n".join(lines)
 
 
+def print_remarks(a) -> int:
+    """``--remarks``: the loop vectorizer's decisions for one variant, by Warp source line."""
+    from benchmarks.lanes_scene import View
+    from warp_rbrdf.runtime import init_warp
+
+    init_warp()
+    tb, mats, env, guides = load_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr")
+    view = View()
+    view.res, view.spp, view.seed, view.tan_half = 16, 16, 7, float(np.tan(np.radians(FOV_Y_DEG / 2)))
+    first = (mats if a.remarks == "scalar" else tb, env, view)
+    extra = (guides,) if a.remarks.endswith("guided") else ()
+    remarks = vectorizer_remarks(lambda flags: build(a.remarks, 3, flags),
+                                 lambda k: render(k, *first, 1, extra))
+    for (where, msg), count in sorted(remarks.items()):
+        print(f"{count:3d}  {where}: {msg}")
+    return 0
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.lanes_prototype",
                                 description=__doc__.split("\n\n")[0])
@@ -348,17 +353,23 @@ def main(argv=None) -> int:
     p.add_argument("--spp", type=int, default=64)
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--lanes", type=int, nargs="+", default=[1, 4, 8, 16])
-    p.add_argument("--kinds", nargs="+", choices=list(KINDS), default=list(KINDS),
-                   help="lane variants: Warp-unrolled, loop, loop with branches, loop with gathers")
+    p.add_argument("--kinds", nargs="+", choices=list(KINDS), default=list(DEFAULT_KINDS),
+                   help="lane variants: Warp-unrolled, loop, loop with branches, loop with gathers, "
+                        "Warp-unrolled with LLVM's default SLP depth")
+    p.add_argument("--no-guided", action="store_true", help="leave out the guide-table variants")
     p.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     p.add_argument("--breakdown", nargs="*", metavar="VARIANT",
                    help="variants (e.g. scalar 'hybrid K=16') also timed stopped after each stage")
+    p.add_argument("--remarks", metavar="VARIANT",
+                   help="compile VARIANT (e.g. 'loop K=8') with the loop vectorizer's remarks, print them, exit")
     p.add_argument("--json", type=Path)
     a = p.parse_args(argv)
     a.argv = list(sys.argv[1:] if argv is None else argv)
     if a.quick:
         a.resolution, a.spp, a.lanes, a.threads, a.repeats = 32, 16, [4], [1], 1
-        a.kinds, a.breakdown = ["loop", "hybrid"], []
+        a.kinds, a.breakdown, a.no_guided = ["loop", "hybrid"], [], False
+    if a.remarks:
+        return print_remarks(a)
     res = run(a)
     m = res["machine"]
     print(f"{m['cpu']} ({m['cores']} cores), warp {m['warp']}, {m['date']}, "

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from conftest import data_file
 
+from benchmarks import lanes_codegen as C
 from benchmarks import lanes_prototype as B
 
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
@@ -49,7 +50,7 @@ def test_count_instructions():
   13:\tvmovaps %ymm1,%ymm2
   17:\tret
 """
-    c = B.count_instructions(text)
+    c = C.count_instructions(text)
     assert c == {"instructions": 6, "ymm": 3, "packed_ps": 2, "packed_ps_ymm": 1, "gathers": 1, "scalar_ss": 1}
 
 
@@ -62,7 +63,7 @@ def test_quick_run_renders_the_scalar_image(tmp_path):
     assert B.main(["--quick", "--json", str(out)]) == 0
     res = json.loads(out.read_text())
     rows = {r["variant"]: r for r in res["rows"]}
-    assert set(rows) == {"scalar", "loop K=4", "hybrid K=4"}
+    assert set(rows) == {"scalar", "loop K=4", "hybrid K=4", "unguided", "guided"}
     assert res["image_mean"] > 0
     for r in rows.values():
         assert r["agreement"]["mean_rel"] < 1e-5, r
