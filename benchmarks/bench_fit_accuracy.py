@@ -10,9 +10,11 @@ Also:
 
 * median and 95th percentile of the relative error ``|rho_fit - rho| / rho`` over the pairs and
   channels where rho is above a tenth of its median (per channel);
-* directional albedo ``a(theta_i) = int rho cos(theta_o) d omega_o`` at theta_i = 0, 30, 60,
-  75 deg (``--albedo-samples`` cosine-distributed ``wo``, the same for truth and fit: the error
-  is the quadrature's, not its noise), the largest relative error over the channels;
+* directional albedo both ways at 0, 30, 60, 75 deg: light-fixed ``a(theta_i) = int rho
+  cos(theta_o) d omega_o`` and view-fixed ``a(theta_o) = int rho cos(theta_i) d omega_i`` (what
+  a uniformly lit surface shows; the RGL films are not reciprocal, so the two differ)
+  (``--albedo-samples`` cosine-distributed varying directions, the same for truth and fit: the
+  error is the quadrature's, not its noise), the largest relative error over the channels;
 * coefficients (three channels, all pieces; the table: its 90 x 90 x 3 values) and fit seconds.
 
 Representations (columns):
@@ -110,15 +112,17 @@ def relative_error_stats(fit_rho, true_rho) -> tuple:
     return float(np.median(r)), float(np.percentile(r, 95))
 
 
-def albedo_errors(evaluate, truth_eval, n: int = 20000, seed: int = 11) -> list:
+def albedo_errors(evaluate, truth_eval, n: int = 20000, seed: int = 11, fixed: str = "light") -> list:
     """Per angle of :data:`ALBEDO_ANGLES_DEG`: the largest relative error over R, G, B of the
-    directional albedo (light at theta_i in the xz plane, views cosine-distributed; the same
-    views for both)."""
-    _, wo = cosine_pairs(n, seed)
+    directional albedo with the ``fixed`` direction ("light": light at the angle in the xz plane,
+    views cosine-distributed; "view": the view there, lights cosine-distributed; the same varying
+    directions for both)."""
+    _, wv = cosine_pairs(n, seed)
     out = []
     for a in ALBEDO_ANGLES_DEG:
         t = np.radians(a)
-        wi = np.broadcast_to(np.array([np.sin(t), 0.0, np.cos(t)]), wo.shape)
+        w0 = np.broadcast_to(np.array([np.sin(t), 0.0, np.cos(t)]), wv.shape)
+        wi, wo = (w0, wv) if fixed == "light" else (wv, w0)
         at = np.pi * np.mean(truth_eval(wi, wo), axis=0)
         af = np.pi * np.mean(evaluate(wi, wo), axis=0)
         out.append(float(np.max(np.abs(af - at) / np.maximum(at, 1e-300))))
@@ -133,7 +137,8 @@ def measure(evaluate, truth, wi, wo, truth_eval, albedo_n: int) -> dict:
     rr = relative_rmse(rho, truth, wi, wo)
     med, p95 = relative_error_stats(rho, truth)
     return {"rel_rmse": float(rr.mean()), "rel_rmse_rgb": rr.tolist(), "median_rel": med, "p95_rel": p95,
-            "albedo_err": albedo_errors(evaluate, truth_eval, albedo_n), "eval_s": eval_s}
+            "albedo_err": albedo_errors(evaluate, truth_eval, albedo_n),
+            "albedo_err_view": albedo_errors(evaluate, truth_eval, albedo_n, fixed="view"), "eval_s": eval_s}
 
 
 # --------------------------------------------------------------------------------------------
@@ -265,6 +270,12 @@ def _f(v, fmt="{:.3f}"):
     return "n/a" if v is None else fmt.format(v)
 
 
+def _albedo_cell(errs) -> str:
+    """``"1.2 % / ..."`` of albedo errors per angle (fractions); "n/a" for a row measured without
+    them (a merged older run)."""
+    return "n/a" if errs is None else " / ".join(f"{100 * a:.1f} %" for a in errs)
+
+
 def markdown(rows: list, meta: dict) -> str:
     """The results as Markdown (docs/fit_accuracy.md's generated part)."""
     L = []
@@ -312,19 +323,21 @@ def markdown(rows: list, meta: dict) -> str:
                  f"{_f(nn and nn['rel_rmse'])} | {met} |")
     L.append("")
     L.append("Median / 95th-percentile relative error where ρ > a tenth of its median; directional-albedo "
-             "error (largest over R, G, B) at θi = 0 / 30 / 60 / 75°; fit seconds.")
+             "error (largest over R, G, B) at 0 / 30 / 60 / 75°, light-fixed (∫ρ cosθo dωo at θi) and view-fixed "
+             "(∫ρ cosθi dωi at θo: what a uniformly lit surface shows); fit seconds.")
     L.append("")
-    L.append("| material | representation | median | p95 | albedo err 0° / 30° / 60° / 75° | coefficients | "
-             "fit s |")
-    L.append("| --- | --- | --- | --- | --- | --- | --- |")
+    L.append("| material | representation | median | p95 | light-fixed albedo err 0° / 30° / 60° / 75° | "
+             "view-fixed albedo err 0° / 30° / 60° / 75° | coefficients | fit s |")
+    L.append("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         for key, label in (("table", "φd-median table"), ("fit2d", "2-D 5 %"), ("fit3d", "3-D")):
             x = r.get(key)
             if x is None:
                 continue
-            alb = " / ".join(f"{100 * a:.1f} %" for a in x["albedo_err"])
+            alb = _albedo_cell(x.get("albedo_err"))
+            alv = _albedo_cell(x.get("albedo_err_view"))
             L.append(f"| {r['material']} | {label} | {100 * x['median_rel']:.1f} % | {100 * x['p95_rel']:.1f} % | "
-                     f"{alb} | {x['coefficients']} | {_f(x.get('fit_s'), '{:.1f}')} |")
+                     f"{alb} | {alv} | {x['coefficients']} | {_f(x.get('fit_s'), '{:.1f}')} |")
     return "\n".join(L) + "\n"
 
 
@@ -541,9 +554,10 @@ def _run(args) -> int:
               f"{f3['fit_s']:.1f} s)  neural {_f(r.get('neural', {}).get('rel_rmse'))}", flush=True)
         if "fit3d_before_albedo" in r:
             b = r["fit3d_before_albedo"]
-            print(f"  before the albedo policy: 3-D {b['rel_rmse']:.3f}, albedo err "
-                  + " / ".join(f"{100 * a:.1f} %" for a in b["albedo_err"]) + "; after: "
-                  + " / ".join(f"{100 * a:.1f} %" for a in f3["albedo_err"]), flush=True)
+            print(f"  before the albedo policy: 3-D {b['rel_rmse']:.3f}, albedo err light-fixed "
+                  + _albedo_cell(b["albedo_err"]) + ", view-fixed " + _albedo_cell(b["albedo_err_view"])
+                  + "; after: light-fixed " + _albedo_cell(f3["albedo_err"]) + ", view-fixed "
+                  + _albedo_cell(f3["albedo_err_view"]), flush=True)
         rows.append(r)
     meta = {"pairs": args.pairs, "seed": args.seed, "fit3d_options": _jsonable(opts),
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "wall_s": time.perf_counter() - t0}

@@ -20,6 +20,7 @@ import pytest
 from fit.rational.albedo3d import (
     albedo_angles,
     albedo_errors,
+    albedo_errors_both,
     albedo_quadrature,
     cosine_views,
 )
@@ -46,6 +47,24 @@ def test_lambertian_albedo_at_every_incidence():
     # a black channel: relative to 5 % of the brightest channel, not to 0
     r = albedo_errors(lambert([0.8, 0.5, 0.004]), lambert([0.8, 0.5, 0.0]), [0.0, 60.0])
     assert np.allclose(r["error"][:, 2], 0.004 / (0.05 * 0.8), rtol=1e-3)
+
+
+def test_light_and_view_fixed_albedo_of_a_non_reciprocal_brdf():
+    """rho = 1.5 cos(theta_i) a / pi: light-fixed albedo 1.5 a cos(theta_i), view-fixed a at every
+    view (int 1.5 cos^2 d omega / pi = 1): the two kinds are told apart, with the light towards wi."""
+    a = np.array([0.8, 0.5, 0.2])
+
+    def rho(wi, wo):
+        return 1.5 * np.asarray(wi)[..., 2:3] * a / np.pi
+
+    angles = [0.0, 30.0, 60.0, 75.0]
+    r = albedo_errors_both(rho, lambert(a), angles)
+    np.testing.assert_allclose(r["view"]["fit"], [a] * 4, rtol=1e-3)
+    np.testing.assert_allclose(r["light"]["fit"], 1.5 * np.cos(np.radians(angles))[:, None] * a, rtol=1e-3)
+    assert r["view"]["error"].max() < 1e-3
+    np.testing.assert_allclose(r["light"]["signed"][:, 0], 1.5 * np.cos(np.radians(angles)) - 1.0, atol=1e-3)
+    with pytest.raises(ValueError):
+        albedo_quadrature([0.0], 64, fixed="both")
 
 
 def lobe_brdf(wi, wo):
@@ -124,12 +143,24 @@ def test_policy_lowers_the_albedo_error_and_keeps_the_bound(corrected):
 
 def test_policy_records_what_stays_outside(corrected):
     rec = corrected.model.fit_info["albedo"]
-    err = np.array(rec["error"])
-    listed = {(o["theta_i_deg"], o["channel"]) for o in rec["outside"]}
-    expect = {(a, "RGB"[c]) for i, a in enumerate(rec["angles_deg"]) for c in range(3) if err[i, c] > TOL}
+    assert rec["fixed"] == ["light", "view"]
+    listed = {(o["fixed"], o["theta_deg"], o["channel"]) for o in rec["outside"]}
+    expect = set()
+    for k in ("light", "view"):
+        err = np.array(rec[k]["error"])
+        assert err.shape == (len(rec["angles_deg"]), 3) and np.array(rec[k]["error_before"]).shape == err.shape
+        assert rec[k]["within"] == bool(np.all(err <= TOL))
+        expect |= {(k, a, "RGB"[c]) for i, a in enumerate(rec["angles_deg"]) for c in range(3) if err[i, c] > TOL}
     assert listed == expect
     assert rec["within"] == (not expect)
-    assert rec["max_error"] == pytest.approx(err.max())
+    both = np.maximum(np.array(rec["light"]["error"]), np.array(rec["view"]["error"]))
+    np.testing.assert_array_equal(np.array(rec["error"]), both)
+    assert rec["max_error"] == pytest.approx(both.max())
+    # a conflict is an (angle, channel) outside either way with the two errors of opposite sign
+    for c in rec["conflicts"]:
+        assert c["light_signed_error"] * c["view_signed_error"] < 0
+        assert max(abs(c["light_signed_error"]), abs(c["view_signed_error"])) > TOL
+    assert isinstance(rec["summary"], str) and ("within" in rec["summary"]) == rec["within"]
     assert rec["time_s"] >= 0 and rec["rounds"] >= 1
     import json
 
@@ -156,7 +187,8 @@ def test_a_correction_that_costs_too_much_is_put_back_and_the_miss_recorded():
             np.testing.assert_array_equal(f.num_coef, c)
     err = np.array(rec["error"])
     np.testing.assert_array_equal(err, np.array(rec["error_before"]))
-    assert not rec["within"] and len(rec["outside"]) == int(np.sum(err > TOL)) > 0
+    n_out = sum(int(np.sum(np.array(rec[k]["error"]) > TOL)) for k in ("light", "view"))
+    assert not rec["within"] and len(rec["outside"]) == n_out > 0
     assert res.model.fit_info["albedo"] is rec
 
 
@@ -187,3 +219,48 @@ def test_the_fit_wide_cost_limit_binds_where_the_channel_limit_would_not():
     wide = albedo_policy(Synthetic(), fit_rgl(Synthetic(), albedo=False, **FIT), tol=TOL, rmse_growth=10.0,
                          total_growth=10.0)
     assert wide["refitted"] and wide["max_error"] < rec["max_error"]
+
+
+class NonReciprocal(Synthetic):
+    """A non-reciprocal truth whose light-fixed albedo a given model has right and whose
+    view-fixed albedo it has wrong: the model plus ``s base (cos theta_o - 2/3)``. That term's
+    light-fixed integral is 0 at every incidence (``int (cos theta_o - 2/3) cos theta_o d omega_o
+    = 0``), its view-fixed one ``s base pi (cos theta_o - 2/3)`` (-5 ... +5 % of the albedo at 0
+    ... 80 deg with ``s = 0.1``)."""
+
+    BASE = np.array([0.08, 0.12, 0.2])
+
+    def __init__(self, model, s: float = 0.1):
+        self.model, self.s = model, s
+
+    def evaluate(self, wi, wo):
+        wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
+        above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        extra = self.s * self.BASE * (wo[..., 2:3] - 2.0 / 3.0)
+        return np.where(above[..., None], evaluate_directions(self.model, wi, wo) + extra, 0.0)
+
+
+def test_a_view_fixed_miss_is_detected_and_corrected():
+    """The fit's light-fixed albedo is right (0 error up to the quadrature's) and its view-fixed
+    one 5 % off at 80 deg: a light-fixed check alone sees nothing; the policy, checking both,
+    detects the miss and brings both within the tolerance, within the data bound."""
+    import copy
+
+    from fit.rational.albedo3d import albedo_policy
+
+    res = fit_rgl(Synthetic(), albedo=False, **FIT)
+    truth = NonReciprocal(copy.deepcopy(res.model))
+    light_only = albedo_policy(truth, copy.deepcopy(res), tol=TOL, fixed=("light",))
+    assert light_only["within"] and not light_only["refitted"] and light_only["max_error"] < 1e-3
+    rec = albedo_policy(truth, res, tol=TOL)
+    before = {k: np.array(rec[k]["error_before"]) for k in ("light", "view")}
+    assert before["light"].max() < 1e-3 and before["view"].max() > 3 * TOL, (before["light"].max(),
+                                                                             before["view"].max())
+    assert rec["refitted"] and rec["within"], rec["summary"]
+    assert rec["light"]["max_error"] <= TOL and rec["view"]["max_error"] <= TOL
+    # measured on a finer quadrature than the policy's own
+    fine = albedo_errors_both(lambda a, b: evaluate_directions(res.model, a, b), truth.evaluate, rec["angles_deg"],
+                              n=128 ** 2)
+    assert fine["view"]["error"].max() < 0.5 * before["view"].max() and fine["light"]["error"].max() < 2 * TOL
+    for r in res.records:
+        assert r["valid"] and r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9)

@@ -1,9 +1,11 @@
-"""Directional albedo of 3-D fits: its measurement (:func:`albedo_quadrature`,
-:func:`albedo_errors`: the same fixed half-vector quadrature for the fit and the truth, a relative
-error per channel with a 5 % channel floor) and the fits' albedo policy (:func:`albedo_policy`,
+"""Directional albedo of 3-D fits, both ways: light-fixed ``int rho(wi, wo) cos(theta_o) d wo`` and
+view-fixed ``int rho(wi, wo) cos(theta_i) d wi`` (they differ for non-reciprocal data such as the
+RGL films). Its measurement (:func:`albedo_quadrature`, :func:`albedo_errors`,
+:func:`albedo_errors_both`: the same fixed half-vector quadrature for the fit and the truth, a
+relative error per channel with a 5 % channel floor) and the fits' albedo policy (:func:`albedo_policy`,
 applied last by :func:`fit.rational.rgl3d.fit_rgl` and :func:`fit.rational.select3d.fit_rgl_select`
-unless ``albedo=False``: a channel outside ``albedo_tol`` refitted by its second stage with the
-albedo of every angle in the objective, the data intervals unchanged, kept only without a spike
+unless ``albedo=False``: a channel outside ``albedo_tol`` either way refitted by its second stage
+with the albedo of every angle, both ways, in the objective, the data intervals unchanged, kept only without a spike
 and within the cost limits; budgets are counts; what stays outside is recorded).
 
 The specification (quadrature, rule, guards, budget, the record's keys, measurements) is
@@ -26,20 +28,22 @@ ANGLES_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0)
 DEFAULT_ALBEDO_TOL = 0.05
 DEFAULT_VIEWS = 9216
 FLOOR_FRAC = 0.05
+FIXED = ("light", "view")          # the two directional albedos: light fixed (views vary), view fixed (lights vary)
 DEFAULT_RMSE_GROWTH = 0.50         # a correction may raise a channel's relative RMSE by at most this fraction ...
 DEFAULT_TOTAL_GROWTH = 0.15        # ... and the fit's (the mean over R, G, B) by at most this one
 DEFAULT_SPIKE_FACTOR = 4.0         # a refitted function may move at most this many times T from the old one
 DEFAULT_MAX_REFITS = 27            # channel corrections (a channel's pieces refitted at one weight) at most
 WEIGHTS = (0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0)   # lam, rounds while outside
-RULE = ("directional albedo sum_j w_j rho(wi, wo_j) on a fixed half-vector quadrature (the same points for fit and "
-        "truth) at each angle; relative error per channel |a_fit - a_true| / max(a_true, 0.05 * max over channels of "
+RULE = ("directional albedo both ways, light-fixed sum_j w_j rho(wi, wo_j) and view-fixed sum_j w_j rho(wi_j, wo), "
+        "on a fixed half-vector quadrature (the same points for fit and truth) at each angle; relative error per channel |a_fit - a_true| / max(a_true, 0.05 * max over channels of "
         "a_true); where outside albedo_tol, every piece of that channel is refitted by its second stage with the "
-        "squared relative albedo errors of every angle added (weight lam = 0.01 ... 100 x the piece's relative "
+        "squared relative albedo errors of every angle of both kinds added (weight lam = 0.01 ... 100 x the piece's relative "
         "metric, rounds while outside), data intervals unchanged (the stated bound does not grow); kept only where "
         "the channel's largest albedo error drops, its relative RMSE on 100,000 check pairs grows by at most "
         "rmse_growth (default 50 %), the fit's (the mean over R, G, B) by at most total_growth (default 15 %), and "
         "no refitted function moves more than 4 T from the pre-policy one at 200,000 fresh points; what stays "
-        "outside is listed in 'outside'")
+        "outside is listed in 'outside', and where light- and view-fixed are off in opposite directions in "
+        "'conflicts'")
 
 
 def albedo_angles(theta_measured_deg=None, angles=ANGLES_DEG) -> list:
@@ -56,10 +60,14 @@ def cosine_views(n: int, seed: int = 0) -> np.ndarray:
     return cosine_directions(np.random.default_rng(seed), n)
 
 
-def albedo_quadrature(angles_deg, n: int = DEFAULT_VIEWS) -> tuple:
+def albedo_quadrature(angles_deg, n: int = DEFAULT_VIEWS, fixed: str = "light") -> tuple:
     """``(wi (A n, 3), wo (A n, 3), weights (A, n))``: the fixed quadrature of the directional
-    albedo, ``a_c(theta_i) = sum_j weights_j rho_c(wi, wo_j)``, per angle (light in the xz
-    plane). The views are reflections of half vectors ``h`` on a ``k x k`` grid (``k =
+    albedo per angle, the fixed direction in the xz plane. ``fixed="light"``: the light-fixed
+    albedo ``a_c(theta_i) = sum_j weights_j rho_c(wi, wo_j)`` (wi at theta_i, the views vary);
+    ``fixed="view"``: the view-fixed albedo ``a_c(theta_o) = sum_j weights_j rho_c(wi_j, wo)``
+    (wo at theta_o, what a uniformly lit surface shows; the same points with the two directions
+    swapped: the rule integrates ``f(w_fixed, w) cos(theta) d omega`` for any ``f``). The varying
+    directions are reflections of half vectors ``h`` on a ``k x k`` grid (``k =
     round(sqrt(n))``): ``theta_h = (pi / 2) s^2`` at midpoints ``s`` (dense at the specular peak:
     the glossy films' lobes and the 3-D fits' peak pieces, theta_h <= 0.05 rad, hold ~ 1/6 of the
     rows) and ``phi_h`` on the half circle ``[0, pi]`` (exact for functions symmetric about the
@@ -67,6 +75,8 @@ def albedo_quadrature(angles_deg, n: int = DEFAULT_VIEWS) -> tuple:
     ``2 cos(theta_o) 4 (wi . h) sin(theta_h) d theta_h d phi_h`` (``d omega_o = 4 (wi . h) d
     omega_h``), 0 where ``wo`` is not above the horizon (docs/fitting.md: a grid of views
     uniform in ``(theta_o, phi_o)`` was too coarse in the glossy lobes)."""
+    if fixed not in FIXED:
+        raise ValueError(f"fixed={fixed!r}: expected one of {FIXED}")
     k = max(round(float(n) ** 0.5), 2)
     m = (np.arange(k) + 0.5) / k
     s, v = np.meshgrid(m, m, indexing="ij")
@@ -84,7 +94,8 @@ def albedo_quadrature(angles_deg, n: int = DEFAULT_VIEWS) -> tuple:
         wo[~ok] = [0.0, 0.0, 1.0]                           # weight 0: any direction above the horizon
         WI.append(np.broadcast_to(wi, wo.shape))
         WO.append(wo)
-    return np.concatenate(WI), np.concatenate(WO), np.array(W)
+    WI, WO = np.concatenate(WI), np.concatenate(WO)
+    return (WI, WO, np.array(W)) if fixed == "light" else (WO, WI, np.array(W))
 
 
 def albedo_from_values(rho, weights) -> np.ndarray:
@@ -102,15 +113,25 @@ def relative_errors(a_fit, a_true, floor_frac: float = FLOOR_FRAC) -> np.ndarray
 
 
 def albedo_errors(fit_eval, truth_eval, angles_deg=ANGLES_DEG, n: int = DEFAULT_VIEWS,
-                  floor_frac: float = FLOOR_FRAC) -> dict:
+                  floor_frac: float = FLOOR_FRAC, fixed: str = "light") -> dict:
     """Directional albedo of ``fit_eval(wi, wo)`` against ``truth_eval(wi, wo)`` (both rho
-    ``(N, 3)``) at ``angles_deg`` on the quadrature of ``n`` points per angle (docs/fitting.md):
-    ``{"angles_deg", "truth" (A, 3), "fit" (A, 3), "error" (A, 3)}``."""
-    wi, wo, qw = albedo_quadrature(angles_deg, n)
+    ``(N, 3)``, wi towards the light) at ``angles_deg`` of the ``fixed`` direction ("light" or
+    "view", :func:`albedo_quadrature`) on the quadrature of ``n`` points per angle
+    (docs/fitting.md): ``{"angles_deg", "fixed", "truth" (A, 3), "fit" (A, 3), "error" (A, 3),
+    "signed" (A, 3)}`` (``signed``: the error with the sign of ``a_fit - a_true``)."""
+    wi, wo, qw = albedo_quadrature(angles_deg, n, fixed)
     at = albedo_from_values(np.maximum(np.asarray(truth_eval(wi, wo), np.float64), 0.0), qw)
     af = albedo_from_values(fit_eval(wi, wo), qw)
-    return {"angles_deg": [float(a) for a in angles_deg], "truth": at, "fit": af,
-            "error": relative_errors(af, at, floor_frac)}
+    err = relative_errors(af, at, floor_frac)
+    return {"angles_deg": [float(a) for a in angles_deg], "fixed": fixed, "truth": at, "fit": af,
+            "error": err, "signed": np.sign(af - at) * err}
+
+
+def albedo_errors_both(fit_eval, truth_eval, angles_deg=ANGLES_DEG, n: int = DEFAULT_VIEWS,
+                       floor_frac: float = FLOOR_FRAC) -> dict:
+    """``{"light": ..., "view": ...}``: :func:`albedo_errors` with the light fixed and with the
+    view fixed (the two differ for a non-reciprocal BRDF such as the RGL measurements)."""
+    return {k: albedo_errors(fit_eval, truth_eval, angles_deg, n, floor_frac, k) for k in FIXED}
 
 
 def _pieces(model) -> list:
@@ -135,8 +156,9 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                   rmse_growth: float = DEFAULT_RMSE_GROWTH, total_growth: float = DEFAULT_TOTAL_GROWTH,
                   n_check: int = 100_000,
                   spike_factor: float = DEFAULT_SPIKE_FACTOR, n_spike: int = 200_000,
-                  max_refits: int = DEFAULT_MAX_REFITS, ceiling=None) -> dict:
-    """Measure and, where it is outside ``tol``, correct the directional albedo of a
+                  max_refits: int = DEFAULT_MAX_REFITS, ceiling=None, fixed=FIXED) -> dict:
+    """Measure and, where it is outside ``tol``, correct the directional albedo (both ways:
+    ``fixed``, the kinds of :func:`albedo_quadrature`, light-fixed and view-fixed by default) of a
     :class:`fit.rational.result3d.Fit3D` made by :func:`fit.rational.rgl3d.fit_rgl` (its data in
     ``res.data``, :class:`fit.rational.result3d.FitData3D`) in place (docs/fitting.md); returns
     the record, also written to ``res.model.fit_info["albedo"]`` and ``res.albedo``. Budgets (counts): the rounds of
@@ -154,12 +176,15 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
     fi = model.fit_info
     angles = albedo_angles(np.degrees(float(brdf.theta_i_max)))
     A = len(angles)
-    wi, wo, qw = albedo_quadrature(angles, n_views)
+    kinds = tuple(fixed)
+    quads = [albedo_quadrature(angles, n_views, k) for k in kinds]     # group g: kind g // A, angle g % A
+    wi, wo, qw = (np.concatenate([q[j] for q in quads]) for j in range(3))
+    G = len(qw)
     Xa = half_diff_3d(wi, wo)
-    nv = len(wo) // A
+    nv = len(wo) // G
     rt = np.maximum(np.asarray(brdf.evaluate(wi, wo), np.float64), 0.0)
     at = albedo_from_values(rt, qw)
-    den = np.maximum(at, np.maximum(floor_frac * at.max(axis=1, keepdims=True), 1e-12))     # (A, 3)
+    den = np.maximum(at, np.maximum(floor_frac * at.max(axis=1, keepdims=True), 1e-12))     # (G, 3)
 
     def fit_values():
         return np.asarray(model(Xa), np.float64)
@@ -167,9 +192,9 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
     rf = fit_values()
     err0 = relative_errors(albedo_from_values(rf, qw), at, floor_frac)
     err = err0.copy()
-    rec = {"rule": RULE, "tol": float(tol), "angles_deg": angles, "quadrature_points": int(len(wo) // A),
-           "floor_frac": float(floor_frac), "albedo_truth": at.tolist(), "error_before": err0.tolist(),
-           "rounds": 0, "refitted": [], "stopped": None, "max_refits": int(max_refits), "channel_refits": 0}
+    rec = {"rule": RULE, "tol": float(tol), "angles_deg": angles, "fixed": list(kinds), "quadrature_points": int(nv),
+           "floor_frac": float(floor_frac), "rounds": 0, "refitted": [], "stopped": None,
+           "max_refits": int(max_refits), "channel_refits": 0}
     data = getattr(res, "data", None)
     if np.any(err0 > tol) and (data is None or data.objective is None):
         rec["stopped"] = "no second stage to correct with (one-stage fit or no data)"
@@ -256,7 +281,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     t2 = np.log(rt[ina, c] + offset)
                     groups = []
                     angle_of, qj = ina // nv, qw.reshape(-1)[ina]
-                    for i in range(A):       # every angle: the ones within must not drift out
+                    for i in range(G):       # every angle of both kinds: the ones within must not drift out
                         idx = np.flatnonzero(angle_of == i)
                         if len(idx) == 0:
                             continue
@@ -297,7 +322,8 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                            "vouched_range": [float(np.maximum(y - stated * scale, 0.0).min()),
                                              float((y + stated * scale).max())]}
                     stage = dict(r0.get("stage", {}))
-                    stage["albedo"] = {"weight": float(lam), "outside_deg": [angles[i] for i in bad],
+                    stage["albedo"] = {"weight": float(lam),
+                                       "outside": [[kinds[i // A], angles[i % A]] for i in bad],
                                        "qp_solves": int(info.get("qp", 0))}
                     upd["stage"] = stage
                     piece.functions[c] = f2
@@ -329,13 +355,68 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                 break
         rec["channel_rmse"] = rmse.tolist()
         _restate(res)
-    out = [{"theta_i_deg": angles[i], "channel": "RGB"[c], "error": float(err[i, c])}
-           for i in range(A) for c in range(3) if err[i, c] > tol]
-    rec.update(error=err.tolist(), within=not out, outside=out, max_error=float(err.max()),
-               max_error_before=float(err0.max()), time_s=time.perf_counter() - t0)
+    af = albedo_from_values(fit_values(), qw)
+    rec.update(_by_kind(kinds, angles, at, af, err0, err, tol))
+    rec.update(max_error=float(err.max()), max_error_before=float(err0.max()), time_s=time.perf_counter() - t0)
+    rec["summary"] = summary(rec)
     fi["albedo"] = rec
     res.albedo = rec
     return rec
+
+
+def _by_kind(kinds, angles, at, af, err0, err, tol) -> dict:
+    """The record's per-kind part: for each kind (``"light"``, ``"view"``) the truth's and the
+    fit's albedo and the errors before and after ``(A, 3)``; ``error``/``error_before``: the
+    larger of the kinds per angle and channel; ``outside``: every (kind, angle, channel) outside
+    ``tol`` with its error and the other kind's signed error there; ``conflicts``: the (angle,
+    channel) outside where the light- and view-fixed albedos are off in opposite directions (the
+    fit would have to raise one integral and lower the other); ``within``."""
+    K, A = len(kinds), len(angles)
+    sign = np.sign(af - at)
+    out_rec, outside, conflicts = {}, [], []
+    for j, k in enumerate(kinds):
+        g = slice(j * A, (j + 1) * A)
+        out_rec[k] = {"truth": at[g].tolist(), "fit": af[g].tolist(), "error_before": err0[g].tolist(),
+                      "error": err[g].tolist(), "signed_error": (sign[g] * err[g]).tolist(),
+                      "max_error": float(err[g].max()), "within": bool(np.all(err[g] <= tol))}
+    for i in range(A):
+        for c in range(3):
+            e = [float(err[j * A + i, c]) for j in range(K)]
+            s = [float(sign[j * A + i, c] * err[j * A + i, c]) for j in range(K)]
+            for j, k in enumerate(kinds):
+                if e[j] > tol:
+                    other = {kk: s[jj] for jj, kk in enumerate(kinds) if jj != j}
+                    outside.append({"fixed": k, "theta_deg": angles[i], "channel": "RGB"[c], "error": e[j],
+                                    "signed_error": s[j], "other_signed_error": other})
+            if K == 2 and max(e) > tol and s[0] * s[1] < 0:
+                conflicts.append({"theta_deg": angles[i], "channel": "RGB"[c], "light_signed_error": s[0],
+                                  "view_signed_error": s[1]})
+    merged = np.max(err.reshape(K, A, 3), axis=0)
+    merged0 = np.max(err0.reshape(K, A, 3), axis=0)
+    out_rec.update(error=merged.tolist(), error_before=merged0.tolist(), outside=outside, conflicts=conflicts,
+                   within=not outside)
+    return out_rec
+
+
+def summary(rec) -> str:
+    """One line on a policy record: within, or the largest miss of each kind, and conflicts."""
+    tol = 100 * rec["tol"]
+    if rec["within"]:
+        return f"directional albedo within {tol:g} % ({' and '.join(k + '-fixed' for k in rec['fixed'])})"
+    parts = []
+    for k in rec["fixed"]:
+        misses = [o for o in rec["outside"] if o["fixed"] == k]
+        if misses:
+            w = max(misses, key=lambda o: o["error"])
+            parts.append(f"{k}-fixed off by up to {100 * w['error']:.3g} % ({w['theta_deg']:g} deg "
+                         f"{w['channel']}, {len(misses)} outside)")
+        else:
+            parts.append(f"{k}-fixed within {tol:g} %")
+    line = "directional albedo: " + "; ".join(parts)
+    if rec["conflicts"]:
+        line += (f"; light- and view-fixed off in opposite directions at {len(rec['conflicts'])} "
+                 "(angle, channel)")
+    return line
 
 
 def _restate(res) -> None:
