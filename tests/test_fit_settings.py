@@ -36,7 +36,8 @@ INVALID = {
                     ("piece_degrees", [(4, 2)] * 3), ("noise_frac", 0.0), ("grazing_cos", 2.0),
                     ("relax", float("nan")), ("ladder_steps", 0), ("time_limit", 0.0), ("grid", (0, 1, 1)),
                     ("n_random", -5), ("theta_fit_deg", 90.0), ("verify", 1.5), ("albedo", "yes"),
-                    ("albedo_tol", 0.0), ("albedo_refits", -1), ("select_share", 0.0), ("max_variants", -1)],
+                    ("albedo_tol", 0.0), ("albedo_refits", -1), ("select_share", 0.0), ("max_variants", -1),
+                    ("objective", "log"), ("relative_floor", -0.5)],
 }
 CHANGES = {BRDFFitSettings: {"tol": 0.1, "max_degree": 8, "core_theta_d_deg": 60.0, "band_partial": None},
            Fit3DSettings: {"tol": 0.01, "theta_h_edges": [0.15], "piece_degrees": [(4, 2), (5, 2)],

@@ -17,7 +17,7 @@ from .fitter import IntervalRationalFitter
 from .model import PiecewiseRationalModel, RationalModel, Variable
 from .refine import refine
 from .result3d import INTERVALS, Fit3D
-from .samples3d import grazing_weight, noise_levels
+from .samples3d import grazing_weight, noise_levels, objective_weights
 from .secant import log_intervals, secant_weights
 from .settings import DEFAULT_LADDER_STEPS, Fit3DSettings
 
@@ -202,11 +202,13 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
             Xo, ro, wo = objective
             so = (Xo[:, 0] >= a - 1e-12) & (Xo[:, 0] <= b + 1e-12) & (wo > 0)
             Uo = np.stack([np.sqrt(Xo[so, 0]), Xo[so, 1], Xo[so, 2]], axis=1)
+            floor = np.maximum(noise, s.relative_floor * np.median(rho, axis=0))
+            wc = objective_weights(s.objective, Xo[so], wo[so], ro[so], floor, channel_floor)   # (M, 3)
         funcs, infos = [], []
         for c in range(3):
             scale = np.maximum(np.maximum(rho[sel, c], noise[c]), channel_floor * rho[sel].max(axis=1)) * g[sel]
             if objective is not None:
-                obj = (Uo, np.maximum(ro[so, c], 0.0), wo[so])
+                obj = (Uo, np.maximum(ro[so, c], 0.0), wc[:, c])
             start = min(r["stage"].get("minimax_met", r["tolerance_met"]) for r in infos) / 1.6 if infos else None
             f = None
             if (k, c) in keep and keep[(k, c)][0] is not None:
@@ -234,7 +236,8 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     valid = all(r["valid"] for r in records)
     elapsed = time.perf_counter() - t0
     fit_info = {"kind": "3d", "tolerance": tol_all, "tolerance_kind": INTERVALS, "grazing_cos": grazing_cos,
-                "channel_floor": channel_floor,
+                "channel_floor": channel_floor, "objective": s.objective if objective is not None else None,
+                "relative_floor": s.relative_floor,
                 "start_tolerance": tol, "noise": noise.tolist(), "noise_frac": noise_frac,
                 "theta_max_deg": float(np.degrees(tm)), "n_points": len(X), "time_s": elapsed,
                 "fitter": "fit.rational.fit3d (interval LP, constraint generation, fixed degrees)",

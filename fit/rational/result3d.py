@@ -1,7 +1,7 @@
 """What a 3-D fit is made of and what it records: :class:`Fit3D` (the result, everything a fit
 finds in its attributes), :class:`FitData3D` (what a refit of it needs), :data:`INTERVALS` (the
 interval policy, written into every record) and :func:`domain_record` (the coefficient file's
-statement of what is guaranteed on the whole measured domain). The method is in
+statement of what is proved on the whole measured domain). The method is in
 docs/fitting.md ("The 3-D method").
 """
 from __future__ import annotations
@@ -58,8 +58,10 @@ class Fit3D:
     ``verify_points_added``, ``verify_s`` (s); the albedo policy (:mod:`fit.rational.albedo3d`):
     ``albedo`` (its record, also ``model.fit_info["albedo"]``), ``model_before_albedo`` (a copy
     of the model it started from); the layout selection (:mod:`fit.rational.select3d`):
-    ``validation_rmse``, ``variant`` (the index of the layout chosen), ``variants`` (what each
-    layout achieved)."""
+    ``validation_rmse``, ``validation_score`` (the held-out criterion of its ``objective``),
+    ``variant`` (the index of the layout chosen), ``variants`` (what each layout achieved); the
+    proof between the grid nodes (setting ``prove_bound``, :mod:`fit.rational.proved_bound`):
+    ``bounds``."""
 
     model: object
     records: list
@@ -80,12 +82,15 @@ class Fit3D:
     albedo: dict | None = None
     model_before_albedo: object = None
     validation_rmse: float | None = None
+    validation_score: float | None = None
     variant: int | None = None
     variants: list | None = None
+    bounds: list | None = None                     # fit.rational.proved_bound.ProvedBound per piece, channel
 
     #: the attributes :attr:`info` lists (those not None)
     _FOUND = ("edges", "verify_round", "verify_max_ratio", "verified", "verify_points_added", "verify_s",
-              "albedo", "model_before_albedo", "validation_rmse", "variant", "variants")
+              "albedo", "model_before_albedo", "validation_rmse", "validation_score", "variant",
+              "variants")
 
     @property
     def info(self) -> MappingProxyType:
@@ -104,36 +109,51 @@ class Fit3D:
 
 
 def domain_record(fit_info: dict) -> dict:
-    """``fit_info["domain"]``: what the fit guarantees on the whole measured domain (theta_i,
-    theta_o <= ``theta_max_deg``), and why not more, from its own record: the guarantee there, or
-    the reason it cannot be, per material, in the file and the report.
+    """``fit_info["domain"]``: what is proved on the whole measured domain (theta_i, theta_o <=
+    ``theta_max_deg``), and why not more, from the fit's own record, per material, in the file
+    and the report.
 
     The bound is *proved* at every data point (an LP certificate of each point, exactly
     re-measured in float64) and Q > 0 on every piece's box (exact Bernstein coefficients); the
-    fit is bounded by its ``vouched_range`` everywhere. Between the data points it is only
-    *checked*: at ``verify_points`` fresh points, the largest error over the bound is
-    ``verify_max_ratio``. A proof there would need bounds on the derivatives of the measurement's
-    interpolant and of the fit on every cell; the RGL format's interpolant (bilinear in warped
-    coordinates, warps built from the data) has none that is stated, and a Lipschitz bound of the
-    fit alone, at a lobe's peak, is orders of magnitude wider than the bound itself. ``proved``
-    is therefore False for every fit, and ``reason`` says so with the material's numbers."""
+    fit is bounded by its ``vouched_range`` everywhere. Between the data points: at
+    ``verify_points`` fresh points, the largest error over the bound is ``verify_max_ratio``
+    (verified, not proved); where ``fit_info["bound"]`` holds the records of
+    :func:`fit.rational.proved_bound.prove_fit3d`, the error against the measurement trilinear
+    between the nodes of a grid (:data:`fit.rational.proved_bound.UNIT_3D`) is proved on every
+    cell of it: ``proved`` is True when every piece's and channel's proved bound is within its
+    stated tolerance, ``proved_bound`` the largest (None: Q inconclusive somewhere),
+    ``proved_fraction`` the smallest fraction of a piece's domain within its tolerance. Without
+    those records ``proved`` is False (not proved between the data points)."""
     n = fit_info.get("n_points")
     tm = fit_info.get("theta_max_deg")
     ratio = fit_info.get("verify_max_ratio")
     m = fit_info.get("verify_points")
     if ratio is None:
-        checked = "not checked between the data points (no verification)"
+        checked = "not verified between the data points (no verification)"
     elif ratio <= 1.0:
-        checked = (f"checked, not proved, between them: within the bound at all {m} fresh points "
+        checked = (f"verified, not proved, between them: within the bound at all {m} fresh points "
                    f"(largest error {ratio:.3g} x the bound)")
     else:
         checked = (f"not within it between them: at {m} fresh points the largest error is "
                    f"{ratio:.3g} x the bound")
-    rec = {"proved": False, "proved_at": "data points", "n_points": n, "theta_max_deg": tm,
-           "fresh_points": m, "fresh_max_ratio": ratio,
+    bounds = fit_info.get("bound") or []
+    proved_vals = [b["proved"] for b in bounds]
+    proved_max = None if any(p is None for p in proved_vals) else max(proved_vals, default=None)
+    proved = bool(bounds) and proved_max is not None and all(b["proved"] <= b["tolerance"] for b in bounds)
+    if not bounds:
+        between = "No proof between the data points (prove_bound off)"
+    elif proved_max is None:
+        between = "Between the grid nodes: not proved (Q's Bernstein coefficients inconclusive on a cell)"
+    else:
+        frac = min(b["proved_fraction"] for b in bounds)
+        between = (f"Between the nodes of the measurement's grid (trilinear): error proved <= {proved_max:.3g} "
+                   f"(unit of the bound records), {'within' if proved else 'NOT within'} the stated tolerance "
+                   f"everywhere; within it on at least {100 * frac:.3g} % of each piece")
+    rec = {"proved": proved, "proved_at": "grid cells" if bounds else "data points", "n_points": n,
+           "theta_max_deg": tm, "fresh_points": m, "fresh_max_ratio": ratio,
+           "proved_bound": proved_max if bounds else None,
+           "proved_fraction": min((b["proved_fraction"] for b in bounds), default=None),
            "reason": (f"bound proved at the {n} data points (theta_i, theta_o <= {tm:.4g} deg) and Q > 0 "
-                      f"on every piece; {checked}. No proof between data points: the measurement's "
-                      "interpolant states no derivative bound, and the fit's own, at the peak, is far "
-                      "wider than the bound")}
+                      f"on every piece; {checked}. {between}")}
     fit_info["domain"] = rec
     return rec

@@ -16,6 +16,7 @@ from ..progress import report
 from .albedo3d import albedo_policy
 from .ceiling import Ceiling
 from .ladder3d import fit_samples
+from .proved_bound import record_fit3d
 from .result3d import FitData3D, Fit3D, domain_record
 from .samples3d import objective_points, sample_rgl
 from .settings import DEFAULT_ALBEDO_REFITS, DEFAULT_ALBEDO_RMSE_GROWTH, DEFAULT_ALBEDO_TOTAL_GROWTH, Fit3DSettings
@@ -48,7 +49,10 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     the whole fit (``albedo_time``: an extra one of the albedo step), recorded as
     ``fit_info["stopped"] = "time"`` when it is passed. ``progress(stage, done, total)``
     (:mod:`fit.progress`): stages ``"sampling the file"``, ``"3-D fit"`` (functions done),
-    ``"verification"`` (rounds), ``"3-D refit"``, ``"albedo policy"``."""
+    ``"verification"`` (rounds), ``"3-D refit"``, ``"albedo policy"``, ``"proving the bound"``.
+    ``prove_bound`` (default off): last, the error between the grid nodes of the measurement is
+    proved per piece and channel (:func:`fit.rational.proved_bound.record_fit3d`: ``bounds``,
+    ``fit_info["bound"]``, and ``fit_info["domain"]`` says what is proved)."""
     s = Fit3DSettings.resolve(settings, **params)
     t0 = time.perf_counter()
     if ceiling is None:
@@ -61,7 +65,7 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     objective = None
     if s.n_objective and s.relax > 1.0:
         edges = [0.0] + sorted(float(e) for e in (s.theta_h_edges or [])) + [tm]
-        Xo, wo = objective_points(tm, edges, s.n_objective)
+        Xo, wo = objective_points(tm, edges, s.n_objective, objective=s.objective)
         wi, wo_dir = half_diff_to_directions(Xo[:, 0], 0.0, Xo[:, 1], Xo[:, 2])
         ro = np.maximum(np.asarray(brdf.evaluate(wi, wo_dir), np.float64), 0.0)
         objective = (Xo, ro, wo)
@@ -75,6 +79,10 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
                      refits=s.albedo_refits, total_growth=s.albedo_total_growth)
         report(progress, "albedo policy", 1, 1)
     ceiling.record(res.model.fit_info)
+    if s.prove_bound:       # the error between the grid nodes, proved (fit.rational.proved_bound)
+        report(progress, "proving the bound", 0, 1)
+        record_fit3d(res, brdf)
+        report(progress, "proving the bound", 1, 1)
     domain_record(res.model.fit_info)
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s

@@ -40,10 +40,17 @@ def sample_grid(theta_max: float, grid=DEFAULT_GRID, n_random: int = DEFAULT_RAN
     return X[keep]
 
 
-def objective_points(theta_max: float, edges, n_per_piece: int = 4000, seed: int = 21):
-    """``(X (M, 3), w (M,))``: the points and weights of the second stage's objective, the
-    benchmark's metric (squared error of ``rho cos theta_i cos theta_o`` over pairs of
-    independent cosine-distributed directions) as an importance-weighted sum. Per theta_h piece
+#: The second stage's objectives (``Fit3DSettings.objective``): ``"relative"``, the squared
+#: relative error of rho (rho floored at the error unit's floor) over pairs of cosine-distributed
+#: directions; ``"rho_cos_cos"``, the squared error of ``rho cos theta_i cos theta_o`` (1/sr) over
+#: the same pairs (the benchmark's relative RMSE, dominated by the peak).
+OBJECTIVES = ("relative", "rho_cos_cos", "blend")
+
+
+def objective_points(theta_max: float, edges, n_per_piece: int = 4000, seed: int = 21, objective: str = "rho_cos_cos"):
+    """``(X (M, 3), w (M,))``: the points and weights of the second stage's objective
+    (:data:`OBJECTIVES`) as an importance-weighted sum over pairs of independent
+    cosine-distributed directions. Per theta_h piece
     ``[edges[k], edges[k+1]]`` (radians), ``n_per_piece`` points uniform in ``(sqrt(theta_h),
     theta_d, |phi_d|)`` on the piece's box (``theta_d <= theta_max``), weighted by the density of
     cosine-distributed pairs there over the uniform one,
@@ -51,10 +58,13 @@ def objective_points(theta_max: float, edges, n_per_piece: int = 4000, seed: int
         p(theta_h, theta_d, phi_d) ~ cos theta_i cos theta_o cos theta_d sin theta_d sin theta_h
         (Rusinkiewicz Jacobian 4 cos theta_d sin theta_d sin theta_h, phi_h integrated out),
 
-    times ``(cos theta_i cos theta_o)^2`` (the metric weighs ``rho cos cos``); ``w = 0`` where
-    a direction is below the horizon or beyond ``theta_max``. Many points near the peak, where
-    the values are large and cosine pairs rare (the peak piece theta_h <= 0.05 holds a few per
-    thousand of them)."""
+    times ``(cos theta_i cos theta_o)^2`` for ``"rho_cos_cos"`` (the metric weighs ``rho cos
+    cos``); for ``"relative"`` the density alone (the caller divides by the squared floored value
+    per channel, :func:`relative_weights`); ``w = 0`` where a direction is below the horizon or
+    beyond ``theta_max``. Many points near the peak, where the values are large and cosine pairs
+    rare (the peak piece theta_h <= 0.05 holds a few per thousand of them)."""
+    if objective not in OBJECTIVES:
+        raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
     rng = np.random.default_rng(seed)
     parts, weights = [], []
     for a, b in itertools.pairwise(edges):
@@ -68,8 +78,36 @@ def objective_points(theta_max: float, edges, n_per_piece: int = 4000, seed: int
         vol = (s1 - s0) * theta_max * np.pi
         dens = ci * co * np.cos(X[:, 1]) * np.sin(X[:, 1]) * np.sin(X[:, 0]) * 2.0 * sq * vol
         parts.append(X[ok])
-        weights.append((dens * (ci * co) ** 2)[ok])
+        weights.append((dens * (ci * co) ** 2 if objective == "rho_cos_cos" else dens)[ok])
     return np.concatenate(parts), np.concatenate(weights)
+
+
+def relative_weights(w, rho, floor, channel_floor: float) -> np.ndarray:
+    """``(M, 3)`` weights of the ``"relative"`` objective: the density weights ``w`` ``(M,)`` of
+    :func:`objective_points` over the squared floored value ``max(rho_c, floor_c, channel_floor *
+    max_c rho)^2`` (``rho`` ``(M, 3)`` and ``floor`` ``(3,)`` in 1/sr): the squared error of rho
+    in units of the value, where a value below the floor counts by the floor (a dark channel next
+    to a bright one by a share of the bright one, as a colour difference does)."""
+    rho = np.maximum(np.asarray(rho, np.float64), 0.0)
+    unit = np.maximum(np.maximum(rho, np.asarray(floor, np.float64)[None, :]),
+                      channel_floor * rho.max(axis=1, keepdims=True))
+    return np.asarray(w, np.float64)[:, None] / np.maximum(unit, 1e-300) ** 2
+
+
+def objective_weights(objective: str, X, w, rho, floor, channel_floor: float) -> np.ndarray:
+    """``(M, 3)`` per-channel weights of the squared error of rho at objective points ``X``
+    ``(M, 3)`` with the weights ``w`` of :func:`objective_points` for ``objective`` and values
+    ``rho`` ``(M, 3)``: ``"rho_cos_cos"`` ``w`` itself; ``"relative"``
+    :func:`relative_weights`; ``"blend"`` the sum of the relative weights and those of ``rho cos
+    cos``, each normalised to a unit sum per channel (half the objective each)."""
+    if objective == "rho_cos_cos":
+        return np.repeat(np.asarray(w, np.float64)[:, None], 3, axis=1)
+    rel = relative_weights(w, rho, floor, channel_floor)
+    if objective == "relative":
+        return rel
+    ci, co = cos_theta_i_o(X[:, 0], X[:, 1], X[:, 2])
+    ab = np.repeat((np.asarray(w, np.float64) * (ci * co) ** 2)[:, None], 3, axis=1)
+    return rel / np.maximum(rel.sum(axis=0), 1e-300) + ab / np.maximum(ab.sum(axis=0), 1e-300)
 
 
 def noise_levels(rho, noise_frac: float = DEFAULT_NOISE_FRAC) -> np.ndarray:

@@ -34,7 +34,7 @@ from ..limits import (
 )
 from .ceiling import DEFAULT_TIME_LIMIT
 from .domain import THETA_D_MAX_DEG
-from .samples3d import DEFAULT_GRID, DEFAULT_NOISE_FRAC, DEFAULT_RANDOM, DEFAULT_THETA_FIT_DEG
+from .samples3d import DEFAULT_GRID, DEFAULT_NOISE_FRAC, DEFAULT_RANDOM, DEFAULT_THETA_FIT_DEG, OBJECTIVES
 
 INTERVALS = ("tol", "tol+spread")               # interval policies of the 2-D fit
 THETA_H_TRANSFORMS = ("sqrt", "identity")
@@ -46,6 +46,8 @@ DEFAULT_CHANNEL_FLOOR = 0.05        # a channel's error unit is at least this fr
 DEFAULT_VERIFY = 40000              # fresh points a fit is checked at (fit_rgl)
 DEFAULT_RELAX = 2.0                 # second stage: intervals at this multiple of the smallest tolerance met
 DEFAULT_OBJECTIVE = 4000            # objective points of the second stage per theta_h piece
+DEFAULT_OBJECTIVE_KIND = "rho_cos_cos"   # what the second stage minimises and the selection compares
+DEFAULT_RELATIVE_FLOOR = 0.1        # "relative": values below this fraction of a channel's median count by it
 DEFAULT_ALBEDO_TOL = 0.05           # directional-albedo tolerance of the policy (fit.rational.albedo3d)
 DEFAULT_ALBEDO_TIME = None          # the albedo step's own wall-clock safety net (s); None: the fit's (time_limit)
 DEFAULT_ALBEDO_REFITS = 27          # channel corrections the albedo policy may try (9 weights x 3 channels)
@@ -204,9 +206,20 @@ class Fit3DSettings(_Settings):
     * ``verify``: fresh points of the verification (0: none); ``verify_rounds``: its refits;
       ``verify_above``: fresh points more than this many times outside the bound are refitted;
     * ``n_objective``: second-stage objective points per piece (0: one stage);
+    * ``objective``: what the second stage minimises and the layout selection compares, one of
+      :data:`fit.rational.samples3d.OBJECTIVES`: ``"relative"`` (squared relative error of rho,
+      rho floored at the error unit's floor, over cosine-distributed pairs; the selection: median
+      + 95th percentile of the relative error at held-out pairs) or ``"rho_cos_cos"`` (squared
+      error of ``rho cos theta_i cos theta_o`` in 1/sr; the selection: relative RMSE of it);
+      ``relative_floor``: ``"relative"`` counts a value below this fraction of its channel's
+      median of the data (or below the noise level) by that floor (fraction, default 0.1);
     * ``albedo``: apply the albedo policy; ``albedo_tol`` (fraction), ``albedo_time`` (s;
       None: none), ``albedo_rmse_growth``, ``albedo_total_growth`` (fractions),
-      ``albedo_refits`` (channel corrections).
+      ``albedo_refits`` (channel corrections);
+    * ``prove_bound``: prove the error between the grid nodes of the measurement, per piece and
+      channel (:func:`fit.rational.proved_bound.prove_fit3d`, recorded in
+      ``fit_info["bound"]`` and ``fit_info["domain"]``); off by default: it costs about as much
+      CPU time as a small-budget fit (docs/fitting.md, "The proved bound").
 
     Layout selection (:func:`~fit.rational.fit3d.fit_rgl_select`): ``select_share`` of
     ``time_limit`` after which no further layout starts; ``max_variants`` layouts at most
@@ -230,12 +243,15 @@ class Fit3DSettings(_Settings):
     verify_rounds: int = 2
     verify_above: float = 1.0
     n_objective: int = DEFAULT_OBJECTIVE
+    objective: str = DEFAULT_OBJECTIVE_KIND
+    relative_floor: float = DEFAULT_RELATIVE_FLOOR
     albedo: bool = True
     albedo_tol: float = DEFAULT_ALBEDO_TOL
     albedo_time: float | None = DEFAULT_ALBEDO_TIME
     albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH
     albedo_total_growth: float = DEFAULT_ALBEDO_TOTAL_GROWTH
     albedo_refits: int = DEFAULT_ALBEDO_REFITS
+    prove_bound: bool = False
     select_share: float = 0.6
     max_variants: int | None = None
 
@@ -265,6 +281,8 @@ class Fit3DSettings(_Settings):
             ("verify_rounds", nonneg_int(self.verify_rounds), "an integer >= 0"),
             ("verify_above", _number(self.verify_above) and self.verify_above > 0, "a finite number > 0"),
             ("n_objective", nonneg_int(self.n_objective), "an integer >= 0"),
+            ("objective", self.objective in OBJECTIVES, f"one of {OBJECTIVES}"),
+            ("relative_floor", _number(self.relative_floor) and self.relative_floor >= 0, "a finite number >= 0"),
             ("albedo", isinstance(self.albedo, bool), "True or False"),
             ("albedo_tol", _number(self.albedo_tol) and self.albedo_tol > 0, "a finite number > 0"),
             ("albedo_time", _optional_positive(self.albedo_time), "None or a finite number > 0 (s)"),
@@ -273,6 +291,7 @@ class Fit3DSettings(_Settings):
             ("albedo_total_growth", _number(self.albedo_total_growth) and self.albedo_total_growth >= 0,
              "a finite number >= 0"),
             ("albedo_refits", nonneg_int(self.albedo_refits), "an integer >= 0"),
+            ("prove_bound", isinstance(self.prove_bound, bool), "True or False"),
             ("select_share", _number(self.select_share) and 0.0 < self.select_share <= 1.0, "in (0, 1]"),
             ("max_variants", self.max_variants is None or nonneg_int(self.max_variants), "None or an integer >= 0"),
         ]
