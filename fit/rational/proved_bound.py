@@ -421,6 +421,15 @@ def prove_fit3d(res, brdf, grid=None, **kw) -> list:
     return out
 
 
+def record_fit3d(res, brdf, **kw) -> list:
+    """:func:`prove_fit3d` of the 3-D fit ``res`` against ``brdf``, kept in ``res.bounds`` and
+    its records in ``res.model.fit_info["bound"]`` (what :func:`fit.rational.result3d.domain_record`
+    then reads)."""
+    res.bounds = prove_fit3d(res, brdf, **kw)
+    res.model.fit_info["bound"] = records(res.bounds)
+    return res.bounds
+
+
 def summary(bounds) -> dict:
     """The largest ``proved`` (None if any is None), the smallest ``proved_fraction`` and the
     largest ``verified`` of a list of :class:`ProvedBound`."""
