@@ -1,0 +1,292 @@
+"""Micro-benchmark: nanoseconds per RGB evaluation of one material in the renderer's Warp code,
+one thread, for the rational fits (2-D and 3-D) against the tables and the RGL reference.
+
+Materials (all of one RGL measurement, ``--material``, default ``satin_rosaline``):
+
+* ``rational 2-D``: a 5 % 2-D fit (``--fit2d``; default the shipped
+  ``warp_rbrdf/data/<material>_rgb.json``);
+* ``rational 3-D``: a 3-D fit (``--fit3d``: a coefficient file of ``fit.rational.fit3d``, e.g.
+  one ``benchmarks/bench_fit_accuracy.py`` writes; without one, a stand-in of random positive
+  coefficients in the four-piece layout of ``fit.rational.fit3d.VARIANTS[0]``: same pieces and
+  degrees, so the same work per evaluation, said in the output);
+* ``projected``: the median (theta_h, theta_d) projection (the 2-D table, nearest cluster);
+* ``measured``: the MERL-grid resampling of the file (the 3-D table, trilinear);
+* ``rgl``: the ``.bsdf`` file evaluated exactly (the format's own interpolation);
+* ``lambert``: the floor (dispatch, loads and stores, the horizon test).
+
+All are materials of one scene, so one compiled ``eval_bsdf`` kernel (the renderer's, with its
+dispatch over material kinds) serves them all. Each timing is one ``wp.launch`` over ``--pairs``
+random pairs of cosine-distributed directions (upper hemisphere; the inputs preallocated), the
+launch overhead (a launch of one pair) subtracted; the materials are timed in turn, round by
+round (``--repeats`` rounds; the machine is shared: ratios come from one run), and each row is
+the median over rounds. ``--render`` also times renders of the reference sphere scene
+(:func:`lab.mitsuba_reference.sphere_scene`, ``--envmap``) with each material, one thread,
+interleaved, in samples/s.
+
+    python -m benchmarks.bench_eval [--material satin_rosaline] [--fit3d FILE] [--pairs 1048576]
+                                    [--repeats 7] [--render] [--json FILE] [--quick]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
+
+ROWS = ("rational 2-D", "rational 3-D", "projected", "measured", "rgl", "lambert")
+
+
+class BenchError(Exception):
+    """Bad input: one line, exit status 2."""
+
+
+def data_dir() -> Path:
+    from warp_rbrdf.paths import require_data_root
+
+    return require_data_root("bench_eval's RGL file")
+
+
+def synthetic_3d(seed: int = 0):
+    """A 3-D model of random positive coefficients in the layout of
+    ``fit.rational.fit3d.VARIANTS[0]`` (theta_h pieces, degrees per piece, the variables and
+    log value transform of a 3-D fit), for timings without a fitted file."""
+    import fit.rational.basis as basis
+    import fit.rational.function as function
+    import fit.rational.model as M
+    from fit.rational.fit3d import VARIANTS
+
+    rng = np.random.default_rng(seed)
+    layout = VARIANTS[0]
+    edges = [0.0] + list(layout["theta_h_edges"]) + [np.pi / 2]
+    td = (0.0, np.radians(89.0))
+    pd = (0.0, np.pi)
+    pieces = []
+    for k, (dn, dd) in enumerate(layout["piece_degrees"]):
+        variables = [M.Variable("theta_h", "rad", "sqrt", (edges[k], edges[k + 1])),
+                     M.Variable("theta_d", "rad", "identity", td), M.Variable("phi_d", "rad", "identity", pd)]
+        dom = np.array([v.rf_domain for v in variables])
+        ne, de = basis.total_degree_exponents(3, dn), basis.total_degree_exponents(3, dd)
+        funcs = []
+        for c in range(3):
+            p = rng.normal(size=len(ne)) * 0.2
+            p[0] = -1.0 + 0.3 * c
+            q = rng.normal(size=len(de)) * 0.03
+            q[0] = 1.0
+            funcs.append(function.RationalFunction(dom, ne, p, de, q))
+        pieces.append(M.RationalModel(name=f"piece{k}", variables=variables, functions=funcs,
+                                      value_transform="log", value_offset=0.01, value_min=0.0, value_max=500.0))
+    whole = [M.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+             M.Variable("theta_d", "rad", "identity", td), M.Variable("phi_d", "rad", "identity", pd)]
+    return M.PiecewiseRationalModel(name="synthetic_3d", variables=whole, split_variable="theta_h",
+                                    edges=edges, pieces=pieces)
+
+
+def material_specs(material: str, fit2d, fit3d, quick: bool):
+    """``({row: MaterialSpec}, notes)`` of the benchmark's materials."""
+    from fit.formats import load_measured
+    from fit.projection.project import project
+    from warp_rbrdf.paths import PACKAGE_DATA
+    from warp_rbrdf.scene import MaterialSpec
+
+    rgl = data_dir() / "rgl" / f"{material}_rgb.bsdf"
+    if not rgl.is_file():
+        raise BenchError(f"no RGL file {rgl}")
+    fit2d = Path(fit2d) if fit2d else PACKAGE_DATA / f"{material}_rgb.json"
+    if not fit2d.is_file():
+        raise BenchError(f"no 2-D fit {fit2d} (give --fit2d)")
+    notes = {"rational 2-D": str(fit2d.relative_to(ROOT) if fit2d.is_relative_to(ROOT) else fit2d)}
+    specs = {"rational 2-D": MaterialSpec(name="r2", type="rational", file=fit2d, sampler="mis")}
+    if fit3d:
+        if not Path(fit3d).is_file():
+            raise BenchError(f"no 3-D fit {fit3d}")
+        specs["rational 3-D"] = MaterialSpec(name="r3", type="rational", file=Path(fit3d), sampler="mis")
+        notes["rational 3-D"] = str(fit3d)
+    else:
+        specs["rational 3-D"] = MaterialSpec(name="r3", type="rational", data=synthetic_3d(), sampler="mis")
+        notes["rational 3-D"] = "stand-in: random coefficients, layout of fit3d.VARIANTS[0]"
+    meas = load_measured(rgl)
+    specs["projected"] = MaterialSpec(name="proj", type="projected", data=project(meas), sampler="mis")
+    specs["measured"] = MaterialSpec(name="meas", type="measured", data=meas, sampler="mis")
+    specs["rgl"] = MaterialSpec(name="rgl", type="rgl", file=rgl, sampler="mis")
+    specs["lambert"] = MaterialSpec(name="lam", type="lambert", albedo=(0.5, 0.5, 0.5), sampler="mis")
+    notes.update(projected="median projection of the RGL file's MERL-grid resampling",
+                 measured="the RGL file's MERL-grid resampling (90 x 90 x 360, trilinear)", rgl=str(rgl.name))
+    return specs, notes
+
+
+def eval_scene(specs):
+    """One scene holding every material (one small sphere each), for one compiled kernel."""
+    from lab import testing as T
+    from warp_rbrdf.scene import IntegratorSpec, Scene, ShapeSpec
+
+    shapes = [ShapeSpec(type="sphere", material=s.name, center=(3.0 * k, 0.0, 0.0), radius=1.0)
+              for k, s in enumerate(specs.values())]
+    return Scene(camera=T.top_down_camera(4), integrator=IntegratorSpec(spp=1, max_depth=1),
+                 materials={s.name: s for s in specs.values()}, shapes=shapes,
+                 lights=[T.constant_env(1.0)], path="<bench_eval>")
+
+
+def cosine_pairs(n: int, seed: int = 0):
+    from fit.formats.angles import cosine_directions
+
+    rng = np.random.default_rng(seed)
+    return cosine_directions(rng, n).astype(np.float32), cosine_directions(rng, n).astype(np.float32)
+
+
+def eval_timings(renderer, specs, n_pairs: int, repeats: int, seed: int = 0) -> dict:
+    """``{row: dict(ns=median ns per evaluation, all_ns=[per round])}`` and the launch overhead."""
+    wp = renderer.wp
+    dev = renderer.device
+    wi, wo = cosine_pairs(n_pairs, seed)
+    a = wp.array(wi, dtype=wp.vec3, device=dev)
+    b = wp.array(wo, dtype=wp.vec3, device=dev)
+    o = wp.zeros(n_pairs, dtype=wp.vec3, device=dev)
+    k = renderer.kernels.eval_bsdf
+    index = {row: renderer.material_index(s.name) for row, s in specs.items()}
+
+    def launch(m, dim):
+        t0 = time.thread_time()
+        wp.launch(k, dim=dim, inputs=[renderer.materials, m, a, b], outputs=[o], device=dev)
+        wp.synchronize_device(dev)
+        return time.thread_time() - t0
+
+    for m in index.values():     # warm-up
+        launch(m, n_pairs)
+    overhead = statistics.median(launch(0, 1) for _ in range(50))
+    times = {row: [] for row in specs}
+    for _ in range(repeats):
+        for row, m in index.items():
+            times[row].append((launch(m, n_pairs) - overhead) / n_pairs * 1e9)
+    return {"launch_overhead_us": overhead * 1e6,
+            "rows": {row: {"ns": statistics.median(v), "all_ns": v} for row, v in times.items()}}
+
+
+def render_timings(specs, envmap: str, resolution: int, spp: int, repeats: int) -> dict:
+    """Samples/s of the reference sphere scene with each material (one thread, interleaved,
+    median of ``repeats``); the ``rgl`` material also with its own sampler (``mis-rgl``)."""
+    import dataclasses
+
+    from lab import mitsuba_reference as MR
+    from warp_rbrdf.renderer import Renderer
+
+    env = data_dir() / "envmaps" / f"{envmap}.hdr"
+    base = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), env, spp, resolution)
+    runs = {}
+    for row, s in specs.items():
+        variants = [(row, s)]
+        if row == "rgl":
+            variants.append(("rgl (mis-rgl)", dataclasses.replace(s, sampler="mis-rgl")))
+        for label, spec in variants:
+            spec = dataclasses.replace(spec, name="obj")
+            sc = dataclasses.replace(base, materials={"obj": spec},
+                                     integrator=dataclasses.replace(base.integrator, sampler=spec.sampler))
+            r = Renderer(sc)
+            r.compile()
+            r.render(spp=1, threads=1)
+            runs[label] = r
+    times = {k: [] for k in runs}
+    for i in range(repeats):
+        for k, r in runs.items():
+            t0 = time.perf_counter()
+            r.render(spp=spp, seed=i, threads=1)
+            times[k].append(time.perf_counter() - t0)
+    n = resolution * resolution * spp
+    return {k: {"samples_per_s": n / statistics.median(v), "seconds": statistics.median(v), "all_s": v}
+            for k, v in times.items()}
+
+
+def machine() -> dict:
+    cpu = platform.processor()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        load = subprocess.run(["uptime"], capture_output=True, text=True, check=False).stdout.strip()
+    except OSError:
+        load = ""
+    import warp as wp
+
+    return {"cpu": cpu, "cores": os.cpu_count(), "uptime": load, "warp": wp.config.version,
+            "date": time.strftime("%Y-%m-%d %H:%M %Z")}
+
+
+def markdown(res) -> str:
+    ev = res["eval"]["rows"]
+    lines = ["| material | ns per RGB evaluation | ÷ 2-D table | ÷ 3-D table | ÷ rgl |",
+             "| --- | --- | --- | --- | --- |"]
+    for row in ROWS:
+        if row in ev:
+            ns = ev[row]["ns"]
+            lines.append(f"| {row} | {ns:.1f} | {ns / ev['projected']['ns']:.2f} | "
+                         f"{ns / ev['measured']['ns']:.2f} | {ns / ev['rgl']['ns']:.2f} |")
+    if "render" in res:
+        rr = res["render"]
+        lines += ["", "| material (reference sphere scene, 1 thread) | M samples/s | ÷ projected | ÷ rgl |",
+                  "| --- | --- | --- | --- |"]
+        for k, v in rr.items():
+            s = v["samples_per_s"]
+            lines.append(f"| {k} | {s / 1e6:.3f} | {s / rr['projected']['samples_per_s']:.2f} | "
+                         f"{s / rr['rgl']['samples_per_s']:.2f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_eval", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--material", default="satin_rosaline", help="RGL file stem without _rgb (shared data rgl/)")
+    ap.add_argument("--fit2d", default=None, help="2-D fit (default: the shipped <material>_rgb.json)")
+    ap.add_argument("--fit3d", default=None, help="3-D fit file (default: a stand-in of the same layout)")
+    ap.add_argument("--pairs", type=int, default=1 << 20, help="direction pairs per launch")
+    ap.add_argument("--repeats", type=int, default=7, help="rounds (median)")
+    ap.add_argument("--render", action="store_true", help="also time the reference sphere scene")
+    ap.add_argument("--envmap", default="studio_small_03_1k")
+    ap.add_argument("--resolution", type=int, default=128)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--json", default=None, help="write the results here")
+    ap.add_argument("--quick", action="store_true", help="a few thousand pairs, two rounds (tests)")
+    a = ap.parse_args(argv)
+    if a.quick:
+        a.pairs, a.repeats, a.resolution, a.spp = 4096, 2, 16, 2
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.runtime import init_warp
+
+    init_warp()
+    try:
+        specs, notes = material_specs(a.material, a.fit2d, a.fit3d, a.quick)
+    except BenchError as e:
+        print(f"bench_eval: {e}", file=sys.stderr)
+        return 2
+    r = Renderer(eval_scene(specs))
+    compile_s = r.compile()
+    res = {"command": "python -m benchmarks.bench_eval " + " ".join(argv if argv is not None else sys.argv[1:]),
+           "machine": machine(), "material": a.material, "pairs": a.pairs, "repeats": a.repeats,
+           "compile_s": compile_s, "notes": notes}
+    res["eval"] = eval_timings(r, specs, a.pairs, a.repeats)
+    if a.render:
+        res["render"] = render_timings(specs, a.envmap, a.resolution, a.spp, a.repeats)
+    print(f"{res['machine']['cpu']}, {res['machine']['date']}; {res['machine']['uptime']}")
+    print(f"{a.pairs} pairs per launch, median of {a.repeats} rounds, one thread; launch overhead "
+          f"{res['eval']['launch_overhead_us']:.1f} us subtracted")
+    print(markdown(res))
+    if a.json:
+        Path(a.json).write_text(json.dumps(res, indent=1))
+    return res
+
+
+if __name__ == "__main__":
+    out = main()
+    sys.exit(out if isinstance(out, int) else 0)

@@ -1,0 +1,37 @@
+"""Smoke test of ``benchmarks/bench_eval.py`` (``--quick``): every material is timed, the table
+lists them, the JSON holds the run; its numbers themselves are docs/bench_eval.md."""
+from __future__ import annotations
+
+import json
+
+import pytest
+from conftest import data_file
+
+from benchmarks import bench_eval as B
+
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
+
+
+def test_bench_eval_quick(tmp_path, capsys):
+    data_file("rgl/satin_rosaline_rgb.bsdf")
+    out = tmp_path / "eval.json"
+    res = B.main(["--quick", "--json", str(out)])
+    rows = res["eval"]["rows"]
+    assert set(rows) == set(B.ROWS)
+    assert all(r["ns"] > 0 and len(r["all_ns"]) == 2 for r in rows.values())
+    assert "stand-in" in res["notes"]["rational 3-D"]          # no --fit3d: the stand-in layout
+    assert json.loads(out.read_text())["pairs"] == 4096
+    text = capsys.readouterr().out
+    assert all(f"| {row} |" in text for row in B.ROWS)
+
+
+def test_stand_in_3d_fit_has_the_fitters_layout():
+    from fit.rational.fit3d import VARIANTS
+    from fit.rational.variables3d import is_3d
+
+    m = B.synthetic_3d()
+    assert is_3d(m) and len(m.pieces) == len(VARIANTS[0]["piece_degrees"])
+    for piece, (dn, dd) in zip(m.pieces, VARIANTS[0]["piece_degrees"]):
+        assert piece.value_transform == "log"
+        for f in piece.functions:
+            assert f.num_exponents.sum(axis=1).max() == dn and f.den_exponents.sum(axis=1).max() == dd

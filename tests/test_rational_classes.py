@@ -1,0 +1,395 @@
+"""The rational materials' evaluation specialised to degree classes (``warp_rbrdf.chebyshev_dense``,
+``warp_rbrdf.materials.rational_kernel.make_rational_eval``) against the NumPy reference.
+
+* the dense form of a class equals the Chebyshev basis (NumPy, and the native Warp function in
+  its vector and scalar forms);
+* on 120,000 direction pairs per fit (uniform, grazing, near-specular, below the horizon), the
+  renderer's evaluation equals the NumPy reference (``fit.rational.vouched`` /
+  ``fit.rational.variables3d``) at the angles the kernel computed, within float32 rounding
+  (stated tolerance :data:`RTOL`): shipped 2-D fits with their measured domain and a flagged
+  piece read from the embedded fallback table, log and linear values, active clamps, vouched
+  and measured ranges, nested theta_h pieces, 3-D fits with a phi_d split, a fit whose pieces
+  fall back to the packed form;
+* against the one generic function (``rational_eval``, the packed form and libm's ``atan2``) at
+  the same directions, the values differ only by the angles' float32 rounding;
+* compile once per class: another fit of the same classes reuses the compiled kernels; a fit of
+  another class gets other kernels (Warp's module hash tells the classes apart).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import warp as wp
+from test_warp_rational import piecewise_model, random_model
+
+import fit.rational.basis as basis
+import fit.rational.function as function
+import fit.rational.model as M
+from fit.formats.angles import directions_to_half_diff, spherical_to_direction
+from fit.formats.grid import theta_d_index, theta_h_index
+from fit.rational.coefficient_file import load as load_coefficients
+from fit.rational.domain import measured_domain, onto_measured_domain
+from fit.rational.flagged import flagged_regions
+from fit.rational.variables3d import is_3d
+from fit.rational.vouched import values_with_table
+from lab import testing as T
+from warp_rbrdf import chebyshev_dense as D
+from warp_rbrdf.materials import rational
+from warp_rbrdf.materials import rational_kernel as RK
+from warp_rbrdf.materials.data import Materials
+from warp_rbrdf.paths import PACKAGE_DATA
+from warp_rbrdf.renderer import Renderer
+from warp_rbrdf.runtime import init_warp
+from warp_rbrdf.scene import IntegratorSpec, MaterialSpec, Scene, ShapeSpec
+from warp_rbrdf.shipped_kernels import render_module_options
+
+init_warp()
+
+#: relative tolerance of the specialised evaluation against the NumPy reference at the kernel's
+#: own float32 angles: float64 sums in another order, P/Q and exp in float64, one float32
+#: rounding of the result (and of a moved theta_d) -- a few float32 ulps
+RTOL, ATOL = 2e-6, 1e-7
+N_PAIRS = 120_000
+
+
+# --------------------------------------------------------------------------------------------
+# The dense form
+# --------------------------------------------------------------------------------------------
+def _groups(nv, dn, dd, seed):
+    """Three numerators (per-channel degrees dn, dn - 1, dn; the second left out: a table
+    channel) and three denominators of degree dd, with duplicate rows and zeros."""
+    rng = np.random.default_rng(seed)
+    nums, dens = [], []
+    for c in range(3):
+        e = basis.total_degree_exponents(nv, max(dn - (c == 1), 0))
+        e = np.vstack([e, e[:2]])
+        k = rng.normal(size=len(e))
+        k[rng.random(len(e)) < 0.1] = 0.0
+        nums.append((e, k))
+        e = basis.total_degree_exponents(nv, dd)
+        dens.append((e, rng.normal(size=len(e))))
+    nums[1] = None
+    return nums, dens
+
+
+def _basis(polys, t, nv, empty):
+    out = []
+    for p in polys:
+        if p is None:
+            out.append(np.full(len(t), empty))
+        else:
+            out.append(basis.chebyshev_basis(t, p[0], np.tile([-1.0, 1.0], (nv, 1))) @ p[1])
+    return np.stack(out, -1)
+
+
+CLASSES = [(2, 12, 6), (2, 4, 3), (3, 5, 2), (3, 7, 3), (1, 6, 2), (2, 0, 0)]
+
+
+@pytest.mark.parametrize("nv, dn, dd", CLASSES)
+def test_dense_form_equals_the_basis(nv, dn, dd):
+    nums, dens = _groups(nv, dn, dd, seed=dn + 10 * nv)
+    key = D.dense_class(nums, dens, nv)
+    assert D.class_of_key(key) == (nv, dn, dd)
+    rows = D.pack_dense(nums, dens, nv, key)
+    assert rows.shape == (len(D.dense_slots(nv, dn)) + len(D.dense_slots(nv, dd)), 4)
+    t = np.random.default_rng(1).uniform(-1, 1, size=(4000, 3))
+    ref_p, ref_q = _basis(nums, t[:, 3 - nv:], nv, 0.0), _basis(dens, t[:, 3 - nv:], nv, 1.0)
+    p, q = D.evaluate_dense(key, rows, t[:, 3 - nv:])
+    np.testing.assert_allclose(p, ref_p, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(q, ref_q, rtol=1e-12, atol=1e-12)
+    # the native function (vector form, and the scalar form of a CUDA build) at float offset 3
+    cf = wp.array(np.concatenate([[7.0, 7.0, 7.0], rows.reshape(-1), [9.0]]), dtype=wp.float64)
+    ta = wp.array(t, dtype=wp.vec3d)
+    for scalar in (False, True):
+        got = _run_dense(D.make_dense_pq(key, scalar), cf, ta)
+        np.testing.assert_allclose(got, np.concatenate([ref_p, ref_q], -1), rtol=1e-12, atol=1e-12)
+
+
+_DENSE_KERNELS = {}
+
+
+def _run_dense(f, cf, t):
+    if f not in _DENSE_KERNELS:
+        @wp.kernel(module="unique")
+        def k(cf: wp.array(dtype=wp.float64), t: wp.array(dtype=wp.vec3d), out: wp.array(dtype=D.vec6d)):
+            i = wp.tid()
+            out[i] = f(wp.address_of(cf[3]), t[i][0], t[i][1], t[i][2])
+
+        _DENSE_KERNELS[f] = k
+    out = wp.zeros(t.shape[0], dtype=D.vec6d)
+    wp.launch(_DENSE_KERNELS[f], dim=t.shape[0], inputs=[cf, t], outputs=[out])
+    return out.numpy()
+
+
+def test_classes_of_fits_and_the_packed_fallback():
+    satin = load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json")
+    keys = rational.packed_classes(rational.pack_model(satin, False, 79.0)[0])
+    assert {D.class_of_key(k) for k in keys} == {(2, 11, 6), (2, 12, 6)}
+    # as the renderer loads it: the flagged blue of the second piece (degree 12) reads the
+    # table, and both pieces are of one class
+    keys = rational.packed_classes(rational.pack_model(satin, True, 79.0)[0])
+    assert {D.class_of_key(k) for k in keys} == {(2, 11, 6)}
+    # tensor degrees (15, 15): total degree 30, beyond the dense form; packed only
+    big = random_model(seed=3)
+    e = basis.tensor_exponents((15, 15))
+    for f in big.functions:
+        f.num_exponents, f.num_coef = e, np.r_[1.0, np.full(len(e) - 1, 1e-4)]
+    assert rational.packed_classes(rational.pack_model(big)[0]) == set()
+    assert D.dense_class([(e, np.ones(len(e)))] * 3, [None] * 3, 2) is None
+
+
+# --------------------------------------------------------------------------------------------
+# Fits and their NumPy reference
+# --------------------------------------------------------------------------------------------
+def model_3d(seed=0, phi_split=True):
+    """A 3-D fit (theta_h, theta_d, |phi_d|, log values, clamps): theta_h pieces of total degrees
+    (4, 2) and (5, 2), the second split again in phi_d (``phi_split``)."""
+    rng = np.random.default_rng(seed)
+    td, pd = (0.0, np.radians(89.0)), (0.0, np.pi)
+
+    def leaf(th, ph, dn, dd, k):
+        v = [M.Variable("theta_h", "rad", "sqrt", th), M.Variable("theta_d", "rad", "identity", td),
+             M.Variable("phi_d", "rad", "identity", ph)]
+        dom = np.array([x.rf_domain for x in v])
+        ne, de = basis.total_degree_exponents(3, dn), basis.total_degree_exponents(3, dd)
+        fs = []
+        for c in range(3):
+            p = rng.normal(size=len(ne)) * 0.3
+            p[0] = -0.5 + 0.3 * c
+            q = rng.normal(size=len(de)) * 0.03
+            q[0] = 1.0
+            fs.append(function.RationalFunction(dom, ne, p, de, q))
+        info = [{"valid": True, "vouched_range": [0.0, 3.0 + c]} for c in range(3)]
+        return M.RationalModel(name=f"leaf{k}", variables=v, functions=fs, value_transform="log",
+                               value_offset=0.02, value_min=0.0, value_max=2.5, function_info=info)
+
+    def whole(th):
+        return [M.Variable("theta_h", "rad", "sqrt", th), M.Variable("theta_d", "rad", "identity", td),
+                M.Variable("phi_d", "rad", "identity", pd)]
+
+    edges = [0.0, 0.3, np.pi / 2]
+    second = leaf((edges[1], edges[2]), pd, 5, 2, 1)
+    if phi_split:
+        second = M.PiecewiseRationalModel(name="phi", variables=whole((edges[1], edges[2])), split_variable="phi_d",
+                                          edges=[0.0, 1.2, np.pi],
+                                          pieces=[leaf((edges[1], edges[2]), (0.0, 1.2), 5, 2, 1),
+                                                  leaf((edges[1], edges[2]), (1.2, np.pi), 5, 2, 2)])
+    return M.PiecewiseRationalModel(name="fit3d", variables=whole((0.0, np.pi / 2)), split_variable="theta_h",
+                                    edges=edges, pieces=[leaf((edges[0], edges[1]), pd, 4, 2, 0), second])
+
+
+def _clamped_piecewise():
+    from test_compile_once import _clamped_piecewise as cp
+
+    return cp()
+
+
+def _packed_fallback_model():
+    """A model whose second piece's numerator has total degree 16 (beyond the dense form): it is
+    evaluated from the packed form inside the specialised function."""
+    m = piecewise_model("log")
+    leaf = m.pieces[1]
+    e = basis.tensor_exponents((8, 8))
+    for f in leaf.functions:
+        c = np.zeros(len(e))
+        c[: len(f.num_coef)] = f.num_coef[: len(e)]
+        c[-1] = 1e-3
+        f.num_exponents, f.num_coef = e, c
+    return m
+
+
+def _cases():
+    """name -> MaterialSpec (the fits as the renderer loads them)."""
+    spec = lambda name, **kw: MaterialSpec(name=name, type="rational", sampler="mis", **kw)  # noqa: E731 - no CDF
+    specs = {p.stem: spec(p.stem, file=p) for p in sorted(PACKAGE_DATA.glob("*.json"))}
+    specs.update({"linear": spec("linear", data=random_model("linear", 1)),
+                  "log": spec("log", data=random_model("log", 2, value_max=4.0)),
+                  "nested": spec("nested", data=piecewise_model("log")),
+                  "clamped_table": spec("clamped_table", data=_clamped_piecewise()),
+                  "fit3d": spec("fit3d", data=model_3d()),
+                  "packed": spec("packed", data=_packed_fallback_model())})
+    return specs
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """``(renderer, specs)``: every case as a material of one scene (one sphere each)."""
+    specs = _cases()
+    for s in specs.values():
+        if s.data is not None and s.name == "clamped_table":
+            # an in-memory flagged fit carries its fallback table as the fitter embeds it
+            s.data.fallback = _fallback_record(s.data)
+    shapes = [ShapeSpec(type="sphere", material=s.name, center=(3.0 * k, 0.0, -20.0), radius=1.0)
+              for k, s in enumerate(specs.values())]
+    sc = Scene(camera=T.top_down_camera(4), integrator=IntegratorSpec(spp=1, max_depth=1), materials=specs,
+               shapes=shapes, lights=[T.constant_env(1.0)], path="<test>")
+    return Renderer(sc), specs
+
+
+def _fallback_record(model):
+    from fit.rational.fallback import fallback_record
+
+    from types import SimpleNamespace
+
+    table = np.random.default_rng(7).uniform(0.1, 4.0, size=(90, 90, 3))
+    return fallback_record(SimpleNamespace(value=table), model)
+
+
+def _pairs(n, seed=4):
+    """``n`` direction pairs: a quarter each uniform over the hemisphere, grazing views (80 to
+    89.99 deg), near-specular, and pairs with a direction at or below the horizon."""
+    rng = np.random.default_rng(seed)
+    q = n // 4
+    wi = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+    wo = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+    wo[q:2 * q] = spherical_to_direction(np.radians(rng.uniform(80, 89.99, q)), rng.random(q) * 2 * np.pi)
+    wi[2 * q:3 * q] = wo[2 * q:3 * q] * [-1, -1, 1] + rng.normal(scale=0.01, size=(q, 3))
+    below = spherical_to_direction(np.radians(rng.uniform(90, 180, n - 3 * q)), rng.random(n - 3 * q) * 2 * np.pi)
+    below[::7, 2] = 0.0
+    swap = rng.random(n - 3 * q) < 0.5
+    wi[3 * q:][swap] = below[swap]
+    wo[3 * q:][~swap] = below[~swap]
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    return wi.astype(np.float32), wo.astype(np.float32)
+
+
+_EVAL_KERNELS = {}
+
+
+def _eval_kernel(classes):
+    """(specialised value, the kernel's angles (theta_h, theta_d, phi_d), the generic
+    ``rational_eval``'s value) per pair, compiled as the render kernels are."""
+    if classes not in _EVAL_KERNELS:
+        fast = RK.make_rational_eval(classes)
+
+        @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
+        def k(mats: Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
+              out: wp.array(dtype=wp.vec3), ang: wp.array(dtype=wp.vec3), gen: wp.array(dtype=wp.vec3)):
+            i = wp.tid()
+            out[i] = fast(mats, m, wi[i], wo[i])
+            g = RK.half_diff_frame(wi[i], wo[i])
+            ang[i] = wp.vec3(g[0], g[1], RK.phi_d_of(g))
+            gen[i] = rational.rational_eval(mats, m, wi[i], wo[i])
+
+        _EVAL_KERNELS[classes] = k
+    return _EVAL_KERNELS[classes]
+
+
+def _evaluate(r, name, wi, wo):
+    md = r.material_data
+    classes = set()
+    for lm in md.loaded:
+        classes |= rational.packed_classes(lm.coefficients[0])
+    n = len(wi)
+    out, ang, gen = (wp.zeros(n, dtype=wp.vec3) for _ in range(3))
+    wp.launch(_eval_kernel(tuple(sorted(classes))), dim=n,
+              inputs=[r.materials, r.material_index(name), wp.array(wi, dtype=wp.vec3), wp.array(wo, dtype=wp.vec3)],
+              outputs=[out, ang, gen])
+    return out.numpy().astype(float), ang.numpy().astype(float), gen.numpy().astype(float)
+
+
+def _reference(lm, ang):
+    """The NumPy reference at the kernel's angles: the 3-D recipe at (theta_h, theta_d, |phi_d|),
+    or the 2-D fit moved onto its measured domain (the moved theta_d rounded to float32 as the
+    kernel rounds it) with its fallback table in flagged pieces (``fit.rational.vouched``)."""
+    model, table = lm.data, lm.fallback_table
+    if is_3d(model):
+        return np.asarray(model(np.stack([ang[:, 0], ang[:, 1], np.abs(ang[:, 2])], -1)), float), None
+    x = ang[:, :2]
+    cut = measured_domain(model)
+    if cut is not None:
+        x = onto_measured_domain(x, cut).astype(np.float32).astype(float)
+    if table is None:
+        return np.asarray(model(x), float), x
+    return values_with_table(model, table.astype(np.float64), x), x
+
+
+def _same_table_bins(model, x):
+    """Whether the kernel's float32 binning of the angles clamped onto each piece's box
+    (``frame.merl_theta_*_index``) and ``fit.formats.grid``'s float64 binning agree (they may
+    not within a float32 rounding of a bin edge)."""
+    ok = np.ones(len(x), bool)
+    half_pi, f90 = np.float32(np.pi / 2), np.float32(90.0)
+    for _, sel, xl in model.leaves(x):
+        th, td = xl[:, 0].astype(np.float32), xl[:, 1].astype(np.float32)
+        ih = np.clip(np.floor(np.sqrt(np.maximum(th, 0) / half_pi) * f90), 0, 89).astype(int)
+        jd = np.clip(np.floor(td / half_pi * f90), 0, 89).astype(int)
+        ok &= ~sel | ((ih == theta_h_index(xl[:, 0])) & (jd == theta_d_index(xl[:, 1])))
+    return ok
+
+
+@pytest.mark.parametrize("name", list(_cases()))
+def test_specialised_eval_equals_the_numpy_reference(scene, name):
+    r, specs = scene
+    lm = r.material_data.loaded[r.material_index(name)]
+    wi, wo = _pairs(N_PAIRS)
+    got, ang, gen = _evaluate(r, name, wi, wo)
+    above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    assert np.all(got[~above] == 0) and np.all(np.isfinite(got))
+    ref, x = _reference(lm, ang[above])
+    ok = np.ones(len(ref), bool)
+    if lm.fallback_table is not None:
+        # flagged channels read the table's cluster of the angles clamped onto the piece's box;
+        # where a box edge falls on a bin edge (60 deg), the kernel's float32 binning (the
+        # packed function's too) and grid's float64 one may differ: there the other channels
+        ok = _same_table_bins(lm.data, x)
+        assert ok.mean() > 0.9
+        table_channels = sorted({c for reg in flagged_regions(lm.data) for c in reg["channels"]})
+        fit_channels = [c for c in range(3) if c not in table_channels]
+        np.testing.assert_allclose(got[above][~ok][:, fit_channels], ref[~ok][:, fit_channels], rtol=RTOL,
+                                   atol=ATOL, err_msg=name)
+    np.testing.assert_allclose(got[above][ok], ref[ok], rtol=RTOL, atol=ATOL, err_msg=name)
+    # what the pairs reached: grazing pairs moved onto a measured domain, flagged pieces, pieces
+    th, _, td, _ = directions_to_half_diff(wi[above].astype(float), wo[above].astype(float))
+    if measured_domain(lm.data) is not None:
+        assert np.mean(np.cos(th) * np.cos(td) < np.cos(np.radians(measured_domain(lm.data)))) > 0.01
+    # the generic function (packed sums, libm atan2) at the same directions: the values differ
+    # only through the float32 rounding of the angles (fastmath.atan2: within 3 ulps)
+    rel = (np.abs(got - gen) / np.maximum(np.abs(gen), 1e-6))[above]
+    assert np.median(rel) < 1e-7 and np.quantile(rel, 0.999) < 1e-4, (name, np.quantile(rel, 0.999))
+    # and both err from the float64 evaluation at the float64 directions alike
+    ref64 = lm.evaluate(wi[above].astype(float), wo[above].astype(float))
+    err = [np.abs(v[above] - ref64) / np.maximum(np.abs(ref64), 1e-6) for v in (got, gen)]
+    assert np.quantile(err[0], 0.99) <= 2 * np.quantile(err[1], 0.99) + 1e-6, name
+
+
+def test_clamps_tables_and_pieces_are_reached(scene):
+    """The cases above exercise what they name: active upper clamps and ranges, table channels
+    (values only the table holds), both phi_d pieces of the 3-D fit, the packed fallback leaf."""
+    r, _ = scene
+    wi, wo = _pairs(20_000, seed=9)
+    got, ang, _ = _evaluate(r, "clamped_table", wi, wo)
+    d = np.degrees(ang[:, 1])
+    above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    assert np.any(got[above & (d > 60), 2] == np.float32(2.1)) and np.any(got[above & (d < 30)] == np.float32(3.0))
+    tab = r.material_data.loaded[r.material_index("clamped_table")].fallback_table
+    assert np.isin(got[above & (d > 61), 1], tab[..., 1]).mean() < 0.01     # green: the fit
+    _, ang3, _ = _evaluate(r, "fit3d", wi, wo)
+    pd = np.abs(ang3[above, 2])
+    assert np.mean(pd < 1.2) > 0.1 and np.mean(pd > 1.2) > 0.1
+    leaf = r.material_data.loaded[r.material_index("packed")].data.pieces[1]
+    nums = [(f.num_exponents, f.num_coef) for f in leaf.functions]
+    assert D.dense_class(nums, [(f.den_exponents, f.den_coef) for f in leaf.functions], 2) is None
+    assert np.mean((d > 30) & (d < 60) & above) > 0.1   # the packed leaf's theta_d piece
+
+
+def test_a_fit_of_compiled_classes_compiles_nothing():
+    """Fits of the same degree classes share the specialised function and the kernels' module
+    hash (the cache serves them); a fit of another class gets another hash."""
+    def renderer(model):
+        spec = MaterialSpec(name="m", type="rational", data=model)
+        return Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
+
+    def hashes(r):
+        k = r.kernels
+        return [x.module.hash_module() for x in (k.render_tile, k.eval_bsdf, k.sample_bsdf, k.pdf_bsdf)]
+
+    a, b = renderer(random_model("linear", 0)), renderer(random_model("log", 5, value_max=2.0))
+    assert hashes(a) == hashes(b)
+    satin = renderer(load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json"))
+    assert hashes(satin) != hashes(a)
+    wi, wo = _pairs(2000, seed=11)
+    for r in (a, b, satin):
+        np.testing.assert_allclose(r.eval_material("m", wi, wo), r.material_data.loaded[0].evaluate(wi, wo),
+                                   rtol=2e-4, atol=1e-6)

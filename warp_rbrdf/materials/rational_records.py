@@ -1,0 +1,136 @@
+"""A rational BRDF fit as data: the records of ``Materials.coef_i`` / ``coef_f`` / ``coef_q`` that
+the Warp evaluators of :mod:`.rational_kernel` walk (:func:`pack_model`).
+
+Records, offsets relative to the material's own starts, the root at int 0:
+
+* a **domain record** (only at the root of a fit with a measured domain,
+  :func:`fit.rational.domain.measured_domain`): kind, the float offset of ``(cos c, c)`` (c: the
+  grazing cut-off, radians), the fit's int offset;
+* a **split record** per piecewise level: kind, the split variable
+  (:data:`SUPPORTED_VARIABLES`), the number of pieces K, the float offset of its K - 1 inner
+  edges, the K children's int offsets;
+* a **leaf record** per single-box piece: kind, variables, flags, the float offset of its
+  header, three variable codes (source angle | transform << 2), the int and row offsets of its
+  numerators and denominators packed as one group of six Chebyshev polynomials
+  (:mod:`warp_rbrdf.chebyshev`: the form every fit has), per channel its mode, then its degree
+  class (:mod:`warp_rbrdf.chebyshev_dense`; 0: none) and the float offset of the same
+  polynomials stored densely for that class (the form the scene's specialised code reads).
+
+The leaf header (floats): value offset, min, max, ``log(max + offset)``; per variable (lo, hi,
+u_lo + u_hi, 1 / (u_hi - u_lo)); per channel the step-7 range (lo, hi); the fallback table's
+box (theta_h lo, hi, theta_d lo, hi). Pure NumPy (the Warp types of the packed forms come with
+:mod:`warp_rbrdf.chebyshev`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fit.rational.model import flagged, output_clamp
+
+from ..chebyshev import FlatData
+from ..chebyshev_dense import dense_class, pack_dense
+
+SUPPORTED_VARIABLES = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
+NODE_LEAF, NODE_SPLIT, NODE_DOMAIN = 0, 1, 2
+DOMAIN_FLOATS, DOMAIN_CHILD = 1, 2                       # domain record (ints)
+SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4   # split record (ints)
+# leaf record (ints)
+LEAF_NV, LEAF_FLAGS, LEAF_FH, LEAF_VARS, LEAF_POLY, LEAF_MODES, LEAF_CLASS, LEAF_DENSE = 1, 2, 3, 4, 7, 9, 12, 13
+N_LEAF = 14
+LEAF_CLAMP, LEAF_LOG, LEAF_MIN, LEAF_MAX, LEAF_TABLE = 1, 2, 4, 8, 16   # flags
+CH_TABLE, CH_RANGE = 1, 2                                               # channel mode bits
+TRANSFORM_CODES = {"identity": 0, "sqrt": 1}
+# leaf header (floats)
+FH_OFFSET, FH_MIN, FH_MAX, FH_LOGMAX, FH_VARS, FH_RANGES, FH_BOX = 0, 1, 2, 3, 4, 16, 22
+N_FH = 26
+
+
+def channel_modes(model, table: bool = False) -> list:
+    """Per output of a single-box model: ``(from_table, range)``: whether the channel reads the
+    fallback table (``table`` and the function is flagged) and its step-7 clamp
+    (:func:`fit.rational.model.output_clamp`; None: none)."""
+    return [(bool(table and flagged(i)), output_clamp(i)) for i in model.function_info]
+
+
+def pack_model(model, table: bool = False, cutoff_deg: float | None = None) -> tuple:
+    """``(ints int32, floats float64, rows float64 (n, 6))``: a
+    :class:`~fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`
+    (nested pieces included) as the records of the module docstring, the root at int 0; offsets
+    are relative to the material's starts. ``table``: flagged channels read the fallback table
+    (:mod:`.rational`). ``cutoff_deg``: the angles are first moved onto the measured domain of
+    that grazing cut-off (:func:`fit.rational.domain.onto_measured_domain`; a domain record at
+    the root); None (default): the file's recipe alone."""
+    fd = FlatData(6)
+    if cutoff_deg is None:
+        _pack_node(fd, model, table)
+    else:
+        cut = np.radians(float(cutoff_deg))
+        n = fd.add_ints([NODE_DOMAIN, 0, 0])
+        fd.ints[n + DOMAIN_FLOATS] = fd.add_floats([np.cos(cut), cut])
+        fd.ints[n + DOMAIN_CHILD] = _pack_node(fd, model, table)
+    return fd.arrays()
+
+
+def _pack_node(fd, model, table) -> int:
+    pieces = getattr(model, "pieces", None)
+    if pieces is None:
+        return _pack_leaf(fd, model, table)
+    n = fd.add_ints([NODE_SPLIT, SUPPORTED_VARIABLES[model.split_variable], len(pieces), 0] + [0] * len(pieces))
+    fd.ints[n + SPLIT_EDGES] = fd.add_floats(model.edges[1:-1])
+    for k, piece in enumerate(pieces):
+        fd.ints[n + SPLIT_CHILDREN + k] = _pack_node(fd, piece, table)
+    return n
+
+
+def _pack_leaf(fd, model, table) -> int:
+    nv = len(model.variables)
+    modes = channel_modes(model, table)
+    vmax, vmin, off = model.value_max, model.value_min, float(model.value_offset)
+    flags = ((LEAF_CLAMP if model.domain_policy.get("outside", "clamp") == "clamp" else 0)
+             | (LEAF_LOG if model.value_transform == "log" else 0)
+             | (LEAF_MIN if vmin is not None else 0) | (LEAF_MAX if vmax is not None else 0)
+             | (LEAF_TABLE if any(t for t, _ in modes) else 0))
+    codes = [SUPPORTED_VARIABLES[v.name] | TRANSFORM_CODES[v.transform] << 2 for v in model.variables]
+    n = fd.add_ints([NODE_LEAF, nv, flags, 0] + codes + [0] * (3 - nv) + [0, 0] + [0] * 3 + [0, 0])
+    head = np.zeros(N_FH)
+    head[[FH_OFFSET, FH_MIN, FH_MAX]] = off, vmin or 0.0, vmax or 0.0
+    if vmax is not None and model.value_transform == "log":
+        head[FH_LOGMAX] = np.log(vmax + off)
+    for v, var in enumerate(model.variables):
+        ulo, uhi = var.rf_domain
+        head[FH_VARS + 4 * v: FH_VARS + 4 * v + 4] = var.domain[0], var.domain[1], ulo + uhi, 1.0 / (uhi - ulo)
+    for c, (_, rng) in enumerate(modes):
+        if rng is not None:
+            head[FH_RANGES + 2 * c: FH_RANGES + 2 * c + 2] = rng
+    if flags & LEAF_TABLE:
+        box = {v.name: v.domain for v in model.variables}
+        head[FH_BOX:FH_BOX + 4] = (*box["theta_h"], *box["theta_d"])
+    fd.ints[n + LEAF_FH] = fd.add_floats(head)
+    fits = [(f, t) for f, (t, _) in zip(model.functions, modes)]
+    nums = [None if t else (f.num_exponents, f.num_coef) for f, t in fits]
+    dens = [None if t else (f.den_exponents, f.den_coef) for f, t in fits]
+    fd.ints[n + LEAF_POLY:n + LEAF_POLY + 2] = fd.add_polynomials(nums + dens, nv)
+    for c, (from_table, rng) in enumerate(modes):
+        fd.ints[n + LEAF_MODES + c] = (CH_TABLE if from_table else 0) | (CH_RANGE if rng is not None else 0)
+    key = dense_class(nums, dens, nv)
+    if key is not None:
+        fd.ints[n + LEAF_CLASS] = key
+        fd.ints[n + LEAF_DENSE] = fd.add_floats(pack_dense(nums, dens, nv, key).reshape(-1))
+    return n
+
+
+def packed_classes(ints) -> set:
+    """The degree classes (:func:`warp_rbrdf.chebyshev_dense.class_key`) of the leaves of a
+    packed fit (``ints`` of :func:`pack_model`); leaves without one are left out."""
+    ints = np.asarray(ints)
+    out, todo = set(), [0]
+    while todo:
+        n = todo.pop()
+        kind = int(ints[n])
+        if kind == NODE_DOMAIN:
+            todo.append(int(ints[n + DOMAIN_CHILD]))
+        elif kind == NODE_SPLIT:
+            todo += [int(c) for c in ints[n + SPLIT_CHILDREN:n + SPLIT_CHILDREN + int(ints[n + SPLIT_N])]]
+        elif int(ints[n + LEAF_CLASS]):
+            out.add(int(ints[n + LEAF_CLASS]))
+    return out
