@@ -121,7 +121,8 @@ def test_cli_brdf(lobe_file, tmp_path, capsys):
                "--max-den-degree", "3", "--out", str(out)])
     text = capsys.readouterr().out
     assert rc == 0 and out.exists()
-    assert "coefs" in text and "guaranteed on theta_d <= 60 deg" in text and "60-78.5" in text
+    assert "coefs" in text and "proved within its intervals at every cluster of theta_d <= 60 deg" in text
+    assert "between the clusters proved" in text and "60-78.5" in text
 
 
 def test_cli_brdf_bad_file(tmp_path, capsys):

@@ -111,7 +111,7 @@ def test_the_file_says_what_is_guaranteed_on_the_whole_domain_and_why_not_more()
     assert f"{fi['n_points']} data points" in d["reason"]
     assert ("not within it between them" in d["reason"]) == (fi["verify_max_ratio"] > 1.0)
     assert fit3d.domain_record({"n_points": 10, "theta_max_deg": 89.0, "verify_points": 40,
-                                "verify_max_ratio": 0.5})["reason"].count("checked, not proved") == 1
+                                "verify_max_ratio": 0.5})["reason"].count("verified, not proved") == 1
     import tempfile
     from pathlib import Path
 

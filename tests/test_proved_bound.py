@@ -113,3 +113,75 @@ def test_reader_checks_the_bound_records():
         bad["fit"]["bound"][0][field] = value
         with pytest.raises(BRDFFileError, match=f"bound.0..{field}"):
             from_dict(bad)
+
+
+class _Lobe3D:
+    """An RGL-like measurement (``evaluate(wi, wo)`` in 1/sr, the last incidence): a diffuse
+    base and a broad lobe in theta_h that depends on phi_d, not reciprocal."""
+
+    name = "broad_lobe"
+    source = ""
+    source_sha256 = ""
+    theta_i_max = np.radians(80.0)
+
+    def evaluate(self, wi, wo):
+        from fit.rational.variables3d import half_diff_3d
+
+        X = half_diff_3d(wi, wo)
+        th, td, pd = X[..., 0], X[..., 1], X[..., 2]
+        spec = 1.5 * np.exp(-(th / 0.45) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + np.sin(td) ** 2)
+        out = np.array([0.1, 0.15, 0.2]) + spec[..., None] * [1.0, 0.9, 0.8]
+        above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
+        return np.where(above[..., None], out, 0.0)
+
+
+def _brute_force_3d(res, brdf, n=100000, seed=11):
+    """The largest error per (piece, channel) at ``n`` random points of the measured cells, in
+    :data:`fit.rational.proved_bound.UNIT_3D` (the measurement trilinear on the fit's grid)."""
+    from fit.rational.proved_bound import measurement_grid
+    from fit.rational.settings import DEFAULT_CHANNEL_FLOOR
+
+    axes, rho, measured = measurement_grid(brdf, float(res.data.theta_max), res.settings.grid)
+    rng = np.random.default_rng(seed)
+    u = rng.random((n, 3)) * np.array([a[-1] for a in axes])
+    idx = [np.clip(np.searchsorted(axes[v], u[:, v]) - 1, 0, len(axes[v]) - 2) for v in range(3)]
+    bits = [(a, b, c) for a in (0, 1) for b in (0, 1) for c in (0, 1)]      # _multilinear's order
+    ok = np.all([measured[idx[0] + a, idx[1] + b, idx[2] + c] for a, b, c in bits], axis=0)
+    u, idx = u[ok], [i[ok] for i in idx]
+    corners = np.stack([rho[idx[0] + a, idx[1] + b, idx[2] + c] for a, b, c in bits], axis=1)
+    loc = np.stack([(u[:, v] - axes[v][idx[v]]) / (axes[v][idx[v] + 1] - axes[v][idx[v]]) for v in range(3)], 1)
+    m = _multilinear(corners, loc)
+    X = np.stack([u[:, 0] ** 2, u[:, 1], u[:, 2]], axis=1)
+    f = np.asarray(res.model(X), np.float64)
+    s = np.maximum(np.maximum(m, np.asarray(res.noise)[None, :]), DEFAULT_CHANNEL_FLOOR * m.max(axis=1, keepdims=True))
+    err = np.abs(f - m) / s
+    piece = np.clip(np.searchsorted(res.edges, X[:, 0], side="right") - 1, 0, len(res.edges) - 2)
+    return {(k, "RGB"[c]): float(err[piece == k, c].max(initial=0.0))
+            for k in range(len(res.edges) - 1) for c in range(3)}
+
+
+def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
+    """A small-budget 3-D fit with ``prove_bound``: a bound per piece and channel, never below the
+    largest error at dense random points of the measured cells, recorded in the fit's record
+    (read back from its file) and in ``fit_info["domain"]``; without it nothing is claimed."""
+    from fit.rational.coefficient_file import load, save
+    from fit.rational.fit3d import fit_rgl
+
+    brdf = _Lobe3D()
+    fit = dict(grid=(9, 8, 6), n_random=300, n_objective=0, verify=0, degrees=(4, 2), theta_h_edges=[0.3],
+               tol=0.05, time_limit=60.0, albedo=False)
+    res = fit_rgl(brdf, prove_bound=True, **fit)
+    assert len(res.bounds) == 2 * 3 and res.model.fit_info["bound"] == [b.record() for b in res.bounds]
+    observed = _brute_force_3d(res, brdf)
+    for b in res.bounds:
+        assert b.proved is not None, b
+        assert b.verified <= b.proved and observed[(b.piece, b.channel)] <= b.proved, (b, observed)
+        assert b.proved <= 50 * observed[(b.piece, b.channel)] + b.tolerance   # not vacuous
+    d = res.model.fit_info["domain"]
+    assert d["proved_at"] == "grid cells" and d["proved_bound"] == max(b.proved for b in res.bounds)
+    assert d["proved"] == all(b.proved <= b.tolerance for b in res.bounds)
+    save(res.model, tmp_path / "f.json")
+    assert load(tmp_path / "f.json").fit_info["bound"] == res.model.fit_info["bound"]
+    plain = fit_rgl(brdf, **fit)
+    assert plain.bounds is None and "bound" not in plain.model.fit_info
+    assert plain.model.fit_info["domain"]["proved"] is False

@@ -441,15 +441,19 @@ def test_fit_study_reports_what_each_fit_guarantees():
     assert fit_study.guarantee(dict(feasible=False, core_guaranteed=False)) == "no"
     band = _piece((60.0, 78.5), True)
     assert _brdf_fit([_piece((0.0, 60.0), True), band], 189, 3.58).summary() == \
-        "total 189 coefficients, 3.6 s, guaranteed on theta_d <= 60 deg; grazing band met"
+        ("total 189 coefficients, 3.6 s, proved within its intervals at every cluster of theta_d <= 60 deg; "
+         "grazing band met; between the clusters not proved")
     assert _brdf_fit([_piece((0.0, 40.0), True, (0.0, 5.0)), _piece((0.0, 40.0), True, (5.0, 90.0)),
                       _piece((40.0, 78.5), False)]).summary() == \
-        ("total 735 coefficients, 21.4 s, guaranteed on theta_d <= 40 deg (split at theta_h = 5 deg); "
-         "grazing band best effort (NOT within its intervals, flagged)")
+        ("total 735 coefficients, 21.4 s, proved within its intervals at every cluster of theta_d <= 40 deg "
+         "(split at theta_h = 5 deg); grazing band best effort (NOT within its intervals, flagged); "
+         "between the clusters not proved")
     assert _brdf_fit([_piece((0.0, 40.0), False), band]).summary() == \
-        "total 735 coefficients, 21.4 s, NOT guaranteed (best fit found, flagged infeasible); grazing band met"
+        ("total 735 coefficients, 21.4 s, NOT within its intervals at every cluster (best fit found, flagged "
+         "infeasible); grazing band met; between the clusters not proved")
     assert _brdf_fit([_piece((0.0, 78.5), True)], 54, 1.0).summary() == \
-        "total 54 coefficients, 1.0 s, guaranteed on theta_d <= 78.5 deg"
+        ("total 54 coefficients, 1.0 s, proved within its intervals at every cluster of theta_d <= 78.5 deg; "
+         "between the clusters not proved")
 
 
 def test_rational_model_caches_a_new_fit_and_refuses_a_flagged_one(tmp_path, monkeypatch):
@@ -474,8 +478,8 @@ def test_rational_model_caches_a_new_fit_and_refuses_a_flagged_one(tmp_path, mon
     cached = tmp_path / "a" / "paper_white_rgb_tol0p3_cli.json"
     assert none is None and info["source"] is None
     assert info["error"] == (f"fit flagged (paper_white_rgb_tol0p3_cli.json): total {m.n_coefficients} "
-                             "coefficients, 2.5 s, NOT guaranteed (best fit found, flagged infeasible); "
-                             "grazing band met")
+                             "coefficients, 2.5 s, NOT within its intervals at every cluster (best fit found, "
+                             "flagged infeasible); grazing band met; between the clusters not proved")
     assert cached.is_file() and load(cached).n_coefficients == m.n_coefficients
     got, info = F.rational_model("paper", 0.3, fit_dir=tmp_path / "a", allow_infeasible=True)
     assert got is not None and info["source"] == "cli (cached)" and len(calls) == 1
