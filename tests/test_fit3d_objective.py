@@ -8,6 +8,9 @@
   dark region at about twice the error;
 * the relative weights divide the density by the squared value floored at the floor and at the
   channel floor; the objective points of ``"relative"`` carry the cosine density alone;
+* each objective's held-out selection score (:func:`fit.rational.select3d.validation_score`)
+  ranks the fit made for it first: the relative score the relative fit, the relative RMSE of
+  ``rho cos cos`` the default one;
 * the fit records its objective; an unknown objective is refused.
 """
 from __future__ import annotations
@@ -18,6 +21,7 @@ import pytest
 from fit.formats.angles import cos_theta_i_o
 from fit.rational.fit3d import fit_samples, objective_points, sample_grid
 from fit.rational.samples3d import relative_weights
+from fit.rational.select3d import validation_relative, validation_score
 from fit.rational.settings import Fit3DSettings
 from fit.rational.variables3d import evaluate_directions, half_diff_3d
 
@@ -73,6 +77,23 @@ def test_relative_objective_beats_the_absolute_one_in_the_dark_region(fits):
         for rec in r.records:          # the bound of every data point: at most relax x the tolerance met
             assert rec["tolerance"] <= rec["tolerance_met"] * (1 + 1e-9)
             assert rec["q_certificate"]["certified"]
+
+
+class _Truth:
+    """Stands in for an RGL file in the selection's validation: ``evaluate(wi, wo)`` (1/sr)."""
+
+    def evaluate(self, wi, wo):
+        return peak_over_dark(half_diff_3d(wi, wo))
+
+
+def test_each_selection_score_prefers_the_fit_of_its_objective(fits):
+    _, _, out = fits
+    truth = _Truth()
+    score = {(k, o): validation_score(truth, r.model, o) for k, r in out.items() for o in ("relative", "rho_cos_cos")}
+    assert score[("relative", "relative")] < score[("rho_cos_cos", "relative")], score
+    assert score[("rho_cos_cos", "rho_cos_cos")] < score[("relative", "rho_cos_cos")], score
+    med, p95 = validation_relative(truth, out["relative"].model)
+    assert 0.0 < med <= p95 and score[("relative", "relative")] == med + p95
 
 
 def test_relative_weights_floor_the_value():
