@@ -102,7 +102,7 @@ class Synthetic:
 
 
 FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "verify": 0, "degrees": (4, 2),
-       "theta_h_edges": [0.15], "tol": 0.01, "time_limit": 30.0}
+       "theta_h_edges": [0.15], "tol": 0.01, "time_limit": 600.0}
 TOL = 0.01
 
 
