@@ -51,15 +51,18 @@ def vouched_evaluate(model):
 
 
 def fit_model_sampler(model, layout: str = "pieces", time_limit_s: float | None = TIME_LIMIT_S,
-                      deadline: Deadline | None = None, progress=None, log=None) -> CDFFit:
+                      deadline: Deadline | None = None, progress=None, log=None,
+                      pieces_kw: dict | None = None) -> CDFFit:
     """The inverse CDFs of ρ·cos θl of the fit ``model`` (:func:`vouched_evaluate`):
     :func:`fit.sampling.cdf_file.fit_cdf` with the default table (32 view rows x 64 x 64 cells,
     the table the renderer tabulates) and ``layout`` (``"pieces"``, default, or ``"global"``).
     ``time_limit_s`` / ``deadline``, ``progress(stage, done, total)`` (:mod:`fit.progress`) and
     ``log`` as there: the table is always completed, and what is not verified by the deadline is
-    sampled with the table."""
+    sampled with the table; ``pieces_kw`` tunes the pieces layout
+    (:func:`fit.sampling.variance_gate.fit_pieces`)."""
     return fit_cdf(vouched_evaluate(model), name=model.name, layout=layout, time_limit_s=time_limit_s,
-                   deadline=deadline, progress=progress, log=log, source={"file": "", "sha256": ""})
+                   deadline=deadline, progress=progress, log=log, source={"file": "", "sha256": ""},
+                   pieces_kw=pieces_kw)
 
 
 def embed_sampler(model, **kw) -> CDFFit:

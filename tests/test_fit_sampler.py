@@ -1,0 +1,187 @@
+"""A fit's own inverse CDFs stored in its coefficient file (fit.sampling.embedded,
+fit.sampling.model_sampler): made from the fit (2-D and 3-D), deterministic, read back
+bit for bit, used by the renderer with no tabulation and no source measurement, χ² and
+unbiasedness of the 3-D fit's sampler through the registry, and hostile records (one line,
+exit 2)."""
+from __future__ import annotations
+
+import copy
+import functools
+import json
+
+import numpy as np
+import pytest
+from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs
+
+from fit.formats.angles import direction_to_spherical, spherical_to_direction
+from fit.rational.coefficient_file import load, save
+from fit.sampling import binary_arrays, embedded
+from fit.sampling.model_sampler import embed_sampler, fit_model_sampler, vouched_evaluate
+from fit.sampling.table import tabulate
+
+T_EDGES, P_EDGES = edges(8, 16)
+
+
+def lobe3d(X):
+    """A synthetic RGB BRDF (1/sr) of (theta_h, theta_d, |phi_d|) rows that depends on phi_d and
+    is not reciprocal."""
+    th, td, pd = X[:, 0], X[:, 1], X[:, 2]
+    spec = 2.5 * np.exp(-(th / 0.3) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + 0.4 * np.sin(td) ** 2)
+    base = np.array([0.1, 0.14, 0.22]) * (1.0 + 0.3 * (np.cos(pd) * np.sin(td))[:, None])
+    return base + spec[:, None] * [1.0, 0.85, 0.7]
+
+
+@functools.lru_cache(maxsize=1)
+def _fit3d_with_sampler():
+    from fit.rational.fit3d import fit_samples, sample_grid
+
+    tm = np.radians(80.0)
+    X = sample_grid(tm, grid=(10, 9, 7), n_random=300, seed=3)
+    res = fit_samples(X, lobe3d(X), name="lobe3d", theta_max=tm, degrees=(4, 2), theta_h_edges=[0.2],
+                      tol=0.01, time_limit=60.0, grazing_cos=0.0, channel_floor=0.0)
+    assert res.valid
+    # every row rational, whatever the machine's load: no variance gate (a time limit would
+    # leave the rows it has not reached to the table), 16 phi pieces
+    cdf = embed_sampler(res.model, time_limit_s=None, pieces_kw=dict(max_variance_ratio=None, n_u=(16,)))
+    return res.model, cdf
+
+
+@pytest.fixture(scope="module")
+def fit3d(tmp_path_factory):
+    """``(path, model, cdf)``: a 3-D fit with its sampler, saved in a folder of its own."""
+    model, cdf = _fit3d_with_sampler()
+    path = tmp_path_factory.mktemp("fit3d") / "lobe3d.json"
+    save(model, path)
+    return path, copy.deepcopy(model), cdf
+
+
+def test_3d_sampler_round_trip_bit_for_bit(fit3d):
+    """The file's record reads back to the same table, bit for bit, and the same pieces; its
+    table is the one the renderer tabulates from the same fit (deterministic)."""
+    path, model, cdf = fit3d
+    assert not cdf.fallback and cdf.layout == "pieces" and cdf.maps.row_ok.all(), cdf.reason
+    back = embedded.read(load(path), path)
+    np.testing.assert_array_equal(back.table.cdf_theta, cdf.table.cdf_theta)
+    np.testing.assert_array_equal(back.table.cdf_phi, cdf.table.cdf_phi)
+    np.testing.assert_array_equal(back.maps.row_ok, cdf.maps.row_ok)
+    only = embedded.read(load(path), path, maps=False)
+    np.testing.assert_array_equal(only.cdf_phi, cdf.table.cdf_phi)
+    again = tabulate(vouched_evaluate(load(path)))
+    np.testing.assert_array_equal(again.cdf_phi, cdf.table.cdf_phi)
+
+
+def _case(path, sampler):
+    from lab import testing as T
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import MaterialSpec
+
+    spec = MaterialSpec(name="m", sampler=sampler, type="rational", file=path)
+    return Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
+
+
+@pytest.mark.parametrize("strategy", ["mis-rational", "rational-derivative"])
+def test_3d_fit_samples_with_its_own_sampler(fit3d, strategy, monkeypatch, tmp_path):
+    """Through the registry, with the source measurement nowhere (RBRDF_DATA elsewhere): the
+    fit's own sampler is used (no fallback, no build), its draws follow the map's own density
+    (χ²) and f cos * weight is unbiased against quadrature at three views."""
+    from warp_rbrdf.techniques import cdf_data
+
+    path, model, cdf = fit3d
+    monkeypatch.setenv("RBRDF_DATA", str(tmp_path))
+    monkeypatch.setattr(cdf_data, "cached_tabulate", lambda *a, **k: pytest.fail("tabulated at load"))
+    r = _case(path, strategy)
+    assert r.material_data.strategies == [strategy]
+    evaluate = vouched_evaluate(model)
+    for tv_deg in (5.0, 45.0, 80.0):
+        tv = np.radians(tv_deg)
+        xi = np.random.default_rng(11).random((20_000, 2)) * 0.998 + 0.001
+        wo = np.broadcast_to(spherical_to_direction(tv, 0.0), (len(xi), 3))
+        wi, w = r.sample_material("m", wo, xi, strategy)
+        wi, w = wi.astype(float), w.astype(float)
+        counts = histogram(*direction_to_spherical(wi[w > 0]), T_EDGES, P_EDGES)
+        assert chi2_pvalue(counts, map_cell_probs(cdf, tv, T_EDGES, P_EDGES), len(xi)) > 1e-4, tv_deg
+        assert_unbiased(evaluate, tv, wi, wo, w, (strategy, tv_deg))
+
+
+def test_mis_tabulated_uses_the_fits_table(fit3d, monkeypatch, tmp_path):
+    """The default strategy of a rational fit reads the table of the fit's record: no tabulation,
+    and the packed table is the record's."""
+    from warp_rbrdf.techniques import cdf_data
+
+    path, _, cdf = fit3d
+    monkeypatch.setenv("RBRDF_DATA", str(tmp_path))
+    monkeypatch.setattr(cdf_data, "cached_tabulate", lambda *a, **k: pytest.fail("tabulated at load"))
+    r = _case(path, "mis-tabulated")
+    np.testing.assert_array_equal(r.material_data.cdf[0].cdf_phi, cdf.table.cdf_phi)
+
+
+def test_2d_fit_sampler_made_from_the_fit(tmp_path):
+    """A shipped 2-D fit: the sampler's table is the table the renderer's load tabulates from the
+    same fit (the vouched values), and the file written with it loads."""
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    model = load(PACKAGE_DATA / "paper_white_rgb.json")
+    cdf = fit_model_sampler(model, time_limit_s=0.01)       # the table; rows past the limit use it
+    ref = tabulate(vouched_evaluate(model))
+    np.testing.assert_array_equal(cdf.table.cdf_theta, ref.cdf_theta)
+    embedded.attach(model, cdf)
+    save(model, tmp_path / "p.json")
+    assert embedded.read(load(tmp_path / "p.json"), maps=False).n_v == 32
+
+
+# --------------------------------------------------------------------------------------------
+# Hostile records: one line naming the file and the key, exit status 2
+# --------------------------------------------------------------------------------------------
+def _edited(fit3d, tmp_path, edit, keep_sha=False):
+    path = fit3d[0]
+    d = json.loads(path.read_text())
+    edit(d)
+    if keep_sha:   # re-sign the record, so that the check after the digest is reached
+        d["sampler"]["sha256"] = embedded.record_sha256(d["sampler"])
+    out = tmp_path / "bad.json"
+    out.write_text(json.dumps(d))
+    return out
+
+
+def _truncate(d):
+    data = d["sampler"]["table_data"]["cdf_phi"]["data"]
+    d["sampler"]["table_data"]["cdf_phi"]["data"] = data[: len(data) // 2]
+
+
+def _huge(d):
+    d["sampler"]["table_data"]["cdf_phi"]["shape"] = [32, 64, 2 ** 30]
+
+
+def _coefficient(d):
+    d["pieces"][0]["functions"][0]["numerator"]["coefficients"][0] *= 1.0 + 1e-9
+
+
+def _cdf_value(d):
+    a = binary_arrays.decode(d["sampler"]["table_data"]["cdf_theta"], "x", (32, 65), 10 ** 6)
+    a[3, 10] = a[3, 11]                        # a cell of no mass
+    d["sampler"]["table_data"]["cdf_theta"] = binary_arrays.encode(a)
+
+
+HOSTILE = [
+    ("truncated", _truncate, True, "sampler.table_data.cdf_phi.data"),
+    ("huge counts", _huge, True, "sampler.table_data"),
+    ("record edited, sha kept", lambda d: d["sampler"]["pieces"]["row_ok"].__setitem__(0, False), False,
+     "sampler.sha256"),
+    ("coefficients edited", _coefficient, False, "sampler.fit_sha256"),
+    ("a CDF value", _cdf_value, True, "sampler.table_data.cdf_theta"),
+]
+
+
+@pytest.mark.parametrize("what,edit,keep_sha,key", HOSTILE, ids=[h[0] for h in HOSTILE])
+def test_hostile_sampler_record_is_one_line_exit_2(fit3d, tmp_path, capsys, what, edit, keep_sha, key):
+    from warp_rbrdf.cli import main
+
+    bad = _edited(fit3d, tmp_path, edit, keep_sha)
+    scene = tmp_path / "s.toml"
+    scene.write_text('[camera]\nresolution = [4, 4]\n[integrator]\nspp = 1\n'
+                     '[materials.m]\ntype = "rational"\nfile = "bad.json"\nsampler = "mis-rational"\n'
+                     '[[shapes]]\ntype = "sphere"\nmaterial = "m"\n[[lights]]\ntype = "constant"\n')
+    rc = main(["render", str(scene), "--out", str(tmp_path / "o.exr"), "--no-progress"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2, err
+    assert len(err.splitlines()) == 1 and key in err and "bad.json" in err, err
