@@ -98,8 +98,8 @@ def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = 
     :data:`SELECT_MARGIN` lower to replace an earlier one; a layout with ``"if_rmse_below"`` is tried
     only when the chosen one's :func:`validation_rmse` is below that RMSE); ``variants`` logs what
     each achieved (coefficients, stated bound, validation RMSE and score, seconds), ``variant`` is
-    the index of the one chosen, ``validation_rmse`` and ``validation_score`` its held-out errors. The budgets are counts
-    (docs/fitting.md, "Budgets"): at most ``max_variants`` layouts are fitted (None: all; later ones
+    the index of the one chosen, ``validation_rmse`` and ``validation_score`` its held-out errors.
+    The budgets are counts (docs/fitting.md, "Budgets"): at most ``max_variants`` layouts are fitted (None: all; later ones
     are logged as skipped, "budget"); the chosen fit is then verified with at most ``verify_rounds``
     refits (:func:`fit.rational.verify3d.verify_and_refit`; a layout's own ``"verify_rounds"`` entry
     overrides it) and the albedo policy applied last with at most ``albedo_refits`` channel
