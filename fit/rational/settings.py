@@ -208,9 +208,11 @@ class Fit3DSettings(_Settings):
     * ``n_objective``: second-stage objective points per piece (0: one stage);
     * ``objective``: what the second stage minimises and the layout selection compares, one of
       :data:`fit.rational.samples3d.OBJECTIVES`: ``"relative"`` (squared relative error of rho,
-      rho floored at the error unit's floor, over cosine-distributed pairs; the selection: median
-      + 95th percentile of the relative error at held-out pairs) or ``"rho_cos_cos"`` (squared
-      error of ``rho cos theta_i cos theta_o`` in 1/sr; the selection: relative RMSE of it);
+      rho floored, over cosine-distributed pairs; the selection: median
+      + 95th percentile of the relative error at held-out pairs), ``"rho_cos_cos"`` (squared
+      error of ``rho cos theta_i cos theta_o`` in 1/sr; the selection: relative RMSE of it) or
+      ``"blend"`` (the two objectives, each of unit sum; the selection as ``"relative"``);
+      docs/fitting.md, "The second stage's objective", has what each achieves;
       ``relative_floor``: ``"relative"`` counts a value below this fraction of its channel's
       median of the data (or below the noise level) by that floor (fraction, default 0.1);
     * ``albedo``: apply the albedo policy; ``albedo_tol`` (fraction), ``albedo_time`` (s;
