@@ -23,7 +23,8 @@ derivative estimator weights by its map's Jacobian and is unbiased; a strategy w
 
 Materials: an analytic glossy lobe on the MERL grid (in memory, no shared data needed) with
 its tabulated and pieces-layout inverse CDFs, a Lambert material with the paper's global
-layout (a glossy lobe's global fit takes minutes), and, for the samplers that only draw from
+layout (a glossy lobe's global fit takes minutes), a 3-D rational fit sampled with the inverse
+CDFs its coefficient record carries (the rational strategies), and, for the samplers that only draw from
 an ``rgl`` material's own tables (the format's luminance + VNDF warps), a glossy and a matte
 shared RGL file as ``rgl`` materials. The slow variant runs the contract on the six shared RGL
 materials.
@@ -71,14 +72,15 @@ class Case:
     #: sub-cells per chi-square cell of the quadrature of a technique's exact pdf
     pdf_sub = 24
 
-    def __init__(self, name, evaluate, cdf, spec_kw, sampler="mis-rational"):
+    def __init__(self, name, evaluate, cdf, spec_kw, sampler="mis-rational", own_sampler=False):
         from warp_rbrdf.renderer import Renderer
         from warp_rbrdf.scene import MaterialSpec
 
         # cdf: what the techniques' NumPy references take (inverse-CDF data, or the RGLBRDF)
         self.name, self.evaluate, self.cdf = name, evaluate, cdf
         spec = MaterialSpec(name="m", sampler=sampler, **spec_kw)
-        spec.cdf = None if sampler == "mis-rgl" else cdf
+        # own_sampler: no cdf key, the material's fit carries ``cdf`` (fit.sampling.embedded)
+        spec.cdf = None if sampler == "mis-rgl" or own_sampler else cdf
         self.spec_kw = spec_kw
         self.renderer = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
         self._draws, self._probs = {}, {}
@@ -142,6 +144,21 @@ def lambert_global():
     return Case("lambert-global", f, cdf, dict(type="lambert", albedo=(0.8, 0.6, 0.4)))
 
 
+@pytest.fixture(scope="module")
+def fit3d_own():
+    """A 3-D rational fit (θh, θd, |φd|; not reciprocal) sampled with the inverse CDFs it carries
+    in its record (no ``cdf`` key; ``tests/test_fit_sampler.py`` makes it: every row rational)."""
+    import copy
+
+    from test_fit_sampler import _fit3d_with_sampler
+
+    from fit.sampling.model_sampler import vouched_evaluate
+
+    model, cdf = _fit3d_with_sampler()
+    model = copy.deepcopy(model)
+    return Case("fit3d-own", vouched_evaluate(model), cdf, dict(type="rational", data=model), own_sampler=True)
+
+
 def _rgl_case(material):
     from fit.formats.rgl import read_rgl
 
@@ -168,6 +185,7 @@ def _own_material(s):
 
 CASES = [(s.name, "glossy") for s in registry.STRATEGIES if _own_material(s) is None] + \
         [(s.name, "lambert_global") for s in registry.STRATEGIES if s.name in registry.RATIONAL_STRATEGIES] + \
+        [(s.name, "fit3d_own") for s in registry.STRATEGIES if s.name in registry.RATIONAL_STRATEGIES] + \
         [(s.name, w) for s in registry.STRATEGIES if _own_material(s) == "rgl"
          for w in ("rgl_glossy", "rgl_matte")]
 
