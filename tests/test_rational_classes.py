@@ -35,7 +35,9 @@ from fit.rational.vouched import values_with_table
 from lab import testing as T
 from warp_rbrdf import chebyshev_dense as D
 from warp_rbrdf.materials import rational
+from warp_rbrdf.materials import rational_channels as RC
 from warp_rbrdf.materials import rational_kernel as RK
+from warp_rbrdf.materials import rational_records
 from warp_rbrdf.materials.data import Materials
 from warp_rbrdf.paths import PACKAGE_DATA
 from warp_rbrdf.renderer import Renderer
@@ -136,6 +138,110 @@ def test_classes_of_fits_and_the_packed_fallback():
         f.num_exponents, f.num_coef = e, np.r_[1.0, np.full(len(e) - 1, 1e-4)]
     assert rational.packed_classes(rational.pack_model(big)[0]) == set()
     assert D.dense_class([(e, np.ones(len(e)))] * 3, [None] * 3, 2) is None
+
+
+_CHANNEL_KERNELS = {}
+
+
+def _run_channels(scalar, pq, head, flags, modes, tab):
+    """:func:`rational_channels.make_channels` at ``n`` inputs: pq ``(n, 6)``, header ``(26,)``,
+    per input its flags ``(n,)`` and modes ``(n, 3)``, table values ``(n, 3)``."""
+    f = RC.make_channels(scalar)
+    if f not in _CHANNEL_KERNELS:
+        @wp.kernel(module="unique")
+        def k(pq: wp.array(dtype=D.vec6d), head: wp.array(dtype=wp.float64), flags: wp.array(dtype=int),
+              modes: wp.array(dtype=wp.vec3i), tab: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3)):
+            i = wp.tid()
+            out[i] = f(pq[i], wp.address_of(head[0]), flags[i], modes[i][0], modes[i][1], modes[i][2], tab[i])
+
+        _CHANNEL_KERNELS[f] = k
+    n = len(pq)
+    out = wp.zeros(n, dtype=wp.vec3)
+    wp.launch(_CHANNEL_KERNELS[f], dim=n, inputs=[wp.array(pq, dtype=D.vec6d), wp.array(head, dtype=wp.float64),
+                                                   wp.array(flags, dtype=int), wp.array(modes, dtype=wp.vec3i),
+                                                   wp.array(tab, dtype=wp.vec3)], outputs=[out])
+    return out.numpy()
+
+
+def test_inline_exp_is_exp():
+    """The channels' vector ``exp`` (log values, no clamp) against NumPy's, rounded to float32:
+    the same float32 except within one ulp of a rounding tie, over the whole range (subnormal
+    and overflowing results included), NaN kept."""
+    y = np.concatenate([np.linspace(-760.0, 720.0, 200_001), np.random.default_rng(2).normal(0, 5, 100_000),
+                        [0.0, -0.0, 1e-300, -1e-300, np.nan, np.inf, -np.inf]])
+    pq = np.zeros((len(y), 6))
+    pq[:, :3], pq[:, 3:] = y[:, None], 1.0
+    head = np.zeros(26)
+    got = _run_channels(False, pq, head, np.full(len(y), rational_records.LEAF_LOG), np.zeros((len(y), 3), int),
+                        np.zeros((len(y), 3), np.float32))[:, 0]
+    with np.errstate(over="ignore"):
+        ref = np.exp(y).astype(np.float32)
+    fin = np.isfinite(ref) & (ref > 0)
+    ulp = np.abs(got[fin].view(np.int32) - ref[fin].view(np.int32))
+    assert ulp.max() <= 1 and np.mean(ulp == 0) > 0.999
+    assert np.array_equal(got[~fin & ~np.isnan(ref)], ref[~fin & ~np.isnan(ref)])
+    assert np.isnan(got[np.isnan(y)]).all()
+    # the lambda itself in float64: within 2 ulps of NumPy's exp wherever the result is normal
+    x = np.concatenate([np.linspace(-708.0, 709.7, 400_001), np.random.default_rng(3).normal(0, 3, 100_000)])
+    e = _exp64(x)
+    ref = np.exp(x)
+    assert np.max(np.abs(e.view(np.int64) - ref.view(np.int64))) <= 2
+
+
+_EXP64 = []
+
+
+def _exp64(x):
+    """``rbrdf_exp`` (:data:`rational_channels.EXP_SOURCE`) of float64 ``x``, lane by lane."""
+    if not _EXP64:
+        snippet = ("typedef double rbrdf_v4d __attribute__((ext_vector_type(4)));\n"
+                   "typedef long long rbrdf_v4l __attribute__((ext_vector_type(4)));\n"
+                   + RC.EXP_SOURCE + "rbrdf_v4d v = x;\nreturn rbrdf_exp(v)[0];\n")
+
+        @D.Native.func_native(snippet, "test_exp64")
+        def exp64(x: wp.float64) -> wp.float64:
+            ...
+
+        @wp.kernel(module="unique")
+        def k(x: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
+            i = wp.tid()
+            out[i] = exp64(x[i])
+
+        _EXP64.append(k)
+    out = wp.zeros(len(x), dtype=wp.float64)
+    wp.launch(_EXP64[0], dim=len(x), inputs=[wp.array(x, dtype=wp.float64)], outputs=[out])
+    return out.numpy()
+
+
+def test_vector_and_scalar_channels_agree():
+    """The CPU (vector) and CUDA (scalar) forms of the channels, compiled here, on random P, Q,
+    headers with active clamps and ranges, every combination of flags and channel modes."""
+    rng = np.random.default_rng(5)
+    n = 40_000
+    pq = np.concatenate([rng.normal(0.5, 2.0, (n, 3)), rng.uniform(0.2, 2.0, (n, 3))], -1)
+    head = np.zeros(26)
+    head[[rational_records.FH_OFFSET, rational_records.FH_MIN, rational_records.FH_MAX]] = 0.02, 0.05, 3.0
+    head[rational_records.FH_LOGMAX] = np.log(3.0 + 0.02) - 0.2
+    head[rational_records.FH_RANGES:rational_records.FH_RANGES + 6] = [0.1, 2.0, 0.0, 1.0, 0.3, 0.4]
+    flags = rng.integers(0, 32, n)
+    modes = rng.integers(0, 4, (n, 3))
+    tab = rng.uniform(0, 5, (n, 3)).astype(np.float32)
+    vec = _run_channels(False, pq, head, flags, modes, tab)
+    sca = _run_channels(True, pq, head, flags, modes, tab)
+    np.testing.assert_allclose(vec, sca, rtol=2e-7, atol=0)
+    assert np.mean(vec == sca) > 0.999
+    # a reference in NumPy of the recipe's steps 5-7 (rational_kernel._channel)
+    y = pq[:, :3] / pq[:, 3:]
+    log, mn, mx = ((flags & b) != 0 for b in (rational_records.LEAF_LOG, rational_records.LEAF_MIN,
+                                              rational_records.LEAF_MAX))
+    y = np.where((log & mx)[:, None], np.fmin(y, head[rational_records.FH_LOGMAX]), y)
+    y = np.where(log[:, None], np.exp(y) - head[rational_records.FH_OFFSET], y)
+    y = np.where(mn[:, None], np.fmax(y, head[rational_records.FH_MIN]), y)
+    y = np.where(mx[:, None], np.fmin(y, head[rational_records.FH_MAX]), y)
+    y = np.where((modes & rational_records.CH_TABLE) != 0, tab.astype(float), y)
+    r = head[rational_records.FH_RANGES:rational_records.FH_RANGES + 6].reshape(3, 2)
+    y = np.where((modes & rational_records.CH_RANGE) != 0, np.fmin(np.fmax(r[:, 0], y), r[:, 1]), y)
+    np.testing.assert_allclose(vec, y.astype(np.float32), rtol=2e-7, atol=0)
 
 
 # --------------------------------------------------------------------------------------------

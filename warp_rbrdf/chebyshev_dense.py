@@ -188,18 +188,18 @@ def make_dense_pq(key: int, scalar: bool = False):
         snippet = ("#if defined(__CUDA_ARCH__)\n" + dense_source(key, vector=False) + "\n#else\n"
                    + dense_source(key, vector=True) + "\n#endif\n")
 
-    @_Native.func_native(snippet, f"dense_pq_{key:06x}" + ("_scalar" if scalar else ""))
+    @Native.func_native(snippet, f"dense_pq_{key:06x}" + ("_scalar" if scalar else ""))
     def dense_pq(ptr: wp.uint64, ta: wp.float64, tb: wp.float64, tc: wp.float64) -> vec6d:
         ...
 
     return dense_pq
 
 
-class _Native:
-    """``@_Native.func_native(snippet, name)``: ``wp.func_native(snippet)`` applied to the stub
-    under the unique name ``name`` (Warp keys a function by its qualified name: one per class).
-    Warp recognises a native stub by a decorator spelled ``<...>.func_native(...)`` in its
-    source, hence the spelling."""
+class Native:
+    """``@Native.func_native(snippet, name)``: ``wp.func_native(snippet)`` applied to the stub
+    under the unique name ``name`` (Warp keys a function by its qualified name, so stubs made
+    by one factory need one each). Warp recognises a native stub by a decorator spelled
+    ``<...>.func_native(...)`` in its source, hence the spelling."""
 
     @staticmethod
     def func_native(snippet: str, name: str):

@@ -10,16 +10,19 @@ from the float32 shading frame.
 
 * :func:`rational_eval`: one function for every fit (the packed Chebyshev groups,
   :func:`warp_rbrdf.chebyshev.cheb_sum6`): its source never depends on the fit.
-* :func:`make_rational_eval` ``(classes)``: the same values (float64 sums in another order)
-  from code specialised to a set of degree classes (:mod:`warp_rbrdf.chebyshev_dense`): a leaf
-  of one of them is evaluated by its class's unrolled code, any other by the packed form. The
-  renderer builds it for the classes of a scene's fits (:func:`.rational.kernel_eval`), so a new
-  fit compiles only when it brings a class no compiled kernel has. It also computes only the
-  angles a fit reads: ``phi_d`` (one ``atan2``) only where a split or a leaf reads it, and the
-  measured-domain move (``acos``, ``cos`` in float64) only where ``cos theta_h cos theta_d``
-  is within :data:`DOMAIN_MARGIN` of the cut-off's cosine or beyond it (elsewhere the move
-  changes nothing); the angles themselves are the float32 operations of
-  :func:`.frame.half_diff`, so both evaluators see the same inputs.
+* :func:`make_rational_eval` ``(classes)``: the same recipe from code specialised to a set of
+  degree classes (:mod:`warp_rbrdf.chebyshev_dense`): a leaf of one of them is evaluated by its
+  class's generated code, any other by the packed form; steps 5-7 run on the three channels at
+  once (:mod:`.rational_channels`: one vector, ``exp`` inline). The renderer builds it for the
+  classes of a scene's fits (:func:`.rational.kernel_eval`), so a new fit compiles only when it
+  brings a class no compiled kernel has. It computes only the angles a fit reads: theta_h and
+  theta_d by the float32 operations of :func:`.frame.half_diff` with the inline
+  :func:`warp_rbrdf.fastmath.atan2` for libm's ``atan2f`` (a call costs about 20 ns; the
+  angles differ by at most 3 float32 ulps), ``phi_d`` only where a split or a leaf reads it,
+  and the measured-domain move (``acos``, ``cos`` in float64) only where ``cos theta_h cos
+  theta_d`` is within :data:`DOMAIN_MARGIN` of the cut-off's cosine or beyond it (elsewhere
+  the move changes nothing). Its values are the NumPy reference's at its angles within float32
+  rounding (``tests/test_rational_classes.py``).
 """
 from __future__ import annotations
 
@@ -34,6 +37,7 @@ from ..chebyshev import cheb_sum6, vec6d
 from ..chebyshev_dense import make_dense_pq
 from . import frame as F
 from .data import Materials
+from .rational_channels import channels
 from .rational_records import (
     CH_RANGE,
     CH_TABLE,
@@ -199,7 +203,8 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
 @wp.func
 def half_diff_frame(wi: wp.vec3, wo: wp.vec3) -> vec6f:
     """``(theta_h, theta_d, x, y, cos theta_h, cos theta_d)`` of a local direction pair: the
-    angles by the float32 operations of :func:`.frame.half_diff` (the same values), and the
+    angles by the float32 operations of :func:`.frame.half_diff` with
+    :func:`warp_rbrdf.fastmath.atan2` (radians, within 3 float32 ulps of its values), and the
     light's direction in the half vector's frame, whose ``atan2(y, x)`` is phi_d
     (:func:`phi_d_of`)."""
     s = wi + wo
@@ -227,7 +232,8 @@ def half_diff_frame(wi: wp.vec3, wo: wp.vec3) -> vec6f:
 
 @wp.func
 def phi_d_of(g: vec6f) -> float:
-    """phi_d in (-pi, pi] of :func:`half_diff_frame`'s output (as :func:`.frame.half_diff`)."""
+    """phi_d in (-pi, pi] (radians) of :func:`half_diff_frame`'s output (as :func:`.frame.half_diff`,
+    with :func:`warp_rbrdf.fastmath.atan2`)."""
     phi_d = 0.0
     if wp.abs(g[2]) + wp.abs(g[3]) > 1.0e-12:
         phi_d = fmath.atan2(g[3], g[2])
@@ -331,9 +337,7 @@ def make_rational_eval(classes: tuple):
             tab = _fallback_table(mats, m, cf, h, a)
         pq = wp.static(leaf_pq)(mats.coef_q, ci, cf, n, ib, fb, ci[3 * m + 2], ta, tb, tc)
         r = n + LEAF_MODES
-        y = wp.vec3(_channel(cf, ci[r], h, flags, 0, pq[0], pq[3], tab[0]),
-                    _channel(cf, ci[r + 1], h, flags, 1, pq[1], pq[4], tab[1]),
-                    _channel(cf, ci[r + 2], h, flags, 2, pq[2], pq[5], tab[2]))
+        y = channels(pq, wp.address_of(cf[h]), flags, ci[r], ci[r + 1], ci[r + 2], tab)
         return wp.cw_mul(y, mats.scale[m])
 
     return rational_eval_classes

@@ -1,0 +1,122 @@
+"""Steps 5-7 of the rational recipe for a leaf's three channels at once, as native code
+(:func:`make_channels`): P/Q, the value transform (linear / log, with ``log(max + offset)`` as the
+ceiling before ``exp``), ``max(y, min)``, ``min(y, max)``, the fallback table in flagged
+channels, the step-7 range; the result rounded to float32. It computes what
+:func:`.rational_kernel._channel` computes per channel (float64 throughout, Warp's ``min`` /
+``max`` / ``clamp``: C ``fmin`` / ``fmax``), with the three channels as lanes of one Clang
+vector (``ext_vector_type``) and ``exp`` inline on the vector (:data:`EXP_SOURCE`): Cody-Waite
+reduction by ln 2, the Taylor polynomial of degree 13 on ``|r| <= ln(2) / 2`` (truncation below
+5e-18 relative), the scale 2^k in two exact factors (so results down to the subnormals and up to
+the overflow are those of ``exp``; ``tests/test_rational_classes.py`` measures it against
+NumPy's). Three libm ``exp`` calls and the scalar code around them cost a third of a 2-D fit's
+evaluation (``benchmarks/bench_eval.py``). A CUDA build compiles the same steps per channel with
+``exp``.
+"""
+from __future__ import annotations
+
+import functools
+import math
+
+import warp as wp
+
+from ..chebyshev import vec6d
+from ..chebyshev_dense import Native
+from .rational_records import (
+    CH_RANGE,
+    CH_TABLE,
+    FH_LOGMAX,
+    FH_MAX,
+    FH_MIN,
+    FH_OFFSET,
+    FH_RANGES,
+    LEAF_LOG,
+    LEAF_MAX,
+    LEAF_MIN,
+)
+
+#: 1 / k! for k = 13 .. 0 (Horner order)
+_TAYLOR = "".join(f"    e = e * r + {1.0 / math.factorial(k)!r};\n" for k in range(12, -1, -1))
+
+#: ``rbrdf_exp(x)``: exp of the four lanes of ``x`` (a C++ lambda; NaN lanes give NaN)
+EXP_SOURCE = f"""auto rbrdf_exp = [](rbrdf_v4d x) -> rbrdf_v4d {{
+    rbrdf_v4d c = __builtin_elementwise_min(__builtin_elementwise_max(x, (rbrdf_v4d)(-1416.0)), (rbrdf_v4d)(710.0));
+    const rbrdf_v4d shifter = 6755399441055744.0;          /* 1.5 * 2^52: rounds to an integer */
+    rbrdf_v4d k = (c * 1.4426950408889634 + shifter) - shifter;
+    rbrdf_v4d r = c - k * 6.93147180369123816490e-01;       /* ln 2, high part: k * it is exact */
+    r = r - k * 1.90821492927058770002e-10;                 /* ln 2, low part */
+    rbrdf_v4d e = {1.0 / math.factorial(13)!r};
+{_TAYLOR}    rbrdf_v4l ki = __builtin_convertvector(k, rbrdf_v4l);
+    rbrdf_v4l k1 = ki >> 1;
+    rbrdf_v4l k2 = ki - k1;
+    e = e * (rbrdf_v4d)((k1 + 1023) << 52) * (rbrdf_v4d)((k2 + 1023) << 52);
+    rbrdf_v4l nan = (rbrdf_v4l)(x != x);
+    return (rbrdf_v4d)(((rbrdf_v4l)e & ~nan) | ((rbrdf_v4l)x & nan));
+}};
+"""
+
+_VECTOR = f"""typedef double rbrdf_v4d __attribute__((ext_vector_type(4)));
+typedef long long rbrdf_v4l __attribute__((ext_vector_type(4)));
+{EXP_SOURCE}const double* hd = (const double*)head;
+rbrdf_v4d p = {{pq.c[0], pq.c[1], pq.c[2], 0.0}};
+rbrdf_v4d q = {{pq.c[3], pq.c[4], pq.c[5], 1.0}};
+rbrdf_v4d y = p / q;
+if (flags & {LEAF_LOG}) {{
+    if (flags & {LEAF_MAX}) y = __builtin_elementwise_min(y, (rbrdf_v4d)(hd[{FH_LOGMAX}]));
+    y = rbrdf_exp(y) - hd[{FH_OFFSET}];
+}}
+if (flags & {LEAF_MIN}) y = __builtin_elementwise_max(y, (rbrdf_v4d)(hd[{FH_MIN}]));
+if (flags & {LEAF_MAX}) y = __builtin_elementwise_min(y, (rbrdf_v4d)(hd[{FH_MAX}]));
+const int modes[3] = {{m0, m1, m2}};
+wp::vec_t<3, float> out;
+for (int c = 0; c < 3; ++c) {{
+    double v = (modes[c] & {CH_TABLE}) ? (double)tab.c[c] : y[c];
+    if (modes[c] & {CH_RANGE}) v = wp::clamp(v, hd[{FH_RANGES} + 2 * c], hd[{FH_RANGES} + 2 * c + 1]);
+    out.c[c] = (float)v;
+}}
+return out;
+"""
+
+_SCALAR = f"""const double* hd = (const double*)head;
+const int modes[3] = {{m0, m1, m2}};
+wp::vec_t<3, float> out;
+for (int c = 0; c < 3; ++c) {{
+    double v = pq.c[c] / pq.c[3 + c];
+    if (flags & {LEAF_LOG}) {{
+        if (flags & {LEAF_MAX}) v = wp::min(v, hd[{FH_LOGMAX}]);
+        v = wp::exp(v) - hd[{FH_OFFSET}];
+    }}
+    if (flags & {LEAF_MIN}) v = wp::max(v, hd[{FH_MIN}]);
+    if (flags & {LEAF_MAX}) v = wp::min(v, hd[{FH_MAX}]);
+    if (modes[c] & {CH_TABLE}) v = (double)tab.c[c];
+    if (modes[c] & {CH_RANGE}) v = wp::clamp(v, hd[{FH_RANGES} + 2 * c], hd[{FH_RANGES} + 2 * c + 1]);
+    out.c[c] = (float)v;
+}}
+return out;
+"""
+
+
+
+def channels_source(scalar: bool = False) -> str:
+    """The C++ body of :func:`make_channels`' function: the vector form on the CPU and the
+    scalar one in a CUDA build (``scalar``: the scalar form everywhere, for tests)."""
+    if scalar:
+        return _SCALAR
+    return "#if defined(__CUDA_ARCH__)\n" + _SCALAR + "#else\n" + _VECTOR + "#endif\n"
+
+
+@functools.lru_cache(maxsize=None)
+def make_channels(scalar: bool = False):
+    """``channels(pq, head, flags, m0, m1, m2, tab) -> vec3``: rho of the three channels (before
+    ``Materials.scale``) of a leaf with flags ``flags``, channel modes ``m0, m1, m2`` and header
+    at address ``head`` (``wp.address_of`` of its first float), from ``pq`` = (P_R, P_G, P_B, Q_R,
+    Q_G, Q_B) and the fallback table's value ``tab`` (:func:`channels_source`)."""
+
+    @Native.func_native(channels_source(scalar), "rational_channels" + ("_scalar" if scalar else ""))
+    def channels(pq: vec6d, head: wp.uint64, flags: int, m0: int, m1: int, m2: int, tab: wp.vec3) -> wp.vec3:
+        ...
+
+    return channels
+
+
+#: the function the renderer uses (:func:`make_channels`)
+channels = make_channels()
