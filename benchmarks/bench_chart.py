@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import functools
 import hashlib
 import json
 import os
@@ -80,17 +81,31 @@ def _sha(path) -> str:
 
 
 # --------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=2)
+def measured_data(bsdf: Path) -> tuple:
+    """``(MeasuredBRDF, ProjectedBRDF)`` of an RGL file, as the ``measured`` and ``projected``
+    kinds load it (``incident = "view"``, median projection); kept for the file's second map."""
+    from fit.formats import load_measured
+    from fit.projection.project import project
+
+    meas = load_measured(bsdf)
+    return meas, project(meas, statistic="median")
+
+
 def spec_for(rep: str, bsdf: Path, fit_file: Path | None):
     """``(MaterialSpec, sampler)`` of representation ``rep`` with its best sampler."""
     from warp_rbrdf import registry
     from warp_rbrdf.scene import MaterialSpec
 
     kind = "rational" if rep.startswith("rational") else rep
-    f = fit_file if kind == "rational" else bsdf
-    cdf = kind == "rational" and "sampler" in json.loads(Path(f).read_text())
+    cdf = kind == "rational" and "sampler" in json.loads(Path(fit_file).read_text())
     sampler = registry.default_strategy(kind, cdf=cdf)
-    extra = {} if kind == "rational" else {"incident": "view"}
-    return MaterialSpec(name="obj", type=kind, file=Path(f), sampler=sampler, **extra), sampler
+    if kind == "rational":
+        return MaterialSpec(name="obj", type=kind, file=Path(fit_file), sampler=sampler), sampler
+    if kind in ("measured", "projected"):
+        data = measured_data(bsdf)[kind == "projected"]
+        return MaterialSpec(name="obj", type=kind, data=data, sampler=sampler), sampler
+    return MaterialSpec(name="obj", type=kind, file=bsdf, sampler=sampler, incident="view"), sampler
 
 
 def scene_with(base, spec):
@@ -145,6 +160,18 @@ def truth(bsdf: Path, env: Path, base, a, out: Path) -> dict:
     return {"img": img, "delta": delta, "source": f"rendered ({secs:.0f} s)", "seconds": secs}
 
 
+def errors(img, ref, mask, expo, band) -> dict:
+    """ΔE2000 mean and p99 over ``mask``, the mean over its rim ``band`` and over the rest, and
+    the RGB channel-mean ratios img / ref over ``mask`` (a colour shift shows there)."""
+    from studies import metrics as M
+
+    de = M.delta_e2000(img, ref, expo)
+    s = M.de_stats(de, mask)
+    inner = mask & ~band
+    return {"de_mean": s["mean"], "de_p99": s["p99"], "de_rim": float(de[band].mean()),
+            "de_inner": float(de[inner].mean()), "mean_ratio": (img[mask].mean(0) / ref[mask].mean(0)).tolist()}
+
+
 def de_stats(img, ref, mask, expo) -> tuple[float, float]:
     from studies import metrics as M
 
@@ -152,7 +179,7 @@ def de_stats(img, ref, mask, expo) -> tuple[float, float]:
     return s["mean"], s["p99"]
 
 
-def ladder_ours(scene, a, ref, mask, expo) -> tuple[list, dict]:
+def ladder_ours(scene, a, ref, mask, expo, band) -> tuple[list, dict]:
     from warp_rbrdf.renderer import Renderer
 
     t0 = time.perf_counter()
@@ -165,13 +192,12 @@ def ladder_ours(scene, a, ref, mask, expo) -> tuple[list, dict]:
         t0 = time.perf_counter()
         img = np.asarray(r.render(spp=spp, seed=a.seed + i, threads=a.threads), np.float64)
         dt = time.perf_counter() - t0
-        m, p = de_stats(img, ref, mask, expo)
-        rungs.append({"spp": spp, "seconds": dt, "de_mean": m, "de_p99": p})
+        rungs.append(dict({"spp": spp, "seconds": dt}, **errors(img, ref, mask, expo, band)))
     return rungs, {"setup_s": setup + comp, "renderer": r, "notes": [n for lm in r.material_data.loaded
                                                                       for n in (lm.notes or ())]}
 
 
-def ladder_mitsuba(bsdf, env, a, ref, mask, expo) -> tuple[list, float]:
+def ladder_mitsuba(bsdf, env, a, ref, mask, expo, band) -> tuple[list, float]:
     from lab import mitsuba_reference as MR
 
     t0 = time.perf_counter()
@@ -181,8 +207,7 @@ def ladder_mitsuba(bsdf, env, a, ref, mask, expo) -> tuple[list, float]:
     for i, spp in enumerate(a.spp_ladder):
         MR.render_timed(scene, spp, seed=2**31 - 1)                    # JIT compile per spp: untimed
         img, dt = MR.render_timed(scene, spp, seed=a.seed + i)
-        m, p = de_stats(img, ref, mask, expo)
-        rungs.append({"spp": spp, "seconds": dt, "de_mean": m, "de_p99": p})
+        rungs.append(dict({"spp": spp, "seconds": dt}, **errors(img, ref, mask, expo, band)))
     return rungs, setup
 
 
@@ -194,7 +219,10 @@ def run_case(mat: str, map_name: str, a, fits: dict, mitsuba: dict, out: Path) -
     bsdf, env = data / "rgl" / f"{mat}_rgb.bsdf", data / MAPS[map_name]
     t_case = time.perf_counter()
     base = MR.sphere_scene(bsdf, env, a.truth_spp, a.res, pattern=OUR_PATTERN)
+    from studies.fidelity import rim_band
+
     mask = MR.sphere_mask(a.res)
+    band = rim_band(a.res, mask)          # the outer 15 px at 256 px (scaled, >= 4 px) of the disc
     tr = truth(bsdf, env, base, a, out)
     ref = tr["img"]
     expo = M.exposure_for(ref, mask)
@@ -211,7 +239,7 @@ def run_case(mat: str, map_name: str, a, fits: dict, mitsuba: dict, out: Path) -
                 continue
         spec, sampler = spec_for(rep, bsdf, fit_file)
         try:
-            rungs, info = ladder_ours(scene_with(base, spec), a, ref, mask, expo)
+            rungs, info = ladder_ours(scene_with(base, spec), a, ref, mask, expo, band)
         except Exception as e:  # noqa: BLE001 - a representation that cannot load is reported
             case["notes"][rep] = f"{type(e).__name__}: {e}"
             continue
@@ -225,7 +253,7 @@ def run_case(mat: str, map_name: str, a, fits: dict, mitsuba: dict, out: Path) -
                                               for r in rungs))
     if mitsuba.get("variant"):
         try:
-            rungs, setup = ladder_mitsuba(bsdf, env, a, ref, mask, expo)
+            rungs, setup = ladder_mitsuba(bsdf, env, a, ref, mask, expo, band)
             case["ladders"]["mitsuba"], case["setup_s"]["mitsuba"] = rungs, setup
             case["samplers"]["mitsuba"] = MITSUBA_SAMPLER
             case["memory"]["mitsuba"] = {"sampler": MITSUBA_SAMPLER, "file_bytes": int(bsdf.stat().st_size)}
@@ -288,6 +316,8 @@ def parse(argv):
     p.add_argument("--no-mitsuba", action="store_true")
     p.add_argument("--out", default=str(ROOT / "results" / "chart"))
     p.add_argument("--docs", action="store_true", help="also write docs/chart.md and docs/images/chart.png")
+    p.add_argument("--from-json", metavar="CHART_JSON", help="render nothing: write the report of an earlier "
+                                                              "run's chart.json")
     a = p.parse_args(argv)
     preset = QUICK if a.quick else FULL
     a.materials = a.materials or preset.get("materials")
@@ -302,10 +332,14 @@ def parse(argv):
 
 
 def main(argv=None) -> int:
-    from fit.atomic_files import atomic_write, save_figure  # noqa: F401 - save_figure via chart_report
+    from fit.atomic_files import atomic_write
     from warp_rbrdf.paths import require_data_root
 
     a = parse(argv)
+    if a.from_json:                # only the report of an earlier run
+        res = json.loads(Path(a.from_json).read_text())
+        write_outputs(res, Path(a.out), a.docs)
+        return 0
     start_load = _load()
     data = require_data_root("the RGL files and environment maps")
     os.environ["RBRDF_DATA"] = str(data)
@@ -338,17 +372,25 @@ def main(argv=None) -> int:
            "fits": {m: {k: v[1] for k, v in f.items()} for m, f in fits.items()}, "cases": cases}
     with atomic_write(out / "chart.json") as f:
         json.dump(res, f, indent=1, default=_jsonable)
-    CR.plot_cases(cases, out / "chart.png")
-    with atomic_write(out / "chart.md") as f:
-        f.write(CR.markdown(res, "chart.png"))
-    if a.docs:
-        CR.plot_cases(cases, ROOT / "docs" / "images" / "chart.png")
-        with atomic_write(ROOT / "docs" / "chart.md") as f:
-            f.write(CR.markdown(res, "images/chart.png"))
+    write_outputs(res, out, a.docs)
     wins = sum(c["summary"]["first"] == "rational-3d" for c in cases)
     log(f"rational-3d first on {wins} of {len(cases)} cases; wrote {out}/chart.json, chart.md, chart.png"
         + (", docs/chart.md" if a.docs else "") + f" ({res['wall_s']:.0f} s)")
     return 0
+
+
+def write_outputs(res: dict, out: Path, docs: bool) -> None:
+    """``chart.png`` and ``chart.md`` in ``out``; with ``docs`` also docs/chart.md and
+    docs/images/chart.png (each written atomically)."""
+    from fit.atomic_files import atomic_write
+
+    CR.plot_cases(res["cases"], out / "chart.png")
+    with atomic_write(out / "chart.md") as f:
+        f.write(CR.markdown(res, "chart.png"))
+    if docs:
+        CR.plot_cases(res["cases"], ROOT / "docs" / "images" / "chart.png")
+        with atomic_write(ROOT / "docs" / "chart.md") as f:
+            f.write(CR.markdown(res, "images/chart.png"))
 
 
 def _jsonable(o):

@@ -60,6 +60,22 @@ def _ordered(d):
     return [k for k in ORDER if k in d] + [k for k in d if k not in ORDER]
 
 
+def first_of_ours(case: dict) -> tuple:
+    """``(representation, seconds)`` of our renderer's first to the target (Mitsuba left out)."""
+    r = {k: v for k, v in case["summary"]["reach"].items() if k != "mitsuba" and v["seconds"] is not None}
+    k = min(_ordered(r), key=lambda k: r[k]["seconds"], default=None)
+    return k, (r[k]["seconds"] if k else None)
+
+
+def shift(ladder) -> str:
+    """The top rung's channel-mean ratios and ΔE mean inside / on the rim (when recorded)."""
+    top = ladder[-1]
+    if "mean_ratio" not in top:
+        return ""
+    return (f"; at {top['spp']} spp R/G/B means {'/'.join(f'{x:.3f}' for x in top['mean_ratio'])} of the truth's, "
+            f"ΔE mean {top['de_inner']:.2f} inside, {top['de_rim']:.2f} on the rim")
+
+
 def why_not(case: dict, rep: str = "rational-3d") -> str:
     """One sentence from the numbers of ``case`` (a case record of bench_chart) on why ``rep``
     does not reach the target first: never reached (its floor: the lowest ΔE mean, against the
@@ -75,15 +91,21 @@ def why_not(case: dict, rep: str = "rational-3d") -> str:
         return (f"never reaches ΔE {TARGET_DE:g} on the ladder: its lowest ΔE mean is {me['floor']:.3g} "
                 f"(truth's own floor {case['truth']['floor_mean']:.2g}); "
                 + ("a bias of the representation (its ΔE stops falling)" if _flat(case["ladders"][rep])
-                   else "still falling at the top rung (noise: more spp needed)"))
+                   else "still falling at the top rung (noise: more spp needed)") + shift(case["ladders"][rep]))
     w = s["first"]
     if w is None:
         return "no representation reaches the target"
     wr = s["reach"][w]
     per_me = _sec_per_spp(case["ladders"][rep])
     per_w = _sec_per_spp(case["ladders"][w])
-    return (f"{w} first ({wr['seconds']:.3g} s vs {me['seconds']:.3g} s): {rep} needs {me['spp']:.3g} spp "
-            f"against {wr['spp']:.3g}, at {per_me / per_w:.2f}x {w}'s seconds per spp")
+    out = (f"{w} first ({wr['seconds']:.3g} s vs {me['seconds']:.3g} s): {rep} needs {me['spp']:.3g} spp "
+           f"against {wr['spp']:.3g}, at {per_me / per_w:.2f}x {w}'s seconds per spp")
+    o, _ = first_of_ours(case)
+    if o not in (w, rep, None):
+        ro = s["reach"][o]
+        out += (f"; of ours {o} first ({ro['seconds']:.3g} s, {ro['spp']:.3g} spp, "
+                f"{_sec_per_spp(case['ladders'][rep]) / _sec_per_spp(case['ladders'][o]):.2f}x its seconds per spp)")
+    return out + shift(case["ladders"][rep])
 
 
 def _flat(ladder) -> bool:
@@ -170,7 +192,8 @@ def markdown(res: dict, image: str | None = None) -> str:
     L += ["## Summary", "",
           f"The rational 3-D path reaches ΔE2000 mean ≤ {TARGET_DE:g} first on **{len(wins)} of {n}** cases "
           f"(the target of the full run: 30 of 40).", ""]
-    head = ["material", "map", "first to ΔE ≤ 1", "at"] + [f"{k} s to ΔE ≤ 1 (floor)" for k in ORDER]
+    head = (["material", "map", "first to ΔE ≤ 1", "at", "first of ours", "at"]
+            + [f"{k} s to ΔE ≤ 1 (floor)" for k in ORDER])
     rows = []
     for c in cases:
         s = c["summary"]
@@ -183,12 +206,14 @@ def markdown(res: dict, image: str | None = None) -> str:
                 cells.append(f"never ({r['floor']:.2f})")
             else:
                 cells.append(f"{r['seconds']:.3g}" + (" ≤" if r["how"] == "first rung" else ""))
-        rows.append([c["material"], c["map"], s["first"] or "none", _t(s["seconds"])] + cells)
+        o, ot = first_of_ours(c)
+        rows.append([c["material"], c["map"], s["first"] or "none", _t(s["seconds"]), o or "none", _t(ot)] + cells)
     L += [_table(rows, head), "",
           "(“≤”: already below the target at the lowest rung, so its time is an upper bound; never: not "
           "reached on the ladder, with the lowest ΔE mean it reached.)", "",
           "### Where the rational 3-D path does not win, and why", ""]
     L += [f"- {c['material']} / {c['map']}: {why_not(c)}" for c in cases if c["summary"]["first"] != "rational-3d"]
+    L += ["", overview(cases)]
     L += ["", "## Memory of each representation", "",
           "Device bytes: the arrays the renderer uploads for the material (BRDF data) and for its sampler "
           "(inverse-CDF tables), summed; file: the bytes of the file it is read from.", ""]
@@ -207,8 +232,14 @@ def markdown(res: dict, image: str | None = None) -> str:
         for k in _ordered(c["ladders"]):
             for r in c["ladders"][k]:
                 rows.append([c["material"], c["map"], k, r["spp"], f"{r['seconds']:.3g}", f"{r['de_mean']:.3g}",
-                             f"{r['de_p99']:.3g}"])
-    L += [_table(rows, ["material", "map", "representation", "spp", "render s", "ΔE mean", "ΔE p99"]), "",
+                             f"{r['de_p99']:.3g}", f"{r.get('de_inner', float('nan')):.3g}",
+                             f"{r.get('de_rim', float('nan')):.3g}",
+                             "/".join(f"{x:.3f}" for x in r.get("mean_ratio", [])) or "–"])
+    L += [_table(rows, ["material", "map", "representation", "spp", "render s", "ΔE mean", "ΔE p99",
+                        "ΔE mean inside", "ΔE mean rim", "R/G/B mean ratio"]), "",
+          "(rim: the outer 15 px at 256 px of the sphere's disc, scaled with the resolution, at least 4 px, as "
+          "`studies/fidelity.py`'s rim band; inside: the rest of the mask; R/G/B mean ratio: the image's "
+          "channel means over the truth's.)", "",
           "## Truth and set-up", ""]
     rows = [[c["material"], c["map"], c["truth"]["spp"], f"{c['truth']['floor_mean']:.3g}",
              f"{c['truth']['floor_p99']:.3g}", c["truth"]["source"]]
@@ -225,6 +256,25 @@ def markdown(res: dict, image: str | None = None) -> str:
           "spp 4 16 64 256, truth 4096 spp; a 3-D fit is 13-40 s on one idle core and is made once, then cached):", "",
           "    RBRDF_DATA=/work/shared/data python -m benchmarks.bench_chart --docs", ""]
     return "\n".join(L)
+
+
+def overview(cases: list[dict]) -> str:
+    """Wins per representation, and per representation against ``rgl`` the median ratio of its
+    seconds per spp and of its ΔE mean at the top rung (its speed and its bias plus noise)."""
+    wins = {}
+    for c in cases:
+        wins[c["summary"]["first"] or "none"] = wins.get(c["summary"]["first"] or "none", 0) + 1
+    parts = [f"First to ΔE ≤ {TARGET_DE:g}: " + ", ".join(f"{k} {v}" for k, v in sorted(wins.items(),
+                                                                                     key=lambda kv: -kv[1])) + "."]
+    for rep in ORDER[1:]:
+        sp = [_sec_per_spp(c["ladders"][rep]) / _sec_per_spp(c["ladders"]["rgl"]) for c in cases
+              if rep in c["ladders"] and "rgl" in c["ladders"]]
+        de = [c["ladders"][rep][-1]["de_mean"] / c["ladders"]["rgl"][-1]["de_mean"] for c in cases
+              if rep in c["ladders"] and "rgl" in c["ladders"]]
+        if sp:
+            parts.append(f"{rep} against rgl (median over cases): {np.median(sp):.2f}x the seconds per spp, "
+                         f"{np.median(de):.2f}x the ΔE mean at the top rung.")
+    return " ".join(parts)
 
 
 def _b(x) -> str:
