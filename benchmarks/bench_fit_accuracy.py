@@ -258,7 +258,7 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
     if res.info.get("albedo") is not None:
         row["fit3d"]["albedo_policy"] = _jsonable(res.info["albedo"])
     if name in NEURAL:
-        row["neural"] = {"rel_rmse": NEURAL[name], "coefficients": NEURAL_WEIGHTS, "source": "published (issue 25)"}
+        row["neural"] = {"rel_rmse": NEURAL[name], "coefficients": NEURAL_WEIGHTS, "source": "published"}
     return row
 
 

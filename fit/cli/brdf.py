@@ -152,7 +152,7 @@ def register(subparsers) -> None:
                     "(the default for a "
                     "MERL .binary file, which is reciprocal and has no 3-D fit): project onto (theta_h, "
                     "theta_d) (median, grazing samples beyond 79 deg dropped), fit each channel with the "
-                    "fewest coefficients inside the intervals (LP with constraint generation) on a guaranteed "
+                    "fewest coefficients inside the intervals (LP with constraint generation), proved at every cluster of the "
                     "core theta_d <= core and, separately, on the grazing band up to 78.5 deg (version 1 or "
                     "2; 3-31 s). Absolute floor of the 2-D fit: tol * A_Y / pi (A_Y = white-sky luminance "
                     "albedo). The flags of the other model are refused.")
@@ -164,16 +164,16 @@ def register(subparsers) -> None:
                         ".binary file; 2d: (theta_h, theta_d) within --tol; 3d: (theta_h, theta_d, |phi_d|), "
                         "RGL .bsdf files only")
     p.add_argument("--tol", type=number(MIN_TOLERANCE, MAX_TOLERANCE), default=None,
-                   help=f"relative tolerance in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}]; 2-D: guaranteed on the "
+                   help=f"relative tolerance in [{MIN_TOLERANCE:g}, {MAX_TOLERANCE:g}]; 2-D: met at every cluster of the "
                         f"core (default {d.tol:g}); 3-D: the first tolerance of the ladder, the bound the file "
                         f"states is the one met (default {brdf3d.TOL_3D:g})")
     g = p.add_argument_group("2-D fit (--model 2d; auto for a MERL .binary)")
     g.add_argument("--intervals", choices=INTERVALS, default=None,
-                   help="interval policy of the guaranteed core: 'tol' (default) = y +- max(tol y, floor); "
+                   help="interval policy of the core (met at every cluster): 'tol' (default) = y +- max(tol y, floor); "
                         "'tol+spread' also widens to the cluster's phi_d standard deviation")
     g.add_argument("--core-theta-d", dest="core_theta_d", default=None, metavar="DEG|auto",
                    type=core_angle(MIN_CORE_THETA_D_DEG, THETA_D_MAX_DEG),
-                   help="theta_d (deg) up to which the tolerance is guaranteed; the grazing band above "
+                   help="theta_d (deg) up to which the tolerance is met at every cluster; the grazing band above "
                         "it, up to 78.5 deg, gets its own functions; in [5, 78.5]. 'auto' (default): the "
                         "largest of 60, 50, 40 that every channel meets; 78.5: one function per channel")
     g.add_argument("--band-intervals", dest="band_intervals", choices=INTERVALS, default=None,
