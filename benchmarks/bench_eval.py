@@ -4,24 +4,31 @@ one thread, for the rational fits (2-D and 3-D) against the tables and the RGL r
 Materials (all of one RGL measurement, ``--material``, default ``satin_rosaline``):
 
 * ``rational 2-D``: a 5 % 2-D fit (``--fit2d``; default the shipped
-  ``warp_rbrdf/data/<material>_rgb.json``);
+  ``warp_rbrdf/data/<material>_rgb.json``), as the renderer evaluates it (code specialised to
+  the fit's degree classes, :mod:`warp_rbrdf.materials.rational_kernel`);
 * ``rational 3-D``: a 3-D fit (``--fit3d``: a coefficient file of ``fit.rational.fit3d``, e.g.
   one ``benchmarks/bench_fit_accuracy.py`` writes; without one, a stand-in of random positive
   coefficients in the four-piece layout of ``fit.rational.fit3d.VARIANTS[0]``: same pieces and
   degrees, so the same work per evaluation, said in the output);
+* ``... generic``: the same two fits through the one function for every fit
+  (``rational_kernel.rational_eval``: packed Chebyshev groups, libm's ``atan2``), in the same
+  run: what the specialisation buys;
 * ``projected``: the median (theta_h, theta_d) projection (the 2-D table, nearest cluster);
 * ``measured``: the MERL-grid resampling of the file (the 3-D table, trilinear);
 * ``rgl``: the ``.bsdf`` file evaluated exactly (the format's own interpolation);
 * ``lambert``: the floor (dispatch, loads and stores, the horizon test).
 
-All are materials of one scene, so one compiled ``eval_bsdf`` kernel (the renderer's, with its
-dispatch over material kinds) serves them all. Each timing is one ``wp.launch`` over ``--pairs``
-random pairs of cosine-distributed directions (upper hemisphere; the inputs preallocated), the
-launch overhead (a launch of one pair) subtracted; the materials are timed in turn, round by
-round (``--repeats`` rounds; the machine is shared: ratios come from one run), and each row is
-the median over rounds. ``--render`` also times renders of the reference sphere scene
-(:func:`lab.mitsuba_reference.sphere_scene`, ``--envmap``) with each material, one thread,
-interleaved, in samples/s.
+The materials are those of one scene, so one compiled ``eval_bsdf`` kernel (the renderer's,
+with its dispatch over material kinds) serves them all (the generic rows: a second renderer of
+the same scene whose rational kind evaluates with the generic function). Each timing is one
+``wp.launch`` over ``--pairs`` random pairs of cosine-distributed directions (upper hemisphere;
+the inputs preallocated), in CPU seconds of the launching thread (the machine may be shared),
+the launch overhead (a launch of one pair) subtracted; the materials are timed in turn, round
+by round (``--repeats`` rounds), and each row is the median over rounds. ``--render`` also
+times renders of the reference sphere scene (:func:`lab.mitsuba_reference.sphere_scene`,
+``--envmap``) with each material, one thread, interleaved, in samples per CPU second: every
+material with the ``mis`` sampler (environment + cosine BSDF sample, so only the material's
+evaluation differs), and ``rgl`` also with its own ``mis-rgl`` (the reference scene's).
 
     python -m benchmarks.bench_eval [--material satin_rosaline] [--fit3d FILE] [--pairs 1048576]
                                     [--repeats 7] [--render] [--json FILE] [--quick]
@@ -44,6 +51,8 @@ ROOT = Path(__file__).resolve().parents[1]
 os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
 
 ROWS = ("rational 2-D", "rational 3-D", "projected", "measured", "rgl", "lambert")
+#: the rational rows again through the generic function (rational_kernel.rational_eval)
+GENERIC = {"rational 2-D": "rational 2-D, generic", "rational 3-D": "rational 3-D, generic"}
 
 
 class BenchError(Exception):
@@ -143,37 +152,57 @@ def cosine_pairs(n: int, seed: int = 0):
     return cosine_directions(rng, n).astype(np.float32), cosine_directions(rng, n).astype(np.float32)
 
 
-def eval_timings(renderer, specs, n_pairs: int, repeats: int, seed: int = 0) -> dict:
-    """``{row: dict(ns=median ns per evaluation, all_ns=[per round])}`` and the launch overhead."""
-    wp = renderer.wp
-    dev = renderer.device
+def generic_renderer(scene):
+    """A renderer of ``scene`` whose rational materials evaluate with the one generic function
+    (:func:`warp_rbrdf.materials.rational_kernel.rational_eval`) instead of the code specialised
+    to their degree classes."""
+    from warp_rbrdf.materials import rational
+    from warp_rbrdf.materials.rational_kernel import rational_eval
+    from warp_rbrdf.renderer import Renderer
+
+    specialised = rational.kernel_eval
+    rational.kernel_eval = lambda loaded_list: rational_eval
+    try:
+        r = Renderer(scene)
+        r.compile()
+    finally:
+        rational.kernel_eval = specialised
+    return r
+
+
+def eval_timings(runs, n_pairs: int, repeats: int, seed: int = 0) -> dict:
+    """``runs``: {row: (renderer, material name)}; ``{"launch_overhead_us", "rows": {row:
+    dict(ns=median ns per evaluation, all_ns=[per round])}}``."""
+    r0 = next(iter(runs.values()))[0]
+    wp = r0.wp
+    dev = r0.device
     wi, wo = cosine_pairs(n_pairs, seed)
     a = wp.array(wi, dtype=wp.vec3, device=dev)
     b = wp.array(wo, dtype=wp.vec3, device=dev)
     o = wp.zeros(n_pairs, dtype=wp.vec3, device=dev)
-    k = renderer.kernels.eval_bsdf
-    index = {row: renderer.material_index(s.name) for row, s in specs.items()}
 
-    def launch(m, dim):
+    def launch(r, m, dim):
         t0 = time.thread_time()
-        wp.launch(k, dim=dim, inputs=[renderer.materials, m, a, b], outputs=[o], device=dev)
+        wp.launch(r.kernels.eval_bsdf, dim=dim, inputs=[r.materials, m, a, b], outputs=[o], device=dev)
         wp.synchronize_device(dev)
         return time.thread_time() - t0
 
-    for m in index.values():     # warm-up
-        launch(m, n_pairs)
-    overhead = statistics.median(launch(0, 1) for _ in range(50))
-    times = {row: [] for row in specs}
+    index = {row: (r, r.material_index(name)) for row, (r, name) in runs.items()}
+    for r, m in index.values():     # warm-up
+        launch(r, m, n_pairs)
+    overhead = statistics.median(launch(r0, 0, 1) for _ in range(50))
+    times = {row: [] for row in runs}
     for _ in range(repeats):
-        for row, m in index.items():
-            times[row].append((launch(m, n_pairs) - overhead) / n_pairs * 1e9)
+        for row, (r, m) in index.items():
+            times[row].append((launch(r, m, n_pairs) - overhead) / n_pairs * 1e9)
     return {"launch_overhead_us": overhead * 1e6,
             "rows": {row: {"ns": statistics.median(v), "all_ns": v} for row, v in times.items()}}
 
 
 def render_timings(specs, envmap: str, resolution: int, spp: int, repeats: int) -> dict:
-    """Samples/s of the reference sphere scene with each material (one thread, interleaved,
-    median of ``repeats``); the ``rgl`` material also with its own sampler (``mis-rgl``)."""
+    """Samples per CPU second of the reference sphere scene with each material (one thread,
+    interleaved, median of ``repeats``); the rational ones also through the generic function,
+    ``rgl`` also with its own sampler (``mis-rgl``)."""
     import dataclasses
 
     from lab import mitsuba_reference as MR
@@ -183,25 +212,27 @@ def render_timings(specs, envmap: str, resolution: int, spp: int, repeats: int) 
     base = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), env, spp, resolution)
     runs = {}
     for row, s in specs.items():
-        variants = [(row, s)]
+        variants = [(row, s, Renderer)]
+        if row in GENERIC:
+            variants.append((GENERIC[row], s, generic_renderer))
         if row == "rgl":
-            variants.append(("rgl (mis-rgl)", dataclasses.replace(s, sampler="mis-rgl")))
-        for label, spec in variants:
+            variants.append(("rgl, mis-rgl sampler", dataclasses.replace(s, sampler="mis-rgl"), Renderer))
+        for label, spec, make in variants:
             spec = dataclasses.replace(spec, name="obj")
             sc = dataclasses.replace(base, materials={"obj": spec},
                                      integrator=dataclasses.replace(base.integrator, sampler=spec.sampler))
-            r = Renderer(sc)
+            r = make(sc)
             r.compile()
             r.render(spp=1, threads=1)
             runs[label] = r
     times = {k: [] for k in runs}
     for i in range(repeats):
         for k, r in runs.items():
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             r.render(spp=spp, seed=i, threads=1)
-            times[k].append(time.perf_counter() - t0)
+            times[k].append(time.process_time() - t0)
     n = resolution * resolution * spp
-    return {k: {"samples_per_s": n / statistics.median(v), "seconds": statistics.median(v), "all_s": v}
+    return {k: {"samples_per_s": n / statistics.median(v), "cpu_seconds": statistics.median(v), "all_s": v}
             for k, v in times.items()}
 
 
@@ -228,19 +259,20 @@ def markdown(res) -> str:
     ev = res["eval"]["rows"]
     lines = ["| material | ns per RGB evaluation | ÷ 2-D table | ÷ 3-D table | ÷ rgl |",
              "| --- | --- | --- | --- | --- |"]
-    for row in ROWS:
+    for row in [r for r in ROWS for r in ((r, GENERIC[r]) if r in GENERIC else (r,))]:
         if row in ev:
             ns = ev[row]["ns"]
             lines.append(f"| {row} | {ns:.1f} | {ns / ev['projected']['ns']:.2f} | "
                          f"{ns / ev['measured']['ns']:.2f} | {ns / ev['rgl']['ns']:.2f} |")
     if "render" in res:
         rr = res["render"]
-        lines += ["", "| material (reference sphere scene, 1 thread) | M samples/s | ÷ projected | ÷ rgl |",
-                  "| --- | --- | --- | --- |"]
+        ref = "rgl, mis-rgl sampler"
+        lines += ["", "| material (reference sphere scene, 1 thread) | M samples / CPU s | ÷ projected | ÷ rgl "
+                      "| ÷ rgl, mis-rgl sampler |", "| --- | --- | --- | --- | --- |"]
         for k, v in rr.items():
-            s = v["samples_per_s"]
-            lines.append(f"| {k} | {s / 1e6:.3f} | {s / rr['projected']['samples_per_s']:.2f} | "
-                         f"{s / rr['rgl']['samples_per_s']:.2f} |")
+            x = v["samples_per_s"]
+            lines.append(f"| {k} | {x / 1e6:.3f} | {x / rr['projected']['samples_per_s']:.2f} | "
+                         f"{x / rr['rgl']['samples_per_s']:.2f} | {x / rr[ref]['samples_per_s']:.2f} |")
     return "\n".join(lines)
 
 
@@ -270,16 +302,20 @@ def main(argv=None):
     except BenchError as e:
         print(f"bench_eval: {e}", file=sys.stderr)
         return 2
-    r = Renderer(eval_scene(specs))
+    scene = eval_scene(specs)
+    r = Renderer(scene)
     compile_s = r.compile()
+    g = generic_renderer(scene)
+    runs = {row: (r, s.name) for row, s in specs.items()}
+    runs.update({GENERIC[row]: (g, specs[row].name) for row in GENERIC})
     res = {"command": "python -m benchmarks.bench_eval " + " ".join(argv if argv is not None else sys.argv[1:]),
            "machine": machine(), "material": a.material, "pairs": a.pairs, "repeats": a.repeats,
            "compile_s": compile_s, "notes": notes}
-    res["eval"] = eval_timings(r, specs, a.pairs, a.repeats)
+    res["eval"] = eval_timings(runs, a.pairs, a.repeats)
     if a.render:
         res["render"] = render_timings(specs, a.envmap, a.resolution, a.spp, a.repeats)
     print(f"{res['machine']['cpu']}, {res['machine']['date']}; {res['machine']['uptime']}")
-    print(f"{a.pairs} pairs per launch, median of {a.repeats} rounds, one thread; launch overhead "
+    print(f"{a.pairs} pairs per launch, median of {a.repeats} rounds, one thread, CPU time; launch overhead "
           f"{res['eval']['launch_overhead_us']:.1f} us subtracted")
     print(markdown(res))
     if a.json:

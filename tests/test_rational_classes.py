@@ -126,7 +126,7 @@ def _run_dense(f, cf, t):
 def test_classes_of_fits_and_the_packed_fallback():
     satin = load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json")
     keys = rational.packed_classes(rational.pack_model(satin, False, 79.0)[0])
-    assert {D.class_of_key(k) for k in keys} == {(2, 11, 6), (2, 12, 6)}
+    assert {D.class_of_key(k) for k in keys} == {(2, 11, 6), (2, 12, 6)} and 0 not in keys
     # as the renderer loads it: the flagged blue of the second piece (degree 12) reads the
     # table, and both pieces are of one class
     keys = rational.packed_classes(rational.pack_model(satin, True, 79.0)[0])
@@ -136,7 +136,7 @@ def test_classes_of_fits_and_the_packed_fallback():
     e = basis.tensor_exponents((15, 15))
     for f in big.functions:
         f.num_exponents, f.num_coef = e, np.r_[1.0, np.full(len(e) - 1, 1e-4)]
-    assert rational.packed_classes(rational.pack_model(big)[0]) == set()
+    assert rational.packed_classes(rational.pack_model(big)[0]) == {0}        # 0: a leaf without a class
     assert D.dense_class([(e, np.ones(len(e)))] * 3, [None] * 3, 2) is None
 
 

@@ -247,15 +247,27 @@ def _packed_pq(rows: wp.array(dtype=vec6d), ci: wp.array(dtype=int), cf: wp.arra
     return cheb_sum6(rows, ci, rb + ci[n + LEAF_POLY + 1], ib + ci[n + LEAF_POLY], ta, tb, tc)
 
 
+@wp.func
+def _no_pq(rows: wp.array(dtype=vec6d), ci: wp.array(dtype=int), cf: wp.array(dtype=wp.float64), n: int,
+           ib: int, fb: int, rb: int, ta: wp.float64, tb: wp.float64, tc: wp.float64) -> vec6d:
+    """The end of a chain whose classes cover every leaf of the scene (never reached): P = 0,
+    Q = 1; keeps the packed groups' code (:func:`warp_rbrdf.chebyshev.cheb_sum6`) out of the
+    kernel."""
+    return vec6d(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0), wp.float64(1.0), wp.float64(1.0),
+                 wp.float64(1.0))
+
+
 @functools.lru_cache(maxsize=None)
-def make_leaf_pq(classes: tuple):
+def make_leaf_pq(keys: tuple, packed: bool = True):
     """``leaf_pq(rows, ci, cf, n, ib, fb, rb, ta, tb, tc) -> vec6d``: P and Q of leaf ``n`` by
-    its class's code when its class is among ``classes``, else from its packed group."""
-    if not classes:
-        return _packed_pq
-    key = classes[0]
+    its class's code when its class is among ``keys`` (:func:`warp_rbrdf.chebyshev_dense.class_key`),
+    else from its packed group (``packed``; False: every leaf has one of the classes, and the
+    packed group's code is left out)."""
+    if not keys:
+        return _packed_pq if packed else _no_pq
+    key = keys[0]
     dense = make_dense_pq(key)
-    rest = make_leaf_pq(classes[1:])
+    rest = make_leaf_pq(keys[1:], packed)
 
     @functools.partial(wp.func, inline=True)
     def leaf_pq(rows: wp.array(dtype=vec6d), ci: wp.array(dtype=int), cf: wp.array(dtype=wp.float64), n: int,
@@ -269,11 +281,12 @@ def make_leaf_pq(classes: tuple):
 
 @functools.lru_cache(maxsize=None)
 def make_rational_eval(classes: tuple):
-    """``rational_eval(mats, m, wi, wo) -> vec3`` (as :func:`rational_eval`, the same values
-    within float64 summation order) specialised to the degree classes ``classes`` (a sorted
-    tuple of :func:`warp_rbrdf.chebyshev_dense.class_key`; module docstring). Cached: one
-    function per tuple."""
-    leaf_pq = make_leaf_pq(tuple(classes))
+    """``rational_eval(mats, m, wi, wo) -> vec3`` (the recipe of :func:`rational_eval`, module
+    docstring) specialised to the degree classes ``classes``: a sorted tuple of
+    :func:`warp_rbrdf.chebyshev_dense.class_key`, with 0 when some leaf has none
+    (:func:`.rational_records.packed_classes`; only then is the packed groups' code compiled
+    in). Cached: one function per tuple."""
+    leaf_pq = make_leaf_pq(tuple(k for k in classes if k), 0 in classes or not classes)
 
     @functools.partial(wp.func, inline=True)
     def rational_eval_classes(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:

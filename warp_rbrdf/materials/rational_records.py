@@ -121,7 +121,8 @@ def _pack_leaf(fd, model, table) -> int:
 
 def packed_classes(ints) -> set:
     """The degree classes (:func:`warp_rbrdf.chebyshev_dense.class_key`) of the leaves of a
-    packed fit (``ints`` of :func:`pack_model`); leaves without one are left out."""
+    packed fit (``ints`` of :func:`pack_model`); 0 stands for the leaves without one (read from
+    their packed group)."""
     ints = np.asarray(ints)
     out, todo = set(), [0]
     while todo:
@@ -131,6 +132,6 @@ def packed_classes(ints) -> set:
             todo.append(int(ints[n + DOMAIN_CHILD]))
         elif kind == NODE_SPLIT:
             todo += [int(c) for c in ints[n + SPLIT_CHILDREN:n + SPLIT_CHILDREN + int(ints[n + SPLIT_N])]]
-        elif int(ints[n + LEAF_CLASS]):
+        else:
             out.add(int(ints[n + LEAF_CLASS]))
     return out
