@@ -60,27 +60,23 @@ def map_cell_probs(cdf, theta_v: float, t_edges, p_edges, nq: int = 64):
     """Exact cell probabilities of a :class:`fit.sampling.cdf_file.CDFFit`'s own sampler (its
     monotone maps; table rows included) from its CDFs: P(theta cell) from ``theta_cdf``, then
     the conditional phi mass at ``nq`` theta_l quantiles inside it from ``phi_cdf_half``
-    (symmetric in phi, mass 1/2 per side)."""
+    (symmetric in phi, mass 1/2 per side). The CDFs are bisections: each is called once, on
+    every point at once."""
     n_t, n_p = len(t_edges) - 1, len(p_edges) - 1
     mu_e = cdf.theta_cdf(theta_v, t_edges)
-    tv = np.full(nq, theta_v)
+    # nq theta_l quantiles inside every theta cell: (n_t, nq)
+    mu = mu_e[:-1, None] + (np.arange(nq) + 0.5)[None, :] / nq * (mu_e[1:] - mu_e[:-1])[:, None]
+    tl = cdf.sample(np.full(mu.size, theta_v), mu.ravel(), np.full(mu.size, 0.75))[0].reshape(n_t, nq)
+    # each phi cell's mass from the CDF of |phi| at its ends (a cell across 0 takes both sides)
+    ends = []
+    for lo, hi in zip(p_edges[:-1], p_edges[1:]):
+        ends.append((hi, lo, -1.0) if lo >= 0 else (-lo, -hi, -1.0) if hi <= 0 else (hi, -lo, 1.0))
+    x = np.unique([e for a, b, _ in ends for e in (a, b)])
+    C = cdf.phi_cdf_half(theta_v, tl[:, :, None], x[None, None, :])      # (n_t, nq, len(x))
     probs = np.zeros((n_t, n_p))
-    for a in range(n_t):
-        mu = mu_e[a] + (np.arange(nq) + 0.5) / nq * (mu_e[a + 1] - mu_e[a])
-        tl = cdf.sample(tv, mu, np.full(nq, 0.75))[0]
-
-        def C(x):
-            return cdf.phi_cdf_half(tv, tl, np.full(nq, x))
-
-        for b in range(n_p):
-            lo, hi = p_edges[b], p_edges[b + 1]
-            if lo >= 0:
-                pr = 0.5 * (C(hi) - C(lo))
-            elif hi <= 0:
-                pr = 0.5 * (C(-lo) - C(-hi))
-            else:
-                pr = 0.5 * (C(hi) + C(-lo))
-            probs[a, b] = (mu_e[a + 1] - mu_e[a]) * pr.mean()
+    for b, (x1, x2, sign) in enumerate(ends):
+        pr = 0.5 * (C[:, :, np.searchsorted(x, x1)] + sign * C[:, :, np.searchsorted(x, x2)])
+        probs[:, b] = (mu_e[1:] - mu_e[:-1]) * pr.mean(axis=1)
     return probs
 
 

@@ -10,6 +10,8 @@ import pytest
 
 from benchmarks import chart_report as CR
 
+pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
+
 
 def rung(spp, seconds, de):
     return {"spp": spp, "seconds": seconds, "de_mean": de, "de_p99": 3 * de}

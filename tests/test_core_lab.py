@@ -1,6 +1,7 @@
 """Core and lab: ``fit/`` and ``warp_rbrdf/`` (the core, what users run and the wheel ships)
 never import the lab (``lab/``, ``studies/``, ``benchmarks/``, ``tests/``), the wheel holds core
-code only, and tests of lab code only carry the ``lab`` marker.
+code only, and tests of lab code only carry the ``lab`` marker, which the default run leaves
+out and ``.ci/run`` runs.
 
 * :func:`lab_imports` is a static check (:mod:`ast`): every ``import`` / ``from ... import``
   statement of a file, wherever it stands (module level, in a function, under ``try``), and every
@@ -179,3 +180,17 @@ def test_lab_tests_carry_the_lab_marker():
             "test_benchmarks.py", "test_profile_render.py"} <= set(lab), lab
     assert "test_grazing.py" not in lab   # a core test using the harness's scene builder
     assert not unmarked, f"tests of lab code without pytestmark = pytest.mark.lab: {unmarked}"
+
+
+def test_lab_tests_are_opt_in_and_ci_runs_them():
+    """The default run (``addopts``) deselects the ``lab`` tests, like the ``slow`` and
+    ``readme`` ones; ``.ci/run`` runs them after the README's test command."""
+    import shlex
+
+    with open(ROOT / "pyproject.toml", "rb") as f:
+        addopts = shlex.split(tomllib.load(f)["tool"]["pytest"]["ini_options"]["addopts"])
+    expr = addopts[addopts.index("-m") + 1]
+    assert {"not lab", "not slow", "not readme"} <= {t.strip() for t in expr.split(" and ")}, expr
+    lines = [ln.strip() for ln in (ROOT / ".ci" / "run").read_text().splitlines()]
+    test_command = next(i for i, ln in enumerate(lines) if ln.endswith("&& python -m pytest"))
+    assert 'python -m pytest -m "lab and not slow"' in lines[test_command + 1:], ".ci/run does not run the lab tests"
