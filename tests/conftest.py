@@ -6,6 +6,7 @@ file is a failure, never a skip.
 """
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 
@@ -27,6 +28,14 @@ RGL_MATERIALS = (
     "satin_rosaline_rgb",
     "vch_golden_yellow_rgb",
 )
+#: The two of them that the default run's per-material statistical tests take (a clear coat's
+#: narrow peak and a matte paper); the other four carry the ``extended`` marker.
+RGL_DEFAULT = ("cc_ibiza_sunset_rgb", "paper_white_rgb")
+
+
+def rgl_params(materials=RGL_MATERIALS):
+    """``materials`` as parameters, those outside :data:`RGL_DEFAULT` marked ``extended``."""
+    return [m if m in RGL_DEFAULT else pytest.param(m, marks=pytest.mark.extended) for m in materials]
 
 
 def missing(msg: str):
@@ -43,6 +52,16 @@ def data_file(relative: str) -> Path:
     if not p.exists():
         missing(f"shared data file missing: {p} (set RBRDF_DATA)")
     return p
+
+
+@functools.lru_cache(maxsize=4)
+def rgl_measured(name: str, incident: str = "view"):
+    """The shared RGL file ``rgl/<name>.bsdf`` resampled on the MERL grid
+    (:func:`fit.formats.load_measured`), made once per test process and shared by the tests
+    that read it (about 6 s and 150 MB each; the last four kept): callers must not modify it."""
+    from fit.formats import load_measured
+
+    return load_measured(data_file(f"rgl/{name}.bsdf"), incident=incident)
 
 
 def require_mitsuba():

@@ -8,7 +8,7 @@ import copy
 import numpy as np
 import pytest
 from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs
-from conftest import RGL_MATERIALS, data_file
+from conftest import rgl_measured, rgl_params
 
 from lab.analytic import lambert
 from fit.formats.angles import spherical_to_direction
@@ -31,9 +31,7 @@ def paint():
     """colodur_napoli_4f, 8 view rows: every row rational with 16 phi pieces (each with the flat
     end piece: its f cos(theta_l) stays finite at grazing light). satin_rosaline, the fixture
     before the weighted tables, now keeps 6 of 8 rows (two over the gate either way)."""
-    from fit.formats import load_measured
-
-    b = load_measured(data_file("rgl/colodur_napoli_4f_rgb.bsdf"))
+    b = rgl_measured("colodur_napoli_4f_rgb")
     fit = fit_cdf(b.evaluate, name="paint", table_params=dict(n_v=8), layout="pieces")
     assert fit.layout == "pieces" and not fit.fallback, fit.reason
     return b, fit
@@ -95,15 +93,13 @@ def test_tampered_pieces_are_detected_and_their_rows_go_to_the_table(paint):
         np.testing.assert_allclose(a, 1.0 / pdf)
 
 
-@pytest.mark.parametrize("name", RGL_MATERIALS)
+@pytest.mark.parametrize("name", rgl_params())
 def test_pieces_sampler_chi2_and_unbiased_on_rgl(name):
-    """Every shared material: chi-square of the pieces sampler against its own density (cell
-    probabilities from the inverse of its monotone map) and the derivative estimator of the
-    luminance albedo against quadrature (3 sigma), theta_v 0/45/85 deg; gate off so every
-    row's maps are tested."""
-    from fit.formats import load_measured
-
-    brdf = load_measured(data_file(f"rgl/{name}.bsdf"))
+    """Every shared material (two in the default run, the others ``extended``): chi-square of
+    the pieces sampler against its own density (cell probabilities from the inverse of its
+    monotone map) and the derivative estimator of the luminance albedo against quadrature
+    (3 sigma), theta_v 0/45/85 deg; gate off so every row's maps are tested."""
+    brdf = rgl_measured(name)
     fit = fit_cdf(brdf.evaluate, name=name, table_params=dict(n_v=16), layout="pieces",
                   pieces_kw=dict(max_variance_ratio=None))
     assert not fit.fallback and fit.maps.row_ok.all(), fit.reason

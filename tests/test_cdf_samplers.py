@@ -1,7 +1,7 @@
-"""Inverse-CDF samplers: the tabulated sampler on every shared RGL material, the paper's global
-layout (verification, fallback, file round trip, monotone refit), renders with every sampler.
-The Warp samplers' own contract (chi-square, unbiasedness, Warp == NumPy, pdf) is
-tests/test_sampler_contract.py."""
+"""Inverse-CDF samplers: the tabulated sampler on every shared RGL material (two in the default
+run, the others ``extended``), the paper's global layout (verification, fallback, file round
+trip, monotone refit), renders with every sampler. The Warp samplers' own contract
+(chi-square, unbiasedness, Warp == NumPy, pdf) is tests/test_sampler_contract.py."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,7 +14,7 @@ from chi2 import (
     map_cell_probs,
     table_cell_probs,
 )
-from conftest import RGL_MATERIALS, data_file
+from conftest import rgl_measured, rgl_params
 
 from lab.analytic import lambert
 from fit.formats.angles import spherical_to_direction
@@ -26,13 +26,15 @@ THETA_V = [0.0, np.radians(45), np.radians(85)]
 
 @pytest.fixture(scope="module")
 def rgl():
-    from fit.formats import load_measured
+    """``rgl(name)``: the shared RGL material on the MERL grid and its table (made on first use)."""
+    tables = {}
 
-    out = {}
-    for name in RGL_MATERIALS:
-        b = load_measured(data_file(f"rgl/{name}.bsdf"))
-        out[name] = (b, tabulate(b.evaluate))
-    return out
+    def get(name):
+        b = rgl_measured(name)
+        if name not in tables:
+            tables[name] = tabulate(b.evaluate)
+        return b, tables[name]
+    return get
 
 
 @pytest.fixture(scope="module")
@@ -44,9 +46,9 @@ def lambert_fit():
     return f, fit
 
 
-@pytest.mark.parametrize("name", RGL_MATERIALS)
+@pytest.mark.parametrize("name", rgl_params())
 def test_tabulated_chi2_and_unbiased_rgl(rgl, name):
-    brdf, table = rgl[name]
+    brdf, table = rgl(name)
     rng = np.random.default_rng(3)
     n = 60_000
     te, pe = edges(7, 9)
@@ -150,7 +152,7 @@ def test_warp_measured_tabulated_matches_reference(rgl):
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 
-    brdf, _ = rgl["satin_rosaline_rgb"]
+    brdf, _ = rgl("satin_rosaline_rgb")
     h, w = 32, 64
     v = (np.arange(h) + 0.5) / h
     sky = np.broadcast_to((0.2 + 2.0 * np.exp(-((v - 0.2) / 0.1) ** 2))[:, None, None], (h, w, 3)).astype(np.float32)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import data_file
+from conftest import data_file, rgl_measured
 
 from lab.mitsuba_reference import sphere_scene
 from warp_rbrdf.renderer import Renderer
@@ -33,7 +33,9 @@ def _render(material, kind, incident, env="rooitou_park_1k", sampler=None):
     sc = sphere_scene(path, data_file(f"envmaps/{env}.hdr"), spp=SPP, resolution=RES, seed=3)
     if sampler is None:
         sampler = "mis-rgl" if kind == "rgl" and incident == "view" else "mis-tabulated"
-    sc.materials["obj"] = MaterialSpec(name="obj", type=kind, file=path, sampler=sampler,
+    # a measured material: the file resampled once per process (conftest.rgl_measured)
+    data = rgl_measured(material, incident) if kind == "measured" else None
+    sc.materials["obj"] = MaterialSpec(name="obj", type=kind, file=path, data=data, sampler=sampler,
                                        incident=incident)
     return Renderer(sc).render().astype(float)
 
