@@ -118,7 +118,7 @@ def test_cli_brdf(lobe_file, tmp_path, capsys):
 
     out = tmp_path / "lobe.json"
     rc = main(["brdf", str(lobe_file), "--tol", "0.1", "--intervals", "tol", "--max-degree", "6",
-               "--max-den-degree", "3", "--out", str(out)])
+               "--max-den-degree", "3", "--out", str(out), "--sampler-time-limit", "1"])
     text = capsys.readouterr().out
     assert rc == 0 and out.exists()
     assert "coefs" in text and "proved within its intervals at every cluster of theta_d <= 60 deg" in text

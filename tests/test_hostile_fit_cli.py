@@ -239,7 +239,7 @@ def test_infeasible_fit_keeps_the_existing_file(capsys, glossy, work):
     # with --allow-infeasible the flagged fit replaces it, whole
     rc, _, err = run(capsys, ["brdf", glossy, "--out", work / "old.json", "--tol", "0.01",
                                 "--max-degree", "1", "--max-den-degree", "0", "--core-theta-d", "78.5",
-                                "--allow-infeasible"])
+                                "--allow-infeasible", "--sampler-time-limit", "1"])
     assert rc == 0 and '"valid": false' in (work / "old.json").read_text()
     from fit.rational.coefficient_file import load
 

@@ -131,8 +131,9 @@ def test_highs_banner_absent_unless_verbose(capfd, glossy, tmp_path, monkeypatch
     from fit.cli import main
     from fit.rational import lp
 
+    # (the fit's own inverse CDFs bounded to 1 s: their variance gate takes a minute otherwise)
     argv = ["brdf", str(glossy), "--out", str(tmp_path / "g.json"), "--tol", "0.5", "--max-degree", "2",
-            "--max-den-degree", "1", "--core-theta-d", "78.5"]
+            "--max-den-degree", "1", "--core-theta-d", "78.5", "--sampler-time-limit", "1"]
     capfd.readouterr()
     main(argv)
     out, err = capfd.readouterr()
