@@ -160,7 +160,7 @@ def test_policy_records_what_stays_outside(corrected):
     for c in rec["conflicts"]:
         assert c["light_signed_error"] * c["view_signed_error"] < 0
         assert max(abs(c["light_signed_error"]), abs(c["view_signed_error"])) > TOL
-    assert isinstance(rec["summary"], str) and ("within" in rec["summary"]) == rec["within"]
+    assert isinstance(rec["summary"], str) and ("off by" in rec["summary"]) == (not rec["within"])
     assert rec["time_s"] >= 0 and rec["rounds"] >= 1
     import json
 
