@@ -60,11 +60,11 @@ def data_file(relative: str) -> Path:
     return p
 
 
-@functools.lru_cache(maxsize=4)
+@functools.lru_cache(maxsize=2)
 def rgl_measured(name: str, incident: str = "view"):
     """The shared RGL file ``rgl/<name>.bsdf`` resampled on the MERL grid
     (:func:`fit.formats.load_measured`), made once per test process and shared by the tests
-    that read it (about 6 s and 150 MB each; the last four kept): callers must not modify it."""
+    that read it (about 6 s and 150 MB each; the last two kept): callers must not modify it."""
     from fit.formats import load_measured
 
     return load_measured(data_file(f"rgl/{name}.bsdf"), incident=incident)
