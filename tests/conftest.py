@@ -80,6 +80,29 @@ def require_mitsuba():
     return MR
 
 
+def _usable_cpus() -> int:
+    """CPUs this process may run on: its affinity, bounded by a cgroup v2 CPU quota."""
+    n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    try:
+        quota, period = Path("/sys/fs/cgroup/cpu.max").read_text().split()[:2]
+        if quota != "max":
+            n = min(n, max(1, int(quota) // int(period)))
+    except (OSError, ValueError):
+        pass
+    return max(1, n)
+
+
+def pytest_xdist_auto_num_workers(config):
+    """``-n auto`` (``addopts``): one worker per usable CPU, at most 8, since each worker
+    imports and collects the whole suite and holds its own copies of the shared data
+    (pytest-xdist's own count takes psutil's physical cores, one where two hyper-threads are
+    the machine's two CPUs, and a container's host CPUs beyond its quota);
+    ``PYTEST_XDIST_AUTO_NUM_WORKERS`` decides when set."""
+    if os.environ.get("PYTEST_XDIST_AUTO_NUM_WORKERS", "").isdigit():
+        return int(os.environ["PYTEST_XDIST_AUTO_NUM_WORKERS"])
+    return min(_usable_cpus(), 8)
+
+
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     return DATA
