@@ -152,7 +152,8 @@ def rational_model(material: str, tol: float = 0.05, allow_fit: bool = True, all
                 if fit.valid or allow_infeasible:
                     # fit_seconds: the fitter's own time, as the file records it (the same
                     # number a cached run reports)
-                    return fit.model, dict(info, source="cli", file=str(out), fit_seconds=fit.time_s)
+                    return fit.model, dict(info, source="cli", file=str(out),
+                                           fit_seconds=fit.model.fit_info["time_s"])
                 errors.append(f"fit flagged ({out.name}): {fit.summary()}")
         else:
             errors.append(why)
