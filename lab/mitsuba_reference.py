@@ -51,6 +51,7 @@ tests. Every plugin this module loads (alone or in a scene) is therefore checked
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
@@ -97,6 +98,22 @@ def _mi():
         raise ReferenceUnavailable(f"Mitsuba {getattr(mi, '__version__', '?')} has no variant "
                                    f"{VARIANT!r} ({e}): {INSTALL_HINT}") from None
     return mi
+
+
+@contextlib.contextmanager
+def _scalar_variant():
+    """Mitsuba with the :data:`VARIANT` selected for the per-pair functions (:func:`eval`,
+    :func:`pdf`, :func:`sample`), whatever variant another caller (a render in ``llvm_ad_rgb``)
+    left selected; that variant is selected again on the way out."""
+    mi = _mi()
+    before = mi.variant()
+    if before != VARIANT:
+        mi.set_variant(VARIANT)
+    try:
+        yield mi
+    finally:
+        if before != VARIANT:
+            mi.set_variant(before)
 
 
 def available() -> bool:
@@ -206,7 +223,9 @@ def _isotropic(filename) -> bool:
 
 
 @functools.lru_cache(maxsize=32)
-def _measured(filename: str):
+def _measured(filename: str, variant: str):
+    """The ``measured`` plugin of ``filename`` loaded in ``variant`` (the current one; part of
+    the cache key, as a plugin keeps the variant it was loaded in)."""
     load = lambda: _mi().load_dict({"type": "measured", "filename": filename})  # noqa: E731
     return _load_checked(load, lambda bsdf: bsdf, filename) if _isotropic(filename) else load()
 
@@ -222,8 +241,9 @@ def _load_scene(scene_dict: dict, material):
 
 
 def load_bsdf(path, clamp_negative: bool = True):
-    """Mitsuba's ``measured`` BSDF of an RGL ``.bsdf`` file (cached per file)."""
-    return _measured(_file_for_mitsuba(path, clamp_negative))
+    """Mitsuba's ``measured`` BSDF of an RGL ``.bsdf`` file in the current variant (cached per
+    file and variant)."""
+    return _measured(_file_for_mitsuba(path, clamp_negative), _mi().variant())
 
 
 def _directions(a, name):
@@ -237,32 +257,32 @@ def eval(path, wt, wx, clamp_negative: bool = True) -> np.ndarray:  # noqa: A001
     """Mitsuba ``measured`` ``eval`` with ``si.wi = wt`` and ``wo = wx`` (local unit directions,
     (N, 3), z = normal): ``f_r * cos(theta_wx)`` as (N, 3) float64 (Mitsuba computes in float32).
     0 where either direction is at or below the tangent plane."""
-    mi = _mi()
-    wt, wx = _directions(wt, "wt"), _directions(wx, "wx")
-    bsdf = load_bsdf(path, clamp_negative)
-    ctx = mi.BSDFContext()
-    si = mi.SurfaceInteraction3f()
-    out = np.empty((len(wt), 3))
-    for k in range(len(wt)):   # the scalar variant takes one direction pair per call
-        si.wi = mi.Vector3f(wt[k])
-        v = bsdf.eval(ctx, si, mi.Vector3f(wx[k]))
-        out[k] = (v[0], v[1], v[2])
-    return out
+    with _scalar_variant() as mi:
+        wt, wx = _directions(wt, "wt"), _directions(wx, "wx")
+        bsdf = load_bsdf(path, clamp_negative)
+        ctx = mi.BSDFContext()
+        si = mi.SurfaceInteraction3f()
+        out = np.empty((len(wt), 3))
+        for k in range(len(wt)):   # the scalar variant takes one direction pair per call
+            si.wi = mi.Vector3f(wt[k])
+            v = bsdf.eval(ctx, si, mi.Vector3f(wx[k]))
+            out[k] = (v[0], v[1], v[2])
+        return out
 
 
 def pdf(path, wt, wx, clamp_negative: bool = True) -> np.ndarray:
     """Mitsuba ``measured`` ``pdf`` (1/sr of ``wx``) of its BSDF sample at ``si.wi = wt``,
     ``wo = wx``: luminance warp, then VNDF warp, then reflection about the micro-normal."""
-    mi = _mi()
-    wt, wx = _directions(wt, "wt"), _directions(wx, "wx")
-    bsdf = load_bsdf(path, clamp_negative)
-    ctx = mi.BSDFContext()
-    si = mi.SurfaceInteraction3f()
-    out = np.empty(len(wt))
-    for k in range(len(wt)):
-        si.wi = mi.Vector3f(wt[k])
-        out[k] = bsdf.pdf(ctx, si, mi.Vector3f(wx[k]))
-    return out
+    with _scalar_variant() as mi:
+        wt, wx = _directions(wt, "wt"), _directions(wx, "wx")
+        bsdf = load_bsdf(path, clamp_negative)
+        ctx = mi.BSDFContext()
+        si = mi.SurfaceInteraction3f()
+        out = np.empty(len(wt))
+        for k in range(len(wt)):
+            si.wi = mi.Vector3f(wt[k])
+            out[k] = bsdf.pdf(ctx, si, mi.Vector3f(wx[k]))
+        return out
 
 
 def sample(path, wt, xi, clamp_negative: bool = True):
@@ -271,24 +291,24 @@ def sample(path, wt, xi, clamp_negative: bool = True):
     ``(xi[:, 1], xi[:, 0])``). Returns ``(wx (N, 3), weight (N, 3), pdf (N,))``: the sampled
     direction (towards the light), Mitsuba's sample weight ``f_r * cos(theta_wx) / pdf`` (0
     where the sample is invalid) and the pdf in 1/sr of ``wx``."""
-    mi = _mi()
-    wt = _directions(wt, "wt")
-    xi = np.asarray(xi, np.float64)
-    if xi.shape != (len(wt), 2):
-        raise ValueError(f"xi must have shape ({len(wt)}, 2), got {xi.shape}")
-    bsdf = load_bsdf(path, clamp_negative)
-    ctx = mi.BSDFContext()
-    si = mi.SurfaceInteraction3f()
-    wx = np.zeros((len(wt), 3))
-    weight = np.zeros((len(wt), 3))
-    p = np.zeros(len(wt))
-    for k in range(len(wt)):
-        si.wi = mi.Vector3f(wt[k])
-        bs, w = bsdf.sample(ctx, si, 0.5, mi.Point2f(xi[k]))
-        wx[k] = (bs.wo[0], bs.wo[1], bs.wo[2])
-        weight[k] = (w[0], w[1], w[2])
-        p[k] = bs.pdf
-    return wx, weight, p
+    with _scalar_variant() as mi:
+        wt = _directions(wt, "wt")
+        xi = np.asarray(xi, np.float64)
+        if xi.shape != (len(wt), 2):
+            raise ValueError(f"xi must have shape ({len(wt)}, 2), got {xi.shape}")
+        bsdf = load_bsdf(path, clamp_negative)
+        ctx = mi.BSDFContext()
+        si = mi.SurfaceInteraction3f()
+        wx = np.zeros((len(wt), 3))
+        weight = np.zeros((len(wt), 3))
+        p = np.zeros(len(wt))
+        for k in range(len(wt)):
+            si.wi = mi.Vector3f(wt[k])
+            bs, w = bsdf.sample(ctx, si, 0.5, mi.Point2f(xi[k]))
+            wx[k] = (bs.wo[0], bs.wo[1], bs.wo[2])
+            weight[k] = (w[0], w[1], w[2])
+            p[k] = bs.pdf
+        return wx, weight, p
 
 
 # --------------------------------------------------------------------------------------------

@@ -244,9 +244,33 @@ def test_mirror_check_only_for_isotropic_files(tmp_path, monkeypatch):
     monkeypatch.setattr(MR, "_isotropic", lambda f: False)
     MR._measured.cache_clear()
     try:
-        assert isinstance(MR._measured("any.bsdf"), GarbageReduction)   # loaded once, not checked
+        assert isinstance(MR._measured("any.bsdf", MR.VARIANT), GarbageReduction)   # loaded once, not checked
     finally:
         MR._measured.cache_clear()
+
+
+def test_per_pair_functions_use_the_scalar_variant_whatever_is_selected():
+    """eval / pdf / sample give the scalar RGB variant's values when another variant is selected
+    (a test or study that rendered in another variant before), and leave that variant selected."""
+    path = rgl_path("paper_white_rgb")
+    rng = np.random.default_rng(3)
+    wt = rng.normal(size=(6, 3)); wt[:, 2] = np.abs(wt[:, 2]) + 0.3
+    wx = rng.normal(size=(6, 3)); wx[:, 2] = np.abs(wx[:, 2]) + 0.3
+    wt /= np.linalg.norm(wt, axis=1, keepdims=True)
+    wx /= np.linalg.norm(wx, axis=1, keepdims=True)
+    xi = rng.random((6, 2))
+    mi = MR._mi()
+    want = MR.eval(path, wt, wx), MR.pdf(path, wt, wx), MR.sample(path, wt, xi)
+    mi.set_variant("scalar_spectral")
+    try:
+        got = MR.eval(path, wt, wx), MR.pdf(path, wt, wx), MR.sample(path, wt, xi)
+        assert mi.variant() == "scalar_spectral"
+    finally:
+        mi.set_variant(MR.VARIANT)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    for g, w in zip(got[2], want[2]):
+        np.testing.assert_array_equal(g, w)
 
 
 def test_negative_entries_clamped_copy(tmp_path, monkeypatch):
