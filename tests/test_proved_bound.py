@@ -185,3 +185,52 @@ def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
     plain = fit_rgl(brdf, **fit)
     assert plain.bounds is None and "bound" not in plain.model.fit_info
     assert plain.model.fit_info["domain"]["proved"] is False
+
+
+def test_joint_enclosure_contains_the_difference():
+    """``Enclosure.ratio_minus`` encloses ``P/Q - l`` (l multilinear through given corner values)
+    on random sub-boxes: every value at dense points of each box lies inside; the joint enclosure
+    is narrower than the range of P/Q plus the range of l on small boxes."""
+    from fit.rational.cell_enclosure import Enclosure, corner_bits
+
+    fn = _model().functions[0]
+    enc = Enclosure(fn)
+    rng = np.random.default_rng(7)
+    n = 60
+    a = rng.uniform(-1, 1, (n, 2))
+    w = rng.uniform(0.01, 0.5, (n, 2))
+    t_lo, t_hi = a, np.minimum(a + w, 1.0)
+    ell = rng.uniform(0.5, 2.0, (n, 4))
+    dl, dh = enc.ratio_minus(t_lo, t_hi, ell)
+    rl, rh = enc.ratio(t_lo, t_hi)
+    bits = corner_bits(2)
+    g = np.linspace(0.0, 1.0, 41)
+    loc = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    for i in range(n):
+        t = t_lo[i] + loc * (t_hi[i] - t_lo[i])
+        x = 0.5 * (t + 1.0) * (fn.domain[:, 1] - fn.domain[:, 0]) + fn.domain[:, 0]
+        w_c = np.prod(np.where(bits[None, :, :], loc[:, None, :], 1.0 - loc[:, None, :]), axis=2)
+        d = fn(x) - w_c @ ell[i]
+        assert dl[i] <= d.min() and d.max() <= dh[i], i
+    small = np.max(t_hi - t_lo, axis=1) < 0.1
+    joint = dh - dl
+    ranges = (rh - rl) + (ell.max(axis=1) - ell.min(axis=1))
+    assert np.all(joint[small] < ranges[small])
+
+
+@pytest.mark.parametrize("value_transform", ["linear", "log"])
+def test_joint_enclosure_is_tighter_and_still_above_the_true_error(value_transform):
+    """On cells where the fit follows a varying measurement closely, the separate ranges of fit
+    and interpolant (``enclosure="ranges"``) add both variations; the joint enclosure of their
+    difference does not: without subdivision it proves a smaller bound, and it is still at least
+    the largest error at dense random points."""
+    model = _model(value_transform)
+    axes = (np.linspace(0.0, 1.0, 9), np.linspace(0.0, 2.0, 7))
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    values = model(X) * (1.0 + 0.02 * np.random.default_rng(3).standard_normal(X.shape[:-1] + (1,)))
+    observed = _brute_force(model, axes, values)
+    loose = _prove(model, axes, values, max_rounds=0, enclosure="ranges")
+    tight = _prove(model, axes, values, max_rounds=0, enclosure="joint")
+    assert observed <= tight.proved < 0.8 * loose.proved, (observed, tight.proved, loose.proved)
+    refined = _prove(model, axes, values, enclosure="joint")
+    assert observed <= refined.proved <= tight.proved

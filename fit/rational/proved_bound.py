@@ -45,11 +45,11 @@ from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .bernstein import bernstein_coefficients_float
+from .cell_enclosure import Enclosure, corner_bits
 from .model import apply_input_transform, invert_value_transform, output_clamp
 
 UNIT_2D = "|fit - cluster| / max(cluster, abs_floor / tolerance) (relative, floored), nearest-cluster table"
@@ -58,6 +58,11 @@ UNIT_3D = ("|fit - m_c| / max(m_c, noise_c, channel_floor * max(m)) (no grazing 
 EPS = np.finfo(float).eps
 DEFAULT_ROUNDS = 16
 DEFAULT_MAX_CELLS = 40000
+#: The enclosures of a cell's error (module docstring, step 2): ``"ranges"`` bounds the fit's
+#: output and the interpolant separately; ``"joint"`` also encloses their difference in one
+#: Bernstein form and keeps the smaller bound (the default).
+ENCLOSURES = ("ranges", "joint")
+WORST_KEPT = 8
 
 
 @dataclass
@@ -79,99 +84,20 @@ class ProvedBound:
     cells: int
     time_s: float
 
+    #: the cells with the largest bounds at the end (``lo``, ``hi``, ``corners``, ``bound``;
+    #: :data:`WORST_KEPT` of them), for the analysis of what sets ``proved``; not in the record
+    worst_cells: dict | None = field(default=None, repr=False, compare=False)
+
     def record(self) -> dict:
         """The coefficient file's ``bound`` record of this piece and channel (JSON values)."""
-        return asdict(self)
+        d = asdict(self)
+        d.pop("worst_cells")
+        return d
 
 
 def records(bounds) -> list:
     """``fit_info["bound"]``: the records of a list of :class:`ProvedBound`."""
     return [b.record() for b in bounds]
-
-
-# --------------------------------------------------------------------------------------------
-# Bernstein enclosure of P/Q on many sub-boxes at once
-# --------------------------------------------------------------------------------------------
-def _casteljau(a, t, left: bool):
-    """Bernstein coefficients (axis 1 of ``a`` (N, n+1, K)) of the part left (right) of the
-    parameter ``t`` (N,) in [0, 1] of each row's interval."""
-    n = a.shape[1] - 1
-    out = np.empty_like(a)
-    rows = a
-    tt = t[:, None, None]
-    out[:, 0 if left else n] = rows[:, 0 if left else n]
-    for k in range(1, n + 1):
-        rows = (1.0 - tt) * rows[:, :-1] + tt * rows[:, 1:]
-        if left:
-            out[:, k] = rows[:, 0]
-        else:
-            out[:, n - k] = rows[:, -1]
-    return out
-
-
-def _restriction(n: int, lo, hi) -> np.ndarray:
-    """``A`` (N, n+1, n+1): Bernstein coefficients on ``[lo, hi]`` (subsets of [0, 1]) are
-    ``A @ b`` of those ``b`` on [0, 1]; each row of ``A`` holds convex weights."""
-    eye = np.broadcast_to(np.eye(n + 1), (len(lo), n + 1, n + 1)).copy()
-    a = _casteljau(eye, hi, left=True)                       # on [0, hi]
-    tau = np.where(hi > 0, lo / np.where(hi > 0, hi, 1.0), 0.0)
-    return _casteljau(a, np.clip(tau, 0.0, 1.0), left=False)  # on [lo, hi]
-
-
-def _restrict(b, err, s_lo, s_hi):
-    """Tensor Bernstein coefficients ``b`` on [0, 1]^n restricted to each box ``[s_lo, s_hi]``
-    (N, n): ``(N, *b.shape)`` and the error bound per box (N,)."""
-    n_vars = b.ndim
-    out = np.broadcast_to(b, (len(s_lo),) + b.shape)
-    e = np.full(len(s_lo), float(err))
-    letters = "abcdefgh"[:n_vars]
-    for v in range(n_vars):
-        deg = b.shape[v] - 1
-        if deg == 0:
-            continue
-        A = _restriction(deg, s_lo[:, v], s_hi[:, v])
-        src = "N" + letters
-        dst = "N" + letters.replace(letters[v], "z")
-        out = np.einsum(f"Nz{letters[v]},{src}->{dst}", A, out)
-        # convex weights: |A b - fl(A b)| <= (deg + 2) eps max|b| per level, the weights' own
-        # rounding (2 deg levels of de Casteljau) as much again; doubled for safety
-        e = e + 4.0 * (2 * deg + 4) * EPS * np.abs(out).reshape(len(s_lo), -1).max(axis=1) + 2 * e * deg * EPS
-    return out, e
-
-
-class _Enclosure:
-    """P and Q of one :class:`fit.rational.function.RationalFunction` in Bernstein form on its
-    box, common degrees; :meth:`ratio` encloses P/Q on sub-boxes given in the box's [-1, 1]."""
-
-    def __init__(self, fn):
-        degs = np.maximum(fn.num_exponents.max(axis=0) if len(fn.num_coef) else 0, fn.den_exponents.max(axis=0))
-        pad = degs[None, :]
-        self.bp, self.ep = bernstein_coefficients_float(np.vstack([fn.num_exponents, pad]),
-                                                        np.append(fn.num_coef, 0.0))
-        self.bq, self.eq = bernstein_coefficients_float(np.vstack([fn.den_exponents, pad]),
-                                                        np.append(fn.den_coef, 0.0))
-        self.fn = fn
-
-    def ratio(self, t_lo, t_hi, chunk: int = 4096):
-        """``(r_lo, r_hi)`` (N,): proved bounds of P/Q on each box ``[t_lo, t_hi]`` (N, n) of
-        [-1, 1]^n; ``(-inf, inf)`` where Q's coefficients are not all proved > 0."""
-        rl = np.empty(len(t_lo))
-        rh = np.empty(len(t_lo))
-        for i in range(0, len(t_lo), chunk):
-            sl = slice(i, i + chunk)
-            a, b = 0.5 * (t_lo[sl] + 1.0), 0.5 * (t_hi[sl] + 1.0)
-            P, ep = _restrict(self.bp, self.ep, a, b)
-            Q, eq = _restrict(self.bq, self.eq, a, b)
-            P, Q = P.reshape(len(a), -1), Q.reshape(len(a), -1)
-            ql, qh = Q - eq[:, None], Q + eq[:, None]
-            pl, ph = P - ep[:, None], P + ep[:, None]
-            ok = ql.min(axis=1) > 0
-            qls = np.where(ql > 0, ql, 1.0)
-            lo = np.where(pl >= 0, pl / qh, pl / qls).min(axis=1)
-            hi = np.where(ph >= 0, ph / qls, ph / qh).max(axis=1)
-            rl[sl] = np.where(ok, lo - 4 * EPS * np.abs(lo), -np.inf)
-            rh[sl] = np.where(ok, hi + 4 * EPS * np.abs(hi), np.inf)
-        return rl, rh
 
 
 def _leaf_output(leaf, c: int, r) -> np.ndarray:
@@ -227,35 +153,113 @@ def _children_corners(corners, axis: int) -> tuple:
     return lo_c, hi_c
 
 
+def _clamps(leaf, c: int) -> tuple:
+    """``(L, U)``: the output clamps of channel ``c`` of ``leaf`` (steps 5-7 after the value
+    transform) as one clamp ``clip(g, L, U)`` of the transformed value ``g`` (a composition of
+    clamps is the clamp between its values at -inf and +inf)."""
+    def chain(g):
+        f = float(g)
+        if leaf.value_max is not None:
+            f = min(f, leaf.value_max)          # the log transform's clamp of P/Q, then the value's
+        if leaf.value_min is not None:
+            f = max(f, leaf.value_min)
+        if leaf.value_max is not None:
+            f = min(f, leaf.value_max)
+        rng = output_clamp(leaf.function_info[c]) if c < len(leaf.function_info) else None
+        if rng is not None:
+            f = min(max(f, rng[0]), rng[1])
+        return f
+    return chain(-np.inf), chain(np.inf)
+
+
+def _joint_error(leaf, c: int, enc, t_lo, t_hi, m):
+    """``(e_lo, e_hi)`` (N,): proved bounds of ``output - m`` on each cell ``[t_lo, t_hi]``
+    (the leaf's [-1, 1]^n) of channel ``c``, ``m`` multilinear with the corner values ``m``
+    (N, 2^n), from one Bernstein enclosure of the difference
+    (:meth:`fit.rational.cell_enclosure.Enclosure.ratio_minus`).
+
+    Linear value transform: ``P/Q - m`` directly. Log (``g = exp(P/Q) - o``): ``d = P/Q -
+    log(m + o)`` is enclosed against the multilinear ``l`` through ``log(m_k + o)`` at the
+    corners; ``log(m + o)`` is concave along every axis (m is linear there), so ``0 <= log(m + o)
+    - l <= sum_v D_v^2 / (8 (m_lo + o)^2)`` (``D_v`` the largest change of m along an edge of
+    axis v; tensor linear interpolation, its error per axis), and ``g - m = (m + o)(e^d - 1)``.
+    The clamps (:func:`_clamps`) move the output towards ``[L, U]`` only."""
+    m_lo, m_hi = m.min(axis=1), m.max(axis=1)
+    if leaf.value_transform == "log":
+        off = float(leaf.value_offset)
+        base = np.maximum(m, 0.0) + off
+        ell = np.log(base)
+        n = t_lo.shape[1]
+        bits = corner_bits(n)
+        delta = 0.0
+        for v in range(n):
+            diff = np.abs(m[:, bits[:, v]] - m[:, ~bits[:, v]]).max(axis=1)
+            delta = delta + diff ** 2
+        delta = delta / (8.0 * (np.maximum(m_lo, 0.0) + off) ** 2)
+        delta = delta * (1.0 + 1e-9) + 8 * EPS * np.abs(ell).max(axis=1)
+        dl, dh = enc.ratio_minus(t_lo, t_hi, ell)
+        dl = dl - delta
+        b_lo, b_hi = np.maximum(m_lo, 0.0) + off, np.maximum(m_hi, 0.0) + off
+        with np.errstate(over="ignore", invalid="ignore"):
+            eh, el = np.expm1(dh), np.expm1(dl)
+            e_hi = np.where(eh >= 0, b_hi * eh, b_lo * eh)
+            e_lo = np.where(el >= 0, b_lo * el, b_hi * el)
+            # exp's and the products' rounding, relative to the values involved
+            slack = 16 * EPS * (b_hi + np.abs(e_hi) + np.abs(e_lo))
+        e_hi, e_lo = e_hi + slack, e_lo - slack
+    elif leaf.value_transform == "linear":
+        e_lo, e_hi = enc.ratio_minus(t_lo, t_hi, m)
+        slack = 8 * EPS * (np.abs(m).max(axis=1) + np.abs(e_lo) + np.abs(e_hi))
+        e_hi, e_lo = e_hi + slack, e_lo - slack
+    else:
+        return np.full(len(m), -np.inf), np.full(len(m), np.inf)
+    L, U = _clamps(leaf, c)
+    with np.errstate(invalid="ignore"):
+        up = np.maximum(np.minimum(e_hi, U - m_lo), L - m_lo)
+        down = np.maximum(np.minimum(e_lo, U - m_hi), L - m_hi)
+    bad = ~(np.isfinite(e_lo) & np.isfinite(e_hi))
+    return np.where(bad, -np.inf, down), np.where(bad, np.inf, up)
+
+
 def prove_cells(leaf, c: int, lo, hi, corners, scale, tolerance: float, piece: int = 0, unit: str = "",
                 max_rounds: int = DEFAULT_ROUNDS, max_cells: int = DEFAULT_MAX_CELLS, gap: float = 0.05,
-                enclose=None) -> ProvedBound:
+                enclose=None, enclosure: str = "joint") -> ProvedBound:
     """The proved bound of channel ``c`` of ``leaf`` against a multilinear interpolant on cells.
 
     ``lo``, ``hi`` (N, n): the cells, boxes in the leaf's transformed coordinates (inside its box);
     ``corners`` (N, 2^n, C): the interpolant's values at each cell's corners, every channel
     (:func:`_multilinear`'s order); ``scale(corners) -> (N,)``: a lower bound of the error unit on
     each cell, ``scale(values (N, 1, C))`` its value at points; ``tolerance``: the target.
-    ``enclose`` (tests): replaces the Bernstein enclosure of P/Q, ``enclose(fn, t_lo, t_hi)``."""
+    ``enclosure``: one of :data:`ENCLOSURES`. ``enclose`` (tests): replaces the Bernstein
+    enclosure of P/Q, ``enclose(fn, t_lo, t_hi)`` (the ``"ranges"`` enclosure only)."""
+    if enclosure not in ENCLOSURES:
+        raise ValueError(f"enclosure must be one of {ENCLOSURES}")
     t0 = time.perf_counter()
     fn = leaf.functions[c]
     dom = fn.domain
-    enc = enclose or _Enclosure(fn).ratio
+    encl = Enclosure(fn)
+    enc = encl.ratio
     if enclose is not None:
-        enc = lambda tl, th: enclose(fn, tl, th)  # noqa: E731
+        enc, enclosure = (lambda tl, th: enclose(fn, tl, th)), "ranges"  # noqa: E731
     lo, hi, corners = (np.asarray(a, np.float64) for a in (lo, hi, corners))
     width = dom[:, 1] - dom[:, 0]
     worst, frac_ok, total, seen, n_obs, n_cells = 0.0, 0.0, 0.0, 0.0, 0, 0
+    kept = {"lo": lo[:0], "hi": hi[:0], "corners": corners[:0], "bound": np.zeros(0)}
     for rnd in range(max_rounds + 1):
         if len(lo) == 0:
             break
         t_lo, t_hi = (2.0 * lo - (dom[:, 0] + dom[:, 1])) / width, (2.0 * hi - (dom[:, 0] + dom[:, 1])) / width
-        rl, rh = enc(np.clip(t_lo, -1, 1), np.clip(t_hi, -1, 1))
+        t_lo, t_hi = np.clip(t_lo, -1, 1), np.clip(t_hi, -1, 1)
+        rl, rh = enc(t_lo, t_hi)
         fl, fh = _leaf_output(leaf, c, rl), _leaf_output(leaf, c, rh)
         fl, fh = fl - 4 * EPS * np.abs(fl), fh + 4 * EPS * np.abs(fh)     # exp's rounding
         m = corners[..., c]
-        bound = np.maximum(np.maximum(fh - m.min(axis=1), m.max(axis=1) - fl), 0.0) / scale(corners)
-        bound = np.where(np.isfinite(rl) & np.isfinite(rh), bound, np.inf)
+        err = np.maximum(np.maximum(fh - m.min(axis=1), m.max(axis=1) - fl), 0.0)
+        err = np.where(np.isfinite(rl) & np.isfinite(rh), err, np.inf)
+        if enclosure == "joint":          # the difference enclosed at once; the smaller bound
+            el, eh = _joint_error(leaf, c, encl, t_lo, t_hi, m)
+            err = np.minimum(err, np.maximum(np.maximum(eh, -el), 0.0))
+        bound = err / scale(corners)
         centre = 0.5 * (lo + hi)
         mc = _multilinear(corners, np.full_like(lo, 0.5))
         f_c = _leaf_output(leaf, c, fn(centre))
@@ -270,6 +274,10 @@ def prove_cells(leaf, c: int, lo, hi, corners, scale, tolerance: float, piece: i
         frac_ok += float(vol[done & (bound <= tolerance)].sum())
         total += float(vol[done].sum())
         n_cells += int(done.sum())
+        kept = {k: np.concatenate([kept[k], v[done]]) for k, v in
+                (("lo", lo), ("hi", hi), ("corners", corners), ("bound", bound))}
+        top = np.argsort(-kept["bound"])[:WORST_KEPT]
+        kept = {k: v[top] for k, v in kept.items()}
         keep = ~done
         lo, hi, corners = lo[keep], hi[keep], corners[keep]
         if not len(lo):
@@ -287,7 +295,7 @@ def prove_cells(leaf, c: int, lo, hi, corners, scale, tolerance: float, piece: i
         corners = np.concatenate([c_lo, c_hi])
     return ProvedBound(piece, "RGB"[c] if c < 3 else str(c), worst if np.isfinite(worst) else None,
                        frac_ok / total if total > 0 else 0.0, seen, n_obs, float(tolerance), unit, n_cells,
-                       time.perf_counter() - t0)
+                       time.perf_counter() - t0, worst_cells=kept)
 
 
 # --------------------------------------------------------------------------------------------

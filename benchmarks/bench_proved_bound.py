@@ -1,0 +1,258 @@
+"""Proved bounds between the data points on every shared RGL material
+(:mod:`fit.rational.proved_bound`; docs/fit_accuracy.md, "Proved bounds between the data points").
+
+Per material, per piece and channel: the proved bound (``proved``), the part of the measured
+domain where the proved cell bound is within the tolerance (``proved_fraction``), the largest
+error observed (``verified``, at the cell centres) and the proof's wall seconds, for
+
+* ``2d``: the 2-D fit at ``--tol`` (5 %): the shipped file (``warp_rbrdf/data/<stem>.json`` of that
+  tolerance, checked against the RGL file's SHA-256 it records), else a cached
+  ``<stem>_tol0p05_cli.json`` in ``--fits-2d`` (``results/fits``, what ``rbrdf-fit brdf FILE --tol
+  0.05`` and :mod:`studies.fits` write), else a new :func:`fit.rational.brdf_fit.fit_brdf` with the
+  command line's defaults (:class:`fit.rational.settings.BRDFFitSettings`), saved there. The
+  projection it is proved against is rebuilt from the RGL file as the fitter builds it
+  (:func:`fit.rational.brdf_data.project_for_fit`: median, 79 deg grazing cut-off), cached in
+  ``--cache`` (``results/proved_bound/proj``);
+* ``3d``: 3-D fits: a coefficient file of a 3-D fit in ``--fits-3d`` (``results/chart/fits``,
+  :mod:`benchmarks.chart_fits`), else, with ``--fit-3d``, a small-budget
+  :func:`fit.rational.fit3d.fit_rgl` (:data:`SMALL_3D`), saved to ``--cache``.
+
+``--enclosure`` picks the proof's enclosure (:data:`fit.rational.proved_bound.ENCLOSURES`;
+``both``: each in turn on the same fits, for before/after). ``--docs`` writes the table into
+docs/fit_accuracy.md between its markers.
+
+    python -m benchmarks.bench_proved_bound --materials paper_white satin_rosaline
+    python -m benchmarks.bench_proved_bound --enclosure both --fit-3d --docs
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "results" / "proved_bound"
+DOCS = ROOT / "docs" / "fit_accuracy.md"
+MARK = ("<!-- bench_proved_bound: begin -->", "<!-- bench_proved_bound: end -->")
+#: The small-budget 3-D fit (fit.rational.fit3d.fit_rgl keyword arguments) made with --fit-3d.
+SMALL_3D = dict(tol=0.05, verify=0, albedo=False, time_limit=60.0)
+#: The accuracy targets per class of material (docs/fit_accuracy.md): matte and satin 10 %, the
+#: glossy films (TeckWrap vinyl, metallic paint) 25 %.
+MATTE_SATIN = ("acrylic_felt_green", "acrylic_felt_pink", "acrylic_felt_purple", "cardboard",
+               "colodur_azure_4e", "colodur_connemara_4c", "colodur_napoli_4f", "ilm_l3_37_matte",
+               "paper_blue", "paper_white", "satin_purple", "satin_rosaline")
+
+
+def target(material: str) -> float:
+    return 0.10 if material in MATTE_SATIN else 0.25
+
+
+def data_dir() -> Path:
+    return Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data")) / "rgl"
+
+
+def all_materials() -> list:
+    return sorted(p.name[:-len("_rgb.bsdf")] for p in data_dir().glob("*_rgb.bsdf"))
+
+
+def _tag(tol: float) -> str:
+    return f"{tol:g}".replace(".", "p")
+
+
+def projection(stem: str, cache: Path):
+    """The projection a 2-D fit of the RGL file ``stem`` is made from, cached as ``.npz``."""
+    from fit.projection.projected import ProjectedBRDF
+    p = cache / "proj" / f"{stem}.npz"
+    if p.exists():
+        return ProjectedBRDF.load(p)
+    from fit.formats import load_measured
+    from fit.rational.brdf_data import project_for_fit
+    proj = project_for_fit(load_measured(data_dir() / f"{stem}.bsdf"))
+    p.parent.mkdir(parents=True, exist_ok=True)
+    proj.save(p)
+    return proj
+
+
+def model_2d(stem: str, tol: float, fits_dir: Path, fit_timeout: float):
+    """``(model, source)``: the 2-D fit of ``stem`` at ``tol`` (module docstring), or
+    ``(None, why)``."""
+    from fit.formats.measured import file_sha256
+    from fit.rational.coefficient_file import load
+    from warp_rbrdf.paths import PACKAGE_DATA
+    sha = file_sha256(data_dir() / f"{stem}.bsdf")
+    for p in sorted(PACKAGE_DATA.glob(f"{stem}*.json")):
+        m = load(p)
+        if m.fit_info.get("kind") != "3d" and abs(float(m.fit_info.get("tolerance", -1)) - tol) < 1e-12:
+            src = getattr(m, "source", None) or {}
+            if isinstance(src, dict) and src.get("sha256") not in (None, sha):
+                continue
+            return m, f"shipped ({p.name})"
+    p = fits_dir / f"{stem}_tol{_tag(tol)}_cli.json"
+    if not p.exists():
+        cmd = [sys.executable, "-m", "fit.cli", "brdf", str(data_dir() / f"{stem}.bsdf"), "--model", "2d",
+               "--tol", str(tol), "--out", str(p), "--allow-infeasible", "--no-sampler", "--no-progress"]
+        try:
+            r = subprocess.run(cmd, capture_output=True, text=True, timeout=fit_timeout, cwd=ROOT)
+        except subprocess.TimeoutExpired:
+            return None, f"no 2-D fit: rbrdf-fit brdf ran past {fit_timeout:g} s"
+        if not p.exists():
+            return None, f"no 2-D fit: {(r.stderr or r.stdout).strip().splitlines()[-1:]}"
+        return load(p), f"fitted ({p.name})"
+    return load(p), f"cached ({p.name})"
+
+
+def model_3d(stem: str, fits_dir: Path, cache: Path, fit_small: bool):
+    """``(result, brdf, source)``: a 3-D fit of ``stem`` as :func:`fit.rational.proved_bound.prove_fit3d`
+    reads it, or ``(None, None, why)``."""
+    from fit.formats.rgl import read_rgl
+    from fit.rational.coefficient_file import load, save
+    from fit.rational.proved_bound import leaves
+    files = sorted(fits_dir.glob(f"{stem}_3d_*.json")) if fits_dir.is_dir() else []
+    small = cache / "fits3d" / f"{stem}_3d_small.json"
+    brdf = read_rgl(data_dir() / f"{stem}.bsdf")
+    if files:
+        m, src = load(files[0]), f"cached ({files[0].relative_to(ROOT) if files[0].is_relative_to(ROOT) else files[0]})"
+    elif small.exists():
+        m, src = load(small), f"small budget, cached ({small.name})"
+    elif fit_small:
+        from fit.rational.fit3d import fit_rgl
+        res = fit_rgl(brdf, **SMALL_3D)
+        small.parent.mkdir(parents=True, exist_ok=True)
+        save(res.model, small)
+        m, src = res.model, f"small budget, fitted ({small.name})"
+    else:
+        return None, None, "no 3-D fit (--fit-3d makes a small-budget one)"
+    fi = m.fit_info
+    recs = [{"piece": k, "channel": "RGB"[c], "tolerance": float(leaf.function_info[c]["tolerance"])}
+            for k, leaf in enumerate(leaves(m)) for c in range(3)]
+    res = SimpleNamespace(model=m, data=None, settings=None, noise=tuple(fi["noise"]), records=recs)
+    return res, brdf, src
+
+
+def _rows(bounds) -> list:
+    return [dict(b.record(), unit=None) for b in bounds]
+
+
+def run(args) -> dict:
+    from fit.rational import proved_bound as pb
+    encl = list(pb.ENCLOSURES) if args.enclosure == "both" else [args.enclosure]
+    fits_2d, fits_3d, cache = Path(args.fits_2d), Path(args.fits_3d), Path(args.cache)
+    out = {"date": datetime.date.today().isoformat(), "load": os.getloadavg(), "tol": args.tol,
+           "enclosures": encl, "materials": {}}
+    for mat in args.materials:
+        stem = f"{mat}_rgb"
+        row = out["materials"][mat] = {"target": target(mat)}
+        if "2d" in args.models:
+            m, src = model_2d(stem, args.tol, fits_2d, args.fit_timeout)
+            row["2d"] = {"source": src}
+            if m is not None:
+                proj = projection(stem, cache)
+                row["2d"]["coefficients"] = int(sum(np.size(f.num_coef) + np.size(f.den_coef)
+                                                    for leaf in pb.leaves(m) for f in leaf.functions))
+                for e in encl:
+                    t0 = time.perf_counter()
+                    b = pb.prove_brdf(m, proj, enclosure=e)
+                    row["2d"][e] = {"wall_s": time.perf_counter() - t0, **pb.summary(b), "bounds": _rows(b)}
+                    print(f"{mat} 2d {e}: {_line(row['2d'][e])}", flush=True)
+            else:
+                print(f"{mat} 2d: {src}", flush=True)
+        if "3d" in args.models:
+            res, brdf, src = model_3d(stem, fits_3d, cache, args.fit_3d)
+            row["3d"] = {"source": src}
+            if res is not None:
+                row["3d"]["coefficients"] = int(sum(np.size(f.num_coef) + np.size(f.den_coef)
+                                                    for leaf in pb.leaves(res.model) for f in leaf.functions))
+                row["3d"]["stated"] = max(r["tolerance"] for r in res.records)
+                for e in encl:
+                    t0 = time.perf_counter()
+                    b = pb.prove_fit3d(res, brdf, enclosure=e)
+                    row["3d"][e] = {"wall_s": time.perf_counter() - t0, **pb.summary(b), "bounds": _rows(b)}
+                    print(f"{mat} 3d {e}: {_line(row['3d'][e])}", flush=True)
+            else:
+                print(f"{mat} 3d: {src}", flush=True)
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps(out, indent=1))
+    out["load_end"] = os.getloadavg()
+    Path(args.out).write_text(json.dumps(out, indent=1))
+    return out
+
+
+def _pct(x) -> str:
+    return "none" if x is None else f"{100 * x:.3g} %"
+
+
+def _line(r) -> str:
+    return (f"proved {_pct(r['proved'])}, within tol on {_pct(r['proved_fraction'])}, verified "
+            f"{_pct(r['verified'])}, {r['wall_s']:.1f} s")
+
+
+def main(argv=None):
+    from fit.rational.proved_bound import ENCLOSURES
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--materials", nargs="+", default=None, help="RGL material names (default: all shared)")
+    ap.add_argument("--models", nargs="+", default=["2d", "3d"], choices=["2d", "3d"])
+    ap.add_argument("--tol", type=float, default=0.05, help="the 2-D fits' tolerance (default 0.05)")
+    ap.add_argument("--enclosure", default=ENCLOSURES[-1], choices=list(ENCLOSURES) + ["both"])
+    ap.add_argument("--fits-2d", default=str(ROOT / "results" / "fits"))
+    ap.add_argument("--fits-3d", default=str(ROOT / "results" / "chart" / "fits"))
+    ap.add_argument("--cache", default=str(RESULTS))
+    ap.add_argument("--fit-3d", action="store_true", help="make a small-budget 3-D fit where none is cached")
+    ap.add_argument("--fit-timeout", type=float, default=900.0, help="seconds per new 2-D fit")
+    ap.add_argument("--out", default=str(RESULTS / "results.json"))
+    ap.add_argument("--docs", action="store_true", help="write the table into docs/fit_accuracy.md")
+    args = ap.parse_args(argv)
+    args.materials = args.materials or all_materials()
+    out = run(args)
+    if args.docs:
+        write_docs(out)
+
+
+def table(out) -> str:
+    """The markdown table of a run."""
+    encl = out["enclosures"]
+    head = ["material", "target", "model (source)", "coefficients", "stated tolerance"]
+    for e in encl:
+        head += [f"proved ({e})", f"within tol ({e})", f"s ({e})"]
+    head += ["verified (points)"]
+    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join("---" for _ in head) + " |"]
+    for mat, row in out["materials"].items():
+        for kind in ("2d", "3d"):
+            r = row.get(kind)
+            if r is None:
+                continue
+            if encl[-1] not in r:
+                lines.append(f"| {mat} | {_pct(row['target'])} | {kind}: {r['source']} |" + " |" * (len(head) - 3))
+                continue
+            last = r[encl[-1]]
+            stated = r.get("stated", out["tol"])
+            cells = [mat, _pct(row["target"]), f"{kind.upper().replace('D', '-D')} ({r['source']})",
+                     str(r.get("coefficients", "")), _pct(stated)]
+            for e in encl:
+                cells += [_pct(r[e]["proved"]), _pct(r[e]["proved_fraction"]), f"{r[e]['wall_s']:.1f}"]
+            pts = sum(b["verified_points"] for b in last["bounds"])
+            cells += [f"{_pct(last['verified'])} ({pts:,})"]
+            lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_docs(out) -> None:
+    text = DOCS.read_text()
+    a, b = text.index(MARK[0]), text.index(MARK[1])
+    block = (f"{MARK[0]}\n\n`python -m benchmarks.bench_proved_bound "
+             f"--enclosure {'both' if len(out['enclosures']) > 1 else out['enclosures'][0]}`, "
+             f"{out['date']}, load average {out['load'][0]:.2f} at the start, {out.get('load_end', out['load'])[0]:.2f} "
+             f"at the end (shared 2-core machine; seconds are wall clock):\n\n{table(out)}\n\n")
+    DOCS.write_text(text[:a] + block + text[b:])
+
+
+if __name__ == "__main__":
+    main()
