@@ -138,7 +138,53 @@ def model_3d(stem: str, fits_dir: Path, cache: Path, fit_small: bool):
 
 
 def _rows(bounds) -> list:
-    return [dict(b.record(), unit=None) for b in bounds]
+    return [dict(b.record(), unit=None, status=b.status) for b in bounds]
+
+
+def unit_2d(model, c: int):
+    """The error unit of :data:`fit.rational.proved_bound.UNIT_2D` at interpolant values (N, C)."""
+    floor = float(model.fit_info["abs_floor"][c]) / float(model.fit_info["tolerance"])
+    return lambda m: np.maximum(m[:, c], floor)
+
+
+def unit_3d(res, c: int):
+    """The error unit of :data:`fit.rational.proved_bound.UNIT_3D` at interpolant values (N, C)."""
+    from fit.rational.settings import DEFAULT_CHANNEL_FLOOR
+    cf = float(res.model.fit_info.get("channel_floor", DEFAULT_CHANNEL_FLOOR))
+    noise = float(res.noise[c])
+    return lambda m: np.maximum(np.maximum(m[:, c], noise), cf * m.max(axis=1))
+
+
+def gap(bound, leaf, unit, n: int = 33) -> dict:
+    """Where ``bound`` (a :class:`fit.rational.proved_bound.ProvedBound`) comes from: on its
+    worst cells (``worst_cells``), the largest error at ``n`` points per axis (a dense grid of
+    each cell, the interpolant multilinear, ``unit`` the error unit at the points) against the
+    cell's proved bound, and the range of P/Q there against its Bernstein enclosure.
+    ``dense_max`` close to ``proved``: the error between the nodes is real (only another fit
+    lowers it); far below it: the enclosure is loose."""
+    from fit.rational.cell_enclosure import Enclosure
+    from fit.rational.proved_bound import _leaf_output, _multilinear
+    w = bound.worst_cells
+    c = "RGB".index(bound.channel)
+    fn = leaf.functions[c]
+    k = w["lo"].shape[1]
+    g = np.linspace(0.0, 1.0, n)
+    loc = np.stack(np.meshgrid(*([g] * k), indexing="ij"), -1).reshape(-1, k)
+    dom = fn.domain
+    enc = Enclosure(fn)
+    out = []
+    for i in range(len(w["bound"])):
+        x = w["lo"][i] + loc * (w["hi"][i] - w["lo"][i])
+        m = _multilinear(np.repeat(w["corners"][i][None], len(loc), axis=0), loc)
+        r = fn(x)
+        err = np.abs(_leaf_output(leaf, c, r) - m[:, c]) / unit(m)
+        t = lambda z: ((2.0 * z - (dom[:, 0] + dom[:, 1])) / (dom[:, 1] - dom[:, 0]))[None]  # noqa: E731
+        rl, rh = enc.ratio(np.clip(t(w["lo"][i]), -1, 1), np.clip(t(w["hi"][i]), -1, 1))
+        out.append({"cell_bound": float(w["bound"][i]), "dense_max": float(err.max()),
+                    "pq_range": float(r.max() - r.min()), "pq_enclosure": float(rh[0] - rl[0])})
+    best = max(out, key=lambda d: d["dense_max"]) if out else {}
+    return {"piece": bound.piece, "channel": bound.channel, "proved": bound.proved,
+            "dense_max_worst_cells": best.get("dense_max"), "cells": out}
 
 
 def run(args) -> dict:
@@ -162,6 +208,10 @@ def run(args) -> dict:
                     b = pb.prove_brdf(m, proj, enclosure=e)
                     row["2d"][e] = {"wall_s": time.perf_counter() - t0, **pb.summary(b), "bounds": _rows(b)}
                     print(f"{mat} 2d {e}: {_line(row['2d'][e])}", flush=True)
+                    if args.gap:
+                        w = max(b, key=lambda x: np.inf if x.proved is None else x.proved)
+                        row["2d"][e]["gap"] = gap(w, pb.leaves(m)[w.piece], unit_2d(m, "RGB".index(w.channel)))
+                        print(f"  gap: {_gap_line(row['2d'][e]['gap'])}", flush=True)
             else:
                 print(f"{mat} 2d: {src}", flush=True)
         if "3d" in args.models:
@@ -176,6 +226,11 @@ def run(args) -> dict:
                     b = pb.prove_fit3d(res, brdf, enclosure=e)
                     row["3d"][e] = {"wall_s": time.perf_counter() - t0, **pb.summary(b), "bounds": _rows(b)}
                     print(f"{mat} 3d {e}: {_line(row['3d'][e])}", flush=True)
+                    if args.gap:
+                        w = max(b, key=lambda x: np.inf if x.proved is None else x.proved)
+                        row["3d"][e]["gap"] = gap(w, pb.leaves(res.model)[w.piece],
+                                                  unit_3d(res, "RGB".index(w.channel)), n=17)
+                        print(f"  gap: {_gap_line(row['3d'][e]['gap'])}", flush=True)
             else:
                 print(f"{mat} 3d: {src}", flush=True)
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
@@ -187,6 +242,14 @@ def run(args) -> dict:
 
 def _pct(x) -> str:
     return "none" if x is None else f"{100 * x:.3g} %"
+
+
+def _gap_line(g) -> str:
+    c = max(g["cells"], key=lambda d: d["cell_bound"]) if g["cells"] else {}
+    return (f"piece {g['piece']} {g['channel']}: proved {_pct(g['proved'])}, dense max on its "
+            f"{len(g['cells'])} worst cells {_pct(g['dense_max_worst_cells'])}; worst cell: bound "
+            f"{_pct(c.get('cell_bound'))}, dense {_pct(c.get('dense_max'))}, P/Q range {c.get('pq_range', 0):.3g} "
+            f"enclosed in {c.get('pq_enclosure', 0):.3g}")
 
 
 def _line(r) -> str:
@@ -208,6 +271,8 @@ def main(argv=None):
     ap.add_argument("--fit-3d", action="store_true", help="make a small-budget 3-D fit where none is cached")
     ap.add_argument("--fit-timeout", type=float, default=900.0, help="seconds per new 2-D fit")
     ap.add_argument("--out", default=str(RESULTS / "results.json"))
+    ap.add_argument("--gap", action="store_true",
+                    help="on the worst piece and channel, the error at dense points of its worst cells")
     ap.add_argument("--docs", action="store_true", help="write the table into docs/fit_accuracy.md")
     args = ap.parse_args(argv)
     args.materials = args.materials or all_materials()

@@ -46,10 +46,13 @@ def _brute_force(model, axes, values, n=200000, seed=5):
     return float(np.max(np.abs(model(x)[:, 0] - m) / np.maximum(m, 0.1)))
 
 
-def _prove(model, axes, values, **kw):
+def _prove(model, axes, values, relative=True, **kw):
+    """:func:`prove_cells` in the unit ``max(m, 0.1)``; ``relative``: told so (``floor``), else
+    only that the unit is at least its value at the smallest corner."""
     c_lo, c_hi, corners = _grid_cells(axes, values, np.ones(values.shape[:-1], bool))
+    floor = (lambda cr: np.full(len(cr), 0.1)) if relative else None
     return prove_cells(model, 0, c_lo, c_hi, corners, lambda cr: np.maximum(cr[..., 0].min(axis=1), 0.1),
-                       tolerance=0.01, **kw)
+                       tolerance=0.01, floor=floor, **kw)
 
 
 @pytest.mark.parametrize("value_transform", ["linear", "log"])
@@ -135,9 +138,11 @@ class _Lobe3D:
         return np.where(above[..., None], out, 0.0)
 
 
-def _brute_force_3d(res, brdf, n=100000, seed=11):
+def _brute_force_3d(res, brdf, n=100000, seed=11, grazing=False):
     """The largest error per (piece, channel) at ``n`` random points of the measured cells, in
-    :data:`fit.rational.proved_bound.UNIT_3D` (the measurement trilinear on the fit's grid)."""
+    :data:`fit.rational.proved_bound.UNIT_3D` (the measurement trilinear on the fit's grid);
+    ``grazing``: in :data:`fit.rational.proved_bound.UNIT_3D_GRAZING`."""
+    from fit.rational.samples3d import grazing_weight
     from fit.rational.proved_bound import measurement_grid
     from fit.rational.settings import DEFAULT_CHANNEL_FLOOR
 
@@ -155,6 +160,8 @@ def _brute_force_3d(res, brdf, n=100000, seed=11):
     f = np.asarray(res.model(X), np.float64)
     s = np.maximum(np.maximum(m, np.asarray(res.noise)[None, :]), DEFAULT_CHANNEL_FLOOR * m.max(axis=1, keepdims=True))
     err = np.abs(f - m) / s
+    if grazing:
+        err = err / grazing_weight(X, res.settings.grazing_cos)[:, None]
     piece = np.clip(np.searchsorted(res.edges, X[:, 0], side="right") - 1, 0, len(res.edges) - 2)
     return {(k, "RGB"[c]): float(err[piece == k, c].max(initial=0.0))
             for k in range(len(res.edges) - 1) for c in range(3)}
@@ -163,9 +170,12 @@ def _brute_force_3d(res, brdf, n=100000, seed=11):
 def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
     """A small-budget 3-D fit with ``prove_bound``: a bound per piece and channel, never below the
     largest error at dense random points of the measured cells, recorded in the fit's record
-    (read back from its file) and in ``fit_info["domain"]``; without it nothing is claimed."""
+    (read back from its file) and in ``fit_info["domain"]``; without it nothing is claimed. In the
+    unit with the grazing weight (``grazing=True``) the bound is again above the error at the
+    random points, and at most the bound without it."""
     from fit.rational.coefficient_file import load, save
     from fit.rational.fit3d import fit_rgl
+    from fit.rational.proved_bound import prove_fit3d
 
     brdf = _Lobe3D()
     fit = dict(grid=(9, 8, 6), n_random=300, n_objective=0, verify=0, degrees=(4, 2), theta_h_edges=[0.3],
@@ -182,6 +192,10 @@ def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
     assert d["proved"] == all(b.proved <= b.tolerance for b in res.bounds)
     save(res.model, tmp_path / "f.json")
     assert load(tmp_path / "f.json").fit_info["bound"] == res.model.fit_info["bound"]
+    weighted = prove_fit3d(res, brdf, grazing=True)
+    observed_w = _brute_force_3d(res, brdf, grazing=True)
+    for b, s in zip(weighted, res.bounds):
+        assert observed_w[(b.piece, b.channel)] <= b.proved <= s.proved * (1 + 1e-9), (b, observed_w)
     plain = fit_rgl(brdf, **fit)
     assert plain.bounds is None and "bound" not in plain.model.fit_info
     assert plain.model.fit_info["domain"]["proved"] is False
@@ -218,8 +232,9 @@ def test_joint_enclosure_contains_the_difference():
     assert np.all(joint[small] < ranges[small])
 
 
+@pytest.mark.parametrize("relative", [True, False])
 @pytest.mark.parametrize("value_transform", ["linear", "log"])
-def test_joint_enclosure_is_tighter_and_still_above_the_true_error(value_transform):
+def test_joint_enclosure_is_tighter_and_still_above_the_true_error(value_transform, relative):
     """On cells where the fit follows a varying measurement closely, the separate ranges of fit
     and interpolant (``enclosure="ranges"``) add both variations; the joint enclosure of their
     difference does not: without subdivision it proves a smaller bound, and it is still at least
@@ -229,8 +244,22 @@ def test_joint_enclosure_is_tighter_and_still_above_the_true_error(value_transfo
     X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
     values = model(X) * (1.0 + 0.02 * np.random.default_rng(3).standard_normal(X.shape[:-1] + (1,)))
     observed = _brute_force(model, axes, values)
-    loose = _prove(model, axes, values, max_rounds=0, enclosure="ranges")
-    tight = _prove(model, axes, values, max_rounds=0, enclosure="joint")
+    loose = _prove(model, axes, values, relative, max_rounds=0, enclosure="ranges")
+    tight = _prove(model, axes, values, relative, max_rounds=0, enclosure="joint")
     assert observed <= tight.proved < 0.8 * loose.proved, (observed, tight.proved, loose.proved)
-    refined = _prove(model, axes, values, enclosure="joint")
+    refined = _prove(model, axes, values, relative, enclosure="joint")
     assert observed <= refined.proved <= tight.proved
+
+
+def test_relative_form_of_a_log_fit_is_tighter_and_still_above_the_true_error():
+    """A log fit's joint bound in the relative unit (``floor`` given: the unit is ``max(m, s0)``)
+    does not carry the variation of m over the cell, which the same bound over the unit's
+    smallest value on the cell does; both stay above the brute-force error."""
+    model = _model("log")
+    axes = (np.linspace(0.0, 1.0, 9), np.linspace(0.0, 2.0, 7))
+    X = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+    values = model(X) * (1.0 + 0.02 * np.random.default_rng(3).standard_normal(X.shape[:-1] + (1,)))
+    observed = _brute_force(model, axes, values)
+    rel = _prove(model, axes, values, True, max_rounds=0)
+    absolute = _prove(model, axes, values, False, max_rounds=0)
+    assert observed <= rel.proved < 0.6 * absolute.proved, (observed, rel.proved, absolute.proved)
