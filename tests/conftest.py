@@ -7,7 +7,11 @@ file is a failure, never a skip.
 from __future__ import annotations
 
 import functools
+import hashlib
 import os
+import pickle
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -60,14 +64,91 @@ def data_file(relative: str) -> Path:
     return p
 
 
-@functools.lru_cache(maxsize=2)
-def rgl_measured(name: str, incident: str = "view"):
-    """The shared RGL file ``rgl/<name>.bsdf`` resampled on the MERL grid
-    (:func:`fit.formats.load_measured`), made once per test process and shared by the tests
-    that read it (about 6 s and 150 MB each; the last two kept): callers must not modify it."""
-    from fit.formats import load_measured
+#: Environment variable naming this test session's folder of resampled RGL files (made by the
+#: controlling process, passed to the pytest-xdist workers, removed at the session's end).
+SESSION_CACHE_ENV = "RBRDF_TEST_SESSION_CACHE"
 
-    return load_measured(data_file(f"rgl/{name}.bsdf"), incident=incident)
+
+@functools.lru_cache(maxsize=2)
+def rgl_measured(name: str, incident: str = "view", horizon_margin_deg: float | None = None):
+    """The shared RGL file ``rgl/<name>.bsdf`` resampled on the MERL grid
+    (``read_rgl(path, incident=incident).to_measured()``, what :func:`fit.formats.load_measured`
+    does; ``horizon_margin_deg`` passed on when given), made once per test session and shared
+    by the tests that read it, in every worker (:func:`session_cached`: about 6-12 s and 150 MB
+    each, the last two kept in memory): callers must not modify it."""
+    from fit.formats.rgl import read_rgl
+
+    path = data_file(f"rgl/{name}.bsdf")
+
+    def resample():
+        b = read_rgl(path, incident=incident)
+        return b.to_measured() if horizon_margin_deg is None else b.to_measured(horizon_margin_deg)
+
+    return session_cached(path, f"{name}-{incident}-{horizon_margin_deg}", resample)
+
+
+def session_cached(path: Path, what: str, make):
+    """``make()`` computed once per test session for all workers: pickled into this session's
+    folder (:data:`SESSION_CACHE_ENV`) under the SHA-256 of the file ``path`` and ``what``,
+    written to a temporary file and renamed into place, under a lock file, so a second worker
+    asking for the same key waits for the first one's result and loads it. Outside a test
+    session (no folder) or without ``fcntl``: ``make()``."""
+    folder = os.environ.get(SESSION_CACHE_ENV)
+    try:
+        import fcntl
+    except ImportError:
+        fcntl = None
+    if not folder or fcntl is None or not Path(folder).is_dir():
+        return make()
+    key = hashlib.sha256(Path(path).read_bytes() + b"\0" + what.encode()).hexdigest()[:32]
+    target = Path(folder) / f"{key}.pickle"
+    with open(Path(folder) / f"{key}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)          # released when the file closes
+        if target.exists():
+            with open(target, "rb") as f:
+                return pickle.load(f)
+        value = make()
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=f"{key}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                pickle.dump(value, f, protocol=pickle.HIGHEST_PROTOCOL)
+            os.replace(tmp, target)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return value
+
+
+def pytest_configure(config):
+    """The session's folder of :func:`session_cached`: made by the controlling process (or the
+    only one, ``-n 0``), handed to each pytest-xdist worker in its ``workerinput``."""
+    global _SESSION_CACHE
+    workerinput = getattr(config, "workerinput", None)
+    if workerinput is not None:
+        if workerinput.get("rbrdf_session_cache"):
+            os.environ[SESSION_CACHE_ENV] = workerinput["rbrdf_session_cache"]
+        return
+    _SESSION_CACHE = tempfile.mkdtemp(prefix="rbrdf-test-session-")
+    os.environ[SESSION_CACHE_ENV] = _SESSION_CACHE
+
+
+_SESSION_CACHE = None
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node):
+    """pytest-xdist: the worker gets the session's folder (:func:`pytest_configure`)."""
+    node.workerinput["rbrdf_session_cache"] = _SESSION_CACHE
+
+
+def pytest_unconfigure(config):
+    """The controlling process removes the session's folder after the workers are done."""
+    global _SESSION_CACHE
+    if _SESSION_CACHE is not None and getattr(config, "workerinput", None) is None:
+        shutil.rmtree(_SESSION_CACHE, ignore_errors=True)
+        if os.environ.get(SESSION_CACHE_ENV) == _SESSION_CACHE:
+            del os.environ[SESSION_CACHE_ENV]
+        _SESSION_CACHE = None
 
 
 def require_mitsuba():

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import data_file
+from conftest import data_file, rgl_measured
 
 from lab.analytic import glossy_lobe, lambert
 from fit.errors import BRDFFileError
@@ -115,7 +115,7 @@ def rgl_roles():
     out = {}
     for incident in ("view", "light"):
         b = read_rgl(path, incident=incident)
-        out[incident] = (b, b.to_measured())
+        out[incident] = (b, rgl_measured(GLOSSY, incident))   # b.to_measured(), once per session
     return out
 
 

@@ -135,14 +135,11 @@ def test_real_fits_at_grazing_views_are_no_brighter_than_the_measurement(materia
     80-89.5 deg from the normal under a white sky, no channel above 1.25 x the reference's.
     Before the domain clamp: cm_toxic_green blue 1.66 x, ilm_solo_m_68 red and green 2000 x
     (the data-free clusters at 1500-4400 /sr)."""
-    from conftest import DATA, data_file
+    from conftest import DATA, rgl_measured
 
-    from fit.formats import load_measured
-
-    src = data_file(f"rgl/{material}.bsdf")
     monkeypatch.setenv("RBRDF_DATA", str(DATA))       # a flagged fit's source measurement
     lm = rational.load(MaterialSpec(name="m", type="rational", file=HERE / "data" / f"{material}_tol0p05.json"))
-    ref = _white_sky(load_measured(src).evaluate)
+    ref = _white_sky(rgl_measured(material).evaluate)   # load_measured(src), once per session
     got = _white_sky(lm.evaluate)
     ratio = got / ref
     assert np.all(ratio <= 1.25) and np.all(ratio > 0.1), (material, ratio)

@@ -6,7 +6,7 @@ import struct
 import numpy as np
 import pytest
 
-from conftest import RGL_MATERIALS, data_file
+from conftest import RGL_MATERIALS, data_file, rgl_measured, rgl_params
 from fit.errors import BRDFFileError
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.formats.grid import phi_d_centres, theta_d_centres, theta_h_centres
@@ -26,9 +26,11 @@ def brdfs():
     return {m: read_rgl(data_file(f"rgl/{m}.bsdf")) for m in RGL_MATERIALS}
 
 
-@pytest.fixture(scope="module")
-def resampled(brdfs):
-    return {m: b.to_measured() for m, b in brdfs.items()}
+def resampled(material):
+    """``read_rgl(...).to_measured()`` of the shared file, resampled once per test session
+    (conftest.rgl_measured): the resampling tests take the two materials of the default run
+    (``conftest.RGL_DEFAULT``), the other four under the ``extended`` marker."""
+    return rgl_measured(material)
 
 
 def _paper_path():
@@ -47,18 +49,27 @@ def _random_dirs(rng, n, theta_max_deg):
 # ------------------------------------------------------------------------------------------
 # Loading and resampling
 # ------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("material", RGL_MATERIALS)
-def test_every_material_loads_and_resamples(material, brdfs, resampled):
+def test_every_material_loads(brdfs):
+    """Every shared file reads (header, fields, the 90 deg slice); its resampling:
+    :func:`test_material_resamples`."""
+    for material in RGL_MATERIALS:
+        b = brdfs[material]
+        assert isinstance(b, RGLBRDF)
+        assert b.name == material
+        assert b.description and b.source.endswith(f"{material}.bsdf")
+        assert len(b.source_sha256) == 64
+        assert b.theta_i.size == 8 and b.rgb.shape[1] == 3
+        # the 90 deg slice copies the last measured one
+        assert np.radians(78) < b.theta_i_max < np.radians(86)
+        assert b.theta_i_max < b.theta_i[-1]
+
+
+@pytest.mark.parametrize("material", rgl_params())
+def test_material_resamples(material, brdfs):
+    """The file resampled on the full-circle MERL grid (:func:`resampled`: two materials in
+    the default run, all six with ``-m extended``)."""
     b = brdfs[material]
-    assert isinstance(b, RGLBRDF)
-    assert b.name == material
-    assert b.description and b.source.endswith(f"{material}.bsdf")
-    assert len(b.source_sha256) == 64
-    assert b.theta_i.size == 8 and b.rgb.shape[1] == 3
-    # the 90 deg slice copies the last measured one
-    assert np.radians(78) < b.theta_i_max < np.radians(86)
-    assert b.theta_i_max < b.theta_i[-1]
-    m = resampled[material]
+    m = resampled(material)
     assert isinstance(m, MeasuredBRDF)
     assert m.values.shape == (90, 90, 360, 3) and not m.reciprocal  # full circle: no fold
     assert m.name == material and m.source == b.source and m.source_sha256 == b.source_sha256
@@ -67,28 +78,38 @@ def test_every_material_loads_and_resamples(material, brdfs, resampled):
     assert 0.5 < m.valid_fraction < 1.0
 
 
-def test_resampled_grid_equals_direct_evaluation(brdfs, resampled):
+@pytest.mark.parametrize("name", rgl_params())
+def test_resampled_grid_equals_direct_evaluation(brdfs, name):
+    """500 random bins of the resampled grid against the file's own evaluation at their
+    centres (:func:`resampled`: two materials in the default run, all six with ``-m extended``)."""
     rng = np.random.default_rng(1)
     th, td, pd = theta_h_centres(), theta_d_centres(), phi_d_centres(360)
-    for name, b in brdfs.items():
-        m = resampled[name]
-        i, j, k = rng.integers(0, 90, 500), rng.integers(0, 90, 500), rng.integers(0, 360, 500)
-        wi, wo = half_diff_to_directions(th[i], 0.0, td[j], pd[k])
-        margin = np.sin(np.radians(1.0))  # to_measured's default horizon margin
-        above = (wi[:, 2] > margin) & (wo[:, 2] > margin)
-        np.testing.assert_allclose(m.values[i, j, k], np.where(above[:, None], b.evaluate(wi, wo), 0.0),
-                                   rtol=1e-12, atol=0)
-        assert np.array_equal(m.valid[i, j, k, 0], above)
+    b, m = brdfs[name], resampled(name)
+    i, j, k = rng.integers(0, 90, 500), rng.integers(0, 90, 500), rng.integers(0, 360, 500)
+    wi, wo = half_diff_to_directions(th[i], 0.0, td[j], pd[k])
+    margin = np.sin(np.radians(1.0))  # to_measured's default horizon margin
+    above = (wi[:, 2] > margin) & (wo[:, 2] > margin)
+    np.testing.assert_allclose(m.values[i, j, k], np.where(above[:, None], b.evaluate(wi, wo), 0.0),
+                               rtol=1e-12, atol=0)
+    assert np.array_equal(m.valid[i, j, k, 0], above)
 
 
-def test_horizon_margin_removes_exploding_grazing_bins(brdfs, resampled):
+@pytest.mark.parametrize("name", rgl_params())
+def test_resampled_values_stay_bounded(name):
+    """With the default 1 deg horizon margin the resampled values stay within a bounded factor
+    of the file's own range (:func:`test_horizon_margin_removes_exploding_grazing_bins`)."""
+    assert resampled(name).values.max() < 5e4, name  # measured: <= 1.3e4 (iris purple gem)
+
+
+def test_horizon_margin_removes_exploding_grazing_bins(brdfs):
     """Within 1 deg of the horizon f*cos/cos explodes; those bins are invalid by default and
-    the remaining values stay within a bounded factor of the file's own range."""
-    for name, m in resampled.items():
-        assert m.values.max() < 5e4, name  # measured: <= 1.3e4 (iris purple gem)
+    the remaining values stay within a bounded factor of the file's own range (every material:
+    :func:`test_resampled_values_stay_bounded`)."""
+    m = resampled("cc_ibiza_sunset_rgb")
+    assert m.values.max() < 5e4
     m0 = brdfs["cc_ibiza_sunset_rgb"].to_measured(horizon_margin_deg=0.0)
     assert m0.values.max() > 1e5  # what the margin protects against
-    assert m0.valid.sum() > resampled["cc_ibiza_sunset_rgb"].valid.sum()
+    assert m0.valid.sum() > m.valid.sum()
 
 
 def test_below_horizon_is_zero_and_shapes_broadcast(brdfs):

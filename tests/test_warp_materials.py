@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import data_file
+from conftest import data_file, rgl_measured
 
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
 from fit.formats.grid import phi_d_centres, theta_d_centres, theta_h_centres
@@ -178,7 +178,8 @@ def fold_renderer():
     from fit.formats.rgl import read_rgl
 
     rgl = read_rgl(_rgl_file())
-    tables = {"merl": synthetic_brdf(), "full": synthetic_full_circle_brdf(), "rgl": rgl.to_measured()}
+    tables = {"merl": synthetic_brdf(), "full": synthetic_full_circle_brdf(),
+              "rgl": rgl_measured("cc_ibiza_sunset_rgb")}   # rgl.to_measured(), once per session
     specs = [MaterialSpec(name=k, type="measured", data=b) for k, b in tables.items()]
     specs += [MaterialSpec(name=k + "-nearest", type="measured", data=b, interpolation="nearest",
                            sampler="mis") for k, b in tables.items()]
@@ -207,7 +208,7 @@ def test_rgl_derived_table_has_no_terminator_line():
     from fit.formats.rgl import read_rgl
 
     b = read_rgl(data_file("rgl/cm_toxic_green_rgb.bsdf"))
-    m = b.to_measured()
+    m = rgl_measured("cm_toxic_green_rgb")   # b.to_measured(), once per session
     rng = np.random.default_rng(4)
     n = 20000
     ct = np.cos(np.radians(85.0)) - rng.random(n) * (np.cos(np.radians(85.0)) - np.cos(np.radians(89.9)))
@@ -237,7 +238,7 @@ def test_trilinear_table_is_closer_to_the_file(short, grazing, nearest_above, li
     from fit.formats.rgl import read_rgl
 
     b = read_rgl(data_file(f"rgl/{short}_rgb.bsdf"))
-    m = b.to_measured()
+    m = rgl_measured(f"{short}_rgb")   # b.to_measured(), once per session
     rng = np.random.default_rng(5)
     n = 40000
 
