@@ -70,6 +70,42 @@ def test_3d_sampler_round_trip_bit_for_bit(fit3d):
     np.testing.assert_array_equal(again.cdf_phi, cdf.table.cdf_phi)
 
 
+def test_stored_pieces_read_without_rebuild_or_scipy(fit3d, tmp_path):
+    """The record stores its pieces' knots and slopes: a load makes the pieces from them (the
+    same floats as a rebuild from the table, bit for bit), with no rebuild, no sampled
+    verification and no SciPy import; a record without them (as written before they were
+    stored) still loads, rebuilt from the table, to the same pieces."""
+    import subprocess
+    import sys
+
+    from fit.sampling import pieces
+
+    path, model, cdf = fit3d
+    rec = load(path).sampler
+    assert set(rec["pieces"]["knots"]) == set(pieces.KNOT_KEYS)
+    stored = embedded.read(load(path), path).maps
+    rebuilt = pieces.build_pieces(cdf.table, cdf.maps.n_mu, cdf.maps.n_u, cdf.maps.row_ok, cdf.maps.flat_end)
+    for a in ("theta", "phi", "theta_knots", "row_ok", "flat_end"):
+        np.testing.assert_array_equal(getattr(stored, a), getattr(rebuilt, a), err_msg=a)
+    np.testing.assert_array_equal(pieces.pieces_phi_knots(stored), pieces.pieces_phi_knots(cdf.maps))
+    d = json.loads(path.read_text())
+    del d["sampler"]["pieces"]["knots"]
+    d["sampler"]["sha256"] = embedded.record_sha256(d["sampler"])
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(d))
+    again = embedded.read(load(old), old).maps
+    for a in ("theta", "phi", "theta_knots"):
+        np.testing.assert_array_equal(getattr(again, a), getattr(stored, a), err_msg=a)
+    code = ("import sys; from fit.rational.coefficient_file import load; from fit.sampling import embedded, pieces\n"
+            "pieces.build_pieces = pieces._pchip_slopes = pieces.rq_eval = None\n"
+            f"c = embedded.read(load({str(path)!r}))\n"
+            "assert c.maps.row_ok.any() and not c.fallback\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy' or m == 'fit.rational.fitter'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]", out.stdout
+
+
 def _case(path, sampler):
     from lab import testing as T
     from warp_rbrdf.renderer import Renderer
@@ -162,6 +198,20 @@ def _cdf_value(d):
     d["sampler"]["table_data"]["cdf_theta"] = binary_arrays.encode(a)
 
 
+def _knots(name, change):
+    """An edit of the stored knots (the record signed again): ``change(array)`` in place."""
+    def edit(d):
+        rec = d["sampler"]["pieces"]["knots"]
+        a = binary_arrays.decode(rec[name], "x", tuple(rec[name]["shape"]), 10 ** 7)
+        change(a)
+        rec[name] = binary_arrays.encode(a)
+    return edit
+
+
+def _swap_phi_knots(a):
+    a[0, 5, 3], a[0, 5, 4] = a[0, 5, 4], a[0, 5, 3]     # a decreasing map
+
+
 HOSTILE = [
     ("truncated", _truncate, True, "sampler.table_data.cdf_phi.data"),
     ("huge counts", _huge, True, "sampler.table_data"),
@@ -169,6 +219,13 @@ HOSTILE = [
      "sampler.sha256"),
     ("coefficients edited", _coefficient, False, "sampler.fit_sha256"),
     ("a CDF value", _cdf_value, True, "sampler.table_data.cdf_theta"),
+    ("knots not monotone", _knots("phi", _swap_phi_knots), True, "sampler.pieces.knots"),
+    ("slope beyond the bound", _knots("theta_slopes", lambda a: a.__setitem__((1, 7), 1e300)), True,
+     "sampler.pieces.knots"),
+    ("end not normalised", _knots("theta", lambda a: a.__setitem__((2, -1), 1.5)), True,
+     "sampler.pieces.knots"),
+    ("knots of the wrong shape", lambda d: d["sampler"]["pieces"]["knots"]["phi"].__setitem__("shape", [32, 64, 3]),
+     True, "sampler.pieces.knots.phi"),
 ]
 
 

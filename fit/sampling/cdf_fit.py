@@ -10,15 +10,18 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..formats.angles import HALF_PI
 from ..rational.coefficient_file import jsonable
-from .global_layout import GlobalMaps
 from .maps import sample_maps
 from .pieces import PieceMaps
 from .table import CDFTable, table_where
+
+if TYPE_CHECKING:   # the global layout imports the fitter (SciPy): not needed to hold or read maps
+    from .global_layout import GlobalMaps
 
 FORMAT = "rbrdf-cdf"
 VERSION = 2   # 2: "layout" key (pieces or global); version-1 files (global layout) still load

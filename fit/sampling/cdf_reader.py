@@ -1,9 +1,13 @@
 """Reading ``rbrdf-cdf`` files (:func:`load`, :func:`from_dict`): every value and size checked
 (:mod:`fit.limits`: the tables' shapes and strictly increasing CDFs, the pieces' sizes before they
-are rebuilt, :func:`check_pieces_size`), the pieces rebuilt from the table and verified, a
-global layout's verification run again rather than read from the file; files of the removed
-per-row layout (``"layout": "rows"``) refused. Every problem is one
-:class:`fit.errors.BRDFFileError` line naming the file and the key (docs/robustness.md).
+are rebuilt, :func:`check_pieces_size`), the pieces rebuilt from the table and verified (or, where
+the record stores their knots and slopes, ``pieces.knots`` as a fit's sampler record does, made
+from those and their structure checked: :func:`fit.sampling.pieces.check_pieces`), a global
+layout's verification run again rather than read from the file; files of the removed per-row
+layout (``"layout": "rows"``) refused. Every problem is one :class:`fit.errors.BRDFFileError`
+line naming the file and the key (docs/robustness.md). Reading a pieces-layout or table-only
+record imports neither SciPy nor the fitter (:mod:`fit.sampling.global_layout` is imported for a
+global layout only).
 """
 from __future__ import annotations
 
@@ -16,8 +20,7 @@ from ..inputs import read_json
 from ..limits import MAX_CDF_PHI_PIECES, MAX_CDF_PIECES, MAX_CDF_ROWS, check_memory
 from . import binary_arrays
 from .cdf_fit import FORMAT, VERSION, CDFFit
-from .global_layout import GlobalMaps
-from .pieces import PieceMaps
+from .pieces import KNOT_KEYS, PieceMaps, knot_shapes
 from .table import CDFTable, check_table_size
 
 
@@ -138,7 +141,32 @@ def _pieces_from_dict(pd, table: CDFTable, key: str = "pieces") -> PieceMaps:
     out = {"n_mu": n_mu, "n_u": n_u, "row_ok": row_ok.tolist()}
     if pd.get("flat_end") is not None:
         out["flat_end"] = F.array(pd["flat_end"], F.sub(key, "flat_end"), (table.n_v,), kind="bool").tolist()
-    return PieceMaps.from_dict(out, table)
+    if pd.get("knots") is None:
+        return PieceMaps.from_dict(out, table)          # rebuilt from the table and verified
+    out["knots"] = _knots_from_dict(pd["knots"], F.sub(key, "knots"), table.n_v, n_mu, n_u, out.get("flat_end"))
+    try:
+        return PieceMaps.from_dict(out, table)          # made from the knots, their structure checked
+    except ValueError as e:
+        raise F.Invalid(F.sub(key, "knots"), str(e)) from None
+
+
+def _knots_from_dict(kd, key: str, n_v: int, n_mu: int, n_u: int, flat_end) -> dict:
+    """The ``pieces.knots`` record (a fit's sampler record: the knots and slopes of the pieces,
+    :data:`fit.sampling.pieces.KNOT_KEYS`): every array of its shape (sizes checked before
+    decoding), finite; the knots of every map from exactly 0 to pi/2 (theta) or pi (phi), as
+    :func:`fit.sampling.pieces.piece_knots` makes them; a ``flat_end`` row's last end slope 0."""
+    F.obj(kd, key)
+    extra = sorted(set(kd) - set(KNOT_KEYS))
+    if extra:
+        raise F.Invalid(F.sub(key, extra[0]), f"unknown key (expected {', '.join(KNOT_KEYS)})")
+    shapes = knot_shapes(n_v, n_mu, n_u)
+    out = {k: _float_array(F.get(kd, k, key), F.sub(key, k), shapes[k]) for k in KNOT_KEYS}
+    for k, span in (("theta", HALF_PI), ("phi", np.pi)):
+        if np.any(out[k][..., 0] != 0.0) or np.any(out[k][..., -1] != span):
+            raise F.Invalid(F.sub(key, k), f"a map's knots do not run from 0 to {span:.17g}")
+    if flat_end is not None and np.any(out["end_slopes"][np.asarray(flat_end, bool), -1] != 0.0):
+        raise F.Invalid(F.sub(key, "end_slopes"), "a flat_end row's last slope is not 0")
+    return out
 
 
 def _prefixed(e: F.Invalid, prefix: str) -> str:
@@ -175,6 +203,8 @@ def from_dict(d: dict, path=None, what: str = f"{FORMAT} file", prefix: str = ""
             for k in ("theta", "phi"):
                 if d.get(k) is not None:
                     F.obj(d[k], k)
+            from .global_layout import GlobalMaps   # the fitter and SciPy: only for this layout
+
             maps = GlobalMaps.from_dict(d, path)
             if maps is not None:
                 for k, f, n in (("theta", maps.theta, 2), ("phi", maps.phi, 3)):

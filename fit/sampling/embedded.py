@@ -7,7 +7,9 @@ it with no table built at load and no source measurement: one self-contained fil
 an ``rbrdf-cdf`` object (:meth:`fit.sampling.cdf_fit.CDFFit.to_dict`: table parameters, the
 layout and its maps, verification, fallback flag and reason) whose two CDF arrays
 ``table_data.cdf_theta`` (n_v, n_t + 1) and ``table_data.cdf_phi`` (n_v, n_t, n_p + 1) are
-encoded arrays (:mod:`fit.sampling.binary_arrays`: base64 of little-endian float64), plus
+encoded arrays (:mod:`fit.sampling.binary_arrays`: base64 of little-endian float64); a pieces
+layout also stores its knots and slopes, ``pieces.knots`` (:data:`fit.sampling.pieces.KNOT_KEYS`,
+encoded the same way: what a load would otherwise rebuild from the table with SciPy), plus
 
 * ``fit_sha256``: :func:`fit.rational.coefficient_format.content_sha256` of the file without
   the record: the fit it was made from. The coefficient reader compares it with the file it
@@ -18,10 +20,12 @@ encoded arrays (:mod:`fit.sampling.binary_arrays`: base64 of little-endian float
 
 Reading (:func:`read`) checks the digest, then every value as an ``rbrdf-cdf`` file is checked
 (:func:`fit.sampling.cdf_reader.from_dict`: sizes within :mod:`fit.limits` before anything is
-decoded, strictly increasing CDFs, the pieces rebuilt and verified, a global layout verified
-again); a renderer that needs only the table reads only the table (``maps=False``). Every
-problem is one :class:`fit.errors.BRDFFileError` line naming the file and the key
-(``sampler.…``).
+decoded, strictly increasing CDFs, the pieces made from the stored knots and their structure
+checked (:func:`fit.sampling.pieces.check_pieces`: finite, monotone, continuous, normalised), a
+global layout verified again); a record without ``pieces.knots`` (written before they were
+stored) has its pieces rebuilt from the table and verified, as an ``rbrdf-cdf`` file. A renderer
+that needs only the table reads only the table (``maps=False``). Every problem is one
+:class:`fit.errors.BRDFFileError` line naming the file and the key (``sampler.…``).
 """
 from __future__ import annotations
 
@@ -35,6 +39,7 @@ from ..rational.coefficient_writer import jsonable, to_dict
 from . import binary_arrays
 from .cdf_fit import FORMAT, VERSION, CDFFit
 from .cdf_reader import from_dict, table_from_dict
+from .pieces import KNOT_KEYS, PieceMaps, piece_knots
 from .table import CDFTable
 
 KEY = SAMPLER_KEY
@@ -66,6 +71,10 @@ def record(cdf: CDFFit, fit_sha256: str) -> dict:
     t = cdf.table
     d["table_data"] = dict(d["table_data"], cdf_theta=binary_arrays.encode(t.cdf_theta),
                            cdf_phi=binary_arrays.encode(t.cdf_phi))
+    if isinstance(cdf.maps, PieceMaps):
+        pm = cdf.maps
+        knots = piece_knots(t, pm.n_mu, pm.n_u, pm.flat_end)     # what a load would rebuild
+        d["pieces"] = dict(d["pieces"], knots={k: binary_arrays.encode(knots[k]) for k in KNOT_KEYS})
     d = jsonable(d)
     d["fit_sha256"] = fit_sha256
     d["sha256"] = record_sha256(d)

@@ -70,16 +70,20 @@ measured again; it keeps the flat end if that passes (satin_rosaline: 0.67-1.46)
 Rows whose pieces fail :func:`verify_pieces`, and rows the variance gate rejects, are sampled
 with the table (``PieceMaps.row_ok`` False).
 
-Storage: the pieces are a deterministic function of the table and ``(n_mu, n_u)``, so a file
-stores the table, ``n_mu``, ``n_u`` and the per-row decisions, and :func:`build_pieces`
-recomputes the coefficients on load (milliseconds).
+Storage: the pieces are a deterministic function of the table and ``(n_mu, n_u)``: an
+``rbrdf-cdf`` file stores the table, ``n_mu``, ``n_u`` and the per-row decisions, and
+:func:`build_pieces` recomputes the coefficients on load, then :func:`verify_pieces` checks them.
+A fit's sampler record (:mod:`fit.sampling.embedded`) stores the knots and slopes as well
+(:func:`piece_knots`, :data:`KNOT_KEYS`): its load makes the pieces from them
+(:func:`pieces_from_knots`: elementwise, no SciPy, the same floats as a rebuild) and checks their
+structure (:func:`check_pieces`: finite, monotone, continuous, normalised, slopes within the
+PCHIP bound), with no rebuild and no sampled verification.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from ..formats.angles import HALF_PI
 from .maps import sample_maps
@@ -191,13 +195,24 @@ class PieceMaps:
 
     @classmethod
     def from_dict(cls, pd: dict, table: CDFTable) -> "PieceMaps":
-        """Rebuild the pieces of a CDF file's ``pieces`` entry from its table; ValueError when
-        the row flags do not fit the table or a rational row's pieces fail verification."""
+        """The pieces of a CDF file's ``pieces`` entry: made from its ``knots`` (the arrays of
+        :data:`KNOT_KEYS`, already read and of the right shapes) and checked
+        (:func:`check_pieces`) when it has them, else rebuilt from the table and verified
+        (:func:`verify_pieces`); ValueError when the row flags do not fit the table or a
+        rational row's pieces fail the check."""
         if len(pd["row_ok"]) != table.n_v:
             raise ValueError(f"{len(pd['row_ok'])} row flags for {table.n_v} table rows")
         flat = pd.get("flat_end")
         if flat is not None and len(flat) != table.n_v:
             raise ValueError(f"{len(flat)} flat_end flags for {table.n_v} table rows")
+        knots = pd.get("knots")
+        if knots is not None:
+            pm = pieces_from_knots(knots, row_ok=pd["row_ok"], flat_end=flat)
+            bad = ~np.asarray(check_pieces(pm)["rows"]) & pm.row_ok
+            if bad.any():
+                raise ValueError(f"stored pieces of rows {np.flatnonzero(bad).tolist()} fail the check "
+                                 "(not monotone, finite and normalised)")
+            return pm
         pm = build_pieces(table, int(pd["n_mu"]), int(pd["n_u"]), row_ok=pd["row_ok"], flat_end=flat)
         bad = ~np.asarray(verify_pieces(pm)["rows"]) & pm.row_ok
         if bad.any():
@@ -251,28 +266,69 @@ def _knots(cdf: np.ndarray, span: float, n: int):
 
 def _pchip_slopes(y: np.ndarray) -> np.ndarray:
     """dy/dt at the knots of SciPy's monotone PCHIP interpolant of ``y`` (..., n + 1) at t = k / n."""
+    from scipy.interpolate import PchipInterpolator   # only to build pieces, never to read stored ones
+
     t = np.linspace(0.0, 1.0, y.shape[-1])
     return PchipInterpolator(t, y, axis=-1)(t, 1)
+
+
+#: The knots and slopes of the pieces (:func:`piece_knots`), with their shapes for ``n_v`` rows,
+#: ``n_mu`` theta and ``n_u`` phi pieces: ``theta`` the knots theta_l (rad) at mu = k / n_mu,
+#: ``theta_slopes`` their slopes d theta_l / dmu, ``end_slopes`` the slopes d y / dmu in
+#: y = sin^2(theta_l) (the end pieces; 0 at the last knot of a ``flat_end`` row), ``phi`` the
+#: knots |phi_l| (rad) at u = j / n_u per theta piece and ``phi_slopes`` their slopes.
+KNOT_KEYS = ("theta", "theta_slopes", "end_slopes", "phi", "phi_slopes")
+
+
+def knot_shapes(n_v: int, n_mu: int, n_u: int) -> dict:
+    """The shape of each array of :data:`KNOT_KEYS`."""
+    t = (n_v, n_mu + 1)
+    p = (n_v, n_mu, n_u + 1)
+    return {"theta": t, "theta_slopes": t, "end_slopes": t, "phi": p, "phi_slopes": p}
+
+
+def piece_knots(table: CDFTable, n_mu: int, n_u: int, flat_end=None) -> dict:
+    """The knots and slopes (:data:`KNOT_KEYS`) of the pieces of every row of ``table``: the
+    table's inverse CDFs at the knots and SciPy's PCHIP slopes (``flat_end``: rows whose last
+    theta knot has slope 0 in y, all False unless given). :func:`pieces_from_knots` makes the
+    pieces from them."""
+    if n_mu < 3 or n_u < 1:
+        raise ValueError(f"need n_mu >= 3 and n_u >= 1 pieces, got {n_mu}, {n_u}")
+    yt = _knots(table.cdf_theta, HALF_PI, n_mu)             # (n_v, n_mu + 1)
+    ds = _pchip_slopes(_end_knots(yt))
+    flat = np.zeros(table.n_v, bool) if flat_end is None else np.asarray(flat_end, bool)
+    ds[flat, -1] = 0.0
+    yp = _knots(_mixed_phi_cdf(table, yt), np.pi, n_u)      # (n_v, n_mu, n_u + 1)
+    return {"theta": yt, "theta_slopes": _pchip_slopes(yt), "end_slopes": ds,
+            "phi": yp, "phi_slopes": _pchip_slopes(yp)}
+
+
+def _end_knots(yt: np.ndarray) -> np.ndarray:
+    """The theta knots ``yt`` in y = sin^2(theta_l), the ends exactly 0 and 1."""
+    ys = np.sin(yt) ** 2
+    ys[:, 0], ys[:, -1] = 0.0, 1.0
+    return ys
+
+
+def pieces_from_knots(knots: dict, row_ok=None, flat_end=None) -> PieceMaps:
+    """The pieces made from knots and slopes (:func:`piece_knots`; elementwise, no SciPy): the
+    same floats as :func:`build_pieces` of the table they came from. ``row_ok``: all True unless
+    given; ``flat_end``: the rows' flags (the slopes already hold them)."""
+    yt = knots["theta"]
+    theta = rq_pieces(yt, knots["theta_slopes"])
+    end = rq_pieces(_end_knots(yt), knots["end_slopes"])
+    theta[:, 0], theta[:, -1] = end[:, 0], end[:, -1]
+    phi = rq_pieces(knots["phi"], knots["phi_slopes"])
+    n_v = yt.shape[0]
+    ok = np.ones(n_v, bool) if row_ok is None else np.asarray(row_ok, bool).copy()
+    flat = np.zeros(n_v, bool) if flat_end is None else np.asarray(flat_end, bool)
+    return PieceMaps(theta=theta, phi=phi, theta_knots=yt, row_ok=ok, flat_end=flat)
 
 
 def build_pieces(table: CDFTable, n_mu: int = 64, n_u: int = 32, row_ok=None, flat_end=None) -> PieceMaps:
     """The pieces of every row of ``table`` (``row_ok``: all True unless given; ``flat_end``:
     rows whose last theta piece ends with slope 0 in y, all False unless given)."""
-    if n_mu < 3 or n_u < 1:
-        raise ValueError(f"need n_mu >= 3 and n_u >= 1 pieces, got {n_mu}, {n_u}")
-    yt = _knots(table.cdf_theta, HALF_PI, n_mu)             # (n_v, n_mu + 1)
-    theta = rq_pieces(yt, _pchip_slopes(yt))
-    ys = np.sin(yt) ** 2
-    ys[:, 0], ys[:, -1] = 0.0, 1.0
-    ds = _pchip_slopes(ys)
-    flat = np.zeros(table.n_v, bool) if flat_end is None else np.asarray(flat_end, bool)
-    ds[flat, -1] = 0.0
-    end = rq_pieces(ys, ds)
-    theta[:, 0], theta[:, -1] = end[:, 0], end[:, -1]
-    yp = _knots(_mixed_phi_cdf(table, yt), np.pi, n_u)      # (n_v, n_mu, n_u + 1)
-    phi = rq_pieces(yp, _pchip_slopes(yp))
-    ok = np.ones(table.n_v, bool) if row_ok is None else np.asarray(row_ok, bool).copy()
-    return PieceMaps(theta=theta, phi=phi, theta_knots=yt, row_ok=ok, flat_end=flat)
+    return pieces_from_knots(piece_knots(table, n_mu, n_u, flat_end), row_ok, flat_end)
 
 
 def _mixed_phi_cdf(table: CDFTable, knots: np.ndarray) -> np.ndarray:
@@ -295,22 +351,33 @@ def _mixed_phi_cdf(table: CDFTable, knots: np.ndarray) -> np.ndarray:
     return cdf
 
 
-def verify_pieces(pm: PieceMaps, n_check: int = 9) -> dict:
+#: The largest slope ratio ``a0``, ``a1`` (knot slope / the piece's secant slope) of a piece made
+#: from PCHIP slopes: Fritsch-Carlson slopes are at most 3x the secant of either side (SciPy's
+#: end slopes included), so a stored piece above it was not made by :func:`piece_knots`; the bound
+#: also keeps every value and derivative finite (:func:`check_pieces`). The margin is rounding.
+MAX_SLOPE_RATIO = 3.0 + 1e-9
+
+
+def verify_pieces(pm: PieceMaps, n_check: int = 9, max_slope_ratio: float | None = None) -> dict:
     """Checks of the construction's guarantees, per row: every piece has h >= 0, a0, a1 >= 0
     (so monotone, denominator >= 1/2: no pole), consecutive pieces meet (continuity), the
     ends are 0 and pi/2 (theta) / 0 and pi (phi); plus values and derivatives on ``n_check``
-    points per piece (finite, non-decreasing, derivative >= 0). Returns
+    points per piece (finite, non-decreasing, derivative >= 0; none with ``n_check`` 0) and,
+    with ``max_slope_ratio``, a0, a1 at most that. Returns
     ``{"ok": bool, "rows": [bool per row], "failures": {...}}``."""
     def check(c):
         """Per map (all axes but the last two): True where a piece breaks a guarantee."""
         bad = (c[..., 1:] < 0).any(axis=(-1, -2)) | ~np.isfinite(c).all(axis=(-1, -2))
+        if max_slope_ratio is not None:
+            bad |= (c[..., 2:] > max_slope_ratio).any(axis=(-1, -2))
         end = c[..., :-1, 0] + c[..., :-1, 1]                 # value at x = 1 of each piece
         nxt = c[..., 1:, 0]
         bad |= ~np.all(np.abs(end - nxt) <= 1e-9 * (1.0 + np.abs(nxt)), axis=-1)
-        x = np.linspace(0.0, 1.0, n_check)
-        val, der = rq_eval(c[..., None, :], x)
-        bad |= ~(np.isfinite(val).all(axis=(-1, -2)) & (der >= 0).all(axis=(-1, -2)))
-        bad |= ~np.all(np.diff(val, axis=-1) >= -1e-12, axis=(-1, -2))
+        if n_check > 0:
+            x = np.linspace(0.0, 1.0, n_check)
+            val, der = rq_eval(c[..., None, :], x)
+            bad |= ~(np.isfinite(val).all(axis=(-1, -2)) & (der >= 0).all(axis=(-1, -2)))
+            bad |= ~np.all(np.diff(val, axis=-1) >= -1e-12, axis=(-1, -2))
         return bad
 
     def near(a, b):
@@ -327,6 +394,16 @@ def verify_pieces(pm: PieceMaps, n_check: int = 9) -> dict:
     rows = ~(bt | bp)
     return {"ok": bool(rows.all()), "rows": rows.tolist(),
             "failures": {"theta": np.flatnonzero(bt).tolist(), "phi": np.flatnonzero(bp).tolist()}}
+
+
+def check_pieces(pm: PieceMaps) -> dict:
+    """The structural check of pieces made from stored knots (:func:`pieces_from_knots`), as
+    :func:`verify_pieces` returns it, without evaluating a piece: h >= 0 and
+    0 <= a0, a1 <= :data:`MAX_SLOPE_RATIO` (every piece monotone, finite, without a pole: the
+    denominator 1 + (a0 + a1 - 2) x(1 - x) lies in [1/2, 2]), pieces that meet (continuous)
+    and the ends 0 and pi/2 (theta) / 0 and pi (phi) (normalised). That is what the sampled
+    checks of :func:`verify_pieces` test at points; it costs one pass over the coefficients."""
+    return verify_pieces(pm, n_check=0, max_slope_ratio=MAX_SLOPE_RATIO)
 
 
 def sample_pieces(table: CDFTable, pm: PieceMaps, theta_v, mu, tau):

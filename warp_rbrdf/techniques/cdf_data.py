@@ -4,7 +4,8 @@ where they come from, and how they are packed into :class:`warp_rbrdf.materials.
 A material whose strategy's technique needs a table (``tabulated``, ``rational``) gets one:
 from its ``cdf = "file.json"`` (an ``rbrdf-cdf`` file of ``rbrdf-fit cdf``), else from the
 sampler record its rational fit carries (:mod:`fit.sampling.embedded`: nothing is built, no
-source file is read; a grey ``scale`` only), or tabulated from the material itself at load
+source file is read, the pieces are made from the record's knots and checked; a grey ``scale``
+only), or tabulated from the material itself at load
 (remembered on disk: :mod:`.table_cache`). A technique that needs verified rational inverse CDFs gets them
 from the same file or the fit's record, or fitted at load (printed: it takes seconds). A fit that failed its
 verification (``CDFFit.fallback``) switches the material to its strategy's ``fallback``
@@ -51,7 +52,7 @@ def _read_cdf(spec, scene_file, key):
     if cdf is None or not isinstance(cdf, (str, bytes, Path)):
         return cdf
     from fit.sampling.cdf_file import (
-        load as load_cdf,  # scipy: imported only when needed
+        load as load_cdf,  # the fitter's modules: imported only when needed
     )
 
     try:
@@ -72,7 +73,7 @@ def _own_sampler(spec, loaded, scene_file, key, maps: bool):
     scale = np.asarray(getattr(spec, "scale", (1.0, 1.0, 1.0)), float).ravel()
     if scale.size and not np.all(scale == scale[0]):
         return None
-    from fit.sampling.embedded import read   # scipy: imported only when needed
+    from fit.sampling.embedded import read   # no SciPy: the pieces are read from the record
 
     try:
         return read(model, getattr(spec, "file", None), maps=maps)
@@ -167,7 +168,7 @@ def pack(cdfs) -> dict:
         info[m, CDF_LAYOUT] = LAYOUT_NONE
         if cdf is table:
             continue
-        from fit.sampling.pieces import (  # scipy: only with a fit
+        from fit.sampling.pieces import (  # only with a fit
             PieceMaps,
             pieces_phi_knots,
         )
