@@ -12,6 +12,8 @@
   fall back to the packed form;
 * against the one generic function (``rational_eval``, the packed form and libm's ``atan2``) at
   the same directions, the values differ only by the angles' float32 rounding;
+* the flat record's angles (``rational_flat2d.angles_2d``: no ``atan2``) against
+  ``frame.half_diff`` and their NumPy form; which fits get a flat record, and what it holds;
 * compile once per class: another fit of the same classes reuses the compiled kernels; a fit of
   another class gets other kernels (Warp's module hash tells the classes apart).
 """
@@ -36,6 +38,7 @@ from lab import testing as T
 from warp_rbrdf import chebyshev_dense as D
 from warp_rbrdf.materials import rational
 from warp_rbrdf.materials import rational_channels as RC
+from warp_rbrdf.materials import rational_flat2d as RF
 from warp_rbrdf.materials import rational_kernel as RK
 from warp_rbrdf.materials import rational_records
 from warp_rbrdf.materials.data import Materials
@@ -138,6 +141,72 @@ def test_classes_of_fits_and_the_packed_fallback():
         f.num_exponents, f.num_coef = e, np.r_[1.0, np.full(len(e) - 1, 1e-4)]
     assert rational.packed_classes(rational.pack_model(big)[0]) == {0}        # 0: a leaf without a class
     assert D.dense_class([(e, np.ones(len(e)))] * 3, [None] * 3, 2) is None
+
+
+def test_flat_records():
+    """The shipped 2-D fits and single boxes get a flat record (after the domain record) holding
+    each piece's ints and a copy of its header; nested pieces, phi_d and pieces without a class
+    do not; the tree the flat record points to is the same fit's (the generic walk skips to it)."""
+    R = rational_records
+    satin = load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json")
+    ints, floats, _ = rational.pack_model(satin, True, 79.0)
+    assert ints[0] == rational.NODE_DOMAIN and _is_flat(ints)
+    n = int(ints[R.DOMAIN_CHILD])
+    k, fo = int(ints[n + R.FLAT_K]), int(ints[n + R.FLAT_FLOATS])
+    assert k == 2 and ints[n + R.FLAT_VAR] == R.SUPPORTED_VARIABLES["theta_d"]
+    np.testing.assert_array_equal(floats[fo:fo + R.FF_HEADS], [np.cos(np.radians(79.0)), np.radians(79.0),
+                                                               satin.edges[1], np.inf, np.inf])
+    tree = int(ints[n + R.FLAT_TREE])
+    assert ints[tree] == rational.NODE_SPLIT
+    for j in range(k):
+        leaf = int(ints[tree + R.SPLIT_CHILDREN + j])
+        got = ints[n + R.FLAT_PIECES + R.FLAT_NI * j:n + R.FLAT_PIECES + R.FLAT_NI * (j + 1)]
+        assert list(got[[0, 2, 3]]) == list(ints[leaf + np.array([R.LEAF_FLAGS, R.LEAF_CLASS, R.LEAF_DENSE])])
+        assert got[1] == 1 and list(got[4:7]) == list(ints[leaf + R.LEAF_MODES:leaf + R.LEAF_MODES + 3])
+        h = int(ints[leaf + R.LEAF_FH])
+        head = fo + R.FF_HEADS + R.N_FH * j
+        np.testing.assert_array_equal(floats[head:head + R.N_FH], floats[h:h + R.N_FH])
+    assert [m & R.CH_TABLE for m in got[4:7]] == [0, 0, R.CH_TABLE]      # the flagged blue of the band
+    plain = rational.pack_model(random_model("log", 2))[0]
+    assert plain[0] == rational_records.NODE_FLAT2D and plain[rational_records.FLAT_K] == 1
+    for model in (piecewise_model("log"), model_3d(), model_3d(phi_split=False), _packed_fallback_model()):
+        assert not _is_flat(rational.pack_model(model)[0])
+    assert _is_flat(rational.pack_model(_flat_theta_h_model())[0])
+
+
+_ANGLE_KERNEL = []
+
+
+def test_flat_angles_against_half_diff():
+    """``angles_2d`` (no atan2) against ``frame.half_diff`` (libm's atan2f) within
+    ``ANGLE_ATOL`` on the tests' pairs above the horizon (grazing and near-specular included),
+    its NumPy form within float32 rounding, and its third value cos theta_h cos theta_d."""
+    from warp_rbrdf.materials.frame import half_diff
+
+    if not _ANGLE_KERNEL:
+        @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
+        def k(wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3), a: wp.array(dtype=wp.vec3),
+              b: wp.array(dtype=wp.vec3)):
+            i = wp.tid()
+            a[i] = RF.angles_2d(wi[i], wo[i])
+            b[i] = half_diff(wi[i], wo[i])
+
+        _ANGLE_KERNEL.append(k)
+    wi, wo = _pairs(N_PAIRS, seed=12)
+    up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    wi, wo = wi[up], wo[up]
+    a, b = (wp.zeros(len(wi), dtype=wp.vec3) for _ in range(2))
+    wp.launch(_ANGLE_KERNEL[0], dim=len(wi), inputs=[wp.array(wi, dtype=wp.vec3), wp.array(wo, dtype=wp.vec3)],
+              outputs=[a, b])
+    got, ref = a.numpy().astype(float), b.numpy().astype(float)
+    err = np.abs(got[:, :2] - ref[:, :2])
+    assert err.max() <= RF.ANGLE_ATOL, err.max()
+    assert np.mean(err == 0) > 0.3
+    np.testing.assert_allclose(got, RF.angles_2d_numpy(wi, wo), rtol=1e-6, atol=3e-7)
+    np.testing.assert_allclose(got[:, 2], np.cos(ref[:, 0]) * np.cos(ref[:, 1]), rtol=1e-5, atol=1e-6)
+    # the float64 angles of the same directions (fit.formats.angles)
+    th, _, td, _ = directions_to_half_diff(wi.astype(float), wo.astype(float))
+    assert np.abs(got[:, 0] - th).max() < 2 * RF.ANGLE_ATOL and np.abs(got[:, 1] - td).max() < 2 * RF.ANGLE_ATOL
 
 
 _CHANNEL_KERNELS = {}
@@ -313,8 +382,25 @@ def _cases():
                   "nested": spec("nested", data=piecewise_model("log")),
                   "clamped_table": spec("clamped_table", data=_clamped_piecewise()),
                   "fit3d": spec("fit3d", data=model_3d()),
-                  "packed": spec("packed", data=_packed_fallback_model())})
+                  "packed": spec("packed", data=_packed_fallback_model()),
+                  "flat_h": spec("flat_h", data=_flat_theta_h_model())})
     return specs
+
+
+def _flat_theta_h_model():
+    """Three theta_h pieces (a flat record split in theta_h): log values with an active upper
+    clamp, vouched ranges in the second, a flagged piece (red and blue) read from the fallback
+    table and clamped to its measured range in the third."""
+    e = [0.0, np.radians(5.0), np.radians(30.0), np.pi / 2]
+    vouched = [{"valid": True, "vouched_range": [1.0 + c, 1.4 + c]} for c in range(3)]
+    flagged = [{"valid": False, "measured_range": [0.5, 1.2]}, {"valid": True},
+               {"valid": False, "measured_range": [2.0, 2.1]}]
+    pieces = [random_model("log", 20 + k, theta_h_range=(e[k], e[k + 1]), value_max=3.0, info=info)
+              for k, info in enumerate([None, vouched, flagged])]
+    return M.PiecewiseRationalModel(
+        name="flat_h", variables=[M.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                                  M.Variable("theta_d", "rad", "identity", (0.0, np.radians(80.0)))],
+        split_variable="theta_h", edges=e, pieces=pieces)
 
 
 @pytest.fixture(scope="module")
@@ -322,7 +408,7 @@ def scene():
     """``(renderer, specs)``: every case as a material of one scene (one sphere each)."""
     specs = _cases()
     for s in specs.values():
-        if s.data is not None and s.name == "clamped_table":
+        if s.data is not None and s.name in ("clamped_table", "flat_h"):
             # an in-memory flagged fit carries its fallback table as the fitter embeds it
             s.data.fallback = _fallback_record(s.data)
     shapes = [ShapeSpec(type="sphere", material=s.name, center=(3.0 * k, 0.0, -20.0), radius=1.0)
@@ -371,18 +457,34 @@ def _eval_kernel(classes):
 
         @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
         def k(mats: Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
-              out: wp.array(dtype=wp.vec3), ang: wp.array(dtype=wp.vec3), gen: wp.array(dtype=wp.vec3)):
+              out: wp.array(dtype=wp.vec3), ang: wp.array(dtype=wp.vec3), gen: wp.array(dtype=wp.vec3),
+              flat: int):
             i = wp.tid()
-            out[i] = fast(mats, m, wi[i], wo[i])
+            # the angles first, as the function computes them: the compiler computes each once
+            # (an FMA contracted in one copy and not in the other would differ by an ulp)
+            f = RF.angles_2d(wi[i], wo[i])
             g = RK.half_diff_frame(wi[i], wo[i])
-            ang[i] = wp.vec3(g[0], g[1], RK.phi_d_of(g))
+            out[i] = fast(mats, m, wi[i], wo[i])
+            if flat != 0:
+                ang[i] = f
+            else:
+                ang[i] = wp.vec3(g[0], g[1], RK.phi_d_of(g))
             gen[i] = rational.rational_eval(mats, m, wi[i], wo[i])
 
         _EVAL_KERNELS[classes] = k
     return _EVAL_KERNELS[classes]
 
 
+def _is_flat(ints) -> bool:
+    """Whether a packed fit has a flat record (the specialised function reads it, with the
+    angles of ``rational_flat2d.angles_2d``)."""
+    n = int(ints[rational_records.DOMAIN_CHILD]) if ints[0] == rational.NODE_DOMAIN else 0
+    return int(ints[n]) == rational_records.NODE_FLAT2D
+
+
 def _evaluate(r, name, wi, wo):
+    """(specialised value, the angles it used (theta_h, theta_d, phi_d for the walk; theta_h,
+    theta_d, cos theta_h cos theta_d for a flat record), generic value) per pair."""
     md = r.material_data
     classes = set()
     for lm in md.loaded:
@@ -391,7 +493,7 @@ def _evaluate(r, name, wi, wo):
     out, ang, gen = (wp.zeros(n, dtype=wp.vec3) for _ in range(3))
     wp.launch(_eval_kernel(tuple(sorted(classes))), dim=n,
               inputs=[r.materials, r.material_index(name), wp.array(wi, dtype=wp.vec3), wp.array(wo, dtype=wp.vec3)],
-              outputs=[out, ang, gen])
+              outputs=[out, ang, gen, int(_is_flat(md.loaded[r.material_index(name)].coefficients[0]))])
     return out.numpy().astype(float), ang.numpy().astype(float), gen.numpy().astype(float)
 
 

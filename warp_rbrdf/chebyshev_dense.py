@@ -128,11 +128,15 @@ def evaluate_dense(key: int, rows, t) -> tuple:
     return out[0], out[1]
 
 
-def dense_source(key: int, vector: bool = True) -> str:
-    """The C++ body of :func:`make_dense_pq`'s function for class ``key``: statements that read
-    ``ptr`` (the rows), ``ta``, ``tb``, ``tc`` and return ``(P_R, P_G, P_B, Q_R, Q_G, Q_B)``.
-    ``vector``: the four lanes of a row as one Clang vector (``ext_vector_type``: one load and one
-    multiply-add per slot); else one scalar sum per lane (the CUDA build)."""
+def dense_block(key: int) -> str:
+    """C++ statements of the vector form of :func:`dense_source` for class ``key`` that read
+    ``rows`` (``const rbrdf_v4du*``: the rows, 8-byte aligned), ``ta``, ``tb``, ``tc`` and add
+    the sums to the vectors ``p`` and ``q`` (``rbrdf_v4d``, declared by the caller): one class
+    of a function that holds several (:mod:`.materials.rational_flat2d`)."""
+    return "\n".join(_sum_lines(key, vector=True, declare=False))
+
+
+def _sum_lines(key: int, vector: bool, declare: bool = True) -> list:
     nv, dn, dd = class_of_key(key)
     deg = max(dn, dd)
     names = [n for n, used in (("a", nv >= 3), ("b", nv >= 2), ("c", True)) if used]
@@ -144,17 +148,13 @@ def dense_source(key: int, vector: bool = True) -> str:
             out.append(f"x{n}[1] = t{n};")
         out += [f"x{n}[{k}] = 2.0 * t{n} * x{n}[{k - 1}] - x{n}[{k - 2}];" for k in range(2, deg + 1)]
     lanes = [None] if vector else [0, 1, 2]
-    if vector:
-        out.append("typedef double rbrdf_v4d __attribute__((ext_vector_type(4), aligned(8)));")
-        out.append("const rbrdf_v4d* rows = (const rbrdf_v4d*)ptr;")
-    else:
-        out.append("const double* rows = (const double*)ptr;")
     base = 0
     for group, degree in (("p", dn), ("q", dd)):
         slots = dense_slots(nv, degree)
         for lane in lanes:
             var = group if lane is None else f"{group}{lane}"
-            out.append(f"{'rbrdf_v4d' if lane is None else 'double'} {var} = 0.0;")
+            if declare:
+                out.append(f"{'rbrdf_v4d' if lane is None else 'double'} {var} = 0.0;")
             j = 0
             while j < len(slots):
                 a, b = slots[j][:2]
@@ -166,6 +166,22 @@ def dense_source(key: int, vector: bool = True) -> str:
                 weight = " * ".join([f"xa[{a}]"] * (nv >= 3) + [f"xb[{b}]"] * (nv >= 2))
                 out.append(f"{var} += ({' + '.join(terms)})" + (f" * ({weight})" if weight else "") + ";")
         base += len(slots)
+    return out
+
+
+def dense_source(key: int, vector: bool = True) -> str:
+    """The C++ body of :func:`make_dense_pq`'s function for class ``key``: statements that read
+    ``ptr`` (the rows), ``ta``, ``tb``, ``tc`` and return ``(P_R, P_G, P_B, Q_R, Q_G, Q_B)``.
+    ``vector``: the four lanes of a row as one Clang vector (``ext_vector_type``: one load and one
+    multiply-add per slot); else one scalar sum per lane (the CUDA build)."""
+    nv = class_of_key(key)[0]
+    out = []
+    if vector:
+        out.append("typedef double rbrdf_v4d __attribute__((ext_vector_type(4), aligned(8)));")
+        out.append("const rbrdf_v4d* rows = (const rbrdf_v4d*)ptr;")
+    else:
+        out.append("const double* rows = (const double*)ptr;")
+    out += _sum_lines(key, vector)
     out.append("wp::vec_t<6, double> r;")
     for c in range(3):
         p, q = ("p." + "xyz"[c], "q." + "xyz"[c]) if vector else (f"p{c}", f"q{c}")

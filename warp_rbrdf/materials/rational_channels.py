@@ -62,12 +62,10 @@ EXP_SOURCE = f"""auto rbrdf_exp = [](rbrdf_v4d x) -> rbrdf_v4d {{
 }};
 """
 
-_VECTOR = f"""typedef double rbrdf_v4d __attribute__((ext_vector_type(4)));
-typedef long long rbrdf_v4l __attribute__((ext_vector_type(4)));
-{EXP_SOURCE}const double* hd = (const double*)head;
-rbrdf_v4d p = {{pq.c[0], pq.c[1], pq.c[2], 0.0}};
-rbrdf_v4d q = {{pq.c[3], pq.c[4], pq.c[5], 1.0}};
-rbrdf_v4d y = p / q;
+#: the vector steps on ``p``, ``q`` (``rbrdf_v4d``: P and Q of R, G, B and a fourth lane), ``hd``
+#: (the leaf header), ``flags``, ``m0``, ``m1``, ``m2`` and ``tab`` (the table's value) into
+#: ``wp::vec_t<3, float> out`` (needs the typedefs and ``rbrdf_exp`` of :data:`VECTOR_PRELUDE`)
+VECTOR_STEPS = f"""rbrdf_v4d y = p / q;
 if (flags & {LEAF_LOG}) {{
     if (flags & {LEAF_MAX}) y = __builtin_elementwise_min(y, (rbrdf_v4d)(hd[{FH_LOGMAX}]));
     y = rbrdf_exp(y) - hd[{FH_OFFSET}];
@@ -81,8 +79,17 @@ for (int c = 0; c < 3; ++c) {{
     if (modes[c] & {CH_RANGE}) v = wp::clamp(v, hd[{FH_RANGES} + 2 * c], hd[{FH_RANGES} + 2 * c + 1]);
     out.c[c] = (float)v;
 }}
-return out;
 """
+
+#: the vector types and the inline ``exp`` the steps use
+VECTOR_PRELUDE = f"""typedef double rbrdf_v4d __attribute__((ext_vector_type(4)));
+typedef long long rbrdf_v4l __attribute__((ext_vector_type(4)));
+{EXP_SOURCE}"""
+
+_VECTOR = (VECTOR_PRELUDE + """const double* hd = (const double*)head;
+rbrdf_v4d p = {pq.c[0], pq.c[1], pq.c[2], 0.0};
+rbrdf_v4d q = {pq.c[3], pq.c[4], pq.c[5], 1.0};
+""" + VECTOR_STEPS + "return out;\n")
 
 _SCALAR = f"""const double* hd = (const double*)head;
 const int modes[3] = {{m0, m1, m2}};

@@ -34,10 +34,11 @@ from fit.formats.grid import N_THETA_D
 
 from .. import fastmath as fmath
 from ..chebyshev import cheb_sum6, vec6d
-from ..chebyshev_dense import make_dense_pq
+from ..chebyshev_dense import class_of_key, make_dense_pq
 from . import frame as F
 from .data import Materials
 from .rational_channels import channels
+from .rational_flat2d import angles_2d, make_flat2d
 from .rational_records import (
     CH_RANGE,
     CH_TABLE,
@@ -63,7 +64,12 @@ from .rational_records import (
     LEAF_POLY,
     LEAF_TABLE,
     LEAF_VARS,
+    FLAT_FLOATS,
+    FLAT_PIECES,
+    FLAT_TREE,
+    FLAT_VAR,
     NODE_DOMAIN,
+    NODE_FLAT2D,
     NODE_SPLIT,
     SPLIT_CHILDREN,
     SPLIT_EDGES,
@@ -155,6 +161,8 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
         d = fb + ci[n + DOMAIN_FLOATS]
         a = _onto_domain(a, cf[d], cf[d + 1])
         n = ib + ci[n + DOMAIN_CHILD]
+    if ci[n] == NODE_FLAT2D:       # the same fit's tree follows
+        n = ib + ci[n + FLAT_TREE]
     while ci[n] == NODE_SPLIT:     # piece k: the first with x <= edge k + 1
         x = wp.float64(a[ci[n + SPLIT_VAR]])
         if ci[n + SPLIT_VAR] == 2:
@@ -287,6 +295,8 @@ def make_rational_eval(classes: tuple):
     (:func:`.rational_records.packed_classes`; only then is the packed groups' code compiled
     in). Cached: one function per tuple."""
     leaf_pq = make_leaf_pq(tuple(k for k in classes if k), 0 in classes or not classes)
+    keys2d = tuple(k for k in classes if k and class_of_key(k)[0] == 2)
+    flat2d = make_flat2d(keys2d, DOMAIN_MARGIN)
 
     @functools.partial(wp.func, inline=True)
     def rational_eval_classes(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
@@ -298,6 +308,17 @@ def make_rational_eval(classes: tuple):
         cf = wp.array(ptr=wp.address_of(mats.coef_f[0]), shape=(mats.coef_f.shape[0],), dtype=wp.float64)
         ib = ci[3 * m]
         fb = ci[3 * m + 1]
+        if wp.static(len(keys2d) > 0):       # a flat record: no walk (.rational_flat2d)
+            nf = ib
+            if ci[nf] == NODE_DOMAIN:
+                nf = ib + ci[nf + DOMAIN_CHILD]
+            if ci[nf] == NODE_FLAT2D:
+                v = wp.static(flat2d)(wp.address_of(cf[fb + ci[nf + FLAT_FLOATS]]),
+                                      wp.address_of(ci[nf + FLAT_PIECES]), wp.address_of(cf[fb]),
+                                      wp.address_of(mats.tables[mats.param[m]]), ci[nf + FLAT_VAR],
+                                      angles_2d(wi, wo))
+                if v[3] != 0.0:
+                    return wp.cw_mul(wp.vec3(v[0], v[1], v[2]), mats.scale[m])
         g = half_diff_frame(wi, wo)
         a = wp.vec3(g[0], g[1], 0.0)
         have_phi = int(0)  # noqa: UP018, RUF046 - Warp: a dynamic int
@@ -307,6 +328,8 @@ def make_rational_eval(classes: tuple):
             if wp.float64(g[4]) * wp.float64(g[5]) < cf[d] + wp.float64(DOMAIN_MARGIN):
                 a = _onto_domain(a, cf[d], cf[d + 1])
             n = ib + ci[n + DOMAIN_CHILD]
+        if ci[n] == NODE_FLAT2D:
+            n = ib + ci[n + FLAT_TREE]
         while ci[n] == NODE_SPLIT:
             var = ci[n + SPLIT_VAR]
             if var == 2 and have_phi == 0:

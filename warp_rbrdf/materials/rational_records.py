@@ -9,6 +9,15 @@ Records, offsets relative to the material's own starts, the root at int 0:
 * a **split record** per piecewise level: kind, the split variable
   (:data:`SUPPORTED_VARIABLES`), the number of pieces K, the float offset of its K - 1 inner
   edges, the K children's int offsets;
+* a **flat record** (after the domain record, or at the root without one) of a fit whose pieces
+  are at most :data:`FLAT_MAX_PIECES` boxes of (theta_h, theta_d) in one split (or one box),
+  each of a degree class: kind, the int offset of the fit's tree (the records below, which the
+  flat record repeats), the float offset of its floats, the number of pieces K, the split
+  variable, then per piece :data:`FLAT_NI` ints (flags, the two inputs' sqrt bits, class, the
+  float offset of its dense rows, the three channel modes); its floats: ``(cos c, c)`` of the
+  domain record (``(-2, 0)`` without one), the K - 1 inner edges padded with +inf to
+  ``FLAT_MAX_PIECES - 1``, then per piece a copy of its leaf header (:data:`N_FH` floats): one
+  contiguous run per fit that :mod:`.rational_flat2d` reads without a walk;
 * a **leaf record** per single-box piece: kind, variables, flags, the float offset of its
   header, three variable codes (source angle | transform << 2), the int and row offsets of its
   numerators and denominators packed as one group of six Chebyshev polynomials
@@ -31,7 +40,11 @@ from ..chebyshev import FlatData
 from ..chebyshev_dense import dense_class, pack_dense
 
 SUPPORTED_VARIABLES = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
-NODE_LEAF, NODE_SPLIT, NODE_DOMAIN = 0, 1, 2
+NODE_LEAF, NODE_SPLIT, NODE_DOMAIN, NODE_FLAT2D = 0, 1, 2, 3
+FLAT_TREE, FLAT_FLOATS, FLAT_K, FLAT_VAR, FLAT_PIECES = 1, 2, 3, 4, 8    # flat record (ints)
+FLAT_NI = 8                   # ints per piece: flags, sqrt bits, class, dense offset, modes (3)
+FLAT_MAX_PIECES = 4
+FF_COS_CUT, FF_CUT, FF_EDGES, FF_HEADS = 0, 1, 2, 2 + FLAT_MAX_PIECES - 1   # flat record (floats)
 DOMAIN_FLOATS, DOMAIN_CHILD = 1, 2                       # domain record (ints)
 SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4   # split record (ints)
 # leaf record (ints)
@@ -62,13 +75,63 @@ def pack_model(model, table: bool = False, cutoff_deg: float | None = None) -> t
     the root); None (default): the file's recipe alone."""
     fd = FlatData(6)
     if cutoff_deg is None:
-        _pack_node(fd, model, table)
+        _pack_flat(fd, model, table, (-2.0, 0.0))
     else:
         cut = np.radians(float(cutoff_deg))
         n = fd.add_ints([NODE_DOMAIN, 0, 0])
         fd.ints[n + DOMAIN_FLOATS] = fd.add_floats([np.cos(cut), cut])
-        fd.ints[n + DOMAIN_CHILD] = _pack_node(fd, model, table)
+        fd.ints[n + DOMAIN_CHILD] = _pack_flat(fd, model, table, (np.cos(cut), cut))
     return fd.arrays()
+
+
+def _flat_layout(model, table):
+    """``(split variable, inner edges, leaves)`` of a fit the flat record can hold (module
+    docstring), else None."""
+    pieces = getattr(model, "pieces", None)
+    leaves = [model] if pieces is None else list(pieces)
+    if (pieces is not None and model.split_variable not in ("theta_h", "theta_d")) or len(leaves) > FLAT_MAX_PIECES:
+        return None
+    for leaf in leaves:
+        if getattr(leaf, "pieces", None) is not None or [v.name for v in leaf.variables] != ["theta_h", "theta_d"]:
+            return None
+        if _leaf_class(leaf, table) is None:
+            return None
+    var = 0 if pieces is None else SUPPORTED_VARIABLES[model.split_variable]
+    return var, ([] if pieces is None else list(model.edges[1:-1])), leaves
+
+
+def _pack_flat(fd, model, table, domain) -> int:
+    """The flat record of ``model`` followed by its tree, or the tree alone (a fit the flat
+    record cannot hold); the int offset of the first."""
+    layout = _flat_layout(model, table)
+    if layout is None:
+        return _pack_node(fd, model, table)
+    var, edges, leaves = layout
+    k = len(leaves)
+    n = fd.add_ints([NODE_FLAT2D, 0, 0, k, var, 0, 0, 0] + [0] * (FLAT_NI * k))
+    tree = _pack_node(fd, model, table)
+    fd.ints[n + FLAT_TREE] = tree
+    nodes = [tree] if k == 1 else [fd.ints[tree + SPLIT_CHILDREN + j] for j in range(k)]
+    floats = [*domain, *edges, *[np.inf] * (FLAT_MAX_PIECES - 1 - len(edges))]
+    for j, leaf in enumerate(nodes):
+        li = fd.ints
+        codes = li[leaf + LEAF_VARS:leaf + LEAF_VARS + 2]
+        fd.ints[n + FLAT_PIECES + FLAT_NI * j:n + FLAT_PIECES + FLAT_NI * (j + 1)] = [
+            li[leaf + LEAF_FLAGS], (codes[0] >> 2) | (codes[1] >> 2) << 1, li[leaf + LEAF_CLASS],
+            li[leaf + LEAF_DENSE], *li[leaf + LEAF_MODES:leaf + LEAF_MODES + 3], 0]
+        h = li[leaf + LEAF_FH]
+        floats += fd.floats[h:h + N_FH]
+    fd.ints[n + FLAT_FLOATS] = fd.add_floats(floats)
+    return n
+
+
+def _leaf_class(model, table):
+    """The degree class of a single-box piece's dense form (:func:`warp_rbrdf.chebyshev_dense.dense_class`)
+    or None."""
+    modes = channel_modes(model, table)
+    nums = [None if t else (f.num_exponents, f.num_coef) for f, (t, _) in zip(model.functions, modes)]
+    dens = [None if t else (f.den_exponents, f.den_coef) for f, (t, _) in zip(model.functions, modes)]
+    return dense_class(nums, dens, len(model.variables))
 
 
 def _pack_node(fd, model, table) -> int:
@@ -130,6 +193,8 @@ def packed_classes(ints) -> set:
         kind = int(ints[n])
         if kind == NODE_DOMAIN:
             todo.append(int(ints[n + DOMAIN_CHILD]))
+        elif kind == NODE_FLAT2D:
+            todo.append(int(ints[n + FLAT_TREE]))
         elif kind == NODE_SPLIT:
             todo += [int(c) for c in ints[n + SPLIT_CHILDREN:n + SPLIT_CHILDREN + int(ints[n + SPLIT_N])]]
         else:

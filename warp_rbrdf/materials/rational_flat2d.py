@@ -1,0 +1,169 @@
+"""The evaluation of a 2-D rational fit held by a flat record (:mod:`.rational_records`: at most
+:data:`~.rational_records.FLAT_MAX_PIECES` boxes of (theta_h, theta_d), each of a degree class)
+as one native function per set of classes (:func:`make_flat2d`): the recipe of
+:mod:`.rational_kernel` without a walk, without ``atan2`` and without ``phi_d``.
+
+* **Angles** (:func:`angles_2d`, :data:`ANGLES_SOURCE`): with ``s = wi + wo``, ``tan(theta_h / 2)
+  = |s_xy| / (|s| + s_z)`` and ``tan(theta_d / 2) = |s x wi| / (|s| |wi| + s . wi)`` (theta_d:
+  the angle between ``wi`` and the half vector, as :func:`.frame.half_diff` defines it for
+  directions of any length; ``s x wi`` has no cancellation where ``wo`` is near ``-wi``), both in
+  [0, 1] above the horizon, so each angle is ``2 atan(a)`` of :func:`warp_rbrdf.fastmath.atan2`'s
+  polynomial on [0, 1], without its octant steps, a normalized half vector, a rotation into its
+  frame or a branch; float32, within :data:`ANGLE_ATOL` of :func:`.frame.half_diff`'s values
+  (``tests/test_rational_classes.py``). The measured-domain test's product ``cos theta_h cos
+  theta_d`` is ``s_z (s . wi) / (|s|^2 |wi|)``.
+* **The piece**: ``k = #{inner edges < x}`` by compare-and-add over the padded edges, no branch;
+  the piece's header, ints and dense rows are read from the flat record's one run.
+* **Steps 1-7** as :mod:`.rational_kernel` (clamp, sqrt, map, the class's sums of
+  :func:`warp_rbrdf.chebyshev_dense.dense_block`, the vector steps of
+  :data:`.rational_channels.VECTOR_STEPS`), the measured-domain move only near its edge
+  (:data:`.rational_kernel.DOMAIN_MARGIN`), the fallback table's cluster only in a leaf that
+  reads it.
+
+Its values are the NumPy reference's (``fit.rational.vouched``) at the angles of
+:func:`angles_2d` within float32 rounding. The function returns ``(R, G, B, 1)``; a CUDA build
+returns ``(0, 0, 0, 0)`` (the vector types are Clang's) and the caller walks the records.
+"""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import warp as wp
+
+from .. import fastmath
+from ..chebyshev_dense import Native, class_of_key, dense_block
+from .rational_channels import VECTOR_PRELUDE, VECTOR_STEPS
+from .rational_records import (
+    FF_COS_CUT,
+    FF_CUT,
+    FF_EDGES,
+    FF_HEADS,
+    FH_BOX,
+    FH_VARS,
+    FLAT_NI,
+    LEAF_CLAMP,
+    LEAF_TABLE,
+    N_FH,
+)
+
+#: |angles_2d - frame.half_diff| on the tests' pairs is within this (radians)
+ANGLE_ATOL = 6e-7
+
+_P = [repr(float(np.float32(c))) + "f" for c in fastmath.ATAN_COEFFS]
+
+#: C++ statements: ``ang`` (``wp::vec3``: theta_h, theta_d, cos theta_h cos theta_d) of ``wi``, ``wo``
+ANGLES_SOURCE = f"""const float sx = wi.c[0] + wo.c[0], sy = wi.c[1] + wo.c[1], sz = wi.c[2] + wo.c[2];
+const float rs2 = sx * sx + sy * sy;
+const float ls2 = rs2 + sz * sz;
+const float ls = sqrtf(ls2);
+const float li = sqrtf(wi.c[0] * wi.c[0] + wi.c[1] * wi.c[1] + wi.c[2] * wi.c[2]);
+const float cx = sy * wi.c[2] - sz * wi.c[1];
+const float cy = sz * wi.c[0] - sx * wi.c[2];
+const float cz = sx * wi.c[1] - sy * wi.c[0];
+const float sw = sx * wi.c[0] + sy * wi.c[1] + sz * wi.c[2];
+const float a0 = sqrtf(rs2) / (ls + sz);
+const float a1 = sqrtf(cx * cx + cy * cy + cz * cz) / (ls * li + sw);
+const float s0 = a0 * a0, s1 = a1 * a1;
+float p0 = {_P[8]}, p1 = {_P[8]};
+""" + "".join(f"p0 = p0 * s0 + {c}; p1 = p1 * s1 + {c};\n" for c in _P[7::-1]) + """wp::vec3 ang;
+ang.c[0] = 2.0f * (a0 * p0);
+ang.c[1] = 2.0f * (a1 * p1);
+ang.c[2] = sz * sw / (ls2 * li);
+"""
+
+
+@Native.func_native(ANGLES_SOURCE + "return ang;\n", "rational_angles_2d")
+def angles_2d(wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
+    """``(theta_h, theta_d, cos theta_h cos theta_d)`` of a local direction pair above the
+    horizon (module docstring; radians)."""
+    ...
+
+
+def angles_2d_numpy(wi, wo) -> np.ndarray:
+    """:func:`angles_2d` in NumPy float32 (the same operations up to fused multiply-adds)."""
+    f = np.float32
+    wi, wo = np.asarray(wi, f), np.asarray(wo, f)
+    s = wi + wo
+    rs2 = s[:, 0] * s[:, 0] + s[:, 1] * s[:, 1]
+    ls2 = rs2 + s[:, 2] * s[:, 2]
+    ls = np.sqrt(ls2)
+    li = np.sqrt((wi * wi).sum(-1, dtype=f))
+    c = np.cross(s, wi)
+    sw = (s * wi).sum(-1, dtype=f)
+    out = []
+    for a in (np.sqrt(rs2) / (ls + s[:, 2]), np.sqrt((c * c).sum(-1, dtype=f)) / (ls * li + sw)):
+        z = a * a
+        p = f(_P[8][:-1])
+        for k in _P[7::-1]:
+            p = p * z + f(k[:-1])
+        out.append(f(2) * (a * p))
+    return np.stack(out + [s[:, 2] * sw / (ls2 * li)], -1).astype(f)
+
+
+def flat_source(keys: tuple, margin: float) -> str:
+    """The C++ body of :func:`make_flat2d`'s function for the 2-variable classes ``keys``."""
+    cases = []
+    for key in keys:
+        cases.append(f"case {key}: {{\n{dense_block(key)}\nbreak;\n}}")
+    switch = "switch (P[2]) {\n" + "\n".join(cases) + "\ndefault: break;\n}\n"
+    return ("#if defined(__CUDA_ARCH__)\nreturn wp::vec4(0.0f);\n#else\n" + VECTOR_PRELUDE
+            + "typedef double rbrdf_v4du __attribute__((ext_vector_type(4), aligned(8)));\n" + f"""
+const double* F = (const double*)fptr;
+const int* I = (const int*)iptr;
+double th = (double)ang.c[0], td = (double)ang.c[1];
+if ((double)ang.c[2] < F[{FF_COS_CUT}] + {margin!r}) {{
+    const double t = wp::min(th, F[{FF_CUT}]);
+    const double lim = wp::acos(wp::min(F[{FF_COS_CUT}] / wp::cos(t), 1.0));
+    th = (double)(float)t;
+    td = (double)(float)wp::min(td, lim);
+}}
+const double x = var ? td : th;
+const int k = (x > F[{FF_EDGES}]) + (x > F[{FF_EDGES + 1}]) + (x > F[{FF_EDGES + 2}]);
+const double* hd = F + {FF_HEADS} + {N_FH} * k;
+const int* P = I + {FLAT_NI} * k;
+const int flags = P[0];
+double xh = th, xd = td;
+if (flags & {LEAF_CLAMP}) {{
+    xh = wp::clamp(xh, hd[{FH_VARS}], hd[{FH_VARS + 1}]);
+    xd = wp::clamp(xd, hd[{FH_VARS + 4}], hd[{FH_VARS + 5}]);
+}}
+if (P[1] & 1) xh = wp::sqrt(wp::max(xh, 0.0));
+if (P[1] & 2) xd = wp::sqrt(wp::max(xd, 0.0));
+const double tb = (2.0 * xh - hd[{FH_VARS + 2}]) * hd[{FH_VARS + 3}];
+const double tc = (2.0 * xd - hd[{FH_VARS + 6}]) * hd[{FH_VARS + 7}];
+const rbrdf_v4du* rows = (const rbrdf_v4du*)((const double*)dptr + P[3]);
+rbrdf_v4d p = {{0.0, 0.0, 0.0, 0.0}};
+rbrdf_v4d q = {{0.0, 0.0, 0.0, 1.0}};
+{switch}wp::vec3 tab(0.0f);
+if (flags & {LEAF_TABLE}) {{
+    const float bh = (float)wp::clamp(th, hd[{FH_BOX}], hd[{FH_BOX + 1}]);
+    const float bd = (float)wp::clamp(td, hd[{FH_BOX + 2}], hd[{FH_BOX + 3}]);
+    const int ih = wp::clamp((int)wp::floor(wp::sqrt(wp::max(bh, 0.0f) / 1.5707963267948966f) * 90.0f), 0, 89);
+    const int jd = wp::clamp((int)wp::floor(bd / 1.5707963267948966f * 90.0f), 0, 89);
+    const float* T = (const float*)tptr + 3 * (ih * 90 + jd);
+    tab = wp::vec3(T[0], T[1], T[2]);
+}}
+const int m0 = P[4], m1 = P[5], m2 = P[6];
+{VECTOR_STEPS}return wp::vec4(out.c[0], out.c[1], out.c[2], 1.0f);
+#endif
+""")
+
+
+@functools.lru_cache(maxsize=None)
+def make_flat2d(keys: tuple, margin: float):
+    """``flat2d(fptr, iptr, dptr, tptr, var, ang) -> vec4``: rho (before ``Materials.scale``) and 1
+    of the flat record whose floats start at ``fptr`` and whose pieces' ints start at ``iptr``
+    (``dptr``: the material's first float, where the dense rows' offsets start; ``tptr``: its
+    fallback table; ``var``: the split variable) at the angles ``ang`` of :func:`angles_2d`;
+    ``keys``: the scene's 2-variable classes (a leaf of another class gives P = 0, Q = 1, never
+    packed as such). Cached: one function per tuple."""
+    keys = tuple(k for k in keys if class_of_key(k)[0] == 2)
+    name = "rational_flat2d_" + "_".join(f"{k:06x}" for k in keys)
+
+    @Native.func_native(flat_source(keys, margin), name)
+    def flat2d(fptr: wp.uint64, iptr: wp.uint64, dptr: wp.uint64, tptr: wp.uint64, var: int,
+               ang: wp.vec3) -> wp.vec4:
+        ...
+
+    return flat2d
