@@ -165,6 +165,25 @@ def test_2d_fit_sampler_made_from_the_fit(tmp_path):
     assert embedded.read(load(tmp_path / "p.json"), maps=False).n_v == 32
 
 
+def test_plot_cdf_of_a_fit_carrying_its_sampler(fit3d, tmp_path, capsys):
+    """rbrdf-fit plot-cdf FIT.json plots the CDFs the fit carries (two PNGs); a fit without a
+    sampler is one line naming the file, exit status 2, nothing written."""
+    from fit.cli import main
+    from warp_rbrdf.paths import PACKAGE_DATA
+
+    path = fit3d[0]
+    assert main(["plot-cdf", str(path), "--out", str(tmp_path / "plots"), "--prefix", "own"]) == 0
+    assert sorted(p.name for p in (tmp_path / "plots").iterdir()) == ["own_phi.png", "own_theta.png"]
+    assert all(p.stat().st_size > 10_000 for p in (tmp_path / "plots").iterdir())
+    capsys.readouterr()
+    bare = PACKAGE_DATA / "paper_white_rgb.json"
+    assert load(bare).sampler is None
+    assert main(["plot-cdf", str(bare), "--out", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "paper_white_rgb.json" in err and "no sampler record" in err, err
+    assert not (tmp_path / "none").exists() or not any((tmp_path / "none").iterdir())
+
+
 # --------------------------------------------------------------------------------------------
 # Hostile records: one line naming the file and the key, exit status 2
 # --------------------------------------------------------------------------------------------

@@ -198,7 +198,12 @@ def _cmd_plot(args) -> int:
     out = check_output_dir(args.out, "--out")
     args.table_only = args.table_only or Path(args.file).suffix.lower() != ".json"
     _check_sizes(args)
-    fit = _load_or_fit(args)
+    if Path(args.file).suffix.lower() == ".json" and _is_fit_file(Path(args.file)):
+        from ..sampling.embedded import load_file   # the sampler the fit carries
+
+        fit = load_file(args.file)
+    else:
+        fit = _load_or_fit(args)
     with OutputSet() as outputs:
         plot_cdf(fit, out, prefix=args.prefix, outputs=outputs)
         files = outputs.commit()
@@ -227,7 +232,9 @@ def register(sub) -> None:
     p = sub.add_parser("plot-cdf", help="plot PDF_v / CDF^-1_v (tabulated, and rational if verified)",
                        description="PNG plots of PDF_v(theta_l), CDF^-1_v(mu) at theta_v = 0/45/85 deg "
                                    "and slices of PDF_v(phi_l | theta_l), CDF^-1_v(tau | theta_l). FILE "
-                                   "is a BRDF file (table only) or an rbrdf-cdf .json (with the fit).")
+                                   "is a BRDF file (table only), an rbrdf-cdf .json (with the fit) or a "
+                                   "rational fit .json carrying its own sampler (rbrdf-fit brdf, rbrdf-fit "
+                                   "cdf FIT.json).")
     p.add_argument("file")
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--prefix", default="cdf", type=file_prefix,

@@ -122,3 +122,16 @@ def read(model, path=None, maps: bool = True) -> CDFFit | CDFTable | None:
         return table_from_dict(F.get(rec, "table_data", KEY), f"{KEY}.table_data")
     except F.Invalid as e:
         raise BRDFFileError(path, f"invalid {WHAT}: {e}") from None
+
+
+def load_file(path, maps: bool = True) -> CDFFit | CDFTable:
+    """The sampler the coefficient file ``path`` carries, read as :func:`read` reads it (the
+    file loaded with :func:`fit.rational.coefficient_file.load`); one
+    :class:`fit.errors.BRDFFileError` line when the fit carries none."""
+    from ..rational.coefficient_file import load
+
+    cdf = read(load(path), path, maps=maps)
+    if cdf is None:
+        raise BRDFFileError(path, f"the fit carries no {WHAT} (key {KEY}); store one with "
+                                  f"`rbrdf-fit cdf FIT.json --out FIT.json`")
+    return cdf
