@@ -11,8 +11,18 @@
   every (incidence, channel) still outside; ``albedo=False`` leaves the fit as it is;
 * a correction over the RMSE allowance is put back (the fit stays the pre-policy one, function
   for function) and the miss is recorded.
+
+The default run gives the policy smaller sizes than its defaults (:data:`POLICY_SIZES`: points
+per angle of its quadrature, RMSE check pairs, spike-check points; through ``fit_rgl`` too, by
+:func:`small_policy`) and shares one fit without the policy between the tests that correct one;
+the policy at its default sizes runs in tests/test_fit3d_budget.py, and the tests marked
+``extended`` here repeat these checks at the default sizes.
 """
 from __future__ import annotations
+
+import contextlib
+import copy
+import functools
 
 import numpy as np
 import pytest
@@ -24,6 +34,8 @@ from fit.rational.albedo3d import (
     albedo_quadrature,
     cosine_views,
 )
+from fit.rational import rgl3d
+from fit.rational.albedo3d import albedo_policy as _albedo_policy
 from fit.rational.fit3d import fit_rgl
 from fit.rational.variables3d import evaluate_directions, half_diff_3d
 
@@ -104,11 +116,46 @@ class Synthetic:
 FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "verify": 0, "degrees": (4, 2),
        "theta_h_edges": [0.15], "tol": 0.01, "time_limit": 600.0}
 TOL = 0.01
+#: the policy's sizes in the default run (its defaults: 9216 points per angle, 100,000 check
+#: pairs, 200,000 spike-check points); ``"default"``: the policy's own (the ``extended`` tests)
+POLICY_SIZES = {"n_views": 48 ** 2, "n_check": 20_000, "n_spike": 40_000}
+SIZES = ["small", pytest.param("default", marks=pytest.mark.extended)]
+
+
+def sizes(which: str) -> dict:
+    """The keyword arguments of :func:`fit.rational.albedo3d.albedo_policy` for ``which``."""
+    return dict(POLICY_SIZES) if which == "small" else {}
+
+
+def albedo_policy(*args, which: str = "small", **kw):
+    """:func:`fit.rational.albedo3d.albedo_policy` at the sizes ``which`` (:func:`sizes`)."""
+    return _albedo_policy(*args, **sizes(which), **kw)
+
+
+@contextlib.contextmanager
+def small_policy(which: str = "small"):
+    """``fit_rgl``'s albedo step calls the policy at the sizes ``which`` within the block."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(rgl3d, "albedo_policy", functools.partial(_albedo_policy, **sizes(which)))
+        yield
 
 
 @pytest.fixture(scope="module")
-def corrected():
-    return fit_rgl(Synthetic(), albedo=True, albedo_tol=TOL, **FIT)
+def plain_fit():
+    """The fit without the policy, made once: tests take a copy (:func:`plain`)."""
+    return fit_rgl(Synthetic(), albedo=False, **FIT)
+
+
+@pytest.fixture
+def plain(plain_fit):
+    """A fresh copy of the module's fit without the policy (the policy changes a fit in place)."""
+    return copy.deepcopy(plain_fit)
+
+
+@pytest.fixture(scope="module", params=SIZES)
+def corrected(request):
+    with small_policy(request.param):
+        return fit_rgl(Synthetic(), albedo=True, albedo_tol=TOL, **FIT)
 
 
 def test_policy_lowers_the_albedo_error_and_keeps_the_bound(corrected):
@@ -167,20 +214,19 @@ def test_policy_records_what_stays_outside(corrected):
     json.dumps(rec)          # recorded in the coefficient file's fit_info
 
 
-def test_policy_off_leaves_the_fit():
-    res = fit_rgl(Synthetic(), albedo=False, **FIT)
+def test_policy_off_leaves_the_fit(plain_fit):
+    res = plain_fit
     assert "albedo" not in res.model.fit_info and "albedo" not in res.info
 
 
-def test_a_correction_that_costs_too_much_is_put_back_and_the_miss_recorded():
+@pytest.mark.parametrize("which", SIZES)
+def test_a_correction_that_costs_too_much_is_put_back_and_the_miss_recorded(plain, which):
     """With no RMSE allowance at all (``rmse_growth`` < 0) every round is put back: the fit is
     the one before the policy, function for function, and every (incidence, channel) outside the
     tolerance is listed with its error."""
-    from fit.rational.albedo3d import albedo_policy
-
-    res = fit_rgl(Synthetic(), albedo=False, **FIT)
+    res = plain
     before = [[f.num_coef.copy() for f in p.functions] for p in res.model.pieces]
-    rec = albedo_policy(Synthetic(), res, tol=TOL, rmse_growth=-1.0)
+    rec = albedo_policy(Synthetic(), res, tol=TOL, rmse_growth=-1.0, which=which)
     assert rec["refitted"] == [] and rec["rejected"], rec["rejected"]
     for p, coefs in zip(res.model.pieces, before):
         for f, c in zip(p.functions, coefs):
@@ -192,10 +238,12 @@ def test_a_correction_that_costs_too_much_is_put_back_and_the_miss_recorded():
     assert res.model.fit_info["albedo"] is rec
 
 
-def test_policy_on_a_one_piece_fit():
+@pytest.mark.parametrize("which", SIZES)
+def test_policy_on_a_one_piece_fit(which):
     """The one-piece layout (a plain RationalModel, fit_rgl_select's (7, 3) variant) is corrected
     the same way."""
-    res = fit_rgl(Synthetic(), albedo=True, albedo_tol=TOL, **dict(FIT, theta_h_edges=[], degrees=(5, 2)))
+    with small_policy(which):
+        res = fit_rgl(Synthetic(), albedo=True, albedo_tol=TOL, **dict(FIT, theta_h_edges=[], degrees=(5, 2)))
     rec = res.model.fit_info["albedo"]
     assert not hasattr(res.model, "pieces")
     assert rec["max_error_before"] > TOL and rec["refitted"]
@@ -203,21 +251,20 @@ def test_policy_on_a_one_piece_fit():
     assert res.valid and all(r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9) for r in res.records)
 
 
-def test_the_fit_wide_cost_limit_binds_where_the_channel_limit_would_not():
+@pytest.mark.parametrize("which", SIZES)
+def test_the_fit_wide_cost_limit_binds_where_the_channel_limit_would_not(plain_fit, which):
     """``total_growth`` bounds the fit's relative RMSE (the mean over R, G, B on the check pairs):
     with the per-channel allowance wide open and no fit-wide allowance, nothing that raises the
     fit's RMSE is kept, and each refused round records the fit's RMSE it would have had; with both
     open (the test above), the same lobe is corrected."""
-    from fit.rational.albedo3d import albedo_policy
-
-    res = fit_rgl(Synthetic(), albedo=False, **FIT)
-    rec = albedo_policy(Synthetic(), res, tol=TOL, rmse_growth=10.0, total_growth=0.0)
+    res = copy.deepcopy(plain_fit)
+    rec = albedo_policy(Synthetic(), res, tol=TOL, rmse_growth=10.0, total_growth=0.0, which=which)
     r0, r1 = np.array(rec["channel_rmse_before"]), np.array(rec["channel_rmse"])
     assert r1.mean() <= r0.mean() * (1 + 1e-12)
     assert rec["rejected"] and all(r["fit_rmse"] > r0.mean() for r in rec["rejected"])
     assert rec["total_growth"] == 0.0 and rec["rmse_growth"] == 10.0
-    wide = albedo_policy(Synthetic(), fit_rgl(Synthetic(), albedo=False, **FIT), tol=TOL, rmse_growth=10.0,
-                         total_growth=10.0)
+    wide = albedo_policy(Synthetic(), copy.deepcopy(plain_fit), tol=TOL, rmse_growth=10.0, total_growth=10.0,
+                         which=which)
     assert wide["refitted"] and wide["max_error"] < rec["max_error"]
 
 
@@ -240,19 +287,16 @@ class NonReciprocal(Synthetic):
         return np.where(above[..., None], evaluate_directions(self.model, wi, wo) + extra, 0.0)
 
 
-def test_a_view_fixed_miss_is_detected_and_corrected():
+@pytest.mark.parametrize("which", SIZES)
+def test_a_view_fixed_miss_is_detected_and_corrected(plain, which):
     """The fit's light-fixed albedo is right (0 error up to the quadrature's) and its view-fixed
     one 5 % off at 80 deg: a light-fixed check alone sees nothing; the policy, checking both,
     detects the miss and brings both within the tolerance, within the data bound."""
-    import copy
-
-    from fit.rational.albedo3d import albedo_policy
-
-    res = fit_rgl(Synthetic(), albedo=False, **FIT)
+    res = plain
     truth = NonReciprocal(copy.deepcopy(res.model))
-    light_only = albedo_policy(truth, copy.deepcopy(res), tol=TOL, fixed=("light",))
+    light_only = albedo_policy(truth, copy.deepcopy(res), tol=TOL, fixed=("light",), which=which)
     assert light_only["within"] and not light_only["refitted"] and light_only["max_error"] < 1e-3
-    rec = albedo_policy(truth, res, tol=TOL)
+    rec = albedo_policy(truth, res, tol=TOL, which=which)
     before = {k: np.array(rec[k]["error_before"]) for k in ("light", "view")}
     assert before["light"].max() < 1e-3 and before["view"].max() > 3 * TOL, (before["light"].max(),
                                                                              before["view"].max())

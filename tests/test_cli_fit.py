@@ -118,14 +118,16 @@ def test_cdf_of_an_rgl_file_records_its_roles_and_a_scene_checks_them(tmp_path, 
 
 # --- rbrdf-fit brdf --model: the 3-D fit as a command, and fits that render from the file alone ---
 SMALL_3D = ["--layout", "single", "--degrees", "3,1", "--grid", "8,6,5", "--random", "200", "--verify", "1000",
-            "--no-albedo"]
+            "--no-albedo", "--sampler-time-limit", "1"]
 
 
 @pytest.fixture(scope="module")
 def fit3d_file(tmp_path_factory):
     """``rbrdf-fit brdf paper_white_rgb.bsdf`` (``--model auto``: 3-D for an RGL file) on a small
     budget (one piece of degrees (3, 1), about 500 data points, 1000 fresh points, no albedo
-    policy; a few seconds), with every stage's progress line: ``(path, rc, stdout, stderr)``."""
+    policy, the fit's own sampler bounded to 1 s: its table complete, the rows not verified by
+    then sampled with it; a few seconds), with every stage's progress line:
+    ``(path, rc, stdout, stderr)``."""
     import io
     from contextlib import redirect_stderr, redirect_stdout
 
@@ -207,7 +209,8 @@ def test_brdf_3d_fit_renders_without_its_source(fit3d_file, tmp_path, monkeypatc
 def test_brdf_2d_flagged_fit_carries_what_the_renderer_shows(tmp_path, monkeypatch, capsys):
     """``rbrdf-fit brdf --allow-infeasible`` writes a flagged 2-D fit with its fallback table
     (fit.rational.fallback) covering every flagged piece: it renders with its source measurement
-    absent, from the embedded table."""
+    absent, from the embedded table. (The fit's own sampler, not what is checked here, is bounded
+    to 1 s; its rows verified without a limit: tests/test_fit_sampler.py.)"""
     import json
     import shutil
 
@@ -222,7 +225,8 @@ def test_brdf_2d_flagged_fit_carries_what_the_renderer_shows(tmp_path, monkeypat
     src = glossy_merl(tmp_path / "glossy.binary")
     out = tmp_path / "fits" / "glossy.json"
     assert main(["brdf", str(src), "--out", str(out), "--tol", "0.01", "--max-degree", "2", "--max-den-degree", "1",
-                 "--core-theta-d", "78.5", "--allow-infeasible", "--no-progress"]) == 0
+                 "--core-theta-d", "78.5", "--allow-infeasible", "--no-progress",
+                 "--sampler-time-limit", "1"]) == 0
     capsys.readouterr()
     model = load(out)
     assert flagged_regions(model) and json.loads(out.read_text())["fallback"]
