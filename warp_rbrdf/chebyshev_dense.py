@@ -16,7 +16,9 @@ reads a table) has numerator 0 and denominator 1.
 Evaluation (:func:`make_dense_pq`, one function per class, cached): the 1-D tables ``T_0 ..
 T_degree`` of the mapped inputs (``t`` in [-1, 1]), then per row of slots sharing ``(a, b)`` the
 sum over ``c`` of ``row * T_c(t_c)``, times ``T_a(t_a) T_b(t_b)``; float64 throughout (sums of
-Chebyshev terms can cancel). The function is a native snippet (``wp.func_native``,
+Chebyshev terms can cancel). The rows go alternately into two accumulators and a row's terms
+are summed as two interleaved halves: shorter chains of dependent multiply-adds (3-6 % of a
+2-D fit's evaluation, ``docs/bench_eval.md``). The function is a native snippet (``wp.func_native``,
 :func:`dense_source`): straight-line C++ in which a row's four lanes are one Clang vector
 (``ext_vector_type``), so each slot is one load and one fused multiply-add of four lanes. Warp's
 own code for the same sums (unrolled with ``wp.static``) runs twice as long: LLVM's SLP
@@ -153,9 +155,11 @@ def _sum_lines(key: int, vector: bool, declare: bool = True) -> list:
         slots = dense_slots(nv, degree)
         for lane in lanes:
             var = group if lane is None else f"{group}{lane}"
+            typ = 'rbrdf_v4d' if lane is None else 'double'
             if declare:
-                out.append(f"{'rbrdf_v4d' if lane is None else 'double'} {var} = 0.0;")
-            j = 0
+                out.append(f"{typ} {var} = 0.0;")
+            out.append(f"{typ} {var}_odd = 0.0;")
+            j, r = 0, 0
             while j < len(slots):
                 a, b = slots[j][:2]
                 terms = []
@@ -164,9 +168,19 @@ def _sum_lines(key: int, vector: bool, declare: bool = True) -> list:
                     terms.append(f"{row} * xc[{slots[j][2]}]")
                     j += 1
                 weight = " * ".join([f"xa[{a}]"] * (nv >= 3) + [f"xb[{b}]"] * (nv >= 2))
-                out.append(f"{var} += ({' + '.join(terms)})" + (f" * ({weight})" if weight else "") + ";")
+                acc = var if r % 2 == 0 else f"{var}_odd"
+                out.append(f"{acc} += {_pairwise(terms)}" + (f" * ({weight})" if weight else "") + ";")
+                r += 1
+            out.append(f"{var} += {var}_odd;")
         base += len(slots)
     return out
+
+
+def _pairwise(terms) -> str:
+    """``terms`` summed as two interleaved halves (two shorter chains of fused multiply-adds)."""
+    if len(terms) < 4:
+        return f"({' + '.join(terms)})"
+    return f"(({' + '.join(terms[0::2])}) + ({' + '.join(terms[1::2])}))"
 
 
 def dense_source(key: int, vector: bool = True) -> str:

@@ -27,6 +27,7 @@ returns ``(0, 0, 0, 0)`` (the vector types are Clang's) and the caller walks the
 from __future__ import annotations
 
 import functools
+import hashlib
 
 import numpy as np
 import warp as wp
@@ -159,9 +160,10 @@ def make_flat2d(keys: tuple, margin: float):
     ``keys``: the scene's 2-variable classes (a leaf of another class gives P = 0, Q = 1, never
     packed as such). Cached: one function per tuple."""
     keys = tuple(k for k in keys if class_of_key(k)[0] == 2)
-    name = "rational_flat2d_" + "_".join(f"{k:06x}" for k in keys)
+    source = flat_source(keys, margin)
+    name = "rational_flat2d_" + "_".join(f"{k:06x}" for k in keys) + "_" + hashlib.sha256(source.encode()).hexdigest()[:8]
 
-    @Native.func_native(flat_source(keys, margin), name)
+    @Native.func_native(source, name)
     def flat2d(fptr: wp.uint64, iptr: wp.uint64, dptr: wp.uint64, tptr: wp.uint64, var: int,
                ang: wp.vec3) -> wp.vec4:
         ...
