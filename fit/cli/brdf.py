@@ -82,7 +82,7 @@ def chosen_model(args) -> str:
 
 def _cmd_brdf(args) -> int:
     limit = getattr(args, "time_limit", None)
-    deadline = Deadline(None if limit == 0 else brdf3d.DEFAULT_TIME_LIMIT if limit is None else limit)
+    deadline = Deadline(limit or None)      # only a --time-limit the user gave bounds the wall clock
     out = check_output_file(args.out, "--out", (".json",))
     if chosen_model(args) == "3d":
         return brdf3d.run(args, out, deadline)

@@ -12,11 +12,15 @@ method"):
 * ``--layout``: ``select`` (default: both layouts of :data:`fit.rational.fit3d.VARIANTS` fitted,
   the lower validation RMSE kept), ``pieces`` (four theta_h pieces, 666 coefficients) or
   ``single`` (one piece of ``--degrees``, default (7, 3): 420 coefficients);
-* ``--time-limit S`` (default 120 s, 0: none): one :class:`fit.progress.Deadline` from the
-  start of the command (reading the file included); what is left of it after reading is the
-  fit's wall-clock safety net (``time_limit``, checked between steps: a step under way
-  finishes): once passed, no further layout, refit or albedo round starts and the ladder
-  squares its steps, and the file records ``fit_info["stopped"] = "time"``;
+* ``--time-limit S`` (default: none; 0: none): a wall-clock limit the user chooses, one
+  :class:`fit.progress.Deadline` from the start of the command (reading the file included);
+  what is left of it after reading is the fit's ``wall_limit`` (checked between steps: a step
+  under way finishes): once passed, no further layout, refit or albedo round starts and the
+  ladder squares its steps, and the file records ``fit_info["stopped"] = "time"``
+  (``stopped_by`` ``"wall"``). A fit it stops depends on the machine's load. Without it, only
+  the fit's safety net applies (``time_limit``, :data:`DEFAULT_TIME_LIMIT` CPU seconds of the
+  process, about 10x the largest fit: the same file and flags give the same coefficients on
+  any load);
 * ``--grid``, ``--random``, ``--verify``, ``--no-albedo``: the data grid, the random points of
   each kind, the fresh points of the verification and the directional-albedo policy.
 
@@ -92,10 +96,12 @@ def add_flags(p) -> None:
                    help="total degrees of numerator and denominator of --layout single (default "
                         f"{','.join(map(str, VARIANTS[1]['degrees']))}; fewer coefficients, larger error)")
     g.add_argument("--time-limit", dest="time_limit", type=number(0.0, MAX_TIME_LIMIT_S), default=None, metavar="S",
-                   help=f"bound on the whole command in seconds (default {DEFAULT_TIME_LIMIT:g}; 0: none; a fit "
-                        "takes 13-40 s on one idle core): a safety net checked between the fit's steps (a step "
-                        "under way finishes); once passed, no further layout, refit or albedo round starts, the "
-                        "tolerance ladder squares its steps, and the file records it")
+                   help="a wall-clock bound on the whole command in seconds, your choice (default: none; 0: "
+                        "none): checked between the fit's steps (a step under way finishes); once passed, no "
+                        "further layout, refit or albedo round starts, the tolerance ladder squares its steps, "
+                        "and the file records it. A fit it stops depends on the machine's load. Without it "
+                        f"the same file and flags give the same coefficients on any load: only a safety net of "
+                        f"{DEFAULT_TIME_LIMIT:g} CPU seconds (about 10x the largest fit) ends a runaway")
     g.add_argument("--grid", type=integers(3, 2, MAX_GRID, "NH,ND,NP"), default=None, metavar="NH,ND,NP",
                    help=f"theta_h, theta_d, phi_d sizes of the data grid (default {','.join(map(str, DEFAULT_GRID))})")
     g.add_argument("--random", dest="n_random", type=integer(0, MAX_POINTS), default=None, metavar="N",
@@ -114,14 +120,15 @@ def given(args) -> list:
     return [flag for dest, flag in FLAGS.items() if getattr(args, dest, None) is not None]
 
 
-def settings_from_args(args, time_limit=None) -> tuple:
-    """``(Fit3DSettings, layouts)`` of parsed flags; ``time_limit``: the fit's safety net in
-    seconds (None: none; :func:`run` gives it what is left of the command's deadline)."""
+def settings_from_args(args, wall_limit=None) -> tuple:
+    """``(Fit3DSettings, layouts)`` of parsed flags; ``wall_limit``: the fit's wall-clock limit in
+    seconds (None: none; :func:`run` gives it what is left of the command's ``--time-limit``); the
+    CPU-time safety net is the settings' default."""
     layout = args.layout or "select"
     if args.degrees is not None and layout != "single":
         raise FlagError("--degrees", "sets the degrees of --layout single only")
     d = Fit3DSettings()
-    s = Fit3DSettings(tol=TOL_3D if args.tol is None else args.tol, time_limit=time_limit,
+    s = Fit3DSettings(tol=TOL_3D if args.tol is None else args.tol, wall_limit=wall_limit,
                       grid=d.grid if args.grid is None else tuple(args.grid),
                       n_random=d.n_random if args.n_random is None else args.n_random,
                       verify=d.verify if args.verify is None else args.verify,
@@ -166,8 +173,8 @@ def run(args, out: Path, deadline) -> int:
     with one_step(progress, "reading the file"):
         b = read_rgl(args.file)
     b.source = Path(args.file).name          # the source record names the file, as a 2-D fit's does
-    left = deadline.left()                   # the deadline's rest is the fit's safety net
-    settings = settings.clone(time_limit=None if left is None else max(left, 1e-3))
+    left = deadline.left()                   # the rest of a --time-limit is the fit's wall-clock limit
+    settings = settings.clone(wall_limit=None if left is None else max(left, 1e-3))
     try:
         res = fit_rgl_select(b, layouts, settings=settings, progress=_layout_progress(progress, len(layouts)))
     except RuntimeError as e:                # no layout valid

@@ -163,9 +163,8 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
     ``res.data``, :class:`fit.rational.result3d.FitData3D`) in place (docs/fitting.md); returns
     the record, also written to ``res.model.fit_info["albedo"]`` and ``res.albedo``. Budgets (counts): the rounds of
     ``weights`` and at most ``max_refits`` channel corrections (a channel's pieces refitted at
-    one weight); ``time_limit`` (s; None: none) and a caller's ``ceiling``
-    (:class:`fit.rational.ceiling.Ceiling`) are only wall-clock safety nets (``stopped`` =
-    "time")."""
+    one weight); ``time_limit`` (CPU seconds of the process; None: none) and a caller's ``ceiling``
+    (:class:`fit.rational.ceiling.Ceiling`) are only safety nets (``stopped`` = "time")."""
     t0 = time.perf_counter()
     own = Ceiling(time_limit)
 

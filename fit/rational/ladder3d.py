@@ -157,8 +157,8 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     at ``theta_h_edges`` (inner edges), each channel a rational function of total degrees
     ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol`` (docs/fitting.md: the stated bound is
     what is met). ``ladder_steps``: the tolerance ladder's budget (:func:`_fit_channel`).
-    ``time_limit`` (s): the wall-clock safety net only (a :class:`fit.rational.ceiling.Ceiling`;
-    ``ceiling`` shares one with a caller), recorded as ``stopped`` in ``fit_info`` when it is
+    ``time_limit`` (CPU s) and ``wall_limit`` (s): the safety net only (a
+    :class:`fit.rational.ceiling.Ceiling`; ``ceiling`` shares one with a caller), recorded as ``stopped`` in ``fit_info`` when it is
     passed. ``objective`` = ``(Xo (M, 3), rho_o (M, 3), w (M,))``
     (:func:`fit.rational.samples3d.objective_points` and the values there) turns on the second stage
     within ``relax`` times the tolerance met (docs/fitting.md); without it (or ``relax <= 1``) the
@@ -176,7 +176,7 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     relax, ladder_steps = s.relax, s.ladder_steps
     t0 = time.perf_counter()
     if ceiling is None:
-        ceiling = Ceiling(s.time_limit)
+        ceiling = Ceiling.of(s)
     X = np.asarray(X, np.float64)
     rho = np.maximum(np.asarray(rho, np.float64), 0.0)
     tm = float(theta_max if theta_max is not None else max(X[:, 0].max(), X[:, 1].max()))

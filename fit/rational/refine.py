@@ -27,8 +27,9 @@ of 1e-10, ``y = R z + c``), so that it reads ``min |y|^2`` under linear rows, a 
 problem, solved as one non-negative least-squares problem (Lawson and Hanson, *Solving Least
 Squares Problems*, ch. 23; :func:`scipy.optimize.nnls`, at most ``20 n`` iterations), with HiGHS's
 QP solver as the fallback (at most ``qp_iterations`` QP iterations, a count, so that the result
-does not depend on the machine's load; its ``qp_time`` seconds remain only as a last-resort
-safety net). HiGHS's active-set QP on the raw Hessian stalled (57 s, then a time limit or a solve
+does not depend on the machine's load; no time limit by default: a wall-clock one, ``qp_time``,
+would make a QP that a loaded machine slows fail where it succeeds on a quiet one, and the
+iteration count already ends it). HiGHS's active-set QP on the raw Hessian stalled (57 s, then a time limit or a solve
 error, on pieces of satin_rosaline); the NNLS form takes 0.02-0.15 s per solve there. Every loop
 here stops on a count (``iterations``, ``max_rounds``, the NNLS and QP iteration limits).
 
@@ -74,16 +75,17 @@ def _least_distance_nnls(G, h):
     return -r[:-1] / r[-1]
 
 
-def _least_distance(G, h, iteration_limit, time_limit=60.0):
+def _least_distance(G, h, iteration_limit, time_limit=None):
     """``argmin |y|^2`` s.t. ``G y >= h`` (HiGHS QP with the identity Hessian: the objective is
     whitened by the caller, which keeps the active-set solver well conditioned), or the model
     status (str) when it does not end optimal within ``iteration_limit`` QP iterations (the
-    rule: a count, the same on any machine) or, as a last-resort safety net only,
-    ``time_limit`` seconds."""
+    rule: a count, the same on any machine) or, only when a caller sets one, ``time_limit``
+    wall-clock seconds (None: none)."""
     m, n = G.shape
     hs = new_model()
     hs.setOptionValue("qp_iteration_limit", int(iteration_limit))
-    hs.setOptionValue("time_limit", float(time_limit))
+    if time_limit is not None:
+        hs.setOptionValue("time_limit", float(time_limit))
     hs.addVars(n, np.full(n, -np.inf), np.full(n, np.inf))
     G = np.ascontiguousarray(G, np.float64)
     hs.addRows(m, np.ascontiguousarray(h, np.float64), np.full(m, np.inf), m * n,
@@ -98,7 +100,7 @@ def _least_distance(G, h, iteration_limit, time_limit=60.0):
 
 
 def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, reweight=None,
-           q_min: float = 1e-4, bernstein_split: int = 2, max_rounds: int = 12, qp_time: float = 60.0,
+           q_min: float = 1e-4, bernstein_split: int = 2, max_rounds: int = 12, qp_time: float | None = None,
            certify_depth: int = 12, margin: float = 1e-5, sums=None, qp_iterations: int = 20000):
     """The weighted-least-squares function inside ``[lo, hi]`` (module docstring).
 
@@ -108,8 +110,9 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
     ``w`` ``(M,)`` weights; ``reweight(R(V), t) -> w`` (optional) between iterations.
     ``iterations``: Sanathanan-Koerner iterations; ``max_rounds``: constraint-generation rounds
     per iteration; ``qp_iterations``: QP iterations of the HiGHS fallback per QP (the budget);
-    ``qp_time``: its wall-clock safety net per QP (seconds; not a rule: a QP that reaches it
-    fails, ``info["reason"]`` says so); ``margin``: see the module
+    ``qp_time``: a wall-clock limit per QP (seconds; None, the default: none, the iteration
+    count ends a QP; a QP that reaches it fails, ``info["reason"]`` says so, and the result then
+    depends on the machine's load); ``margin``: see the module
     docstring. ``sums`` (optional): squared **sums** of residuals added to the objective (e.g. a
     directional albedo, :mod:`fit.rational.albedo3d`), ``(W, t2, groups, slope)``: points ``W``
     ``(K, n_vars)`` with targets ``t2`` ``(K,)``, ``groups`` a list of ``(idx, coef, const,
@@ -124,7 +127,7 @@ def refine(f0: RationalFunction, U, lo, hi, V, t, w, *, iterations: int = 3, rew
         return None, {"reason": "no objective point with a positive weight"}
     try:
         return _refine(f0, U, lo, hi, V, t, w, iterations, reweight, q_min, bernstein_split, max_rounds,
-                       (int(qp_iterations), float(qp_time)), certify_depth, margin, sums)
+                       (int(qp_iterations), None if qp_time is None else float(qp_time)), certify_depth, margin, sums)
     except np.linalg.LinAlgError as e:
         return None, {"reason": f"linear algebra: {e}"}
 

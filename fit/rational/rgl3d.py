@@ -45,9 +45,10 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     ``albedo_rmse_growth`` of a channel's relative RMSE and ``albedo_total_growth`` of the fit's,
     what stays outside recorded in ``fit_info["albedo"]``; ``albedo``, ``model_before_albedo``).
     Every step stops on a count (docs/fitting.md, "Budgets"); ``time_limit`` (default
-    :data:`fit.rational.ceiling.DEFAULT_TIME_LIMIT` = 120 s) is only the wall-clock safety net of
-    the whole fit (``albedo_time``: an extra one of the albedo step), recorded as
-    ``fit_info["stopped"] = "time"`` when it is passed. ``progress(stage, done, total)``
+    :data:`fit.rational.ceiling.DEFAULT_TIME_LIMIT` = 600 CPU seconds of the process) is only the
+    safety net of the whole fit (``albedo_time``: an extra one of the albedo step), and
+    ``wall_limit`` (default None) a wall-clock limit a user chose, recorded as
+    ``fit_info["stopped"] = "time"`` when either is passed. ``progress(stage, done, total)``
     (:mod:`fit.progress`): stages ``"sampling the file"``, ``"3-D fit"`` (functions done),
     ``"verification"`` (rounds), ``"3-D refit"``, ``"albedo policy"``, ``"proving the bound"``.
     ``prove_bound`` (default off): last, the error between the grid nodes of the measurement is
@@ -56,7 +57,7 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     s = Fit3DSettings.resolve(settings, **params)
     t0 = time.perf_counter()
     if ceiling is None:
-        ceiling = Ceiling(s.time_limit)
+        ceiling = Ceiling.of(s)
     report(progress, "sampling the file", 0, 1)
     X, rho, tm = sample_rgl(brdf, s.grid, s.n_random, s.theta_fit_deg)
     report(progress, "sampling the file", 1, 1)

@@ -46,7 +46,7 @@ VARIANTS = (
 SELECT_MARGIN = 0.05
 #: Settings of the selection itself (its budgets, verification and albedo policy), not of a
 #: layout's fit: not listed in the layouts' ``"options"`` log.
-_SELECT_SETTINGS = frozenset({"time_limit", "select_share", "verify", "verify_rounds", "verify_above", "albedo",
+_SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above", "albedo",
                               "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
                               "albedo_refits", "max_variants"})
 
@@ -103,16 +103,17 @@ def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = 
     are logged as skipped, "budget"); the chosen fit is then verified with at most ``verify_rounds``
     refits (:func:`fit.rational.verify3d.verify_and_refit`; a layout's own ``"verify_rounds"`` entry
     overrides it) and the albedo policy applied last with at most ``albedo_refits`` channel
-    corrections (``albedo``, as in :func:`fit.rational.rgl3d.fit_rgl`). ``time_limit`` (s; default
-    120; None: none) is only the wall-clock safety net of the whole selection: past ``select_share``
-    of it no further layout is started (logged as skipped, "time"), past it no refit and no albedo
+    corrections (``albedo``, as in :func:`fit.rational.rgl3d.fit_rgl`). ``time_limit`` (CPU seconds of
+    the process; default 600; None: none) is only the safety net of the whole selection, and
+    ``wall_limit`` (s; default None) a wall-clock limit a user chose: past ``select_share`` of either
+    no further layout is started (logged as skipped, "time"), past it no refit and no albedo
     round; ``fit_info["stopped"] = "time"`` and ``stopped_at`` record it. ``time_s`` is the whole
     selection. ``progress(stage, done, total)`` (:mod:`fit.progress`): each layout's stages as in
     :func:`fit.rational.rgl3d.fit_rgl`, then the chosen one's ``"verification"`` and ``"albedo
     policy"``."""
     s = Fit3DSettings.resolve(settings, **params)
     t0 = time.perf_counter()
-    ceiling = Ceiling(s.time_limit)
+    ceiling = Ceiling.of(s)
     common = {k: v for k, v in s.changed_params().items() if k not in _SELECT_SETTINGS}
     best, chosen, log = None, None, []
     for k, v in enumerate(variants):

@@ -49,7 +49,7 @@ DEFAULT_OBJECTIVE = 4000            # objective points of the second stage per t
 DEFAULT_OBJECTIVE_KIND = "rho_cos_cos"   # what the second stage minimises and the selection compares
 DEFAULT_RELATIVE_FLOOR = 0.1        # "relative": values below this fraction of a channel's median count by it
 DEFAULT_ALBEDO_TOL = 0.05           # directional-albedo tolerance of the policy (fit.rational.albedo3d)
-DEFAULT_ALBEDO_TIME = None          # the albedo step's own wall-clock safety net (s); None: the fit's (time_limit)
+DEFAULT_ALBEDO_TIME = None          # the albedo step's own CPU-time safety net (s); None: the fit's (time_limit)
 DEFAULT_ALBEDO_REFITS = 27          # channel corrections the albedo policy may try (9 weights x 3 channels)
 DEFAULT_LADDER_STEPS = 12           # infeasible tolerances at step 1.6 before the ladder squares its step
 DEFAULT_ALBEDO_RMSE_GROWTH = 0.50   # the albedo correction may raise a channel's relative RMSE by this fraction
@@ -197,7 +197,11 @@ class Fit3DSettings(_Settings):
       channel's error unit is at least this fraction of the brightest channel;
     * ``relax``: the second stage's intervals at this multiple of the tolerance met (<= 1: one
       stage); ``ladder_steps``: infeasible tolerances before the ladder squares its step;
-      ``time_limit``: the wall-clock safety net (s; None: none).
+      ``time_limit``: the safety net in CPU seconds of the process (default
+      :data:`fit.rational.ceiling.DEFAULT_TIME_LIMIT`, about 10x the largest fit; None: none),
+      which a normal fit never reaches on any load; ``wall_limit``: a wall-clock limit (s; None,
+      the default: none), only when a user asks for one (``rbrdf-fit brdf --time-limit``): a fit
+      it stops depends on the machine's load.
 
     Sampling a file, verification and albedo policy (:func:`~fit.rational.fit3d.fit_rgl`):
 
@@ -216,7 +220,7 @@ class Fit3DSettings(_Settings):
       ``relative_floor``: ``"relative"`` counts a value below this fraction of its channel's
       median of the data (or below the noise level) by that floor (fraction, default 0.1);
     * ``albedo``: apply the albedo policy; ``albedo_tol`` (fraction), ``albedo_time`` (s;
-      None: none), ``albedo_rmse_growth``, ``albedo_total_growth`` (fractions),
+      None: none; CPU seconds, as ``time_limit``), ``albedo_rmse_growth``, ``albedo_total_growth`` (fractions),
       ``albedo_refits`` (channel corrections);
     * ``prove_bound``: prove the error between the grid nodes of the measurement, per piece and
       channel (:func:`fit.rational.proved_bound.prove_fit3d`, recorded in
@@ -224,7 +228,7 @@ class Fit3DSettings(_Settings):
       CPU time as a small-budget fit (docs/fitting.md, "The proved bound").
 
     Layout selection (:func:`~fit.rational.fit3d.fit_rgl_select`): ``select_share`` of
-    ``time_limit`` after which no further layout starts; ``max_variants`` layouts at most
+    ``time_limit`` (and of ``wall_limit``) after which no further layout starts; ``max_variants`` layouts at most
     (None: all).
     """
 
@@ -238,6 +242,7 @@ class Fit3DSettings(_Settings):
     relax: float = DEFAULT_RELAX
     ladder_steps: int = DEFAULT_LADDER_STEPS
     time_limit: float | None = DEFAULT_TIME_LIMIT
+    wall_limit: float | None = None
     grid: tuple = DEFAULT_GRID
     n_random: int = DEFAULT_RANDOM
     theta_fit_deg: float = DEFAULT_THETA_FIT_DEG
@@ -275,6 +280,7 @@ class Fit3DSettings(_Settings):
             ("relax", _number(self.relax) and self.relax > 0, "a finite number > 0"),
             ("ladder_steps", _integer(self.ladder_steps) and self.ladder_steps >= 1, "an integer >= 1"),
             ("time_limit", _optional_positive(self.time_limit), "None or a finite number > 0 (s)"),
+            ("wall_limit", _optional_positive(self.wall_limit), "None or a finite number > 0 (s)"),
             ("grid", isinstance(self.grid, (tuple, list)) and len(self.grid) == 3
              and all(_integer(g) and g >= 1 for g in self.grid), "three integers >= 1"),
             ("n_random", nonneg_int(self.n_random), "an integer >= 0"),

@@ -49,8 +49,8 @@ def verify_and_refit(brdf, res, verify: int = DEFAULT_VERIFY, verify_rounds: int
     stated bound (1: any; 4: spikes only) to the data and fits again only the functions (piece,
     channel) that are outside their bound at one of them (the others are kept, their records
     measured again on the enlarged data; ``refit_all``: every function), with the noise levels of
-    the first fit; ``fit_info["verify_refitted"]`` lists them per round. ``time_limit`` (s; None:
-    none) or a caller's ``ceiling`` (:class:`fit.rational.ceiling.Ceiling`) is only the wall-clock
+    the first fit; ``fit_info["verify_refitted"]`` lists them per round. ``time_limit`` (CPU s; None:
+    none) or a caller's ``ceiling`` (:class:`fit.rational.ceiling.Ceiling`) is only the
     safety net: once passed, no further refit is started (``fit_info["stopped"]``).
     ``progress(stage, done, total)`` (default: the fit's own, ``res.data.progress``;
     :mod:`fit.progress`): stage ``"verification"``, the rounds done."""
