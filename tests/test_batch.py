@@ -16,6 +16,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from lab.analytic import glossy_lobe, lambert
@@ -27,8 +28,10 @@ from fit.formats.merl import write_merl
 
 ROOT = Path(__file__).resolve().parents[1]
 # one function per channel over the whole theta_d range (no grazing band: half the LPs)
-FAST = ["--tol", "0.2", "--core-theta-d", "78.5", "--n-v", "4", "--n-t", "8", "--n-p", "8"]
-FAST_KW = {"tols": (0.2,), "brdf_options": {"core_theta_d_deg": 78.5}, "cdf_options": {"n_v": 4, "n_t": 8, "n_p": 8}}
+# no sampler stored in the BRDF outputs (test_batch_stores_the_fits_own_sampler tests it)
+FAST = ["--tol", "0.2", "--core-theta-d", "78.5", "--n-v", "4", "--n-t", "8", "--n-p", "8", "--no-sampler"]
+FAST_KW = {"tols": (0.2,), "brdf_options": {"core_theta_d_deg": 78.5}, "cdf_options": {"n_v": 4, "n_t": 8, "n_p": 8},
+           "sampler": False}
 
 
 def _env():
@@ -181,6 +184,46 @@ def test_interrupt_and_resume_on_local_cluster(materials, tmp_path, capsys):
     again = list(csv.DictReader((out / "report.csv").open()))
     assert [r["status"] for r in again] == ["skipped"] * 3
     assert [r["coefs"] for r in again] == [str(c) for c in report["coefs"]]
+
+
+# --- the fit's own sampler in each BRDF output, as rbrdf-fit brdf stores it --------------------------
+def test_batch_stores_the_fits_own_sampler(materials, tmp_path):
+    """A BRDF output of the batch carries the fit's own inverse CDFs (the sampler record of
+    rbrdf-fit brdf: made from the fit, its table the renderer's tabulation of the fit), reported
+    in the 'sampler' column, under a key of its own; --no-sampler's output has none."""
+    from fit import load_coefficients
+    from fit.batch import fit_database
+    from fit.batch.keys import SamplerOptions
+    from fit.sampling import embedded
+    from fit.sampling.model_sampler import vouched_evaluate
+    from fit.sampling.table import tabulate
+
+    out = tmp_path / "out"
+    one = [materials / "a_lambert.binary"]
+    kw = dict(FAST_KW, cdf=False, sampler=True, sampler_time_limit_s=10.0)
+    report = fit_database(one, out, workers=1, progress=False, **kw)
+    assert report.counts == {"done": 1, "skipped": 0, "failed": 0}, report.rows
+    (path,) = (out / "a_lambert").glob("brdf-*[0-9a-f].json")
+    model = load_coefficients(path)
+    cdf = embedded.read(model, path)
+    assert cdf is not None                       # rows past the time limit are sampled with the table
+    model.sampler = None
+    np.testing.assert_array_equal(cdf.table.cdf_phi, tabulate(vouched_evaluate(model)).cdf_phi)
+    cell = report["sampler"][0]
+    rows = int((cdf.fit_info or {}).get("verified_rows", 0))
+    assert cell == (f"rational {rows}/32" if not cdf.fallback else "table"), cell
+    manifest = json.loads(path.with_name(path.name[:-5] + ".manifest.json").read_text())
+    assert manifest["options"]["sampler"] == {"time_limit_s": 10.0}
+    assert manifest["record"]["sampler"] in ("rational", "table")
+    sha = manifest["input"]["sha256"]
+    bo = BrdfOptions(tol=0.2, core_theta_d_deg=78.5)
+    assert path.name.endswith(brdf_key(sha, bo, SamplerOptions(10.0)) + ".json")
+    assert brdf_key(sha, bo, SamplerOptions(10.0)) != brdf_key(sha, bo) != brdf_key(sha, bo, SamplerOptions())
+
+    bare = fit_database(one, out, workers=1, progress=False, **dict(kw, sampler=False))
+    assert bare.counts == {"done": 1, "skipped": 0, "failed": 0} and bare["sampler"] == [None]
+    (plain,) = (out / "a_lambert").glob(f"brdf-*{brdf_key(sha, bo)}.json")
+    assert load_coefficients(plain).sampler is None
 
 
 # --- external scheduler + workers, one corrupt input ------------------------------------------------

@@ -11,7 +11,8 @@ Key: the first 16 hex digits (64 bits) of the sha256 of the canonical JSON (sort
 whitespace) of ``{"key_version", "kind", "input_sha256", "options"}``; ``kind`` is ``"brdf"``
 (options: ``get_params()`` of the fit's :class:`fit.rational.settings.BRDFFitSettings`, every
 setting of the 2-D fit) or ``"cdf"`` (options: the :func:`fit.fit_cdf` table and layout
-arguments). :data:`KEY_VERSION` is raised when the
+arguments); a BRDF output that stores the fit's sampler adds its options
+(:class:`SamplerOptions`) under ``"sampler"``. :data:`KEY_VERSION` is raised when the
 meaning of an option changes. The fitter's own code version is *not* part of the key: after
 an update that changes results, re-run into a new folder (or delete the old outputs).
 """
@@ -51,13 +52,25 @@ class CdfOptions:
 
 
 @dataclass(frozen=True)
+class SamplerOptions:
+    """The fit's own inverse CDFs stored in each BRDF output, as ``rbrdf-fit brdf`` stores them
+    (:func:`fit.sampling.model_sampler.embed_sampler`, the defaults of ``--sampler-time-limit``):
+    ``time_limit_s`` bounds making them (None: no limit; the table is always completed, rows
+    not verified by then are sampled with the table)."""
+
+    time_limit_s: float | None = 60.0
+
+
+@dataclass(frozen=True)
 class BatchOptions:
     """Everything that decides a batch's outputs: the tolerances (one BRDF fit per material and
-    tolerance), the other BRDF options, and the CDF options (None: no CDF, ``--no-cdf``)."""
+    tolerance), the other BRDF options, the CDF options (None: no CDF, ``--no-cdf``) and the
+    sampler stored in each BRDF output (None: none, ``--no-sampler``)."""
 
     tols: tuple = (0.05,)
     brdf: dict = field(default_factory=dict)      # BRDFFitSettings names other than tol
     cdf: CdfOptions | None = field(default_factory=CdfOptions)
+    sampler: SamplerOptions | None = field(default_factory=SamplerOptions)
 
     def brdf_options(self) -> list:
         """One :class:`fit.rational.settings.BRDFFitSettings` per tolerance, in the order given."""
@@ -90,9 +103,14 @@ def output_key(kind: str, input_sha256: str, options: dict) -> str:
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:KEY_HEX_DIGITS]
 
 
-def brdf_key(input_sha256: str, settings: BRDFFitSettings) -> str:
-    """The key of a BRDF output: from every setting of the fit (``settings.get_params()``)."""
-    return output_key("brdf", input_sha256, settings.get_params())
+def brdf_key(input_sha256: str, settings: BRDFFitSettings, sampler: SamplerOptions | None = None) -> str:
+    """The key of a BRDF output: from every setting of the fit (``settings.get_params()``) and,
+    when the output stores the fit's sampler, its options (``"sampler"``; an output without
+    one keeps the key it has always had)."""
+    options = settings.get_params()
+    if sampler is not None:
+        options = {**options, "sampler": asdict(sampler)}
+    return output_key("brdf", input_sha256, options)
 
 
 def cdf_key(input_sha256: str, options: CdfOptions) -> str:

@@ -10,7 +10,9 @@ pieces), ``core_deg`` (theta_d of the guaranteed core, degrees), ``guaranteed`` 
 cluster of the core inside its interval, Q > 0 certified), ``band`` (grazing band: ``met``,
 ``best effort`` or ``none``), ``core_max_err_pct`` / ``core_rms_err_pct`` (relative error on
 the core's clusters where the relative tolerance applies, percent), ``fit_s`` (the BRDF fit's
-own seconds, as its manifest records them), ``cdf_rows_rational`` (view rows of the inverse
+own seconds, as its manifest records them), ``sampler`` (the fit's own inverse CDFs stored in
+its file, as ``rbrdf-fit brdf`` stores them: ``rational 29/32`` rows, ``table``, ``none``;
+empty with ``--no-sampler``), ``cdf_rows_rational`` (view rows of the inverse
 CDFs sampled with the rational pieces, e.g. ``32/32``), ``cdf_fallback``,
 ``cdf_var_ratio_med`` / ``cdf_var_ratio_max`` (variance per sample of the rational sampler /
 the tabulated one, over the rational rows: the fitter's measure; the samples/s ratio needs the
@@ -27,13 +29,13 @@ import io
 import math
 
 COLUMNS = ("material", "tol", "status", "coefs", "coefs_r", "coefs_g", "coefs_b", "core_deg", "guaranteed", "band",
-           "core_max_err_pct", "core_rms_err_pct", "fit_s", "cdf_rows_rational", "cdf_fallback",
+           "core_max_err_pct", "core_rms_err_pct", "fit_s", "sampler", "cdf_rows_rational", "cdf_fallback",
            "cdf_var_ratio_med", "cdf_var_ratio_max", "cdf_s", "error")
 
 _MD_HEADERS = {"material": "material", "tol": "tol", "status": "status", "coefs": "coefs",
                "coefs_r": "R", "coefs_g": "G", "coefs_b": "B", "core_deg": "core θd°",
                "guaranteed": "guaranteed", "band": "grazing band", "core_max_err_pct": "core max %",
-               "core_rms_err_pct": "core RMS %", "fit_s": "fit s", "cdf_rows_rational": "CDF rows rational",
+               "core_rms_err_pct": "core RMS %", "fit_s": "fit s", "sampler": "own sampler", "cdf_rows_rational": "CDF rows rational",
                "cdf_fallback": "CDF fallback", "cdf_var_ratio_med": "var. ratio med",
                "cdf_var_ratio_max": "var. ratio max", "cdf_s": "CDF s", "error": "error"}
 
@@ -42,6 +44,16 @@ def _num(x, digits: int):
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return None
     return round(float(x), digits)
+
+
+def _sampler_cell(rec: dict):
+    """The ``sampler`` cell of a BRDF record: ``rational 29/32`` (view rows of the fit's own
+    inverse CDFs sampled with the rational pieces), ``table``, ``none`` (nothing vouched to
+    sample), None when the output stores none (``--no-sampler``)."""
+    kind = rec.get("sampler")
+    if kind == "rational":
+        return f"rational {rec.get('sampler_rows_rational')}/{rec.get('sampler_rows')}"
+    return kind
 
 
 def rows_from_results(results) -> list:
@@ -72,7 +84,7 @@ def rows_from_results(results) -> list:
                            if rec.get("core_max_rel_error") is not None else None,
                            core_rms_err_pct=_num(100 * rec["core_rms_rel_error"], 2)
                            if rec.get("core_rms_rel_error") is not None else None,
-                           fit_s=_num(rec.get("fit_s"), 2))
+                           fit_s=_num(rec.get("fit_s"), 2), sampler=_sampler_cell(rec))
             row.update(cdf_cols)
             errors = [e for e in (res.get("error"), rec.get("error"), cdf.get("error")) if e]
             if cdf.get("status") == "failed" and rec.get("status") != "failed":

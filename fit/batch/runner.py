@@ -30,7 +30,7 @@ from pathlib import Path
 
 from ..errors import BRDFFileError, FlagError, OutputError, display_text
 from .inputs import collect_inputs, expand_inputs  # noqa: F401 - expand_inputs: the API before
-from .keys import BatchOptions, BrdfOptions, CdfOptions
+from .keys import BatchOptions, BrdfOptions, CdfOptions, SamplerOptions
 from .progress import ProgressClock
 from .scheduler import CONNECT_TIMEOUT_S
 from .report import BatchReport, plot_coefficients, rows_from_results
@@ -40,7 +40,8 @@ REPORT_FILES = ("report.csv", "report.md", "report_coefficients.png")
 
 
 def make_options(tols=(0.05,), cdf: bool = True, brdf_options: dict | None = None,
-                 cdf_options: dict | None = None) -> BatchOptions:
+                 cdf_options: dict | None = None, sampler: bool = True,
+                 sampler_time_limit_s: float | None = SamplerOptions.time_limit_s) -> BatchOptions:
     """:class:`BatchOptions` from plain arguments (unknown option names: ``ValueError``)."""
     if isinstance(tols, (int, float)):
         tols = (tols,)
@@ -49,7 +50,10 @@ def make_options(tols=(0.05,), cdf: bool = True, brdf_options: dict | None = Non
         raise ValueError("no tolerance")
     bo = dict(brdf_options or {})
     BrdfOptions(**bo)                      # unknown names raise TypeError -> ValueError below
-    return BatchOptions(tols=tols, brdf=bo, cdf=CdfOptions(**(cdf_options or {})) if cdf else None)
+    if sampler_time_limit_s is not None and not sampler_time_limit_s > 0:
+        raise ValueError(f"sampler time limit {sampler_time_limit_s!r}: expected seconds > 0 or None (no limit)")
+    return BatchOptions(tols=tols, brdf=bo, cdf=CdfOptions(**(cdf_options or {})) if cdf else None,
+                        sampler=SamplerOptions(sampler_time_limit_s) if sampler else None)
 
 
 def _check_options(options: BatchOptions) -> None:
@@ -101,7 +105,9 @@ def _start_client(workers: int | None, scheduler: str | None, timeout_s: float, 
 
 
 def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: dict | None = None,
-                 cdf_options: dict | None = None, workers: int | None = None, scheduler: str | None = None,
+                 cdf_options: dict | None = None, sampler: bool = True,
+                 sampler_time_limit_s: float | None = SamplerOptions.time_limit_s,
+                 workers: int | None = None, scheduler: str | None = None,
                  progress: bool | None = None, log=None, on_progress=None,
                  connect_timeout_s: float = CONNECT_TIMEOUT_S, worker_timeout_s: float = 30.0,
                  report_only: bool = False) -> BatchReport:
@@ -113,7 +119,10 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
     (:func:`fit.fit_brdf`; ``brdf_options``: its other arguments, e.g. ``{"max_degree": 8}``,
     defaults those of ``rbrdf-fit brdf``); ``cdf``: also fit the inverse CDFs
     (:func:`fit.fit_cdf`; ``cdf_options``: :class:`fit.batch.keys.CdfOptions` fields, defaults
-    those of ``rbrdf-fit cdf``). ``workers``: local worker processes (default: one per core);
+    those of ``rbrdf-fit cdf``); ``sampler``: store the fit's own inverse CDFs in each BRDF
+    output, as ``rbrdf-fit brdf`` does (:func:`fit.sampling.model_sampler.embed_sampler`;
+    ``sampler_time_limit_s``: its bound, default 60 s as ``--sampler-time-limit``, None: no
+    limit). ``workers``: local worker processes (default: one per core);
     ``scheduler``: address of a running scheduler instead (``workers`` ignored;
     :mod:`fit.batch.scheduler`: checked before anything is read, reached within
     ``connect_timeout_s`` seconds, a first worker within ``worker_timeout_s``).
@@ -140,7 +149,7 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
     clock = ProgressClock(on_progress)
     log = log or (lambda s: None)
     try:
-        options = make_options(tols, cdf, brdf_options, cdf_options)
+        options = make_options(tols, cdf, brdf_options, cdf_options, sampler, sampler_time_limit_s)
         _check_options(options)
     except (TypeError, ValueError) as e:
         raise FlagError("options", str(e)) from None
@@ -281,7 +290,7 @@ def material_status(path, options: BatchOptions, out, sha: str):
            "error": None, "seconds": 0.0, "worker": None}
     complete = True
     for bo in options.brdf_options():
-        key = brdf_key(sha, bo)
+        key = brdf_key(sha, bo, options.sampler)
         d = read_done(folder / brdf_name(bo, key), key)
         rec = {"key": key, "file": brdf_name(bo, key), "tol": bo.tol}
         if d is None:

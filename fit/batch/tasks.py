@@ -6,7 +6,8 @@ and ``rbrdf-fit cdf``, and write each output with its manifest.
 Outputs of the material ``STEM`` (the input's file name without its suffix) under the batch's
 output folder ``OUT``::
 
-    OUT/STEM/brdf-tol0.05-<key>.json            rbrdf-rational coefficient file
+    OUT/STEM/brdf-tol0.05-<key>.json            rbrdf-rational coefficient file (with the fit's
+                                                own inverse CDFs, as rbrdf-fit brdf stores them)
     OUT/STEM/brdf-tol0.05-<key>.manifest.json   what made it and what it measured
     OUT/STEM/cdf-<key>.json                     rbrdf-cdf file
     OUT/STEM/cdf-<key>.manifest.json
@@ -41,7 +42,7 @@ from pathlib import Path
 
 from ..errors import RbrdfError, display_text
 from ..rational.settings import BRDFFitSettings
-from .keys import BatchOptions, CdfOptions, brdf_key, cdf_key
+from .keys import BatchOptions, CdfOptions, SamplerOptions, brdf_key, cdf_key
 
 MANIFEST_FORMAT = "rbrdf-batch-manifest"
 MANIFEST_VERSION = 1
@@ -224,7 +225,7 @@ def run_material(path, options: BatchOptions, out, input_sha256: str | None = No
             folder = material_dir(out, path)
             todo = []
             for bo in options.brdf_options():
-                key = brdf_key(sha, bo)
+                key = brdf_key(sha, bo, options.sampler)
                 target = folder / brdf_name(bo, key)
                 done = read_done(target, key)
                 rec = {"status": "pending", "key": key, "file": target.name, "tol": bo.tol}
@@ -258,7 +259,8 @@ def run_material(path, options: BatchOptions, out, input_sha256: str | None = No
             return result
         src = {"path": os.fspath(path), "file": path.name, "sha256": sha}
         for bo, key, target, rec in todo:
-            _run_output(rec, lambda bo=bo, key=key, target=target: _fit_brdf(brdf, path, bo, key, target, src))
+            _run_output(rec, lambda bo=bo, key=key, target=target: _fit_brdf(brdf, path, bo, key, target, src,
+                                                                            options.sampler))
         if cdf_todo is not None:
             key, target, rec = cdf_todo
             _run_output(rec, lambda: _fit_cdf(brdf, path, options.cdf, key, target, src))
@@ -294,7 +296,8 @@ def _manifest(kind: str, key: str, src: dict, options: dict, record: dict, secon
             "worker": f"{socket.gethostname()}:{os.getpid()}"}
 
 
-def _fit_brdf(brdf, path: Path, bo: BRDFFitSettings, key: str, target: Path, src: dict) -> dict:
+def _fit_brdf(brdf, path: Path, bo: BRDFFitSettings, key: str, target: Path, src: dict,
+              sampler: SamplerOptions | None = None) -> dict:
     from ..errors import BRDFFileError
     from ..rational.brdf_fit import fit_brdf
 
@@ -304,8 +307,28 @@ def _fit_brdf(brdf, path: Path, bo: BRDFFitSettings, key: str, target: Path, src
     except ValueError as e:
         raise BRDFFileError(path, str(e)) from None
     record = brdf_record(fit)
-    _write(target, fit.save, _manifest("brdf", key, src, bo.get_params(), record, time.perf_counter() - t))
+    if sampler is not None:
+        record.update(_attach_sampler(fit.model, sampler))
+    options = bo.get_params() if sampler is None else {**bo.get_params(), "sampler": asdict(sampler)}
+    _write(target, fit.save, _manifest("brdf", key, src, options, record, time.perf_counter() - t))
     return record
+
+
+def _attach_sampler(model, sampler: SamplerOptions) -> dict:
+    """Store the fit's own inverse CDFs in ``model`` (:func:`fit.sampling.model_sampler.embed_sampler`,
+    as ``rbrdf-fit brdf``); the record's ``sampler`` (``"rational"``, ``"table"`` or ``"none"``:
+    a fit with nothing vouched to sample is written without one), ``sampler_reason`` and
+    ``sampler_s``."""
+    from ..sampling.model_sampler import embed_sampler
+
+    t = time.perf_counter()
+    try:
+        cdf = embed_sampler(model, time_limit_s=sampler.time_limit_s)
+    except ValueError as e:
+        return {"sampler": "none", "sampler_reason": display_text(e), "sampler_s": time.perf_counter() - t}
+    return {"sampler": "table" if cdf.fallback else "rational", "sampler_reason": cdf.reason,
+            "sampler_rows_rational": int((cdf.fit_info or {}).get("verified_rows", 0 if cdf.fallback else cdf.table.n_v)),
+            "sampler_rows": int(cdf.table.n_v), "sampler_s": time.perf_counter() - t}
 
 
 def _fit_cdf(brdf, path: Path, co: CdfOptions, key: str, target: Path, src: dict) -> dict:

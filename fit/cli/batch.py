@@ -1,6 +1,8 @@
 """``rbrdf-fit batch INPUTS... --out DIR``: fit a whole database on dask.distributed
-(:func:`fit.batch.runner.fit_database`), with the BRDF flags of ``rbrdf-fit brdf`` and the
-table flags of ``rbrdf-fit cdf`` and their defaults. Registered by :mod:`fit.cli`.
+(:func:`fit.batch.runner.fit_database`), with the BRDF flags of ``rbrdf-fit brdf`` (the fit's
+own inverse CDFs stored in each BRDF output unless ``--no-sampler``, bounded by
+``--sampler-time-limit``, as there) and the table flags of ``rbrdf-fit cdf`` and their
+defaults. Registered by :mod:`fit.cli`.
 
 Progress: one line per stage and per material finished on stdout (``batch: [done/total] ...;
 elapsed ..., about ... left``, :mod:`fit.batch.progress`), also without a terminal; on a
@@ -31,6 +33,7 @@ from ..limits import (
 )
 from ..rational.brdf_fit import INTERVALS
 from ..rational.domain import THETA_D_MAX_DEG
+from .cdf import add_sampler_flags
 from .flags import core_angle, integer, number
 
 MAX_TOLERANCES = 16
@@ -64,7 +67,9 @@ def _cmd_batch(args) -> int:
         tty = False
     try:
         report = fit_database(args.inputs, args.out, tols=args.tol, cdf=not args.no_cdf, brdf_options=brdf,
-                              cdf_options=cdf, workers=args.workers, scheduler=args.scheduler,
+                              cdf_options=cdf, sampler=not args.no_sampler,
+                              sampler_time_limit_s=None if args.sampler_time_limit <= 0 else args.sampler_time_limit,
+                              workers=args.workers, scheduler=args.scheduler,
                               report_only=args.report_only, progress=tty and not args.quiet,
                               on_progress=None if args.quiet else
                               (lambda e: print(display_text(e.line()), flush=True)))
@@ -122,6 +127,7 @@ def register(sub) -> None:
     g.add_argument("--floor-frac", dest="floor_frac", type=number(0.0, MAX_FLOOR_FRAC), default=1.0)
     g.add_argument("--max-degree", type=integer(0, MAX_FIT_DEGREE), default=12)
     g.add_argument("--max-den-degree", type=integer(0, MAX_FIT_DEN_DEGREE), default=6)
+    add_sampler_flags(g)
     g = p.add_argument_group("inverse CDFs (as rbrdf-fit cdf)")
     g.add_argument("--n-v", type=integer(2, MAX_CDF_ROWS), default=32)
     g.add_argument("--n-t", type=integer(2, MAX_CDF_THETA_CELLS), default=64)
