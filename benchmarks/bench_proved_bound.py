@@ -133,7 +133,12 @@ def model_3d(stem: str, fits_dir: Path, cache: Path, fit_small: bool):
     fi = m.fit_info
     recs = [{"piece": k, "channel": "RGB"[c], "tolerance": float(leaf.function_info[c]["tolerance"])}
             for k, leaf in enumerate(leaves(m)) for c in range(3)]
-    res = SimpleNamespace(model=m, data=None, settings=None, noise=tuple(fi["noise"]), records=recs)
+    from fit.rational.settings import Fit3DSettings
+    grid = tuple(fi.get("grid") or Fit3DSettings().grid)      # a file without it: the default grid
+    if "grid" not in fi:
+        src += f", grid {grid} (the default; the file records none)"
+    res = SimpleNamespace(model=m, data=None, settings=SimpleNamespace(grid=grid), noise=tuple(fi["noise"]),
+                          records=recs)
     return res, brdf, src
 
 
@@ -278,6 +283,11 @@ def _pct(x) -> str:
     return "none" if x is None else f"{100 * x:.3g} %"
 
 
+def _frac(x) -> str:
+    """A part of the domain: one short of all of it is not printed as 100 %."""
+    return "> 99.9 %" if x is not None and 0.999 < x < 1.0 else _pct(x)
+
+
 def _gap_line(g) -> str:
     c = max(g["cells"], key=lambda d: d["cell_bound"]) if g["cells"] else {}
     return (f"piece {g['piece']} {g['channel']}: proved {_pct(g['proved'])}, dense max on its "
@@ -287,7 +297,7 @@ def _gap_line(g) -> str:
 
 
 def _line(r) -> str:
-    return (f"proved {_pct(r['proved'])}, within tol on {_pct(r['proved_fraction'])}, verified "
+    return (f"proved {_pct(r['proved'])}, within tol on {_frac(r['proved_fraction'])}, verified "
             f"{_pct(r['verified'])}, {r['wall_s']:.1f} s")
 
 
@@ -312,9 +322,14 @@ def main(argv=None):
     ap.add_argument("--merge", action="store_true",
                     help="keep the rows of --out for the materials (and models) not run now")
     ap.add_argument("--docs", action="store_true", help="write the table into docs/fit_accuracy.md")
+    ap.add_argument("--from-json", nargs="+", default=None, metavar="FILE",
+                    help="no run: merge the rows of these results files (later files win per material and "
+                         "model) and print (with --docs: write) their tables")
     args = ap.parse_args(argv)
     args.materials = args.materials or all_materials()
-    out = run(args)
+    out = merged(args.from_json) if args.from_json else run(args)
+    if args.from_json:
+        print(table(out))
     if args.docs:
         write_docs(out)
 
@@ -333,8 +348,29 @@ def _verdict(r, tgt: float) -> str:
     return "missed: the proof's budget"
 
 
+def _found(r) -> str:
+    """The largest error found at dense points of the worst cells (``--gap``): observed, so a
+    lower bound of the true largest error, like ``verified``."""
+    g = r.get("gap")
+    return _pct(g["dense_max_worst_cells"]) + f" ({g['piece']} {g['channel']})" if g else "n/a"
+
+
 def _arrow(r, key, encl) -> str:
-    return " → ".join(_pct(r[e][key]) for e in encl if e in r)
+    fmt = _frac if key == "proved_fraction" else _pct
+    return " → ".join(fmt(r[e][key]) for e in encl if e in r)
+
+
+def merged(files) -> dict:
+    """The runs of ``files`` in one (their dates and loads listed in ``runs``)."""
+    runs = [json.loads(Path(f).read_text()) for f in files]
+    out = dict(runs[0], materials={}, runs=[])
+    for r in runs:
+        assert r["enclosures"] == out["enclosures"], "runs with different enclosures"
+        out["runs"].append({"date": r["date"], "load": r["load"], "load_end": r.get("load_end", r["load"]),
+                            "materials": {m: sorted(k for k in row if k in ("2d", "3d")) for m, row in r["materials"].items()}})
+        for m, row in r["materials"].items():
+            out["materials"].setdefault(m, {}).update(row)
+    return out
 
 
 def table(out) -> str:
@@ -342,8 +378,9 @@ def table(out) -> str:
     encl = out["enclosures"]
     last = encl[-1]
     lines = ["| material | target | 2-D fit at 5 % | coefficients | proved, " + " → ".join(encl)
-             + " | proved where vouched | within 5 %, " + " → ".join(encl) + " | verified (points) | proof s, "
-             + " → ".join(encl) + " | against the target |", "| " + " | ".join(["---"] * 10) + " |"]
+             + " | proved where vouched | within 5 %, " + " → ".join(encl) + " | verified (points) | found on the "
+             "worst cells | proof s, " + " → ".join(encl) + " | against the target |",
+             "| " + " | ".join(["---"] * 11) + " |"]
     rows3 = []
     for mat, row in out["materials"].items():
         r = row.get("2d")
@@ -352,34 +389,41 @@ def table(out) -> str:
             lines.append(f"| {mat} | {_pct(row['target'])} | {r['source']} | {r.get('coefficients', '')} | "
                          f"{_arrow(r, 'proved', encl)} | {_pct(r[last]['vouched']['proved'])} | "
                          f"{_arrow(r, 'proved_fraction', encl)} | {_pct(r[last]['verified'])} ({pts:,}) | "
+                         f"{_found(r[last])} | "
                          + " → ".join(f"{r[e]['wall_s']:.1f}" for e in encl if e in r)
                          + f" | {_verdict(r[last], row['target'])} |")
         elif r is not None:
-            lines.append(f"| {mat} | {_pct(row['target'])} | {r['source']} |" + " |" * 7)
+            lines.append(f"| {mat} | {_pct(row['target'])} | {r['source']} |" + " |" * 8)
         r3 = row.get("3d")
         if r3 is not None and last in r3:
             g = r3.get("grazing")
             rows3.append(f"| {mat} | {r3['source']} | {r3.get('coefficients', '')} | {_pct(r3.get('stated'))} | "
                          f"{_arrow(r3, 'proved', encl)} | {_pct(g['proved']) if g else 'n/a'} | "
-                         f"{_arrow(r3, 'proved_fraction', encl)} | {_pct(g['proved_fraction']) if g else 'n/a'} | "
-                         f"{_pct(r3[last]['verified'])} | {_pct(g['verified']) if g else 'n/a'} | "
+                         f"{_arrow(r3, 'proved_fraction', encl)} | {_frac(g['proved_fraction']) if g else 'n/a'} | "
+                         f"{_pct(r3[last]['verified'])} | {_found(r3[last])} | {_pct(g['verified']) if g else 'n/a'} | "
                          + " → ".join(f"{r3[e]['wall_s']:.0f}" for e in encl if e in r3)
                          + (f", {g['wall_s']:.0f}" if g else "") + " |")
     if rows3:
         lines += ["", "| material | 3-D fit | coefficients | stated tolerance | proved (no grazing weight), "
                   + " → ".join(encl) + " | proved in the stated unit | within the stated tolerance, "
-                  + " → ".join(encl) + " | … in the stated unit | verified | verified in the stated unit | proof s |",
-                  "| " + " | ".join(["---"] * 11) + " |"] + rows3
+                  + " → ".join(encl) + " | … in the stated unit | verified | found on the worst cells | verified in "
+                  "the stated unit | proof s |", "| " + " | ".join(["---"] * 12) + " |"] + rows3
     return "\n".join(lines)
 
 
 def write_docs(out) -> None:
     text = DOCS.read_text()
     a, b = text.index(MARK[0]), text.index(MARK[1])
-    block = (f"{MARK[0]}\n\n`python -m benchmarks.bench_proved_bound "
-             f"--enclosure {'both' if len(out['enclosures']) > 1 else out['enclosures'][0]}`, "
-             f"{out['date']}, load average {out['load'][0]:.2f} at the start, {out.get('load_end', out['load'])[0]:.2f} "
-             f"at the end (shared 2-core machine; seconds are wall clock):\n\n{table(out)}\n\n")
+    runs = out.get("runs") or [{"date": out["date"], "load": out["load"], "load_end": out.get("load_end", out["load"]),
+                                "materials": {m: sorted(k for k in row if k in ("2d", "3d"))
+                                              for m, row in out["materials"].items()}}]
+    lines = [f"- {r['date']}, load average {r['load'][0]:.1f} at the start and {r['load_end'][0]:.1f} at the end: "
+             + ", ".join(f"{m} ({'/'.join(k.upper().replace('D', '-D') for k in ks)})" for m, ks in r["materials"].items())
+             for r in runs]
+    block = (f"{MARK[0]}\n\n`python -m benchmarks.bench_proved_bound --enclosure "
+             f"{'both' if len(out['enclosures']) > 1 else out['enclosures'][0]} --gap` (`--models 3d --grazing` for "
+             f"the 3-D rows), one process, on the shared 2-core machine (seconds are wall clock, under the "
+             f"load given):\n\n" + "\n".join(lines) + f"\n\n{table(out)}\n\n")
     DOCS.write_text(text[:a] + block + text[b:])
 
 

@@ -1,5 +1,5 @@
 """warp-rbrdf fitter: measured isotropic BRDFs, their (theta_h, theta_d) projection and
-rational-function fits with guaranteed error. Pure NumPy/SciPy; never imports Warp.
+rational-function fits with an error guaranteed at their data points. Pure NumPy/SciPy; never imports Warp.
 
 Sub-packages: :mod:`fit.formats` (measured-BRDF files and types), :mod:`fit.projection`,
 :mod:`fit.rational` (rational functions, the interval fitter, coefficient files, ``fit_brdf``),

@@ -1,5 +1,6 @@
-"""Rational functions with a guaranteed error: the basis, Q > 0 certificates, the interval
-fitter, the models and their coefficient files, and the fit of a measured BRDF.
+"""Rational functions with an error guaranteed at their data points: the basis, Q > 0
+certificates, the interval fitter, the models and their coefficient files, and the fit of a
+measured BRDF.
 
 * :mod:`fit.rational.basis`: exponent lists and the tensor Chebyshev basis;
 * :mod:`fit.rational.bernstein`: Bernstein forms, subdivision, Q > 0 certificates;

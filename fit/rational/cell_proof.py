@@ -50,8 +50,9 @@ class ProvedBound:
     def status(self) -> str:
         """``"proved"`` where ``proved`` is within the tolerance; otherwise ``"verified only: "``
         and why: Q's coefficients inconclusive, the error observed already above the tolerance
-        (the fit's own error between the nodes: only another fit lowers it), or the proof's budget
-        spent above the tolerance while every error observed is within it."""
+        (the fit's own error between the nodes: only another fit lowers it), or the proof ended
+        above the tolerance (its cells within ``gap`` of the largest error seen, or its budget
+        spent) while every error observed is within it."""
         if self.proved is not None and self.proved <= self.tolerance:
             return "proved"
         if self.proved is None:
@@ -59,8 +60,9 @@ class ProvedBound:
         if self.verified > self.tolerance:
             return (f"verified only: the fit's error between the nodes, {100 * self.verified:.3g} % at a cell "
                     f"centre, is above the tolerance")
-        return (f"verified only: the proof's budget ({self.cells} cells) ended at {100 * self.proved:.3g} % "
-                f"with every error seen within the tolerance")
+        return (f"verified only: the proof ended at {100 * self.proved:.3g} % (within its gap of the largest "
+                f"error seen, {100 * self.verified:.3g} %, or at its budget of {self.cells} cells), every error "
+                f"seen within the tolerance")
 
     def record(self) -> dict:
         """The coefficient file's ``bound`` record of this piece and channel (JSON values)."""

@@ -1,4 +1,4 @@
-"""Interval-constraint rational fitting with a guaranteed error (linear programming).
+"""Interval-constraint rational fitting (linear programming), its error guaranteed at the data points.
 
 Given points ``x_i`` and intervals ``[l_i, u_i]`` (from a tolerance or a cluster spread), find
 ``R = P / Q`` in the Chebyshev basis (:mod:`fit.rational.function`) with
