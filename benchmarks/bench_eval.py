@@ -5,7 +5,8 @@ Materials (all of one RGL measurement, ``--material``, default ``satin_rosaline`
 
 * ``rational 2-D``: a 5 % 2-D fit (``--fit2d``; default the shipped
   ``warp_rbrdf/data/<material>_rgb.json``), as the renderer evaluates it (code specialised to
-  the fit's degree classes, :mod:`warp_rbrdf.materials.rational_kernel`);
+  the fit's degree classes, :mod:`warp_rbrdf.materials.rational_kernel`; a fit of at most four
+  (theta_h, theta_d) boxes from its flat record, :mod:`warp_rbrdf.materials.rational_flat2d`);
 * ``rational 3-D``: a 3-D fit (``--fit3d``: a coefficient file of ``fit.rational.fit3d``, e.g.
   one ``benchmarks/bench_fit_accuracy.py`` writes; without one, a stand-in of random positive
   coefficients in the four-piece layout of ``fit.rational.fit3d.VARIANTS[0]``: same pieces and

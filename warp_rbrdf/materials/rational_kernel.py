@@ -15,7 +15,10 @@ from the float32 shading frame.
   class's generated code, any other by the packed form; steps 5-7 run on the three channels at
   once (:mod:`.rational_channels`: one vector, ``exp`` inline). The renderer builds it for the
   classes of a scene's fits (:func:`.rational.kernel_eval`), so a new fit compiles only when it
-  brings a class no compiled kernel has. It computes only the angles a fit reads: theta_h and
+  brings a class no compiled kernel has. A fit with a flat record (at most four (theta_h,
+  theta_d) boxes, :mod:`.rational_records`) is evaluated from it by one native function without
+  a walk or ``atan2`` (:mod:`.rational_flat2d`); any other walks the records. The walk computes
+  only the angles a fit reads: theta_h and
   theta_d by the float32 operations of :func:`.frame.half_diff` with the inline
   :func:`warp_rbrdf.fastmath.atan2` for libm's ``atan2f`` (a call costs about 20 ns; the
   angles differ by at most 3 float32 ulps), ``phi_d`` only where a split or a leaf reads it,
