@@ -263,3 +263,20 @@ def test_relative_form_of_a_log_fit_is_tighter_and_still_above_the_true_error():
     rel = _prove(model, axes, values, True, max_rounds=0)
     absolute = _prove(model, axes, values, False, max_rounds=0)
     assert observed <= rel.proved < 0.6 * absolute.proved, (observed, rel.proved, absolute.proved)
+
+
+def test_status_says_proved_or_verified_only_and_why():
+    """``ProvedBound.status``: "proved" only within the tolerance; otherwise "verified only" with
+    the reason, and ``summary`` lists exactly those pieces and channels."""
+    from fit.rational.proved_bound import ProvedBound, summary
+
+    def b(proved, verified, piece=0):
+        return ProvedBound(piece, "R", proved, 0.5, verified, 10, 0.05, "", 5, 0.1)
+    ok, real, gap, none = b(0.049, 0.04), b(0.3, 0.2, 1), b(0.052, 0.049, 2), b(None, 0.01, 3)
+    assert ok.status == "proved"
+    assert real.status.startswith("verified only: the fit's error between the nodes, 20 %")
+    assert gap.status.startswith("verified only: the proof ended at 5.2 %")
+    assert none.status.startswith("verified only: Q's")
+    s = summary([ok, real, gap, none])
+    assert s["proved"] is None and len(s["verified_only"]) == 3
+    assert [v.split(":")[0] for v in s["verified_only"]] == ["piece 1 R", "piece 2 R", "piece 3 R"]
