@@ -151,13 +151,9 @@ def _joint_bound(leaf, c: int, enc, t_lo, t_hi, m, s0, s_lo):
     axis); then ``(g - m) / u = (e^d - 1) (m + o) / u``, and ``(m + o) / max(m, s0)`` is largest at
     ``m = s0`` and smallest at an end of ``[m_lo, m_hi]``, so the relative error is bounded
     without the variation of m over the cell. The clamps ``clip(g, L, U)`` (:func:`_clamps`)
-    only move the output towards ``[L, U]``: ``(L - m) / u`` and ``(U - m) / u`` decrease with m
-    (L, U >= 0)."""
+    only move the output towards ``[L, U]``."""
     m_lo, m_hi = m.min(axis=1), m.max(axis=1)
-    if s0 is None:
-        u_lo = u_hi = s_lo
-    else:
-        u_lo, u_hi = np.maximum(m_lo, s0), np.maximum(m_hi, s0)
+    u_lo = s_lo if s0 is None else np.maximum(m_lo, s0)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         if leaf.value_transform == "log":
             off = float(leaf.value_offset)
@@ -182,13 +178,11 @@ def _joint_bound(leaf, c: int, enc, t_lo, t_hi, m, s0, s_lo):
         else:
             return np.full(len(m), np.inf)
         e_hi, e_lo = e_hi + slack, e_lo - slack
+        # clip(g, L, U) - m = max(L - m, min(g - m, U - m)); over the unit (>= u_lo on the cell),
+        # (K - m) / u is at most max(K - m_lo, 0) / u_lo and at least min(K - m_hi, 0) / u_lo
         L, U = _clamps(leaf, c)
-        up = e_hi if U < 0 else np.minimum(e_hi, (U - m_lo) / u_lo)
-        if L > -np.inf:
-            up = np.maximum(up, (L - m_lo) / u_lo if L >= 0 else 0.0)
-        down = e_lo if U < 0 else np.minimum(e_lo, (U - m_hi) / u_hi)
-        if L >= 0:
-            down = np.maximum(down, (L - m_hi) / u_hi)
+        up = np.maximum(np.minimum(e_hi, np.maximum(U - m_lo, 0.0) / u_lo), np.maximum(L - m_lo, 0.0) / u_lo)
+        down = np.maximum(np.minimum(e_lo, np.minimum(U - m_hi, 0.0) / u_lo), np.minimum(L - m_hi, 0.0) / u_lo)
         bound = np.maximum(np.maximum(up, -down), 0.0)
     return np.where(np.isnan(bound), np.inf, bound)
 
