@@ -18,7 +18,7 @@ import pytest
 
 from fit.rational import albedo3d, ceiling, fit3d, ladder3d, rgl3d, select3d, verify3d
 from fit.rational.fit3d import fit_rgl_select
-from test_albedo3d import Synthetic  # the synthetic glossy lobe as an RGL-like object
+from test_albedo3d import Synthetic, small_policy  # the synthetic glossy lobe as an RGL-like object
 
 
 #: every module of the 3-D fits that reads the clock
@@ -31,7 +31,11 @@ FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "tol": 0.01, "v
 
 
 def select(**kw):
-    return fit_rgl_select(Synthetic(), variants=VARIANTS, **dict(FIT, **kw))
+    """The selection, its albedo policy at the default run's sizes of tests/test_albedo3d.py (the
+    budgets are counts, whatever the sizes; the policy at its own sizes: that file's ``extended``
+    tests)."""
+    with small_policy():
+        return fit_rgl_select(Synthetic(), variants=VARIANTS, **dict(FIT, **kw))
 
 
 def coefficients(res) -> np.ndarray:
@@ -95,15 +99,16 @@ def test_the_safety_ceiling_is_recorded(monkeypatch):
     assert res.info["albedo"]["stopped"] == "time" and res.info["albedo"]["rounds"] == 0
 
 
-def test_the_file_says_what_is_guaranteed_on_the_whole_domain_and_why_not_more():
+def test_the_file_says_what_is_guaranteed_on_the_whole_domain_and_why_not_more(normal):
     """``fit_info["domain"]`` (issue 25: the guarantee on the whole measured domain "or the reason it
     cannot be, per material, in the file"): proved at the data points only, with the fit's own
-    fresh-point ratio in the reason; written to the coefficient file and read back."""
+    fresh-point ratio in the reason; written to the coefficient file and read back (the
+    module's selection, the one the tests above repeat)."""
     import json
 
     from fit.rational.coefficient_file import load, save
 
-    res = select()
+    res = normal
     fi = res.model.fit_info
     d = fi["domain"]
     assert d["proved"] is False and d["proved_at"] == "data points"
