@@ -78,11 +78,11 @@ def test_stored_pieces_read_without_rebuild_or_scipy(fit3d, tmp_path):
     import subprocess
     import sys
 
-    from fit.sampling import pieces
+    from fit.sampling import cdf_reader, pieces
 
     path, model, cdf = fit3d
     rec = load(path).sampler
-    assert set(rec["pieces"]["knots"]) == set(pieces.KNOT_KEYS)
+    assert set(rec["pieces"]["knots"]) == set(cdf_reader.KNOT_KEYS)
     stored = embedded.read(load(path), path).maps
     rebuilt = pieces.build_pieces(cdf.table, cdf.maps.n_mu, cdf.maps.n_u, cdf.maps.row_ok, cdf.maps.flat_end)
     for a in ("theta", "phi", "theta_knots", "row_ok", "flat_end"):

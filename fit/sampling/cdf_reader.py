@@ -2,7 +2,7 @@
 (:mod:`fit.limits`: the tables' shapes and strictly increasing CDFs, the pieces' sizes before they
 are rebuilt, :func:`check_pieces_size`), the pieces rebuilt from the table and verified (or, where
 the record stores their knots and slopes, ``pieces.knots`` as a fit's sampler record does, made
-from those and their structure checked: :func:`fit.sampling.pieces.check_pieces`), a global
+from those and their structure checked: :func:`check_pieces`), a global
 layout's verification run again rather than read from the file; files of the removed per-row
 layout (``"layout": "rows"``) refused. Every problem is one :class:`fit.errors.BRDFFileError`
 line naming the file and the key (docs/robustness.md). Reading a pieces-layout or table-only
@@ -20,8 +20,40 @@ from ..inputs import read_json
 from ..limits import MAX_CDF_PHI_PIECES, MAX_CDF_PIECES, MAX_CDF_ROWS, check_memory
 from . import binary_arrays
 from .cdf_fit import FORMAT, VERSION, CDFFit
-from .pieces import KNOT_KEYS, PieceMaps, knot_shapes
+from .pieces import PieceMaps, pieces_from_knots, verify_pieces
 from .table import CDFTable, check_table_size
+
+
+#: The knots and slopes of the pieces (:func:`fit.sampling.pieces.piece_knots`), with their shapes for ``n_v`` rows,
+#: ``n_mu`` theta and ``n_u`` phi pieces: ``theta`` the knots theta_l (rad) at mu = k / n_mu,
+#: ``theta_slopes`` their slopes d theta_l / dmu, ``end_slopes`` the slopes d y / dmu in
+#: y = sin^2(theta_l) (the end pieces; 0 at the last knot of a ``flat_end`` row), ``phi`` the
+#: knots |phi_l| (rad) at u = j / n_u per theta piece and ``phi_slopes`` their slopes.
+KNOT_KEYS = ("theta", "theta_slopes", "end_slopes", "phi", "phi_slopes")
+
+
+def knot_shapes(n_v: int, n_mu: int, n_u: int) -> dict:
+    """The shape of each array of :data:`KNOT_KEYS`."""
+    t = (n_v, n_mu + 1)
+    p = (n_v, n_mu, n_u + 1)
+    return {"theta": t, "theta_slopes": t, "end_slopes": t, "phi": p, "phi_slopes": p}
+
+
+#: The largest slope ratio ``a0``, ``a1`` (knot slope / the piece's secant slope) of a piece made
+#: from PCHIP slopes: Fritsch-Carlson slopes are at most 3x the secant of either side (SciPy's
+#: end slopes included), so a stored piece above it was not made by :func:`fit.sampling.pieces.piece_knots`; the bound
+#: also keeps every value and derivative finite (:func:`check_pieces`). The margin is rounding.
+MAX_SLOPE_RATIO = 3.0 + 1e-9
+
+
+def check_pieces(pm: PieceMaps) -> dict:
+    """The structural check of pieces made from stored knots (:func:`fit.sampling.pieces.pieces_from_knots`), as
+    :func:`fit.sampling.pieces.verify_pieces` returns it, without evaluating a piece: h >= 0 and
+    0 <= a0, a1 <= :data:`MAX_SLOPE_RATIO` (every piece monotone, finite, without a pole: the
+    denominator 1 + (a0 + a1 - 2) x(1 - x) lies in [1/2, 2]), pieces that meet (continuous)
+    and the ends 0 and pi/2 (theta) / 0 and pi (phi) (normalised). That is what the sampled
+    checks of :func:`fit.sampling.pieces.verify_pieces` test at points; it costs one pass over the coefficients."""
+    return verify_pieces(pm, n_check=0, max_slope_ratio=MAX_SLOPE_RATIO)
 
 
 def check_pieces_size(n_v: int, n_t: int, n_p: int, n_mu: int, n_u: int) -> None:
@@ -143,16 +175,18 @@ def _pieces_from_dict(pd, table: CDFTable, key: str = "pieces") -> PieceMaps:
         out["flat_end"] = F.array(pd["flat_end"], F.sub(key, "flat_end"), (table.n_v,), kind="bool").tolist()
     if pd.get("knots") is None:
         return PieceMaps.from_dict(out, table)          # rebuilt from the table and verified
-    out["knots"] = _knots_from_dict(pd["knots"], F.sub(key, "knots"), table.n_v, n_mu, n_u, out.get("flat_end"))
-    try:
-        return PieceMaps.from_dict(out, table)          # made from the knots, their structure checked
-    except ValueError as e:
-        raise F.Invalid(F.sub(key, "knots"), str(e)) from None
+    knots = _knots_from_dict(pd["knots"], F.sub(key, "knots"), table.n_v, n_mu, n_u, out.get("flat_end"))
+    pm = pieces_from_knots(knots, row_ok=out["row_ok"], flat_end=out.get("flat_end"))
+    bad = ~np.asarray(check_pieces(pm)["rows"]) & pm.row_ok
+    if bad.any():
+        raise F.Invalid(F.sub(key, "knots"), f"stored pieces of rows {np.flatnonzero(bad).tolist()} fail the "
+                                             "check (not monotone, finite and normalised)")
+    return pm
 
 
 def _knots_from_dict(kd, key: str, n_v: int, n_mu: int, n_u: int, flat_end) -> dict:
     """The ``pieces.knots`` record (a fit's sampler record: the knots and slopes of the pieces,
-    :data:`fit.sampling.pieces.KNOT_KEYS`): every array of its shape (sizes checked before
+    :data:`KNOT_KEYS`): every array of its shape (sizes checked before
     decoding), finite; the knots of every map from exactly 0 to pi/2 (theta) or pi (phi), as
     :func:`fit.sampling.pieces.piece_knots` makes them; a ``flat_end`` row's last end slope 0."""
     F.obj(kd, key)

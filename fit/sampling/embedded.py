@@ -8,7 +8,7 @@ an ``rbrdf-cdf`` object (:meth:`fit.sampling.cdf_fit.CDFFit.to_dict`: table para
 layout and its maps, verification, fallback flag and reason) whose two CDF arrays
 ``table_data.cdf_theta`` (n_v, n_t + 1) and ``table_data.cdf_phi`` (n_v, n_t, n_p + 1) are
 encoded arrays (:mod:`fit.sampling.binary_arrays`: base64 of little-endian float64); a pieces
-layout also stores its knots and slopes, ``pieces.knots`` (:data:`fit.sampling.pieces.KNOT_KEYS`,
+layout also stores its knots and slopes, ``pieces.knots`` (:data:`fit.sampling.cdf_reader.KNOT_KEYS`,
 encoded the same way: what a load would otherwise rebuild from the table with SciPy), plus
 
 * ``fit_sha256``: :func:`fit.rational.coefficient_format.content_sha256` of the file without
@@ -21,7 +21,7 @@ encoded the same way: what a load would otherwise rebuild from the table with Sc
 Reading (:func:`read`) checks the digest, then every value as an ``rbrdf-cdf`` file is checked
 (:func:`fit.sampling.cdf_reader.from_dict`: sizes within :mod:`fit.limits` before anything is
 decoded, strictly increasing CDFs, the pieces made from the stored knots and their structure
-checked (:func:`fit.sampling.pieces.check_pieces`: finite, monotone, continuous, normalised), a
+checked (:func:`fit.sampling.cdf_reader.check_pieces`: finite, monotone, continuous, normalised), a
 global layout verified again); a record without ``pieces.knots`` (written before they were
 stored) has its pieces rebuilt from the table and verified, as an ``rbrdf-cdf`` file. A renderer
 that needs only the table reads only the table (``maps=False``). Every problem is one
@@ -38,8 +38,8 @@ from ..rational.coefficient_format import SAMPLER_KEY, content_sha256
 from ..rational.coefficient_writer import jsonable, to_dict
 from . import binary_arrays
 from .cdf_fit import FORMAT, VERSION, CDFFit
-from .cdf_reader import from_dict, table_from_dict
-from .pieces import KNOT_KEYS, PieceMaps, piece_knots
+from .cdf_reader import KNOT_KEYS, from_dict, table_from_dict
+from .pieces import PieceMaps, piece_knots
 from .table import CDFTable
 
 KEY = SAMPLER_KEY

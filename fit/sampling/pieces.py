@@ -74,10 +74,10 @@ Storage: the pieces are a deterministic function of the table and ``(n_mu, n_u)`
 ``rbrdf-cdf`` file stores the table, ``n_mu``, ``n_u`` and the per-row decisions, and
 :func:`build_pieces` recomputes the coefficients on load, then :func:`verify_pieces` checks them.
 A fit's sampler record (:mod:`fit.sampling.embedded`) stores the knots and slopes as well
-(:func:`piece_knots`, :data:`KNOT_KEYS`): its load makes the pieces from them
+(:func:`piece_knots`; :data:`fit.sampling.cdf_reader.KNOT_KEYS`): its load makes the pieces from them
 (:func:`pieces_from_knots`: elementwise, no SciPy, the same floats as a rebuild) and checks their
-structure (:func:`check_pieces`: finite, monotone, continuous, normalised, slopes within the
-PCHIP bound), with no rebuild and no sampled verification.
+structure (:func:`fit.sampling.cdf_reader.check_pieces`), with no rebuild and no sampled
+verification.
 """
 from __future__ import annotations
 
@@ -195,24 +195,14 @@ class PieceMaps:
 
     @classmethod
     def from_dict(cls, pd: dict, table: CDFTable) -> "PieceMaps":
-        """The pieces of a CDF file's ``pieces`` entry: made from its ``knots`` (the arrays of
-        :data:`KNOT_KEYS`, already read and of the right shapes) and checked
-        (:func:`check_pieces`) when it has them, else rebuilt from the table and verified
-        (:func:`verify_pieces`); ValueError when the row flags do not fit the table or a
-        rational row's pieces fail the check."""
+        """Rebuild the pieces of a CDF file's ``pieces`` entry from its table; ValueError when
+        the row flags do not fit the table or a rational row's pieces fail verification (stored
+        knots are read by :mod:`fit.sampling.cdf_reader`)."""
         if len(pd["row_ok"]) != table.n_v:
             raise ValueError(f"{len(pd['row_ok'])} row flags for {table.n_v} table rows")
         flat = pd.get("flat_end")
         if flat is not None and len(flat) != table.n_v:
             raise ValueError(f"{len(flat)} flat_end flags for {table.n_v} table rows")
-        knots = pd.get("knots")
-        if knots is not None:
-            pm = pieces_from_knots(knots, row_ok=pd["row_ok"], flat_end=flat)
-            bad = ~np.asarray(check_pieces(pm)["rows"]) & pm.row_ok
-            if bad.any():
-                raise ValueError(f"stored pieces of rows {np.flatnonzero(bad).tolist()} fail the check "
-                                 "(not monotone, finite and normalised)")
-            return pm
         pm = build_pieces(table, int(pd["n_mu"]), int(pd["n_u"]), row_ok=pd["row_ok"], flat_end=flat)
         bad = ~np.asarray(verify_pieces(pm)["rows"]) & pm.row_ok
         if bad.any():
@@ -272,23 +262,9 @@ def _pchip_slopes(y: np.ndarray) -> np.ndarray:
     return PchipInterpolator(t, y, axis=-1)(t, 1)
 
 
-#: The knots and slopes of the pieces (:func:`piece_knots`), with their shapes for ``n_v`` rows,
-#: ``n_mu`` theta and ``n_u`` phi pieces: ``theta`` the knots theta_l (rad) at mu = k / n_mu,
-#: ``theta_slopes`` their slopes d theta_l / dmu, ``end_slopes`` the slopes d y / dmu in
-#: y = sin^2(theta_l) (the end pieces; 0 at the last knot of a ``flat_end`` row), ``phi`` the
-#: knots |phi_l| (rad) at u = j / n_u per theta piece and ``phi_slopes`` their slopes.
-KNOT_KEYS = ("theta", "theta_slopes", "end_slopes", "phi", "phi_slopes")
-
-
-def knot_shapes(n_v: int, n_mu: int, n_u: int) -> dict:
-    """The shape of each array of :data:`KNOT_KEYS`."""
-    t = (n_v, n_mu + 1)
-    p = (n_v, n_mu, n_u + 1)
-    return {"theta": t, "theta_slopes": t, "end_slopes": t, "phi": p, "phi_slopes": p}
-
-
 def piece_knots(table: CDFTable, n_mu: int, n_u: int, flat_end=None) -> dict:
-    """The knots and slopes (:data:`KNOT_KEYS`) of the pieces of every row of ``table``: the
+    """The knots and slopes of the pieces (``theta``: theta_l at mu = k / n_mu, ``theta_slopes``,
+    ``end_slopes`` in y = sin^2 theta_l, ``phi`` per theta piece, ``phi_slopes``) of every row of ``table``: the
     table's inverse CDFs at the knots and SciPy's PCHIP slopes (``flat_end``: rows whose last
     theta knot has slope 0 in y, all False unless given). :func:`pieces_from_knots` makes the
     pieces from them."""
@@ -351,13 +327,6 @@ def _mixed_phi_cdf(table: CDFTable, knots: np.ndarray) -> np.ndarray:
     return cdf
 
 
-#: The largest slope ratio ``a0``, ``a1`` (knot slope / the piece's secant slope) of a piece made
-#: from PCHIP slopes: Fritsch-Carlson slopes are at most 3x the secant of either side (SciPy's
-#: end slopes included), so a stored piece above it was not made by :func:`piece_knots`; the bound
-#: also keeps every value and derivative finite (:func:`check_pieces`). The margin is rounding.
-MAX_SLOPE_RATIO = 3.0 + 1e-9
-
-
 def verify_pieces(pm: PieceMaps, n_check: int = 9, max_slope_ratio: float | None = None) -> dict:
     """Checks of the construction's guarantees, per row: every piece has h >= 0, a0, a1 >= 0
     (so monotone, denominator >= 1/2: no pole), consecutive pieces meet (continuity), the
@@ -394,16 +363,6 @@ def verify_pieces(pm: PieceMaps, n_check: int = 9, max_slope_ratio: float | None
     rows = ~(bt | bp)
     return {"ok": bool(rows.all()), "rows": rows.tolist(),
             "failures": {"theta": np.flatnonzero(bt).tolist(), "phi": np.flatnonzero(bp).tolist()}}
-
-
-def check_pieces(pm: PieceMaps) -> dict:
-    """The structural check of pieces made from stored knots (:func:`pieces_from_knots`), as
-    :func:`verify_pieces` returns it, without evaluating a piece: h >= 0 and
-    0 <= a0, a1 <= :data:`MAX_SLOPE_RATIO` (every piece monotone, finite, without a pole: the
-    denominator 1 + (a0 + a1 - 2) x(1 - x) lies in [1/2, 2]), pieces that meet (continuous)
-    and the ends 0 and pi/2 (theta) / 0 and pi (phi) (normalised). That is what the sampled
-    checks of :func:`verify_pieces` test at points; it costs one pass over the coefficients."""
-    return verify_pieces(pm, n_check=0, max_slope_ratio=MAX_SLOPE_RATIO)
 
 
 def sample_pieces(table: CDFTable, pm: PieceMaps, theta_v, mu, tau):
