@@ -6,8 +6,8 @@ own command line, in a child process.
   ``rbrdf-fit brdf FILE --model 2d --tol 0.05 --out <that cache file>`` (the command's defaults:
   the fit :mod:`studies.fits` makes, with the fit's own inverse CDFs stored in the file).
 * 3-D (``rational-3d``): ``rbrdf-fit brdf FILE --model 3d --out OUT`` with every default
-  (``--layout select``, ``--tol 0.01``, ``--time-limit 120``: docs/fitting.md, "The 3-D
-  method"), cached as ``results/chart/fits/<stem>_3d_<key>.json`` where ``key`` is the first 12
+  (``--layout select``, ``--tol 0.01``, no wall-clock limit, so a fit does not depend on the
+  machine's load: docs/fitting.md, "The 3-D method"), cached as ``results/chart/fits/<stem>_3d_<key>.json`` where ``key`` is the first 12
   hex digits of the SHA-256 of the measured file's SHA-256 and the command's flags: a new
   file or other flags make a new fit, the same ones reuse it.
 
