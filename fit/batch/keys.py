@@ -58,7 +58,7 @@ class SamplerOptions:
     ``time_limit_s`` bounds making them (None: no limit; the table is always completed, rows
     not verified by then are sampled with the table)."""
 
-    time_limit_s: float | None = 60.0
+    time_limit_s: float | None = None
 
 
 @dataclass(frozen=True)

@@ -121,7 +121,7 @@ def fit_database(inputs, out, tols=(0.05,), *, cdf: bool = True, brdf_options: d
     (:func:`fit.fit_cdf`; ``cdf_options``: :class:`fit.batch.keys.CdfOptions` fields, defaults
     those of ``rbrdf-fit cdf``); ``sampler``: store the fit's own inverse CDFs in each BRDF
     output, as ``rbrdf-fit brdf`` does (:func:`fit.sampling.model_sampler.embed_sampler`;
-    ``sampler_time_limit_s``: its bound, default 60 s as ``--sampler-time-limit``, None: no
+    ``sampler_time_limit_s``: its wall-clock bound, default None (none) as ``--sampler-time-limit``, None: no
     limit). ``workers``: local worker processes (default: one per core);
     ``scheduler``: address of a running scheduler instead (``workers`` ignored;
     :mod:`fit.batch.scheduler`: checked before anything is read, reached within

@@ -53,8 +53,10 @@ def _check_sizes(args) -> None:
         raise FlagError("--n-v/--n-t/--n-p", str(e)) from None
 
 
-#: Default bound (s) on making the sampler a fit carries at the end of ``rbrdf-fit brdf``.
-SAMPLER_TIME_LIMIT_S = 60.0
+#: Default bound (s) on making the sampler a fit carries at the end of ``rbrdf-fit brdf``: 0,
+#: none, so that the file written does not depend on the machine's load (a wall-clock bound
+#: decides which view rows are verified rational and which are sampled with the table).
+SAMPLER_TIME_LIMIT_S = 0.0
 
 
 def add_sampler_flags(p) -> None:
@@ -64,9 +66,9 @@ def add_sampler_flags(p) -> None:
                         "tabulates them at load; `rbrdf-fit cdf FIT.json --out FIT.json` adds them later)")
     p.add_argument("--sampler-time-limit", dest="sampler_time_limit", type=number(0.0, MAX_TIME_LIMIT_S),
                    default=SAMPLER_TIME_LIMIT_S, metavar="S",
-                   help=f"bound on making the fit's inverse CDFs in seconds (default {SAMPLER_TIME_LIMIT_S:g}; "
-                        "0: none): the table is always completed; view rows not verified by then are "
-                        "sampled with the table")
+                   help="a wall-clock bound on making the fit's inverse CDFs in seconds, your choice "
+                        "(default: none; 0: none): the table is always completed; view rows not verified "
+                        "by then are sampled with the table, so the file then depends on the machine's load")
 
 
 def attach_sampler(model, args, progress=None) -> str:
