@@ -149,7 +149,7 @@ def make_scene(geometry: str, light: str, material: MaterialSpec, resolution: in
 
 _TABLES: dict = {}
 _FITS: dict = {}
-CDF_TIME_LIMIT_S: float | None = None   # bound on each rational CDF fit (None: fit_cdf's default)
+CDF_TIME_LIMIT_S: float | None = None   # bound on each rational CDF fit (s; None: fit_cdf's default; 0: none)
 CDF_PIECES_KW: dict | None = None       # pieces layout options of the fits (None: fit_cdf's defaults)
 #: Pieces layout options of the smoke-size presets: one phi-piece count and no re-measurement of
 #: the variance gate's borderline rows (fit.sampling.variance_gate.fit_pieces). On the failure
@@ -178,7 +178,7 @@ def cdf_for(spec: MaterialSpec, rational: bool):
         return _TABLES[key][0]
     fit_key = key + (CDF_TIME_LIMIT_S, repr(sorted((CDF_PIECES_KW or {}).items())))
     if fit_key not in _FITS:
-        kw = {} if CDF_TIME_LIMIT_S is None else {"time_limit_s": CDF_TIME_LIMIT_S}
+        kw = {} if CDF_TIME_LIMIT_S is None else {"time_limit_s": CDF_TIME_LIMIT_S or None}
         _FITS[fit_key] = fit_cdf(evaluate, name=spec.name, table=_TABLES[key][0].table,
                                  pieces_kw=CDF_PIECES_KW, **kw)
     return _FITS[fit_key]
