@@ -200,7 +200,7 @@ def test_batch_stores_the_fits_own_sampler(materials, tmp_path):
 
     out = tmp_path / "out"
     one = [materials / "a_lambert.binary"]
-    kw = dict(FAST_KW, cdf=False, sampler=True, sampler_time_limit_s=10.0)
+    kw = dict(FAST_KW, cdf=False, sampler=True, sampler_time_limit_s=1.0)
     report = fit_database(one, out, workers=1, progress=False, **kw)
     assert report.counts == {"done": 1, "skipped": 0, "failed": 0}, report.rows
     (path,) = (out / "a_lambert").glob("brdf-*[0-9a-f].json")
@@ -213,12 +213,12 @@ def test_batch_stores_the_fits_own_sampler(materials, tmp_path):
     rows = int((cdf.fit_info or {}).get("verified_rows", 0))
     assert cell == (f"rational {rows}/32" if not cdf.fallback else "table"), cell
     manifest = json.loads(path.with_name(path.name[:-5] + ".manifest.json").read_text())
-    assert manifest["options"]["sampler"] == {"time_limit_s": 10.0}
+    assert manifest["options"]["sampler"] == {"time_limit_s": 1.0}
     assert manifest["record"]["sampler"] in ("rational", "table")
     sha = manifest["input"]["sha256"]
     bo = BrdfOptions(tol=0.2, core_theta_d_deg=78.5)
-    assert path.name.endswith(brdf_key(sha, bo, SamplerOptions(10.0)) + ".json")
-    assert brdf_key(sha, bo, SamplerOptions(10.0)) != brdf_key(sha, bo) != brdf_key(sha, bo, SamplerOptions())
+    assert path.name.endswith(brdf_key(sha, bo, SamplerOptions(1.0)) + ".json")
+    assert brdf_key(sha, bo, SamplerOptions(1.0)) != brdf_key(sha, bo) != brdf_key(sha, bo, SamplerOptions())
 
     bare = fit_database(one, out, workers=1, progress=False, **dict(kw, sampler=False))
     assert bare.counts == {"done": 1, "skipped": 0, "failed": 0} and bare["sampler"] == [None]
