@@ -36,3 +36,18 @@ def glossy_lobe(exponent=80.0, kd=(0.05, 0.04, 0.03), ks=(0.6, 0.7, 0.8), phi_mo
         return (kd + ks * lobe[..., None]) * mod[..., None]
 
     return f
+
+
+class RGLLike:
+    """An analytic BRDF dressed as a read RGL file for the 3-D fitter (``fit_rgl``,
+    ``fit_rgl_select``, ``albedo_policy``): ``evaluate(wi, wo)`` (1/sr, RGB, (..., 3); the file's
+    roles: ``wi`` the light), ``name``, the last measured incidence ``theta_i_max`` (radians,
+    from ``theta_i_max_deg``) and no source file (``source``, ``source_sha256`` empty)."""
+
+    source = ""
+    source_sha256 = ""
+
+    def __init__(self, evaluate, name: str, theta_i_max_deg: float = 80.0):
+        self.evaluate = evaluate
+        self.name = name
+        self.theta_i_max = np.radians(theta_i_max_deg)

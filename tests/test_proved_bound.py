@@ -9,6 +9,7 @@ import pytest
 from fit.rational.function import RationalFunction
 from fit.rational.model import RationalModel, Variable
 from fit.rational.proved_bound import _grid_cells, _multilinear, prove_cells
+from lab.analytic import RGLLike
 
 
 def _model(value_transform="linear"):
@@ -118,24 +119,16 @@ def test_reader_checks_the_bound_records():
             from_dict(bad)
 
 
-class _Lobe3D:
-    """An RGL-like measurement (``evaluate(wi, wo)`` in 1/sr, the last incidence): a diffuse
-    base and a broad lobe in theta_h that depends on phi_d, not reciprocal."""
+def _broad_lobe(wi, wo):
+    """A diffuse base and a broad lobe in theta_h that depends on phi_d, not reciprocal (1/sr, RGB)."""
+    from fit.rational.variables3d import half_diff_3d
 
-    name = "broad_lobe"
-    source = ""
-    source_sha256 = ""
-    theta_i_max = np.radians(80.0)
-
-    def evaluate(self, wi, wo):
-        from fit.rational.variables3d import half_diff_3d
-
-        X = half_diff_3d(wi, wo)
-        th, td, pd = X[..., 0], X[..., 1], X[..., 2]
-        spec = 1.5 * np.exp(-(th / 0.45) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + np.sin(td) ** 2)
-        out = np.array([0.1, 0.15, 0.2]) + spec[..., None] * [1.0, 0.9, 0.8]
-        above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
-        return np.where(above[..., None], out, 0.0)
+    X = half_diff_3d(wi, wo)
+    th, td, pd = X[..., 0], X[..., 1], X[..., 2]
+    spec = 1.5 * np.exp(-(th / 0.45) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + np.sin(td) ** 2)
+    out = np.array([0.1, 0.15, 0.2]) + spec[..., None] * [1.0, 0.9, 0.8]
+    above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
+    return np.where(above[..., None], out, 0.0)
 
 
 def _brute_force_3d(res, brdf, n=100000, seed=11, grazing=False):
@@ -177,7 +170,7 @@ def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
     from fit.rational.fit3d import fit_rgl
     from fit.rational.proved_bound import prove_fit3d
 
-    brdf = _Lobe3D()
+    brdf = RGLLike(_broad_lobe, "broad_lobe")
     fit = dict(grid=(9, 8, 6), n_random=300, n_objective=0, verify=0, degrees=(4, 2), theta_h_edges=[0.3],
                tol=0.05, time_limit=60.0, albedo=False)
     res = fit_rgl(brdf, prove_bound=True, **fit)

@@ -42,7 +42,7 @@ class Ceiling:
     def of(cls, settings) -> "Ceiling":
         """The ceiling of a :class:`fit.rational.settings.Fit3DSettings` (``time_limit``,
         ``wall_limit``)."""
-        return cls(settings.time_limit, getattr(settings, "wall_limit", None))
+        return cls(settings.time_limit, settings.wall_limit)
 
     def _passed(self, share: float) -> str | None:
         if self.time_limit is not None and time.process_time() - self.c0 > share * self.time_limit:
