@@ -85,12 +85,12 @@ class Case:
         self.renderer = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
         self._draws, self._probs = {}, {}
 
-    def spec(self, sampler: str, cdf=None):
-        """A fresh scene material ``m`` of this case with ``sampler`` and inverse-CDF data
+    def spec(self, sampler: str, cdf=None, name: str = "m"):
+        """A fresh scene material ``name`` of this case with ``sampler`` and inverse-CDF data
         ``cdf`` (None: none given)."""
         from warp_rbrdf.scene import MaterialSpec
 
-        spec = MaterialSpec(name="m", sampler=sampler, **self.spec_kw)
+        spec = MaterialSpec(name=name, sampler=sampler, **self.spec_kw)
         spec.cdf = cdf
         return spec
 
@@ -277,26 +277,44 @@ MIS_THETA_V_DEG = 50.0
 MIS_SPP = 4096
 
 
-def _furnace_render(case, strategy, theta_v_deg=MIS_THETA_V_DEG, spp=MIS_SPP):
-    """Render the case's material on a plane under a unit constant environment with its
-    scene ``sampler = strategy``, seen from ``theta_v_deg`` through a 1 deg field of view (every
-    pixel sees the same view within 0.5 deg): ``(luminance of the image mean, its standard
-    error)``, the estimate of the integral of f cos over the light."""
+@pytest.fixture(scope="module")
+def furnace_cases(request):
+    """``{strategy: case}`` for every MIS strategy (:func:`_first_case`): every furnace scene
+    holds all of them, so that their renders share one render kernel (a kernel per material
+    kind and technique set, compiled on first use)."""
+    return {s: _case(request, _first_case(s)) for s in MIS_STRATEGIES}
+
+
+def _furnace_render(cases, strategy, theta_v_deg=MIS_THETA_V_DEG, spp=MIS_SPP):
+    """Render the material of ``cases[strategy]`` on a plane under a unit constant environment
+    with its scene ``sampler = strategy``, seen from ``theta_v_deg`` through a 1 deg field of
+    view (every pixel sees the same view within 0.5 deg): ``(luminance of the image mean, its
+    standard error)``, the estimate of the integral of f cos over the light. The other cases'
+    materials (each with its own strategy) lie on small planes below the lit plane, where no
+    path reaches them: every scene of :func:`furnace_cases` uses the same kinds and techniques."""
     from fit.formats.colour import LUMINANCE
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import CameraSpec, IntegratorSpec, Scene, ShapeSpec
 
-    cdf = None if registry.technique(registry.strategy(strategy).technique).material else case.cdf
+    def material(s):
+        own = registry.technique(registry.strategy(s).technique).material
+        return cases[s].spec(s, None if own else cases[s].cdf, name=s)
+
     tv = np.radians(theta_v_deg)
     cam = CameraSpec(origin=(0.0, np.cos(tv), np.sin(tv)), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
                      fov=1.0, resolution=(4, 4))
+    others = [s for s in cases if s != strategy]
     sc = Scene(camera=cam, integrator=IntegratorSpec(spp=spp, seed=1, tile_size=8),
-               materials={"m": case.spec(strategy, cdf)},
-               shapes=[ShapeSpec(type="plane", material="m", size=(100.0, 100.0))],
+               materials={s: material(s) for s in cases},
+               shapes=[ShapeSpec(type="plane", material=strategy, size=(100.0, 100.0))]
+               + [ShapeSpec(type="plane", material=s, center=(3.0 * k, -10.0, 0.0), size=(1.0, 1.0))
+                  for k, s in enumerate(others)],
                lights=[T.constant_env(1.0)],
                path="<test scene>")
     r = Renderer(sc)
-    assert r.material_data.strategies == [strategy]   # no fallback: the strategy itself renders
+    # no fallback: each material renders with its own strategy
+    assert r.material_data.strategies[r.material_index(strategy)] == strategy
+    assert [r.material_data.strategies[r.material_index(s)] for s in cases] == list(cases)
     img, var = r.render(return_variance=True)
     n = img.shape[0] * img.shape[1]
     se = np.sqrt(var.mean(axis=(0, 1)) / spp / n)
@@ -304,15 +322,15 @@ def _furnace_render(case, strategy, theta_v_deg=MIS_THETA_V_DEG, spp=MIS_SPP):
 
 
 @pytest.mark.parametrize("strategy", MIS_STRATEGIES)
-def test_mis_weights_sum_to_one(request, strategy):
+def test_mis_weights_sum_to_one(furnace_cases, strategy):
     """A strategy that combines the environment sample and its BSDF sample weights the two by
     the power heuristic; the combination is unbiased for every integrand exactly when the two
     weights of every direction sum to one (the same BSDF density on both sides: ``1 / weight``
     where the technique's pdf is exact, its pdf function otherwise). The render of a plane
     under a unit constant environment (both pdfs comparable over the whole hemisphere: the
     environment's is uniform) equals the quadrature of f cos within 4 standard errors."""
-    case = _case(request, _first_case(strategy))
-    m, se = _furnace_render(case, strategy)
+    case = furnace_cases[strategy]
+    m, se = _furnace_render(furnace_cases, strategy)
     q, dq = quadrature_albedo(case.evaluate, np.radians(MIS_THETA_V_DEG))
     assert abs(m - q) < 4 * se + 2 * dq + 1e-6, (strategy, case.name, m, q, se, dq)
 
@@ -334,8 +352,9 @@ def test_mis_check_catches_weights_that_do_not_sum_to_one(request, monkeypatch):
         return wp.min(1.0, 1.25 * pa * pa / (pa * pa + pb * pb))
 
     monkeypatch.setattr(integrator, "power_heuristic", broken_heuristic)
-    case = _case(request, _first_case("mis"))
-    m, se = _furnace_render(case, "mis")
+    cases = request.getfixturevalue("furnace_cases")
+    case = cases["mis"]
+    m, se = _furnace_render(cases, "mis")
     q, dq = quadrature_albedo(case.evaluate, np.radians(MIS_THETA_V_DEG))
     assert abs(m - q) > 4 * se + 2 * dq + 1e-6, (m, q, se, dq)
 
