@@ -341,8 +341,12 @@ def test_a_new_fit_compiles_nothing():
     from warp_rbrdf.scene import MaterialSpec
 
     def renderer(model):
-        spec = MaterialSpec(name="m", type="rational", data=model)
-        return Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
+        # the cosine-MIS strategy: the kernels are the fit's (the default, mis-tabulated, would
+        # tabulate each fit first; a CDF file's kernels: the test below)
+        spec = MaterialSpec(name="m", type="rational", data=model, sampler="mis")
+        r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
+        assert r.material_data.strategies == ["mis"]
+        return r
 
     first = renderer(_model("linear", 0))
     first.compile()
