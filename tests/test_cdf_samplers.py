@@ -129,27 +129,61 @@ def test_rows_layout_file_is_refused(lambert_fit, tmp_path):
 
 
 # ---- Warp ---------------------------------------------------------------------------------
-def test_warp_renders_agree(lambert_fit):
+@pytest.fixture(scope="module")
+def hidden(lambert_fit, rgl):
+    """Materials that no path reaches, added to every render of this module (:func:`_renderer`)
+    so that the renders share one render kernel (a kernel per set of material kinds and
+    techniques, compiled on first use): a Lambert material sampled with the rational maps and
+    with the table of ``lambert_fit``, and the satin measured material with cosine MIS."""
+    from lab import testing as T
+    from warp_rbrdf.scene import MaterialSpec
+
+    _, fit = lambert_fit
+    specs = []
+    for sampler in ("rational", "tabulated"):
+        spec = T.lambert(name=f"hidden-{sampler}", albedo=(0.8, 0.6, 0.4), sampler=sampler)
+        spec.cdf = fit
+        specs.append(spec)
+    specs.append(MaterialSpec(name="hidden-measured", type="measured", data=rgl("satin_rosaline_rgb")[0],
+                              sampler="mis"))
+    return specs
+
+
+def _renderer(scene, hidden):
+    """A renderer of ``scene`` (a plane at y = 0 lit from above) with the ``hidden`` materials on
+    small planes 10 units below it, where no path from the camera reaches."""
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import ShapeSpec
+
+    for k, spec in enumerate(hidden):
+        scene.materials[spec.name] = spec
+        scene.shapes.append(ShapeSpec(type="plane", material=spec.name, center=(3.0 * k, -10.0, 0.0), size=(1.0, 1.0)))
+    r = Renderer(scene)
+    assert [r.material_data.strategies[r.material_index(s.name)] for s in hidden] == [s.sampler for s in hidden]
+    return r
+
+
+def test_warp_renders_agree(lambert_fit, hidden):
     """A Lambert plane under a constant sky: every pixel is the albedo, with every sampler."""
     from lab import testing as T
     from warp_rbrdf import registry
-    from warp_rbrdf.renderer import Renderer
 
     _, fit = lambert_fit
     # every registered strategy that samples the material's inverse-CDF data
     for sampler in registry.TABLE_STRATEGIES:
         spec = T.lambert(albedo=(0.8, 0.6, 0.4), sampler=sampler)
         spec.cdf = fit
-        img = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=6, spp=64)).render()
+        r = _renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=6, spp=64), hidden)
+        assert r.material_data.strategies[r.material_index("m")] == sampler
+        img = r.render()
         img = np.asarray(img)
         np.testing.assert_allclose(img.reshape(-1, 3).mean(0), [0.8, 0.6, 0.4], rtol=0.02, err_msg=sampler)
 
 
-def test_warp_measured_tabulated_matches_reference(rgl):
+def test_warp_measured_tabulated_matches_reference(rgl, hidden):
     """A glossy RGL material under an uneven sky: tabulated / mis-tabulated agree with a
     high-spp cosine-MIS reference within noise."""
     from lab import testing as T
-    from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 
     brdf, _ = rgl("satin_rosaline_rgb")
@@ -161,7 +195,7 @@ def test_warp_measured_tabulated_matches_reference(rgl):
         spec = MaterialSpec(name="m", type="measured", data=brdf, sampler=sampler)
         sc = T.plane_scene(spec, [T.image_env(sky)], resolution=4, spp=spp)
         sc.camera.origin = (0.0, 1.0, 1.0)
-        imgs[sampler] = np.asarray(Renderer(sc).render()).reshape(-1, 3).mean(0)
+        imgs[sampler] = np.asarray(_renderer(sc, hidden).render()).reshape(-1, 3).mean(0)
     for s in ("tabulated", "mis-tabulated"):
         np.testing.assert_allclose(imgs[s], imgs["mis"], rtol=0.05, err_msg=s)
 
