@@ -584,9 +584,11 @@ def test_clamps_tables_and_pieces_are_reached(scene):
 
 def test_a_fit_of_compiled_classes_compiles_nothing():
     """Fits of the same degree classes share the specialised function and the kernels' module
-    hash (the cache serves them); a fit of another class gets another hash."""
+    hash (the cache serves them); a fit of another class gets another hash. (The cosine
+    technique of ``mis``: the kind's default, ``mis-tabulated``, would tabulate each fit's
+    inverse CDFs at load, seconds each, and its technique has no code specialised to a fit.)"""
     def renderer(model):
-        spec = MaterialSpec(name="m", type="rational", data=model)
+        spec = MaterialSpec(name="m", type="rational", data=model, sampler="mis")
         return Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
 
     def hashes(r):
