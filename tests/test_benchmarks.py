@@ -12,7 +12,7 @@ from conftest import data_file, require_mitsuba
 
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
-BENCHMARKS = ("bench_convert", "bench_dial", "bench_env_sampling", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
+BENCHMARKS = ("bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba")
 
 
@@ -24,6 +24,33 @@ def test_benchmark_help(name, capsys):
     assert e.value.code == 0
     out = capsys.readouterr().out
     assert out.startswith("usage: ") and f"python -m benchmarks.{name}" in out
+
+
+# --------------------------------------------------------------------------------------------
+# bench_cuda: its agreement test, on the CPU device against itself and against a biased image
+
+
+def test_bench_cuda_agreement_flags_a_bias(tmp_path):
+    from benchmarks import bench_cuda
+
+    ref = tmp_path / "ref"
+    args = ["--cases", "lambert", "--scenes", "sphere-sky", "--check-resolution", "24", "--check-spp", "16"]
+    assert bench_cuda.main(["--write-reference", str(ref), *args]) == 0
+    out = tmp_path / "cpu.json"
+    assert bench_cuda.main(["--device", "cpu", "--reference", str(ref), "--resolution", "16", "--spp", "4",
+                            "--repeats", "1", "--out", str(out), *args]) == 0
+    row = json.loads(out.read_text())["cases"]["sphere-sky/lambert"]
+    assert row["agreement"]["agrees"] and row["agreement"]["mean_z2"] == 0.0
+    assert row["speed"]["samples"] == 16 * 16 * 4
+    z = np.load(ref / "sphere-sky__lambert.npz")
+    probe = {k: z[k] for k in z.files}
+    probe["spp"] = int(probe["spp"])
+    biased = dict(probe, image=probe["image"] * 1.05)   # a 5 % bias: far outside the pixels' noise
+    assert not bench_cuda.compare(biased, probe)["agrees"]
+    rng = np.random.default_rng(0)   # an independent estimate of the same image: agrees
+    noisy = dict(probe, image=probe["image"] + rng.standard_normal(probe["image"].shape).astype(np.float32)
+                 * np.sqrt(probe["variance"] / probe["spp"]))
+    assert bench_cuda.compare(noisy, probe)["agrees"]
 
 
 # --------------------------------------------------------------------------------------------
