@@ -66,7 +66,8 @@ def piecewise_model(value_transform="log"):
 @pytest.mark.parametrize("value_transform", ["linear", "log", "piecewise"])
 def test_rational_matches_numpy(value_transform):
     model = piecewise_model() if value_transform == "piecewise" else random_model(value_transform)
-    spec = MaterialSpec(name="m", type="rational", data=model)
+    # cosine MIS: no table (the default strategy tabulates the fit at load); the evaluation is the same
+    spec = MaterialSpec(name="m", type="rational", data=model, sampler="mis")
     r = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
     rng = np.random.default_rng(5)
     from fit.formats.angles import spherical_to_direction
@@ -83,37 +84,50 @@ def test_rational_matches_numpy(value_transform):
 
 
 def test_rational_file_round_trip(tmp_path):
+    """A fit saved to a coefficient file and named by a scene: the renderer's Warp evaluation of
+    the file's material is the fit's (the evaluation kernel of test_rational_matches_numpy)."""
+    from fit.formats.angles import spherical_to_direction
+    from warp_rbrdf.scene import parse_scene
+
     model = random_model()
     path = tmp_path / "m.json"
     coefficient_file.save(model, path)
-    from warp_rbrdf.scene import parse_scene
-
     sc = parse_scene(f"""
 [camera]
 resolution = [8, 8]
 [materials.m]
 type = "rational"
 file = "{path.as_posix()}"
+sampler = "mis"
 [[shapes]]
-type = "sphere"
+type = "plane"
 material = "m"
 [[lights]]
 type = "constant"
 """, path=tmp_path / "s.toml")
-    img = Renderer(sc).render(spp=2)
-    assert np.isfinite(img).all() and img.max() > 0
+    rng = np.random.default_rng(6)
+    wi = spherical_to_direction(np.arccos(rng.random(2000)), rng.random(2000) * 2 * np.pi)
+    wo = spherical_to_direction(np.arccos(rng.random(2000)), rng.random(2000) * 2 * np.pi)
+    got = Renderer(sc).eval_material("m", wi, wo)
+    assert got.max() > 0
+    np.testing.assert_allclose(got, model.evaluate(wi, wo), rtol=2e-4, atol=1e-6)
 
 
 def test_default_scene_uses_shipped_coefficients(tmp_path, monkeypatch):
-    """With a coefficient file in warp_rbrdf/data the default scene's sphere is rational."""
+    """With a coefficient file in warp_rbrdf/data the default scene's sphere is rational, read
+    from that file (a copy of the shipped default fit under another name: the render loads the
+    shipped kernel and table of the default scene where they are current)."""
+    import shutil
+
     import warp_rbrdf.defaults as defaults
     import warp_rbrdf.paths as paths
 
-    coefficient_file.save(random_model(), tmp_path / "shipped.json")
+    shutil.copy(paths.PACKAGE_DATA / defaults.PREFERRED_DEFAULT, tmp_path / "shipped.json")
     monkeypatch.setattr(defaults, "PACKAGE_DATA", tmp_path)
     monkeypatch.setattr(paths, "PACKAGE_DATA", tmp_path)
     sc = defaults.default_scene()
     assert sc.materials["sphere"].type == "rational"
+    assert sc.materials["sphere"].file == tmp_path / "shipped.json"
     sc.camera.resolution = (8, 8)
     img = Renderer(sc).render(spp=1)
     assert np.isfinite(img).all()
