@@ -74,7 +74,8 @@ def _parser() -> argparse.ArgumentParser:
                                                                "scene's integrator.seed)")
     r.add_argument("--out", "-o", help="output EXR (default out/<scene name>.exr); the PNG goes next "
                                        "to it as <name>_ev<exposure>.png")
-    r.add_argument("--device", default="cpu", type=device_name, help="Warp device: cpu (default), cuda or cuda:N")
+    r.add_argument("--device", default=None, type=device_name,
+                   help="Warp device: cpu, cuda or cuda:N (default: $RBRDF_DEVICE, else cpu)")
     r.add_argument("--threads", type=integer(1, limits.MAX_THREADS), default=None,
                    help=f"CPU threads for the tiles (default: all cores, {os.cpu_count()} here)")
     r.add_argument("--exposure", type=number(-limits.MAX_EXPOSURE_EV, limits.MAX_EXPOSURE_EV), default=0.0,

@@ -55,6 +55,8 @@ class RenderStats:
 class Renderer:
     """A scene built for one Warp device. ``render()`` can be called many times.
 
+    ``device``: ``"cpu"``, ``"cuda"`` or ``"cuda:N"``; None: ``$RBRDF_DEVICE``, else ``"cpu"``.
+
     ``analytic_spheres``: intersect ``sphere`` shapes analytically where their transform keeps
     them spheres (default); False tessellates every sphere into its icosphere of
     ``subdivisions`` (for comparisons; :mod:`warp_rbrdf.geometry`).
@@ -64,7 +66,7 @@ class Renderer:
     needs (rows), ``"building the geometry"`` and ``"environment map"`` (one step each), and
     :meth:`compile`'s ``"loading the render kernel"``."""
 
-    def __init__(self, scene: Scene, device: str = "cpu", analytic_spheres: bool = True, progress=None):
+    def __init__(self, scene: Scene, device: str | None = None, analytic_spheres: bool = True, progress=None):
         wp = init_warp()
         self.wp = wp
         self.scene = scene
@@ -283,7 +285,7 @@ class Renderer:
         return out.numpy()
 
 
-def render(scene, spp: int | None = None, seed: int | None = None, device: str = "cpu",
+def render(scene, spp: int | None = None, seed: int | None = None, device: str | None = None,
            threads: int | None = None, progress: bool = False) -> np.ndarray:
     """Render ``scene`` (a :class:`~warp_rbrdf.scene.Scene`, a TOML path, or None for the
     embedded default) and return the linear (H, W, 3) float32 image."""

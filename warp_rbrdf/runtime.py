@@ -34,18 +34,24 @@ def init_warp():
     return wp
 
 
-def get_device(name: str = "cpu"):
-    """The Warp device for ``name`` (``"cpu"``, ``"cuda"``, ``"cuda:N"``); clear error if absent."""
+def get_device(name: str | None = None):
+    """The Warp device for ``name`` (``"cpu"``, ``"cuda"``, ``"cuda:N"``); ``None``: the
+    environment variable ``RBRDF_DEVICE``, else ``"cpu"``. Clear error (naming the variable when
+    the name came from it) if the name is unknown or the device absent."""
     wp = init_warp()
-    name = (name or "cpu").strip().lower()
+    source = ""
+    if name is None:
+        name = os.environ.get("RBRDF_DEVICE", "")
+        source = "RBRDF_DEVICE: " if name.strip() else ""
+    name = (name or "").strip().lower() or "cpu"
     if name.startswith("cuda"):
         if not wp.is_cuda_available():
-            raise RenderError(f"device {name!r} requested but CUDA is not available on this "
+            raise RenderError(f"{source}device {name!r} requested but CUDA is not available on this "
                               "machine (no CUDA driver/GPU found); use --device cpu")
         try:
             return wp.get_device(name)
         except Exception as e:  # noqa: BLE001 - Warp raises plain exceptions for bad ordinals
-            raise RenderError(f"device {name!r}: {e}") from None
+            raise RenderError(f"{source}device {name!r}: {e}") from None
     if name != "cpu":
-        raise RenderError(f"unknown device {name!r}; expected 'cpu', 'cuda' or 'cuda:N'")
+        raise RenderError(f"{source}unknown device {name[:40]!r}; expected 'cpu', 'cuda' or 'cuda:N'")
     return wp.get_device("cpu")
