@@ -138,13 +138,14 @@ def test_valid_fit_is_clamped_to_its_vouched_range_and_unchanged_at_its_data(fit
 
 @pytest.fixture(scope="module")
 def renderer(fitted):
-    """One scene, one compile: the flagged fit from its file and the same coefficients vouched."""
+    """One scene, one compile: the flagged fit from its file and the same coefficients vouched
+    (cosine MIS: the tests evaluate, no inverse-CDF table is tabulated at load)."""
     from warp_rbrdf.renderer import Renderer
     from lab.testing import top_down_camera
 
     d, _ = fitted
-    specs = {"flagged": MaterialSpec(name="flagged", type="rational", file=d / "spiky.json"),
-             "vouched": MaterialSpec(name="vouched", type="rational",
+    specs = {"flagged": MaterialSpec(name="flagged", type="rational", file=d / "spiky.json", sampler="mis"),
+             "vouched": MaterialSpec(name="vouched", type="rational", sampler="mis",
                                      data=_vouched_copy(load_coefficients(d / "spiky.json")))}
     sc = Scene(camera=top_down_camera(4), materials=specs,
                shapes=[ShapeSpec(type="sphere", material=n, center=(3.0 * i, -10.0, 0.0), radius=0.5)
@@ -230,7 +231,9 @@ def test_unflagged_fit_is_unchanged(renderer):
 
 
 def _scene_text(folder, unvouched=None, file="spiky.json"):
+    """A scene of the fit ``file`` (cosine MIS: no inverse-CDF table tabulated at load)."""
     extra = f'unvouched = "{unvouched}"\n' if unvouched else ""
+    extra += 'sampler = "mis"\n'
     return (f'[materials.satin]\ntype = "rational"\nfile = "{file}"\n{extra}'
             f'[[shapes]]\ntype = "sphere"\nmaterial = "satin"\n')
 
@@ -464,8 +467,8 @@ def test_embedded_table_renders_without_the_source_as_the_source_does(fitted, tm
                                  "region's measured range)")
     np.testing.assert_array_equal(mem.evaluate(wi, wo), src.evaluate(wi, wo))
     # Warp: one scene, both materials
-    specs = {"e": MaterialSpec(name="e", type="rational", file=tmp_path / "alone" / "spiky.json"),
-             "s": MaterialSpec(name="s", type="rational", file=tmp_path / "old" / "spiky.json")}
+    specs = {"e": MaterialSpec(name="e", type="rational", file=tmp_path / "alone" / "spiky.json", sampler="mis"),
+             "s": MaterialSpec(name="s", type="rational", file=tmp_path / "old" / "spiky.json", sampler="mis")}
     sc = Scene(camera=top_down_camera(4), materials=specs,
                shapes=[ShapeSpec(type="sphere", material=n, center=(3.0 * i, -10.0, 0.0), radius=0.5)
                        for i, n in enumerate(specs)])
