@@ -138,6 +138,13 @@ def dense_block(key: int) -> str:
     return "\n".join(_sum_lines(key, vector=True, declare=False))
 
 
+def dense_block_scalar(key: int) -> str:
+    """C++ statements of the scalar form of :func:`dense_block` (one sum per lane, for a CUDA
+    build): read ``rows`` (``const double*``, :data:`LANES` per row), ``ta``, ``tb``, ``tc`` and
+    add the sums to the doubles ``p0, p1, p2, q0, q1, q2`` (declared by the caller)."""
+    return "\n".join(_sum_lines(key, vector=False, declare=False))
+
+
 def _sum_lines(key: int, vector: bool, declare: bool = True) -> list:
     nv, dn, dd = class_of_key(key)
     deg = max(dn, dd)

@@ -91,8 +91,10 @@ rbrdf_v4d p = {pq.c[0], pq.c[1], pq.c[2], 0.0};
 rbrdf_v4d q = {pq.c[3], pq.c[4], pq.c[5], 1.0};
 """ + VECTOR_STEPS + "return out;\n")
 
-_SCALAR = f"""const double* hd = (const double*)head;
-const int modes[3] = {{m0, m1, m2}};
+#: the scalar steps on ``pq`` (``wp::vec_t<6, double>``: P of R, G, B, then Q), ``hd`` (the leaf
+#: header), ``flags``, ``m0``, ``m1``, ``m2`` and ``tab`` into ``wp::vec_t<3, float> out``: the
+#: CUDA build's form of :data:`VECTOR_STEPS` (the same operations per channel, ``wp::exp``)
+SCALAR_STEPS = f"""const int modes[3] = {{m0, m1, m2}};
 wp::vec_t<3, float> out;
 for (int c = 0; c < 3; ++c) {{
     double v = pq.c[c] / pq.c[3 + c];
@@ -106,9 +108,9 @@ for (int c = 0; c < 3; ++c) {{
     if (modes[c] & {CH_RANGE}) v = wp::clamp(v, hd[{FH_RANGES} + 2 * c], hd[{FH_RANGES} + 2 * c + 1]);
     out.c[c] = (float)v;
 }}
-return out;
 """
 
+_SCALAR = "const double* hd = (const double*)head;\n" + SCALAR_STEPS + "return out;\n"
 
 
 def channels_source(scalar: bool = False) -> str:

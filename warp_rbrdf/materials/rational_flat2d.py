@@ -33,8 +33,8 @@ import numpy as np
 import warp as wp
 
 from .. import fastmath
-from ..chebyshev_dense import Native, class_of_key, dense_block
-from .rational_channels import VECTOR_PRELUDE, VECTOR_STEPS
+from ..chebyshev_dense import Native, class_of_key, dense_block, dense_block_scalar
+from .rational_channels import SCALAR_STEPS, VECTOR_PRELUDE, VECTOR_STEPS
 from .rational_records import (
     FF_COS_CUT,
     FF_CUT,
@@ -102,15 +102,36 @@ def angles_2d_numpy(wi, wo) -> np.ndarray:
     return np.stack(out + [s[:, 2] * sw / (ls2 * li)], -1).astype(f)
 
 
-def flat_source(keys: tuple, margin: float) -> str:
-    """The C++ body of :func:`make_flat2d`'s function for the 2-variable classes ``keys``."""
-    cases = []
-    for key in keys:
-        cases.append(f"case {key}: {{\n{dense_block(key)}\nbreak;\n}}")
+def flat_source(keys: tuple, margin: float, scalar: bool = False) -> str:
+    """The C++ body of :func:`make_flat2d`'s function for the 2-variable classes ``keys``: the
+    vector form on the CPU and the scalar one in a CUDA build (``scalar``: the scalar form
+    everywhere, for tests)."""
+    if scalar:
+        return _flat_body(keys, margin, vector=False)
+    return ("#if defined(__CUDA_ARCH__)\n" + _flat_body(keys, margin, vector=False) + "#else\n"
+            + _flat_body(keys, margin, vector=True) + "#endif\n")
+
+
+def _flat_body(keys: tuple, margin: float, vector: bool) -> str:
+    block = dense_block if vector else dense_block_scalar
+    cases = [f"case {key}: {{\n{block(key)}\nbreak;\n}}" for key in keys]
     switch = "switch (P[2]) {\n" + "\n".join(cases) + "\ndefault: break;\n}\n"
-    return ("#if defined(__CUDA_ARCH__)\nreturn wp::vec4(0.0f);\n#else\n" + VECTOR_PRELUDE
-            + "typedef double rbrdf_v4du __attribute__((ext_vector_type(4), aligned(8)));\n" + f"""
-const double* F = (const double*)fptr;
+    if vector:
+        prelude = (VECTOR_PRELUDE
+                   + "typedef double rbrdf_v4du __attribute__((ext_vector_type(4), aligned(8)));\n")
+        sums = f"""const rbrdf_v4du* rows = (const rbrdf_v4du*)((const double*)dptr + P[3]);
+rbrdf_v4d p = {{0.0, 0.0, 0.0, 0.0}};
+rbrdf_v4d q = {{0.0, 0.0, 0.0, 1.0}};
+"""
+        steps = VECTOR_STEPS
+    else:
+        prelude = ""
+        sums = """const double* rows = (const double*)dptr + P[3];
+double p0 = 0.0, p1 = 0.0, p2 = 0.0, q0 = 0.0, q1 = 0.0, q2 = 0.0;
+"""
+        steps = ("wp::vec_t<6, double> pq;\npq.c[0] = p0; pq.c[1] = p1; pq.c[2] = p2; "
+                 "pq.c[3] = q0; pq.c[4] = q1; pq.c[5] = q2;\n" + SCALAR_STEPS)
+    return (prelude + f"""const double* F = (const double*)fptr;
 const int* I = (const int*)iptr;
 double th = (double)ang.c[0], td = (double)ang.c[1];
 if ((double)ang.c[2] < F[{FF_COS_CUT}] + {margin!r}) {{
@@ -133,10 +154,7 @@ if (P[1] & 1) xh = wp::sqrt(wp::max(xh, 0.0));
 if (P[1] & 2) xd = wp::sqrt(wp::max(xd, 0.0));
 const double tb = (2.0 * xh - hd[{FH_VARS + 2}]) * hd[{FH_VARS + 3}];
 const double tc = (2.0 * xd - hd[{FH_VARS + 6}]) * hd[{FH_VARS + 7}];
-const rbrdf_v4du* rows = (const rbrdf_v4du*)((const double*)dptr + P[3]);
-rbrdf_v4d p = {{0.0, 0.0, 0.0, 0.0}};
-rbrdf_v4d q = {{0.0, 0.0, 0.0, 1.0}};
-{switch}wp::vec3 tab(0.0f);
+""" + sums + switch + f"""wp::vec3 tab(0.0f);
 if (flags & {LEAF_TABLE}) {{
     const float bh = (float)wp::clamp(th, hd[{FH_BOX}], hd[{FH_BOX + 1}]);
     const float bd = (float)wp::clamp(td, hd[{FH_BOX + 2}], hd[{FH_BOX + 3}]);
@@ -146,21 +164,20 @@ if (flags & {LEAF_TABLE}) {{
     tab = wp::vec3(T[0], T[1], T[2]);
 }}
 const int m0 = P[4], m1 = P[5], m2 = P[6];
-{VECTOR_STEPS}return wp::vec4(out.c[0], out.c[1], out.c[2], 1.0f);
-#endif
-""")
+""" + steps + "return wp::vec4(out.c[0], out.c[1], out.c[2], 1.0f);\n")
 
 
 @functools.lru_cache(maxsize=None)
-def make_flat2d(keys: tuple, margin: float):
+def make_flat2d(keys: tuple, margin: float, scalar: bool = False):
     """``flat2d(fptr, iptr, dptr, tptr, var, ang) -> vec4``: rho (before ``Materials.scale``) and 1
     of the flat record whose floats start at ``fptr`` and whose pieces' ints start at ``iptr``
     (``dptr``: the material's first float, where the dense rows' offsets start; ``tptr``: its
     fallback table; ``var``: the split variable) at the angles ``ang`` of :func:`angles_2d`;
     ``keys``: the scene's 2-variable classes (a leaf of another class gives P = 0, Q = 1, never
-    packed as such). Cached: one function per tuple."""
+    packed as such); ``scalar``: the CUDA build's scalar form on every device (for tests).
+    Cached: one function per tuple."""
     keys = tuple(k for k in keys if class_of_key(k)[0] == 2)
-    source = flat_source(keys, margin)
+    source = flat_source(keys, margin, scalar)
     name = "rational_flat2d_" + "_".join(f"{k:06x}" for k in keys) + "_" + hashlib.sha256(source.encode()).hexdigest()[:8]
 
     @Native.func_native(source, name)
