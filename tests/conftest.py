@@ -11,6 +11,7 @@ import hashlib
 import os
 import pickle
 import shutil
+import sys
 import tempfile
 from pathlib import Path
 
@@ -194,3 +195,24 @@ def _warp_cache(tmp_path_factory):
     """Keep Warp's kernel cache inside the checkout unless the caller chose one."""
     os.environ.setdefault("WARP_CACHE_PATH", str(ROOT / ".warp_cache"))
     yield
+
+
+@pytest.fixture(autouse=True)
+def _warp_default_device_is_the_cpu():
+    """Arrays a test makes without naming a device live on the CPU, where the tests' own kernels
+    run (Warp's default device is the first GPU wherever one exists). The renderer names its
+    device itself: ``Renderer(scene)`` follows ``$RBRDF_DEVICE``, so ``RBRDF_DEVICE=cuda python
+    -m pytest`` runs the renders of the suite on the GPU (docs/cuda.md). Acts once per process,
+    and only where a test module imported Warp (initialised as the package does)."""
+    global _DEFAULT_DEVICE_SET
+    if not _DEFAULT_DEVICE_SET and "warp" in sys.modules:
+        from warp_rbrdf.runtime import init_warp
+
+        wp = init_warp()
+        if wp.is_cuda_available():
+            wp.set_device("cpu")
+        _DEFAULT_DEVICE_SET = True
+    yield
+
+
+_DEFAULT_DEVICE_SET = False

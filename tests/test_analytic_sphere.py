@@ -50,12 +50,12 @@ def trace(renderer, o, d, tmax=1.0e30):
     dict of hit (N,), t (N,), ng, ns (N, 3), mat (N,), occluded (N,)."""
     g = renderer.geometry
     k = tracer_kernels(g.num_triangles > 0, g.num_spheres > 0)
-    n = len(o)
-    out = {"hit": wp.zeros(n, dtype=int), "t": wp.zeros(n, dtype=float), "ng": wp.zeros(n, dtype=wp.vec3),
-           "ns": wp.zeros(n, dtype=wp.vec3), "mat": wp.zeros(n, dtype=int), "occluded": wp.zeros(n, dtype=int)}
-    wp.launch(k, dim=n, inputs=[renderer.scene_geometry, wp.array(np.asarray(o, np.float32), dtype=wp.vec3),
-                                wp.array(np.asarray(d, np.float32), dtype=wp.vec3), float(tmax)],
-              outputs=list(out.values()))
+    n, dev = len(o), renderer.device    # the renderer's device: $RBRDF_DEVICE runs this on a GPU
+    out = {key: wp.zeros(n, dtype=t, device=dev) for key, t in
+           (("hit", int), ("t", float), ("ng", wp.vec3), ("ns", wp.vec3), ("mat", int), ("occluded", int))}
+    wp.launch(k, dim=n, inputs=[renderer.scene_geometry, wp.array(np.asarray(o, np.float32), dtype=wp.vec3, device=dev),
+                                wp.array(np.asarray(d, np.float32), dtype=wp.vec3, device=dev), float(tmax)],
+              outputs=list(out.values()), device=dev)
     return {key: v.numpy() for key, v in out.items()}
 
 

@@ -415,7 +415,9 @@ def scene():
               for k, s in enumerate(specs.values())]
     sc = Scene(camera=T.top_down_camera(4), integrator=IntegratorSpec(spp=1, max_depth=1), materials=specs,
                shapes=shapes, lights=[T.constant_env(1.0)], path="<test>")
-    return Renderer(sc), specs
+    # the CPU whatever $RBRDF_DEVICE says: this file's own kernels (the vector code, the inline
+    # exp) are the CPU build's and run on the CPU (tests/test_flat2d_scalar.py: the scalar form)
+    return Renderer(sc, device="cpu"), specs
 
 
 def _fallback_record(model):

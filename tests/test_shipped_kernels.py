@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 from warp_rbrdf import Renderer
 from warp_rbrdf.defaults import default_scene
-r = Renderer(default_scene())
+r = Renderer(default_scene(), device="cpu")
 img = r.render(spp=1, seed=3, threads=1)
 m = r.kernels.render_tile.module
 ex = m.execs[(None, 1)]
@@ -58,7 +58,7 @@ def default_module():
     from warp_rbrdf.defaults import default_scene
     from warp_rbrdf.renderer import Renderer
 
-    r = Renderer(default_scene())
+    r = Renderer(default_scene(), device="cpu")   # the shipped set is CPU code
     return r.kernels.render_tile.module, r.device
 
 
