@@ -97,7 +97,7 @@ def test_cdf_table_only_writes_a_flagged_table(lambert_file, tmp_path, capsys):
 def test_cdf_of_an_rgl_file_records_its_roles_and_a_scene_checks_them(tmp_path, capsys):
     """A table built from an RGL file depends on which direction is the tensors' theta_i: the
     file records it and a scene whose material has the other roles refuses it in one line."""
-    from conftest import data_file
+    from conftest import data_file, rgl_measured
 
     from fit.sampling.cdf_file import load
     from warp_rbrdf.errors import SceneError
@@ -111,9 +111,18 @@ def test_cdf_of_an_rgl_file_records_its_roles_and_a_scene_checks_them(tmp_path, 
     assert load(out).source["incident"] == "light"
     text = (f'[materials.m]\ntype = "measured"\nfile = "{src}"\nsampler = "tabulated"\n'
             f'cdf = "{out}"\nincident = "{{}}"\n[[shapes]]\ntype = "sphere"\nmaterial = "m"\n')
+
+    def scene(incident):
+        sc = parse_scene(text.format(incident), path=tmp_path / "s.toml")
+        assert sc.materials["m"].incident == incident
+        # the file's table with these roles, resampled once per test session (what the
+        # material loads from its file; the CDF's roles are checked after it)
+        sc.materials["m"].data = rgl_measured("paper_white_rgb", incident)
+        return sc
+
     with pytest.raises(SceneError, match="built with incident = 'light', the material has 'view'"):
-        Renderer(parse_scene(text.format("view"), path=tmp_path / "s.toml"))
-    Renderer(parse_scene(text.format("light"), path=tmp_path / "s.toml"))   # same roles: accepted
+        Renderer(scene("view"))
+    Renderer(scene("light"))   # same roles: accepted
 
 
 # --- rbrdf-fit brdf --model: the 3-D fit as a command, and fits that render from the file alone ---
@@ -135,16 +144,27 @@ def fit3d_file(tmp_path_factory):
 
     import fit.progress
 
+    from fit.cli import brdf3d
+
     out = tmp_path_factory.mktemp("fit3d") / "paper3d.json"
     so, se = io.StringIO(), io.StringIO()
     saved = fit.progress.MIN_SECONDS
     fit.progress.MIN_SECONDS = 0.0          # a line for every stage, however short
+    real, results = brdf3d.fit_rgl_select, []
+
+    def kept(*a, **kw):                     # the fit's result, for test_brdf_3d_that_is_not_valid...
+        results.append(real(*a, **kw))
+        return results[-1]
+
+    brdf3d.fit_rgl_select = kept
     try:
         with redirect_stdout(so), redirect_stderr(se):
             rc = main(["brdf", str(data_file("rgl/paper_white_rgb.bsdf")), "--out", str(out), *SMALL_3D])
     finally:
         fit.progress.MIN_SECONDS = saved
-    return out, rc, so.getvalue(), se.getvalue()
+        brdf3d.fit_rgl_select = real
+    assert len(results) == 1
+    return out, rc, so.getvalue(), se.getvalue(), results[0]
 
 
 def test_brdf_3d_writes_a_version_3_fit_with_progress(fit3d_file):
@@ -155,7 +175,7 @@ def test_brdf_3d_writes_a_version_3_fit_with_progress(fit3d_file):
 
     from fit.rational.coefficient_file import load
 
-    out, rc, stdout, stderr = fit3d_file
+    out, rc, stdout, stderr, _ = fit3d_file
     assert rc == 0, stderr
     d = json.loads(out.read_text())
     assert d["version"] == 3 and [v["name"] for v in d["variables"]] == ["theta_h", "theta_d", "phi_d"]
@@ -243,20 +263,20 @@ def test_brdf_2d_flagged_fit_carries_what_the_renderer_shows(tmp_path, monkeypat
 
 
 def test_brdf_3d_that_is_not_valid_writes_nothing(fit3d_file, tmp_path, capsys, monkeypatch):
-    """A 3-D fit with a function outside its bound (here the real fit with one function's
-    record made invalid after the fact) is not written: exit 1, an earlier file unchanged, the
-    verdict on stderr; no layout valid at all (the fitter's RuntimeError) likewise."""
+    """A 3-D fit with a function outside its bound (here the fixture's fit of the same file
+    and flags, one function's record made invalid after the fact) is not written: exit 1, an
+    earlier file unchanged, the verdict on stderr; no layout valid at all (the fitter's
+    RuntimeError) likewise."""
     import copy
 
     from conftest import data_file
 
     from fit.cli import brdf3d
 
-    real = brdf3d.fit_rgl_select
+    fitted = fit3d_file[4]
 
     def one_invalid(*a, **kw):
-        res = real(*a, **kw)
-        res.model = copy.deepcopy(res.model)
+        res = copy.deepcopy(fitted)
         res.model.function_info[1] = dict(res.model.function_info[1], valid=False)
         res.valid = False
         return res
