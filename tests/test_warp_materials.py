@@ -1,6 +1,8 @@
 """The Warp materials against the fit package's NumPy evaluation at the same directions."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from conftest import data_file, rgl_measured
@@ -14,8 +16,10 @@ from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.scene import MaterialSpec
 
 
+@functools.lru_cache(maxsize=1)
 def synthetic_brdf():
-    """A table whose every bin differs (so a wrong bin shows), with a few invalid bins."""
+    """A table whose every bin differs (so a wrong bin shows), with a few invalid bins (made
+    once per module: callers must not modify it)."""
     def f(wi, wo):
         th = np.arccos(np.clip(wi[..., 2], -1, 1))
         to = np.arccos(np.clip(wo[..., 2], -1, 1))
@@ -30,8 +34,15 @@ def synthetic_brdf():
     return b
 
 
+@functools.lru_cache(maxsize=1)
+def synthetic_projected():
+    """:func:`synthetic_brdf` projected (once per module: callers must not modify it)."""
+    return project(synthetic_brdf())
+
+
 def renderer_for(spec):
-    return Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
+    """A scene of ``spec`` (with the other kinds beside it: :func:`_multi_scene`)."""
+    return _multi_scene([spec])
 
 
 def random_pairs(n, seed=1):
@@ -65,7 +76,7 @@ def test_lambert_matches_closed_form():
 def test_measured_table_matches_numpy_nearest():
     b = synthetic_brdf()
     r = renderer_for(MaterialSpec(name="m", type="measured", data=b, scale=(1.0, 2.0, 0.5),
-                                  interpolation="nearest"))
+                                  interpolation="nearest", sampler="mis"))
     scale = np.array([1.0, 2.0, 0.5])
     # at bin centres the float32 Warp code must pick exactly the same bin
     wi, wo = bin_centre_pairs()
@@ -99,7 +110,7 @@ def test_measured_table_matches_numpy_linear():
     """The default (trilinear) lookup: the kernel equals MeasuredBRDF.evaluate, bins without a
     sample left out in both; at a bin centre it is that bin's value."""
     b = synthetic_brdf()
-    r = renderer_for(MaterialSpec(name="m", type="measured", data=b, scale=(1.0, 2.0, 0.5)))
+    r = renderer_for(MaterialSpec(name="m", type="measured", data=b, scale=(1.0, 2.0, 0.5), sampler="mis"))
     scale = np.array([1.0, 2.0, 0.5])
     wi, wo = bin_centre_pairs()
     ref = b.evaluate(wi, wo) * scale
@@ -112,9 +123,8 @@ def test_measured_table_matches_numpy_linear():
 
 
 def test_projected_table_matches_numpy():
-    b = synthetic_brdf()
-    pb = project(b)
-    r = renderer_for(MaterialSpec(name="m", type="projected", data=pb))
+    pb = synthetic_projected()
+    r = renderer_for(MaterialSpec(name="m", type="projected", data=pb, sampler="mis"))
     wi, wo = bin_centre_pairs()
     np.testing.assert_allclose(r.eval_material("m", wi, wo), pb.evaluate(wi, wo), rtol=1e-5, atol=1e-7)
     wi, wo = random_pairs(20000, seed=3)
@@ -128,8 +138,9 @@ def test_measured_material_renders_under_directional_light():
     from warp_rbrdf.scene import CameraSpec
 
     b = synthetic_brdf()
-    # nearest bin: constant over the pixels' few 0.01 deg (the frame is what is tested here)
-    spec = MaterialSpec(name="m", type="measured", data=b, interpolation="nearest")
+    # nearest bin: constant over the pixels' few 0.01 deg (the frame is what is tested here);
+    # mis: no inverse CDFs to tabulate (the directional light is all the image holds)
+    spec = MaterialSpec(name="m", type="measured", data=b, interpolation="nearest", sampler="mis")
     to_light = np.array([0.3, 0.8, 0.5]) / np.linalg.norm([0.3, 0.8, 0.5])
     to_eye = np.array([-0.5, 0.7, 0.2]) / np.linalg.norm([-0.5, 0.7, 0.2])
     sc = T.plane_scene(spec, [T.directional(to_light, 2.0)], resolution=4, spp=1)
@@ -161,9 +172,19 @@ def _rgl_file():
 
 
 def _multi_scene(specs):
-    """One scene using every spec (a plane, then spheres), so the kernels see them together."""
+    """One scene using every spec (a plane, then spheres), so the kernels see them together,
+    and a material of each other kind this module evaluates (lambert, measured, projected) on
+    further spheres: every scene's evaluation kernel is then the same one (each set of kinds
+    is a kernel of its own, seconds of compiling on a cold cache). The tables of this module
+    sample with the cosine technique of ``mis``: their kinds' default, ``mis-tabulated``, would
+    tabulate each table's inverse CDFs at load, and only their evaluation is tested here."""
     from warp_rbrdf.scene import ShapeSpec
 
+    others = {"lambert": T.lambert(name="other-lambert"),
+              "measured": MaterialSpec(name="other-measured", type="measured", data=synthetic_brdf(), sampler="mis"),
+              "projected": MaterialSpec(name="other-projected", type="projected", data=synthetic_projected(),
+                                        sampler="mis")}
+    specs = list(specs) + [o for kind, o in others.items() if kind not in {s.type for s in specs}]
     sc = T.plane_scene(specs[0], [T.constant_env(1.0)], resolution=4, spp=1)
     for n, s in enumerate(specs[1:]):
         sc.materials[s.name] = s
@@ -180,7 +201,7 @@ def fold_renderer():
     rgl = read_rgl(_rgl_file())
     tables = {"merl": synthetic_brdf(), "full": synthetic_full_circle_brdf(),
               "rgl": rgl_measured("cc_ibiza_sunset_rgb")}   # rgl.to_measured(), once per session
-    specs = [MaterialSpec(name=k, type="measured", data=b) for k, b in tables.items()]
+    specs = [MaterialSpec(name=k, type="measured", data=b, sampler="mis") for k, b in tables.items()]
     specs += [MaterialSpec(name=k + "-nearest", type="measured", data=b, interpolation="nearest",
                            sampler="mis") for k, b in tables.items()]
     return _multi_scene(specs), tables, rgl
@@ -219,7 +240,7 @@ def test_rgl_derived_table_has_no_terminator_line():
     assert ((old.evaluate(wl, wv, "nearest") @ LUMINANCE) * wl[:, 2]).mean() / exact.mean() < 0.9   # 0.87
     new = (m.evaluate(wl, wv) @ LUMINANCE) * wl[:, 2]
     assert new.mean() / exact.mean() == pytest.approx(1.0, abs=0.03)
-    r = _multi_scene([MaterialSpec(name="rgl", type="measured", data=m)])
+    r = _multi_scene([MaterialSpec(name="rgl", type="measured", data=m, sampler="mis")])
     got = (r.eval_material("rgl", wl, wv).astype(float) @ LUMINANCE) * wl[:, 2]
     close = np.isclose(got, new, rtol=2e-4, atol=1e-6 * new.max())
     assert close.mean() > 0.999   # float32 angles: a pair on a bin boundary may read the next bin
