@@ -104,15 +104,16 @@ def table_cell_probs(table, theta_v: float, t_edges, p_edges):
     return probs
 
 
-def assert_unbiased(evaluate, theta_v: float, wi, wo, weight, label="", rel: float = 0.0):
+def assert_unbiased(evaluate, theta_v: float, wi, wo, weight, label="", rel: float = 0.0, quadrature=None):
     """The estimator ``f cos(theta_l) * weight`` (luminance; ``evaluate(wi, wo) -> (N, 3)``)
     of the integral of f cos over the light (view ``wo`` fixed at ``theta_v``) agrees with
     midpoint quadrature within 3 sigma + twice the quadrature's own uncertainty (difference of
-    two resolutions) + ``rel`` of the value."""
+    two resolutions) + ``rel`` of the value. ``quadrature``: ``quadrature_albedo(evaluate,
+    theta_v)`` when the caller has it (None: computed here)."""
     wi = np.asarray(wi, float)
     est = (np.asarray(evaluate(wi, wo), float) @ LUMINANCE) * np.maximum(wi[:, 2], 0.0) * weight
     m, se = est.mean(), est.std() / np.sqrt(len(est))
-    q, dq = quadrature_albedo(evaluate, theta_v)
+    q, dq = quadrature_albedo(evaluate, theta_v) if quadrature is None else quadrature
     assert abs(m - q) < 3 * se + 2 * dq + rel * abs(q) + 1e-6, (label, m, q, se, dq)
 
 
