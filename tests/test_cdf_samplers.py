@@ -4,6 +4,9 @@ trip, monotone refit), renders with every sampler. The Warp samplers' own contra
 (chi-square, unbiasedness, Warp == NumPy, pdf) is tests/test_sampler_contract.py."""
 from __future__ import annotations
 
+import functools
+from pathlib import Path
+
 import numpy as np
 import pytest
 from chi2 import (
@@ -14,7 +17,7 @@ from chi2 import (
     map_cell_probs,
     table_cell_probs,
 )
-from conftest import rgl_measured, rgl_params
+from conftest import rgl_measured, rgl_params, session_cached
 
 from lab.analytic import lambert
 from fit.formats.angles import spherical_to_direction
@@ -37,13 +40,24 @@ def rgl():
     return get
 
 
+@functools.lru_cache(maxsize=2)
+def lambert_global_fit(n_v: int = 8):
+    """The global-layout inverse CDFs of a Lambert material on a table of ``n_v`` view rows,
+    made once per test session for every worker (:func:`conftest.session_cached`;
+    tests/test_sampler_contract.py and tests/test_compile_once.py take them too): callers must
+    not modify them."""
+    def make():
+        return fit_cdf(lambert((0.8, 0.6, 0.4)), name="lambert", table_params=dict(n_v=n_v, n_t=32, n_p=32),
+                       phi_kw=dict(degrees=(2, 1)), refinements=0, layout="global")
+
+    return session_cached(Path(__file__), f"lambert-global-{n_v}", make)
+
+
 @pytest.fixture(scope="module")
 def lambert_fit():
-    f = lambert((0.8, 0.6, 0.4))
-    fit = fit_cdf(f, name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32),
-                  phi_kw=dict(degrees=(2, 1)), refinements=0, layout="global")
-    assert not fit.fallback, fit.reason
-    return f, fit
+    fit = lambert_global_fit(8)
+    assert fit.layout == "global" and not fit.fallback, fit.reason
+    return lambert((0.8, 0.6, 0.4)), fit
 
 
 @pytest.mark.parametrize("name", rgl_params())
