@@ -8,10 +8,12 @@ from __future__ import annotations
 import copy
 import functools
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
 from chi2 import assert_unbiased, chi2_pvalue, edges, histogram, map_cell_probs
+from conftest import session_cached
 
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
 from fit.rational.coefficient_file import load, save
@@ -33,6 +35,13 @@ def lobe3d(X):
 
 @functools.lru_cache(maxsize=1)
 def _fit3d_with_sampler():
+    """``(model, cdf)``: the 3-D fit of :func:`lobe3d` and its sampler, made once per test session
+    for every worker (:func:`conftest.session_cached`; tests/test_sampler_contract.py samples
+    it too): callers must not modify them."""
+    return session_cached(Path(__file__), "fit3d-with-sampler", _make_fit3d_with_sampler)
+
+
+def _make_fit3d_with_sampler():
     from fit.rational.fit3d import fit_samples, sample_grid
 
     tm = np.radians(80.0)
@@ -106,6 +115,21 @@ def test_stored_pieces_read_without_rebuild_or_scipy(fit3d, tmp_path):
     assert out.stdout.strip() == "[]", out.stdout
 
 
+@pytest.fixture(scope="module")
+def quadrature(fit3d):
+    """``quadrature(theta_v)``: :func:`chi2.quadrature_albedo` of the 3-D fit (its vouched
+    evaluation) at view ``theta_v``, cached (both strategies are checked against it)."""
+    from chi2 import quadrature_albedo
+
+    evaluate, cache = vouched_evaluate(fit3d[1]), {}
+
+    def get(theta_v):
+        if theta_v not in cache:
+            cache[theta_v] = quadrature_albedo(evaluate, theta_v)
+        return cache[theta_v]
+    return get
+
+
 def _case(path, sampler):
     from lab import testing as T
     from warp_rbrdf.renderer import Renderer
@@ -116,7 +140,7 @@ def _case(path, sampler):
 
 
 @pytest.mark.parametrize("strategy", ["mis-rational", "rational-derivative"])
-def test_3d_fit_samples_with_its_own_sampler(fit3d, strategy, monkeypatch, tmp_path):
+def test_3d_fit_samples_with_its_own_sampler(fit3d, quadrature, strategy, monkeypatch, tmp_path):
     """Through the registry, with the source measurement nowhere (RBRDF_DATA elsewhere): the
     fit's own sampler is used (no fallback, no build), its draws follow the map's own density
     (χ²) and f cos * weight is unbiased against quadrature at three views."""
@@ -136,7 +160,7 @@ def test_3d_fit_samples_with_its_own_sampler(fit3d, strategy, monkeypatch, tmp_p
         wi, w = wi.astype(float), w.astype(float)
         counts = histogram(*direction_to_spherical(wi[w > 0]), T_EDGES, P_EDGES)
         assert chi2_pvalue(counts, map_cell_probs(cdf, tv, T_EDGES, P_EDGES), len(xi)) > 1e-4, tv_deg
-        assert_unbiased(evaluate, tv, wi, wo, w, (strategy, tv_deg))
+        assert_unbiased(evaluate, tv, wi, wo, w, (strategy, tv_deg), quadrature=quadrature(tv))
 
 
 def test_mis_tabulated_uses_the_fits_table(fit3d, monkeypatch, tmp_path):
