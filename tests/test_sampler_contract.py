@@ -83,7 +83,18 @@ class Case:
         spec.cdf = None if sampler == "mis-rgl" or own_sampler else cdf
         self.spec_kw = spec_kw
         self.renderer = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=4, spp=1))
-        self._draws, self._probs = {}, {}
+        self._draws, self._probs, self._quad = {}, {}, {}
+
+    def quadrature(self, theta_v: float):
+        """:func:`chi2.quadrature_albedo` of the material at view ``theta_v`` (cached: every
+        strategy's estimator is checked against the same integral)."""
+        if theta_v not in self._quad:
+            self._quad[theta_v] = quadrature_albedo(self.evaluate, theta_v)
+        return self._quad[theta_v]
+
+    def assert_unbiased(self, theta_v, wi, wo, weight, label):
+        """:func:`chi2.assert_unbiased` against the case's cached quadrature."""
+        assert_unbiased(self.evaluate, theta_v, wi, wo, weight, label, quadrature=self.quadrature(theta_v))
 
     def spec(self, sampler: str, cdf=None, name: str = "m"):
         """A fresh scene material ``name`` of this case with ``sampler`` and inverse-CDF data
@@ -144,9 +155,12 @@ def glossy():
 
 @pytest.fixture(scope="module")
 def lambert_global():
+    """A Lambert material's global-layout inverse CDFs (8 view rows), made once per test session
+    (tests/test_cdf_samplers.py)."""
+    from test_cdf_samplers import lambert_global_fit
+
     f = lambert((0.8, 0.6, 0.4))
-    cdf = fit_cdf(f, name="lambert", table_params=dict(n_v=8, n_t=32, n_p=32),
-                  phi_kw=dict(degrees=(2, 1)), refinements=0, layout="global")
+    cdf = lambert_global_fit(8)
     assert cdf.layout == "global" and not cdf.fallback, cdf.reason
     return Case("lambert-global", f, cdf, dict(type="lambert", albedo=(0.8, 0.6, 0.4)))
 
@@ -230,7 +244,7 @@ def test_unbiased_against_quadrature(request, strategy, which):
     for tv_deg in THETA_V_DEG:
         tv = np.radians(tv_deg)
         _, wo, wi, w = case.draws(strategy, tv, N_CHI2)
-        assert_unbiased(case.evaluate, tv, wi, wo, w, (strategy, which, tv_deg))
+        case.assert_unbiased(tv, wi, wo, w, (strategy, which, tv_deg))
 
 
 # --------------------------------------------------------------------------------------------
@@ -331,7 +345,7 @@ def test_mis_weights_sum_to_one(furnace_cases, strategy):
     environment's is uniform) equals the quadrature of f cos within 4 standard errors."""
     case = furnace_cases[strategy]
     m, se = _furnace_render(furnace_cases, strategy)
-    q, dq = quadrature_albedo(case.evaluate, np.radians(MIS_THETA_V_DEG))
+    q, dq = case.quadrature(np.radians(MIS_THETA_V_DEG))
     assert abs(m - q) < 4 * se + 2 * dq + 1e-6, (strategy, case.name, m, q, se, dq)
 
 
@@ -355,7 +369,7 @@ def test_mis_check_catches_weights_that_do_not_sum_to_one(request, monkeypatch):
     cases = request.getfixturevalue("furnace_cases")
     case = cases["mis"]
     m, se = _furnace_render(cases, "mis")
-    q, dq = quadrature_albedo(case.evaluate, np.radians(MIS_THETA_V_DEG))
+    q, dq = case.quadrature(np.radians(MIS_THETA_V_DEG))
     assert abs(m - q) > 4 * se + 2 * dq + 1e-6, (m, q, se, dq)
 
 
@@ -401,9 +415,9 @@ def test_derivative_estimator_weight_is_the_maps_jacobian(request, strategy, whi
         assert _matches(w[ok], ref), (strategy, which, tv_deg)
         assert not _matches(1.03 * w[ok], ref), (strategy, which, tv_deg)
         _, wo, wi, w = case.draws(strategy, tv, N_CHI2)
-        assert_unbiased(case.evaluate, tv, wi, wo, w, (strategy, which, tv_deg))
+        case.assert_unbiased(tv, wi, wo, w, (strategy, which, tv_deg))
         with pytest.raises(AssertionError):
-            assert_unbiased(case.evaluate, tv, wi, wo, 1.03 * w, (strategy, which, tv_deg))
+            case.assert_unbiased(tv, wi, wo, 1.03 * w, (strategy, which, tv_deg))
 
 
 @pytest.mark.parametrize("strategy", FALLBACK_STRATEGIES)
