@@ -365,13 +365,11 @@ def test_a_new_fit_compiles_nothing():
 
 @pytest.fixture(scope="module")
 def global_fits():
-    """Two different verified global-layout fits (a Lambert material's CDFs on two tables)."""
-    from lab.analytic import lambert
-    from fit.sampling.cdf_file import fit_cdf
+    """Two different verified global-layout fits (a Lambert material's CDFs on two tables; made
+    once per test session, tests/test_cdf_samplers.py)."""
+    from test_cdf_samplers import lambert_global_fit
 
-    f = lambert((0.8, 0.6, 0.4))
-    fits = [fit_cdf(f, name="lambert", table_params=dict(n_v=n_v, n_t=32, n_p=32), phi_kw=dict(degrees=(2, 1)),
-                    refinements=0, layout="global") for n_v in (8, 6)]
+    fits = [lambert_global_fit(n_v) for n_v in (8, 6)]
     for c in fits:
         assert c.layout == "global" and not c.fallback, c.reason
     assert not np.array_equal(fits[0].maps.theta.num_coef, fits[1].maps.theta.num_coef)
