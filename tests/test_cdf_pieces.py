@@ -298,9 +298,13 @@ def test_pieces_warp_equals_numpy_and_renders_agree(paint):
     """The Warp sampler (constant-time pieces, table rows through the table) gives NumPy's
     directions and alphas; the standard estimator's weight 1 / pdf equals alpha; a render of
     the paint plane under a constant sky with the pieces sampler agrees with the tabulated
-    sampler's within 4 sigma per channel of the image mean."""
+    sampler's within 4 sigma per channel of the image mean. The two render scenes also hold
+    Lambert materials no path reaches (cosine MIS, the rational maps and the table of
+    test_cdf_samplers's Lambert fit): both use one render kernel, the one of
+    test_cdf_samplers's renders (compiled once per session where the runs share the cache)."""
+    from test_cdf_samplers import _renderer, lambert_global_fit
+
     from lab import testing as T
-    from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene import MaterialSpec
 
     b, fit = paint
@@ -315,11 +319,17 @@ def test_pieces_warp_equals_numpy_and_renders_agree(paint):
     wi2, w2 = r.sample_material("m", wo, xi, "rational")
     np.testing.assert_allclose(wi2, wi, atol=1e-6)
     np.testing.assert_allclose(w2, w, rtol=1e-5, atol=1e-7)
+    hidden = []
+    for sampler in ("mis", "rational", "tabulated"):
+        spec = T.lambert(name=f"hidden-{sampler}", albedo=(0.8, 0.6, 0.4), sampler=sampler)
+        spec.cdf = None if sampler == "mis" else lambert_global_fit(8)
+        hidden.append(spec)
     means = {}
     for s in ("rational-derivative", "tabulated"):
         spec = MaterialSpec(name="m", type="measured", data=b, sampler=s)
         spec.cdf = fit
-        rr = Renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=8, spp=256))
+        rr = _renderer(T.plane_scene(spec, [T.constant_env(1.0)], resolution=8, spp=256), hidden)
+        assert rr.material_data.strategies[rr.material_index("m")] == s
         img, var = rr.render(seed=3, return_variance=True)
         means[s] = (img.reshape(-1, 3).mean(0), np.sqrt(var.reshape(-1, 3).sum(0) / 256) / img[..., 0].size)
     (m1, s1), (m2, s2) = means.values()
