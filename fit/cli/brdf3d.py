@@ -12,6 +12,10 @@ method"):
 * ``--layout``: ``select`` (default: both layouts of :data:`fit.rational.fit3d.VARIANTS` fitted,
   the lower validation RMSE kept), ``pieces`` (four theta_h pieces, 666 coefficients) or
   ``single`` (one piece of ``--degrees``, default (7, 3): 420 coefficients);
+* ``--target-rmse R``: the coefficient count as the dial: the layouts of
+  :data:`fit.rational.select3d.TARGET_LADDER` (one piece of 72 to 420 coefficients, then the four
+  pieces' 666) fitted cheapest first, the first whose validation RMSE is within ``R`` kept (none:
+  the lowest); only with ``--layout select``;
 * ``--time-limit S`` (default: none; 0: none): a wall-clock limit the user chooses, one
   :class:`fit.progress.Deadline` from the start of the command (reading the file included);
   what is left of it after reading is the fit's ``wall_limit`` (checked between steps: a step
@@ -51,6 +55,7 @@ from ..rational.fit3d import (
     DEFAULT_RANDOM,
     DEFAULT_TIME_LIMIT,
     DEFAULT_VERIFY,
+    TARGET_LADDER,
     VARIANTS,
     Fit3DSettings,
     fit_rgl_select,
@@ -64,7 +69,8 @@ TOL_3D = 0.01
 #: ``--layout``: the layouts fitted (:data:`fit.rational.fit3d.VARIANTS`; ``single`` with ``--degrees``).
 LAYOUTS = ("select", "pieces", "single")
 #: The flags of the 3-D fit (argparse destinations), refused with ``--model 2d``.
-FLAGS = {"layout": "--layout", "degrees": "--degrees", "time_limit": "--time-limit", "grid": "--grid",
+FLAGS = {"layout": "--layout", "degrees": "--degrees", "target_rmse": "--target-rmse", "time_limit": "--time-limit",
+         "grid": "--grid",
          "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo"}
 MAX_GRID = 200            # per dimension of --grid (8 million points at most)
 MAX_POINTS = 1_000_000    # --random (each kind) and --verify
@@ -95,6 +101,11 @@ def add_flags(p) -> None:
     g.add_argument("--degrees", type=integers(2, 0, MAX_FIT_DEGREE, "NUM,DEN"), default=None, metavar="NUM,DEN",
                    help="total degrees of numerator and denominator of --layout single (default "
                         f"{','.join(map(str, VARIANTS[1]['degrees']))}; fewer coefficients, larger error)")
+    g.add_argument("--target-rmse", dest="target_rmse", type=number(1e-6, 10.0), default=None, metavar="R",
+                   help="the coefficient count as the dial: one piece of degrees (3,1), (4,2), (5,2), (6,3), "
+                        "(7,3) (72 to 420 coefficients), then the four pieces (666), fitted cheapest first; the "
+                        "first whose validation RMSE (relative RMSE of rho cos cos at 20,000 held-out pairs) is "
+                        "within R is kept, else the lowest. Fits up to six layouts where the default fits two")
     g.add_argument("--time-limit", dest="time_limit", type=number(0.0, MAX_TIME_LIMIT_S), default=None, metavar="S",
                    help="a wall-clock bound on the whole command in seconds, your choice (default: none; 0: "
                         "none): checked between the fit's steps (a step under way finishes); once passed, no "
@@ -127,14 +138,17 @@ def settings_from_args(args, wall_limit=None) -> tuple:
     layout = args.layout or "select"
     if args.degrees is not None and layout != "single":
         raise FlagError("--degrees", "sets the degrees of --layout single only")
+    target = getattr(args, "target_rmse", None)
+    if target is not None and layout != "select":
+        raise FlagError("--target-rmse", f"chooses among the layouts of --layout select, not with --layout {layout}")
     d = Fit3DSettings()
     s = Fit3DSettings(tol=TOL_3D if args.tol is None else args.tol, wall_limit=wall_limit,
                       grid=d.grid if args.grid is None else tuple(args.grid),
                       n_random=d.n_random if args.n_random is None else args.n_random,
                       verify=d.verify if args.verify is None else args.verify,
-                      albedo=not args.no_albedo)
+                      albedo=not args.no_albedo, target_rmse=target)
     if layout == "select":
-        return s, VARIANTS
+        return s, (VARIANTS if target is None else TARGET_LADDER)
     if layout == "pieces":
         return s, (VARIANTS[0],)
     single = dict(VARIANTS[1])
@@ -227,4 +241,8 @@ def _print_table(name: str, res, settings) -> None:
              (f"directional albedo within {100 * alb['tol']:g} %" if alb.get("within") else
               f"directional albedo off by up to {100 * alb['max_error']:.3g} %") if alb else "no albedo policy",
              "time limit reached" if info.get("stopped") == "time" else None]
+    tgt = info.get("target")
+    if tgt:
+        parts.insert(1, f"target validation RMSE {tgt['rmse']:g} " + ("met" if tgt["met"] else "not met (the lowest kept)")
+                     + f" with {tgt['coefficients']} coefficients")
     print("; ".join(p for p in parts if p))

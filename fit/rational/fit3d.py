@@ -13,7 +13,7 @@ The modules, one step each:
 * :mod:`fit.rational.verify3d`: :func:`verification_ratio`, :func:`verify_and_refit`;
 * :mod:`fit.rational.albedo3d`: the directional-albedo policy;
 * :mod:`fit.rational.rgl3d`: :func:`fit_rgl`, an RGL file sampled, fitted, verified, albedo policy;
-* :mod:`fit.rational.select3d`: :func:`fit_rgl_select`, :data:`VARIANTS`, :func:`validation_rmse`;
+* :mod:`fit.rational.select3d`: :func:`fit_rgl_select`, :data:`VARIANTS`, :data:`TARGET_LADDER`, :func:`validation_rmse`;
 * :mod:`fit.rational.result3d`: :class:`Fit3D`, :class:`FitData3D`, :func:`domain_record`;
 * :mod:`fit.rational.settings`: :class:`Fit3DSettings` and the defaults; :mod:`fit.rational.ceiling`:
   the wall-clock safety net.
@@ -35,7 +35,7 @@ from .samples3d import (
     sample_grid,
     sample_rgl,
 )
-from .select3d import SELECT_MARGIN, VARIANTS, fit_rgl_select, validation_rmse
+from .select3d import SELECT_MARGIN, TARGET_LADDER, VARIANTS, fit_rgl_select, validation_rmse
 from .settings import (
     DEFAULT_ALBEDO_REFITS,
     DEFAULT_ALBEDO_RMSE_GROWTH,
@@ -58,7 +58,7 @@ __all__ = [
     "DEFAULT_ALBEDO_TOTAL_GROWTH", "DEFAULT_CHANNEL_FLOOR", "DEFAULT_DEGREES", "DEFAULT_GRAZING_COS",
     "DEFAULT_GRID", "DEFAULT_LADDER_STEPS", "DEFAULT_NOISE_FRAC", "DEFAULT_OBJECTIVE", "DEFAULT_RANDOM",
     "DEFAULT_RELAX", "DEFAULT_THETA_FIT_DEG", "DEFAULT_TIME_LIMIT", "DEFAULT_VERIFY", "INTERVALS", "SELECT_MARGIN",
-    "VARIANTS", "Ceiling", "Fit3D", "Fit3DSettings", "FitData3D", "domain_record", "fit_rgl", "fit_rgl_select",
+    "TARGET_LADDER", "VARIANTS", "Ceiling", "Fit3D", "Fit3DSettings", "FitData3D", "domain_record", "fit_rgl", "fit_rgl_select",
     "fit_samples", "grazing_weight", "noise_levels", "objective_points", "sample_grid", "sample_rgl",
     "validation_rmse", "verification_ratio", "verify_and_refit",
 ]

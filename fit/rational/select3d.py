@@ -39,6 +39,13 @@ VARIANTS = (
     {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
     {"theta_h_edges": [], "degrees": (7, 3), "if_rmse_below": 0.065, "verify_rounds": 1, "verify_above": 4.0},
 )
+#: The layouts a selection with ``target_rmse`` (the coefficient count as the dial) tries, cheapest
+#: first: one piece of degrees (3, 1), (4, 2), (5, 2), (6, 3), (7, 3) (72, 135, 198, 312, 420
+#: coefficients), then the four theta_h pieces (666). The first whose validation RMSE is within the
+#: target is kept: the fewest coefficients of the ladder that meet it (docs/fit_accuracy.md, "The
+#: coefficient count as a dial", measured these rungs on three materials).
+TARGET_LADDER = tuple({"theta_h_edges": [], "degrees": d, "verify_rounds": 1, "verify_above": 4.0}
+                      for d in ((3, 1), (4, 2), (5, 2), (6, 3), (7, 3))) + (VARIANTS[0],)
 #: A later layout replaces the one chosen so far only when its validation RMSE is lower by this
 #: fraction: vch_golden_yellow's one piece (0.0439 against 0.0441) was chosen without it, and
 #: it was 0.045 against 0.043 on the benchmark's pairs and 52.6 against 9.2 times its bound at
@@ -48,7 +55,7 @@ SELECT_MARGIN = 0.05
 #: layout's fit: not listed in the layouts' ``"options"`` log.
 _SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above", "albedo",
                               "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
-                              "albedo_refits", "max_variants"})
+                              "albedo_refits", "max_variants", "target_rmse"})
 
 
 def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
@@ -89,7 +96,7 @@ def validation_score(brdf, model, objective: str) -> float:
     return validation_rmse(brdf, model)
 
 
-def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = None, progress=None,
+def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None, progress=None,
                    **params) -> Fit3D:
     """Fit every layout of ``variants`` (each a dict of settings that replace those of ``settings``,
     :class:`fit.rational.settings.Fit3DSettings`, default its defaults, whose names are also keyword
@@ -99,6 +106,11 @@ def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = 
     only when the chosen one's :func:`validation_rmse` is below that RMSE); ``variants`` logs what
     each achieved (coefficients, stated bound, validation RMSE and score, seconds), ``variant`` is
     the index of the one chosen, ``validation_rmse`` and ``validation_score`` its held-out errors.
+    ``variants`` None: :data:`VARIANTS`, or :data:`TARGET_LADDER` with the setting ``target_rmse``:
+    then the layouts are taken as ordered cheapest first, the lowest validation RMSE so far is kept
+    (no margin, no ``"if_rmse_below"``) and the next layouts are skipped ("target met") once it is
+    within the target; ``fit_info["target"]`` records the target, whether it was met and the
+    coefficients kept.
     The budgets are counts (docs/fitting.md, "Budgets"): at most ``max_variants`` layouts are fitted (None: all; later ones
     are logged as skipped, "budget"); the chosen fit is then verified with at most ``verify_rounds``
     refits (:func:`fit.rational.verify3d.verify_and_refit`; a layout's own ``"verify_rounds"`` entry
@@ -112,6 +124,9 @@ def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = 
     :func:`fit.rational.rgl3d.fit_rgl`, then the chosen one's ``"verification"`` and ``"albedo
     policy"``."""
     s = Fit3DSettings.resolve(settings, **params)
+    target = s.target_rmse
+    if variants is None:
+        variants = VARIANTS if target is None else TARGET_LADDER
     t0 = time.perf_counter()
     ceiling = Ceiling.of(s)
     common = {k: v for k, v in s.changed_params().items() if k not in _SELECT_SETTINGS}
@@ -125,10 +140,13 @@ def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = 
         if s.max_variants is not None and k >= int(s.max_variants):
             log.append({"variant": k, "options": _plain(opts), "skipped": "budget"})
             continue
+        if target is not None and best is not None and best.validation_rmse <= target:
+            log.append({"variant": k, "options": _plain(opts), "skipped": f"target RMSE {target:g} met"})
+            continue
         if k and (best is None or ceiling.out("selection", s.select_share)):
             log.append({"variant": k, "options": _plain(opts), "skipped": "time"})
             continue
-        if below is not None and best is not None and best.validation_rmse >= below:
+        if below is not None and target is None and best is not None and best.validation_rmse >= below:
             log.append({"variant": k, "options": _plain(opts), "skipped": f"validation RMSE >= {below:g}"})
             continue
         layout = s.clone(**v, verify_rounds=rounds, verify_above=above)
@@ -139,7 +157,11 @@ def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = 
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
                     "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse,
                     "validation_score": score, "time_s": res.time_s})
-        if res.valid and (best is None or score < (1.0 - SELECT_MARGIN) * best.validation_score):
+        if target is not None:       # the dial: the lowest validation RMSE so far, no margin
+            better = res.valid and (best is None or v_rmse < best.validation_rmse)
+        else:
+            better = res.valid and (best is None or score < (1.0 - SELECT_MARGIN) * best.validation_score)
+        if better:
             best = res
             best.validation_rmse, best.validation_score, best.variant = v_rmse, score, k
             chosen = layout
@@ -163,6 +185,9 @@ def fit_rgl_select(brdf, variants=VARIANTS, *, settings: Fit3DSettings | None = 
             best.validation_score = validation_score(brdf, best.model, s.objective)
     best.variants = log
     best.time_s = time.perf_counter() - t0
+    if target is not None:
+        best.model.fit_info["target"] = {"rmse": float(target), "met": bool(best.validation_rmse <= target),
+                                         "coefficients": int(best.n_coefficients)}
     best.model.fit_info.update(time_s=best.time_s, variant=best.variant, variants=log,
                                validation_rmse=best.validation_rmse, objective=s.objective,
                                validation_score=best.validation_score,

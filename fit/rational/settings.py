@@ -229,7 +229,9 @@ class Fit3DSettings(_Settings):
 
     Layout selection (:func:`~fit.rational.fit3d.fit_rgl_select`): ``select_share`` of
     ``time_limit`` (and of ``wall_limit``) after which no further layout starts; ``max_variants`` layouts at most
-    (None: all).
+    (None: all); ``target_rmse``: the coefficient count as the dial (None, the default: the lowest
+    validation error of the layouts wins): the layouts are tried cheapest first and the first whose
+    validation RMSE is within it is kept (:data:`fit.rational.select3d.TARGET_LADDER` by default).
     """
 
     tol: float = 0.03
@@ -261,6 +263,7 @@ class Fit3DSettings(_Settings):
     prove_bound: bool = False
     select_share: float = 0.6
     max_variants: int | None = None
+    target_rmse: float | None = None
 
     def _checks(self):
         edges, pdeg = self.theta_h_edges, self.piece_degrees
@@ -280,6 +283,7 @@ class Fit3DSettings(_Settings):
             ("relax", _number(self.relax) and self.relax > 0, "a finite number > 0"),
             ("ladder_steps", _integer(self.ladder_steps) and self.ladder_steps >= 1, "an integer >= 1"),
             ("time_limit", _optional_positive(self.time_limit), "None or a finite number > 0 (s)"),
+            ("target_rmse", _optional_positive(self.target_rmse), "None or a finite number > 0"),
             ("wall_limit", _optional_positive(self.wall_limit), "None or a finite number > 0 (s)"),
             ("grid", isinstance(self.grid, (tuple, list)) and len(self.grid) == 3
              and all(_integer(g) and g >= 1 for g in self.grid), "three integers >= 1"),
