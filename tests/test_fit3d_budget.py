@@ -24,7 +24,7 @@ CLOCKED = (ladder3d, verify3d, rgl3d, select3d, albedo3d, ceiling)
 #: two small layouts, a verification with refits and the albedo policy at a tight tolerance (it
 #: corrects on this lobe): every loop that used to stop on time runs
 VARIANTS = ({"theta_h_edges": [0.15], "degrees": (4, 2)}, {"theta_h_edges": [], "degrees": (4, 2)})
-FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "tol": 0.01, "verify": 4000,
+FIT = {"grid": (8, 7, 5), "n_random": 200, "n_objective": 800, "tol": 0.01, "verify": 2000,
        "verify_rounds": 2, "albedo_tol": 0.01}
 
 
