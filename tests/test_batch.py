@@ -191,8 +191,54 @@ def test_interrupt_and_resume_on_local_cluster(materials, tmp_path, capsys):
     assert [r["coefs"] for r in again] == [str(c) for c in report["coefs"]]
 
 
+# --- an external scheduler and worker (``dask scheduler`` + ``dask worker`` on 127.0.0.1) ---------
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _stop(procs):
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+    for p in procs:
+        try:
+            p.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+@pytest.fixture(scope="module")
+def scheduler(tmp_path_factory):
+    """The address of a ``dask scheduler`` with one single-threaded ``dask worker``, processes
+    started once for the tests that fit on an external cluster (the batch's own local cluster is
+    started by the interrupted and resumed runs above), stopped after them."""
+    cwd = tmp_path_factory.mktemp("cluster")
+    port = _free_port()
+    addr = f"tcp://127.0.0.1:{port}"
+    common = {"cwd": cwd, "env": _env(), "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
+                               str(port), "--no-dashboard"], **common)]
+    try:
+        deadline = time.monotonic() + 60      # the batch says "connection refused" at once: wait for the port
+        while time.monotonic() < deadline and procs[0].poll() is None:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                time.sleep(0.2)
+        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", addr, "--nthreads", "1",
+                                       "--nworkers", "1", "--no-dashboard", "--death-timeout", "60"], **common))
+        yield addr
+    finally:
+        _stop(procs)
+    assert all(p.returncode is not None for p in procs)
+
+
 # --- the fit's own sampler in each BRDF output, as rbrdf-fit brdf stores it --------------------------
-def test_batch_stores_the_fits_own_sampler(materials, tmp_path):
+def test_batch_stores_the_fits_own_sampler(materials, tmp_path, scheduler):
     """A BRDF output of the batch carries the fit's own inverse CDFs (the sampler record of
     rbrdf-fit brdf: made from the fit, its table the renderer's tabulation of the fit), reported
     in the 'sampler' column, under a key of its own (--no-sampler's outputs, without one and
@@ -207,7 +253,7 @@ def test_batch_stores_the_fits_own_sampler(materials, tmp_path):
     out = tmp_path / "out"
     one = [materials / "a_lambert.binary"]
     kw = dict(FAST_KW, cdf=False, sampler=True, sampler_time_limit_s=1.0)
-    report = fit_database(one, out, workers=1, progress=False, **kw)
+    report = fit_database(one, out, scheduler=scheduler, connect_timeout_s=60, progress=False, **kw)
     assert report.counts == {"done": 1, "skipped": 0, "failed": 0}, report.rows
     (path,) = (out / "a_lambert").glob("brdf-*[0-9a-f].json")
     model = load_coefficients(path)
@@ -227,26 +273,7 @@ def test_batch_stores_the_fits_own_sampler(materials, tmp_path):
     assert brdf_key(sha, bo, SamplerOptions(1.0)) != brdf_key(sha, bo) != brdf_key(sha, bo, SamplerOptions())
 
 
-# --- external scheduler + workers, one corrupt input ------------------------------------------------
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _stop(procs):
-    for p in procs:
-        if p.poll() is None:
-            p.send_signal(signal.SIGINT)
-    for p in procs:
-        try:
-            p.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
-
-
-def test_external_scheduler_and_failure_isolation(materials, tmp_path):
+def test_external_scheduler_and_failure_isolation(materials, tmp_path, scheduler):
     from fit.batch import fit_database
 
     db = tmp_path / "db"
@@ -254,25 +281,8 @@ def test_external_scheduler_and_failure_isolation(materials, tmp_path):
     for name in ("a_lambert.binary", "c_glossy.binary"):
         (db / name).symlink_to(materials / name)
     (db / "broken.binary").write_bytes(b"\x01\x00\x00\x00" * 3 + b"\0" * 64)
-    addr = f"tcp://127.0.0.1:{_free_port()}"
-    common = {"cwd": tmp_path, "env": _env(), "stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
-    procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1", "--port",
-                               addr.rsplit(":", 1)[1], "--no-dashboard"], **common)]
-    try:
-        deadline = time.monotonic() + 60      # the batch says "connection refused" at once: wait for the port
-        while time.monotonic() < deadline and procs[0].poll() is None:
-            try:
-                socket.create_connection(("127.0.0.1", int(addr.rsplit(":", 1)[1])), timeout=1).close()
-                break
-            except OSError:
-                time.sleep(0.2)
-        procs.append(subprocess.Popen([sys.executable, "-m", "dask", "worker", addr, "--nthreads", "1",
-                                       "--nworkers", "1", "--no-dashboard", "--death-timeout", "60"], **common))
-        report = fit_database([db], tmp_path / "out", scheduler=addr, progress=False, connect_timeout_s=60,
-                              **FAST_KW)
-    finally:
-        _stop(procs)
-    assert all(p.returncode is not None for p in procs)
+    report = fit_database([db], tmp_path / "out", scheduler=scheduler, progress=False, connect_timeout_s=60,
+                          **FAST_KW)
     assert report["material"] == ["a_lambert", "broken", "c_glossy"]
     assert report["status"] == ["done", "failed", "done"] and report.workers == 1
     err = report[1]["error"]
