@@ -71,27 +71,21 @@ file = "${RBRDF_DATA}/meshes/teapot.obj"
 material = "obj"
 transform = { scale = 0.5 }
 """
+def _body(origin, target, shape: str, light: str) -> str:
+    """A scene body: the camera (at ``origin``, looking at ``target``, 35 deg), the object, the light."""
+    return (f"\n[camera]\norigin = {list(origin)}\ntarget = {list(target)}\nfov = 35.0\n"
+            "resolution = [64, 64]\n" + shape + light)
+
+
 #: Scene bodies: camera, object, floor, light (the material table is appended).
 SCENES = {
-    "sphere-sky": ("""
-[camera]
-origin = [0.0, 1.6, 4.2]
-target = [0.0, 0.8, 0.0]
-fov = 35.0
-resolution = [64, 64]
-""" + _SPHERE + """
+    "sphere-sky": _body((0.0, 1.6, 4.2), (0.0, 0.8, 0.0), _SPHERE, """
 [[lights]]
 type = "sky"
 sun_elevation = 40.0
 sun_azimuth = 140.0
 """),
-    "teapot-env": ("""
-[camera]
-origin = [0.0, 2.0, 5.5]
-target = [0.0, 0.6, 0.0]
-fov = 35.0
-resolution = [64, 64]
-""" + _TEAPOT + """
+    "teapot-env": _body((0.0, 2.0, 5.5), (0.0, 0.6, 0.0), _TEAPOT, """
 [[lights]]
 type = "envmap"
 file = "${RBRDF_DATA}/envmaps/rooitou_park_1k.hdr"

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from fit.formats.angles import directions_to_half_diff
+from fit.rational.variables3d import half_diff_3d
 
 
 def lambert(albedo=(0.8, 0.5, 0.2)):
@@ -34,6 +35,24 @@ def glossy_lobe(exponent=80.0, kd=(0.05, 0.04, 0.03), ks=(0.6, 0.7, 0.8), phi_mo
         lobe = np.cos(np.clip(th, 0, np.pi / 2)) ** exponent
         mod = 1.0 + phi_mod * np.cos(2 * pd) * np.sin(td)
         return (kd + ks * lobe[..., None]) * mod[..., None]
+
+    return f
+
+
+def phi_d_lobe(peak: float, width: float, td_power: int, base=(0.1, 0.15, 0.2)):
+    """A diffuse ``base`` and a lobe in theta_h of height ``peak`` and width ``width`` (radians)
+    that depends on phi_d (``1 + 0.3 cos phi_d``) and grows towards grazing theta_d
+    (``1 + sin(theta_d)^td_power``), tinted (1, 0.9, 0.8); zero below the horizon; not
+    reciprocal (the 3-D fitter's test material)."""
+    base = np.array(base)
+
+    def f(wi, wo):
+        X = half_diff_3d(wi, wo)
+        th, td, pd = X[..., 0], X[..., 1], X[..., 2]
+        spec = peak * np.exp(-(th / width) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + np.sin(td) ** td_power)
+        out = base + spec[..., None] * [1.0, 0.9, 0.8]
+        above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
+        return np.where(above[..., None], out, 0.0)
 
     return f
 

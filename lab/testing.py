@@ -23,6 +23,17 @@ def plane_scene(material: MaterialSpec, lights=(), resolution=16, spp=16, seed=0
                  lights=list(lights), path="<test scene>")
 
 
+def spheres_scene(specs: dict) -> Scene:
+    """Every material of ``specs`` (name -> :class:`MaterialSpec`) on a unit sphere of its own, in a
+    row out of the view of a 4-pixel top-down camera, under a constant environment, 1 spp: a
+    scene whose renderer evaluates, samples and packs them (``Renderer.eval_material``, its
+    ``materials``) with one compiled kernel."""
+    shapes = [ShapeSpec(type="sphere", material=s.name, center=(3.0 * k, 0.0, -20.0), radius=1.0)
+              for k, s in enumerate(specs.values())]
+    return Scene(camera=top_down_camera(4), integrator=IntegratorSpec(spp=1, max_depth=1), materials=specs,
+                 shapes=shapes, lights=[constant_env(1.0)], path="<test>")
+
+
 def lambert(name="m", albedo=1.0, sampler="mis") -> MaterialSpec:
     return MaterialSpec(name=name, type="lambert", albedo=tuple(np.broadcast_to(albedo, 3).astype(float)),
                         sampler=sampler)

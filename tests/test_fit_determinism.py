@@ -20,8 +20,7 @@ from fit.rational import ceiling as ceiling_module
 from fit.rational.ceiling import DEFAULT_TIME_LIMIT, Ceiling
 from fit.rational.fit3d import fit_rgl_select
 from fit.rational.settings import Fit3DSettings
-from fit.rational.variables3d import half_diff_3d
-from lab.analytic import RGLLike
+from lab.analytic import RGLLike, phi_d_lobe
 
 #: two small layouts, a verification with a refit and the albedo policy: every step that checks
 #: the safety net runs
@@ -31,14 +30,8 @@ FIT = {"grid": (9, 8, 6), "n_random": 300, "n_objective": 1000, "tol": 0.01, "ve
 FAST = 50.0       # the wall clock runs this many times fast
 
 
-def lobe_brdf(wi, wo):
-    """A diffuse base and a glossy lobe in theta_h that depends on phi_d (1/sr, RGB)."""
-    X = half_diff_3d(wi, wo)
-    th, td, pd = X[..., 0], X[..., 1], X[..., 2]
-    spec = 3.0 * np.exp(-(th / 0.13) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + np.sin(td) ** 4)
-    out = np.array([0.1, 0.14, 0.2]) + spec[..., None] * [1.0, 0.9, 0.8]
-    above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
-    return np.where(above[..., None], out, 0.0)
+#: a diffuse base and a glossy lobe in theta_h that depends on phi_d (1/sr, RGB)
+lobe_brdf = phi_d_lobe(3.0, 0.13, 4, base=(0.1, 0.14, 0.2))
 
 
 #: an RGL-like object of :func:`lobe_brdf` (the last incidence 80 deg)

@@ -19,7 +19,7 @@ from warp_rbrdf.materials.data import Materials
 from warp_rbrdf.materials.rational_kernel import DOMAIN_MARGIN
 from warp_rbrdf.paths import PACKAGE_DATA
 from warp_rbrdf.renderer import Renderer
-from warp_rbrdf.scene import IntegratorSpec, MaterialSpec, Scene, ShapeSpec
+from warp_rbrdf.scene import MaterialSpec
 
 _KERNELS: dict = {}
 
@@ -73,10 +73,7 @@ def scene():
     flat_h.fallback = _fallback_record(flat_h)
     specs["flat_h"] = spec("flat_h", data=flat_h)
     specs["flat_d"] = spec("flat_d", data=_flat_theta_d_model())
-    shapes = [ShapeSpec(type="sphere", material=s.name, center=(3.0 * k, 0.0, -20.0), radius=1.0)
-              for k, s in enumerate(specs.values())]
-    sc = Scene(camera=T.top_down_camera(4), integrator=IntegratorSpec(spp=1, max_depth=1), materials=specs,
-               shapes=shapes, lights=[T.constant_env(1.0)], path="<test>")
+    sc = T.spheres_scene(specs)
     return Renderer(sc, device="cpu"), list(specs)
 
 

@@ -9,7 +9,7 @@ import pytest
 from fit.rational.function import RationalFunction
 from fit.rational.model import RationalModel, Variable
 from fit.rational.proved_bound import _grid_cells, _multilinear, prove_cells
-from lab.analytic import RGLLike
+from lab.analytic import RGLLike, phi_d_lobe
 
 
 def _model(value_transform="linear"):
@@ -119,16 +119,8 @@ def test_reader_checks_the_bound_records():
             from_dict(bad)
 
 
-def _broad_lobe(wi, wo):
-    """A diffuse base and a broad lobe in theta_h that depends on phi_d, not reciprocal (1/sr, RGB)."""
-    from fit.rational.variables3d import half_diff_3d
-
-    X = half_diff_3d(wi, wo)
-    th, td, pd = X[..., 0], X[..., 1], X[..., 2]
-    spec = 1.5 * np.exp(-(th / 0.45) ** 2) * (1.0 + 0.3 * np.cos(pd)) * (1.0 + np.sin(td) ** 2)
-    out = np.array([0.1, 0.15, 0.2]) + spec[..., None] * [1.0, 0.9, 0.8]
-    above = (np.asarray(wi)[..., 2] > 0) & (np.asarray(wo)[..., 2] > 0)
-    return np.where(above[..., None], out, 0.0)
+#: a diffuse base and a broad lobe in theta_h that depends on phi_d, not reciprocal (1/sr, RGB)
+_broad_lobe = phi_d_lobe(1.5, 0.45, 2)
 
 
 def _brute_force_3d(res, brdf, n=100000, seed=11, grazing=False):

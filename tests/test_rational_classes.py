@@ -45,7 +45,7 @@ from warp_rbrdf.materials.data import Materials
 from warp_rbrdf.paths import PACKAGE_DATA
 from warp_rbrdf.renderer import Renderer
 from warp_rbrdf.runtime import init_warp
-from warp_rbrdf.scene import IntegratorSpec, MaterialSpec, Scene, ShapeSpec
+from warp_rbrdf.scene import MaterialSpec
 from warp_rbrdf.shipped_kernels import render_module_options
 
 init_warp()
@@ -411,10 +411,7 @@ def scene():
         if s.data is not None and s.name in ("clamped_table", "flat_h"):
             # an in-memory flagged fit carries its fallback table as the fitter embeds it
             s.data.fallback = _fallback_record(s.data)
-    shapes = [ShapeSpec(type="sphere", material=s.name, center=(3.0 * k, 0.0, -20.0), radius=1.0)
-              for k, s in enumerate(specs.values())]
-    sc = Scene(camera=T.top_down_camera(4), integrator=IntegratorSpec(spp=1, max_depth=1), materials=specs,
-               shapes=shapes, lights=[T.constant_env(1.0)], path="<test>")
+    sc = T.spheres_scene(specs)
     # the CPU whatever $RBRDF_DEVICE says: this file's own kernels (the vector code, the inline
     # exp) are the CPU build's and run on the CPU (tests/test_flat2d_scalar.py: the scalar form)
     return Renderer(sc, device="cpu"), specs
