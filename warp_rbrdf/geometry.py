@@ -285,18 +285,24 @@ def build_geometry(scene: Scene, material_index: dict, analytic_spheres: bool = 
 #: ``benchmarks/bench_render.py --bvh`` (docs/rendering.md).
 BVH_CONSTRUCTOR = "sah"
 BVH_LEAF_SIZE = 4
+#: The same on a CUDA device (Warp's own default there is a 4-triangle LBVH): on an H100 the
+#: bunny renders at 446 M samples/s with SAH / 1 against 319 M with the default, the teapot
+#: 1,288 against 1,081 M (docs/cuda.md).
+BVH_CONSTRUCTOR_CUDA = "sah"
+BVH_LEAF_SIZE_CUDA = 1
 
 
 def make_warp_mesh(geom: Geometry, device, constructor: str | None = None, leaf_size: int | None = None):
-    """One :class:`warp.Mesh` for the scene's triangles (CPU: :data:`BVH_CONSTRUCTOR`,
-    :data:`BVH_LEAF_SIZE` unless given); None if there is no triangle."""
+    """One :class:`warp.Mesh` for the scene's triangles (unless given: CPU :data:`BVH_CONSTRUCTOR`,
+    :data:`BVH_LEAF_SIZE`; CUDA :data:`BVH_CONSTRUCTOR_CUDA`, :data:`BVH_LEAF_SIZE_CUDA`); None
+    if there is no triangle."""
     if geom.num_triangles == 0:
         return None
     points = wp.array(geom.points, dtype=wp.vec3, device=device)
     indices = wp.array(geom.indices, dtype=wp.int32, device=device)
-    if str(device) == "cpu":
-        constructor = constructor or BVH_CONSTRUCTOR
-        leaf_size = leaf_size or BVH_LEAF_SIZE
+    cpu = str(device) == "cpu"
+    constructor = constructor or (BVH_CONSTRUCTOR if cpu else BVH_CONSTRUCTOR_CUDA)
+    leaf_size = leaf_size or (BVH_LEAF_SIZE if cpu else BVH_LEAF_SIZE_CUDA)
     return wp.Mesh(points=points, indices=indices, bvh_constructor=constructor, bvh_leaf_size=leaf_size)
 
 
