@@ -13,7 +13,7 @@ from conftest import data_file, require_mitsuba
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
 BENCHMARKS = ("bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
-              "bench_spectral", "bench_startup", "bench_vs_mitsuba")
+              "bench_spectral", "bench_startup", "bench_vs_mitsuba", "bench_mesh_vs_mitsuba")
 
 
 @pytest.mark.parametrize("name", BENCHMARKS)
@@ -51,6 +51,45 @@ def test_bench_cuda_agreement_flags_a_bias(tmp_path):
     noisy = dict(probe, image=probe["image"] + rng.standard_normal(probe["image"].shape).astype(np.float32)
                  * np.sqrt(probe["variance"] / probe["spp"]))
     assert bench_cuda.compare(noisy, probe)["agrees"]
+
+
+# --------------------------------------------------------------------------------------------
+# bench_mesh_vs_mitsuba: the mesh both renderers read, and a smoke run
+def test_mesh_for_mitsuba_is_ours(tmp_path):
+    """The PLY written for Mitsuba holds our loader's triangles and normals after the transform
+    that puts the mesh's bounding box at the origin with its largest side MESH_EXTENT."""
+    from benchmarks import bench_mesh_vs_mitsuba as B
+    from warp_rbrdf.geometry import load_mesh_file
+
+    v, f, n = load_mesh_file(data_file("meshes/teapot.obj"))
+    m = B.mesh_to_world(v)
+    w = v @ m[:3, :3].T + m[:3, 3]
+    assert np.allclose((w.max(0) + w.min(0)) / 2, 0, atol=1e-9)
+    assert np.isclose((w.max(0) - w.min(0)).max(), B.MESH_EXTENT)
+    B.write_ply(tmp_path / "t.ply", w, f, n)
+    raw = (tmp_path / "t.ply").read_bytes()
+    body = raw[raw.index(b"end_header\n") + len(b"end_header\n"):]
+    verts = np.frombuffer(body[:len(v) * 24], "<f4").reshape(-1, 6)
+    faces = np.frombuffer(body[len(v) * 24:], dtype=[("n", "u1"), ("i", "<i4", 3)])
+    assert len(faces) == len(f) and np.all(faces["n"] == 3) and np.array_equal(faces["i"], f)
+    assert np.allclose(verts[:, :3], w, atol=1e-6) and np.allclose(verts[:, 3:], n, atol=1e-6)
+
+
+def test_bench_mesh_vs_mitsuba_smoke(tmp_path):
+    """A tiny run (Mitsuba's scalar variant): the teapot renders the same in both (mean within
+    10 %: a wrong transform or mesh moves it far more), every number is there."""
+    MR = require_mitsuba()
+    data_file("meshes/teapot.obj")
+    data_file("envmaps/studio_small_03_1k.hdr")
+    from benchmarks import bench_mesh_vs_mitsuba as B
+
+    out = tmp_path / "m.json"
+    assert B.main(["--variant", MR.VARIANT, "--objects", "teapot", "--materials", "lambert",
+                   "--resolution", "24", "--spp", "4", "--rounds", "2", "--out", str(out)]) == 0
+    (c,) = json.loads(out.read_text())["cases"]
+    assert c["pixels_on_object"] > 50 and abs(c["mean_rel_diff"]) < 0.1
+    for k in ("ours", "mitsuba"):
+        assert c[k]["samples_per_s"] > 0 and c[k]["rel_variance_per_sample"] > 0
 
 
 # --------------------------------------------------------------------------------------------
