@@ -1,6 +1,8 @@
 """Small in-memory scenes for tests and examples (no files needed)."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from warp_rbrdf.scene import CameraSpec, IntegratorSpec, LightSpec, MaterialSpec, Scene, ShapeSpec
@@ -32,6 +34,73 @@ def spheres_scene(specs: dict) -> Scene:
               for k, s in enumerate(specs.values())]
     return Scene(camera=top_down_camera(4), integrator=IntegratorSpec(spp=1, max_depth=1), materials=specs,
                  shapes=shapes, lights=[constant_env(1.0)], path="<test>")
+
+
+def hide(sc: Scene, specs) -> Scene:
+    """``sc`` with the materials ``specs`` (:class:`MaterialSpec`) on small shapes no ray reaches,
+    so that the scene's render kernel has their kinds and techniques (a kernel per combination
+    of material kinds, techniques and geometry kinds, seconds of compiling each on a cold
+    cache): inside the first sphere of ``sc`` (a plane and a sphere in turn, a tenth of its
+    radius, at its centre), or else under its first plane (spheres of radius 0.01 whose centres
+    lie 0.02 under it, 0.05 apart; the plane's normal is +Y, as :func:`plane_scene`'s). The
+    integrator's rays leave a surface on its outer side, and a ray towards them meets the sphere
+    or the plane first; the shapes lie inside the scene's bounding box, or extend it by 0.03
+    (the automatic ray epsilon, 1e-5 of its diagonal, unchanged to 1e-7 in a scene of size 1 or
+    more). A render estimates the scene without them, with the random stream of the scene's set
+    of strategies, hidden ones included (``sample_patterns.stream_key``)."""
+    specs = list(specs)
+    spheres = [sh for sh in sc.shapes if sh.type == "sphere"]
+    if spheres:
+        sph = spheres[0]
+        assert np.array_equal(sph.transform, np.eye(4)), "hide: the first sphere has a transform"
+        c, r = np.asarray(sph.center, float), sph.radius
+        places = [("plane", c, 0.1 * r), ("sphere", c, 0.1 * r)]
+    else:
+        plane = next(sh for sh in sc.shapes if sh.type == "plane")
+        assert np.array_equal(plane.transform, np.eye(4)), "hide: the first plane has a transform"
+        c = np.asarray(plane.center, float)
+        places = [("sphere", c + (0.05 * k, -0.02, 0.0), 0.01) for k in range(len(specs))]
+    for k, spec in enumerate(specs):
+        assert spec.name not in sc.materials, spec.name
+        sc.materials[spec.name] = spec
+        kind, centre, size = places[k % len(places)]
+        sc.shapes.append(ShapeSpec(type=kind, material=spec.name, center=tuple(centre), radius=size,
+                                   size=(size, size)))
+    return sc
+
+
+@functools.lru_cache(maxsize=1)
+def constant_measured():
+    """A ``measured`` table of 0.1 everywhere (the MERL grid) and a small table-only inverse CDF
+    of it (4 view rows; nothing to resample or tabulate at load)."""
+    from fit.formats.grid import MERL_SHAPE
+    from fit.formats.measured import MeasuredBRDF
+    from fit.sampling.cdf_file import table_only
+
+    shape = MERL_SHAPE + (3,)
+    const = MeasuredBRDF(values=np.full(shape, 0.1), valid=np.ones(shape, bool), name="hidden")
+    return const, table_only(const.evaluate, {"n_v": 4, "n_t": 8, "n_p": 8})
+
+
+#: the material kinds and BSDF techniques of :func:`common_kernel`
+COMMON_KINDS = ("lambert", "measured")
+COMMON_TECHNIQUES = ("cosine", "uniform", "tabulated")
+
+
+def common_kernel(sc: Scene) -> Scene:
+    """``sc`` (``lambert`` and ``measured`` materials, cosine, uniform and tabulated BSDF
+    samples: :data:`COMMON_KINDS`, :data:`COMMON_TECHNIQUES`) with hidden materials
+    (:func:`hide`) of both kinds and the three techniques, and a hidden sphere or plane: its
+    render kernel is the common test kernel of triangles, analytic spheres, these kinds and
+    techniques (or, rendered with ``analytic_spheres=False``, of triangles only), which the
+    render tests of several files share (each kernel compiles once per kernel cache). The
+    hidden materials' strategies are ``mis`` (environment + cosine), ``uniform`` and
+    ``tabulated`` (BSDF sample only)."""
+    const, table = constant_measured()
+    return hide(sc, [lambert(name="hidden-mis", albedo=1.0, sampler="mis"),
+                     MaterialSpec(name="hidden-uniform", type="measured", data=const, sampler="uniform"),
+                     MaterialSpec(name="hidden-tabulated", type="measured", data=const, sampler="tabulated",
+                                  cdf=table)])
 
 
 def lambert(name="m", albedo=1.0, sampler="mis") -> MaterialSpec:

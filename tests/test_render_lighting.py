@@ -28,32 +28,10 @@ FURNACE_STRATEGIES = registry.BASE_STRATEGIES
 
 
 def hidden(sc: Scene) -> Scene:
-    """``sc`` with a white Lambert material per BSDF technique of :data:`FURNACE_STRATEGIES`
-    on shapes no ray reaches (a small plane and sphere inside the first sphere, or two small
-    spheres under the first plane, whose normal is +Y), so that the scenes of this module have
-    the same geometry kinds (triangles and spheres), material kinds and techniques, and share
-    one compiled render kernel (each combination is a kernel of its own: seconds of compiling
-    on a cold cache). The integrator's rays leave a surface on its outer side; the shapes lie
-    inside the scene's bounding box, or extend it by 0.03 (the ray epsilon, 1e-5 of its
-    diagonal, unchanged to 1e-7). A render estimates the scene without them, with the random
-    stream of the scene's set of strategies (``sample_patterns.stream_key``)."""
-    techniques = {}
-    for name in FURNACE_STRATEGIES:
-        techniques.setdefault(registry.strategy(name).technique, name)
-    spheres = [sh for sh in sc.shapes if sh.type == "sphere"]
-    if spheres:
-        c, r = np.asarray(spheres[0].center, float), spheres[0].radius
-        places = [("plane", c, 0.1 * r), ("sphere", c, 0.1 * r)]
-    else:
-        c = np.asarray(next(sh for sh in sc.shapes if sh.type == "plane").center, float)
-        places = [("sphere", c + (0.05 * k, -0.02, 0.0), 0.01) for k in range(2)]
-    for k, sampler in enumerate(techniques.values()):
-        name = f"hidden-{sampler}"
-        sc.materials[name] = T.lambert(name=name, albedo=1.0, sampler=sampler)
-        kind, centre, size = places[k % len(places)]
-        sc.shapes.append(ShapeSpec(type=kind, material=name, center=tuple(centre), radius=size,
-                                   size=(size, size)))
-    return sc
+    """``sc`` with the hidden materials and shapes of :func:`lab.testing.common_kernel`: the
+    scenes of this module (Lambert materials, the techniques of :data:`FURNACE_STRATEGIES`)
+    share the common test kernel with the render tests of other files."""
+    return T.common_kernel(sc)
 
 
 @pytest.mark.parametrize("sampler", FURNACE_STRATEGIES)
