@@ -11,7 +11,6 @@ import pytest
 import warp as wp
 from conftest import ROOT, data_file, rgl_measured
 
-from fit.formats.measured import MeasuredBRDF
 from warp_rbrdf import geometry as G
 from warp_rbrdf import load_scene, transforms
 from lab import testing as T
@@ -315,7 +314,8 @@ def test_sphere_scene_render_equals_the_icosphere_render():
     satin = sc.materials["satin"]
     assert satin.type == "measured" and Path(satin.file).name == "satin_rosaline_rgb.bsdf"
     satin.data = rgl_measured("satin_rosaline_rgb", satin.incident)   # resampled once for both renders
-    z, a, _, _, _ = _compare_renders(sc, 64)
+    # the common test kernel (lab.testing; triangles only for the icosphere render)
+    z, a, _, _, _ = _compare_renders(T.common_kernel(sc), 64)
     assert np.all(np.abs(z) < 3), z
     assert a.mean() > 0.01
 
@@ -324,22 +324,14 @@ def test_reference_sphere_render_equals_the_icosphere_render():
     """The Mitsuba reference scene (unit sphere, environment map, hidden) with a Lambert
     material, analytic vs the icosphere of mitsuba_reference.SPHERE_SUBDIVISIONS: channel means
     within 3 standard errors and per-pixel z-scores inside the silhouette noise-like."""
-    from fit.formats.grid import MERL_SHAPE
     from lab import mitsuba_reference as MR
-    from warp_rbrdf.scene import MaterialSpec
 
     env = data_file("envmaps/studio_small_03_1k.hdr")
     sc = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), env, 64, 48)
-    # a measured material (a constant table, mis) on a small plane at the sphere's centre, which
-    # no ray reaches (rays leave the sphere outwards, max_depth 1; the bounding box and the ray
-    # epsilon unchanged; the same sampler, so the same random stream: the same images): the
-    # scene then has the kinds, techniques and geometry of scenes/sphere.toml above, whose two
-    # compiled kernels (analytic spheres and triangles, triangles only) the renders share
-    shape = MERL_SHAPE + (3,)
-    hidden = MeasuredBRDF(values=np.full(shape, 0.1), valid=np.ones(shape, bool), name="hidden")
-    sc.materials["hidden"] = MaterialSpec(name="hidden", type="measured", data=hidden, sampler="mis")
-    sc.shapes.append(ShapeSpec(type="plane", material="hidden", center=(0.0, 0.0, 0.0), size=(0.2, 0.2)))
-    z, a, b, va, vb = _compare_renders(sc, 64)
+    # hidden materials inside the sphere (lab.testing.common_kernel): the scene then has the
+    # kinds, techniques and geometry of the scene above, whose two compiled kernels (analytic
+    # spheres and triangles, triangles only) the renders share
+    z, a, b, va, vb = _compare_renders(T.common_kernel(sc), 64)
     assert np.all(np.abs(z) < 3), z
     mask = MR.sphere_mask(48)
     zp = (a - b)[mask] / np.sqrt((va + vb)[mask] / 64 + 1e-30)
