@@ -83,9 +83,33 @@ def rgl_measured(name: str, incident: str = "view", horizon_margin_deg: float | 
 
     def resample():
         b = read_rgl(path, incident=incident)
-        return b.to_measured() if horizon_margin_deg is None else b.to_measured(horizon_margin_deg)
+        # the method itself, also where rgl_resampled_once has it take its result from here
+        to_measured = getattr(type(b).to_measured, "__wrapped__", type(b).to_measured)
+        return to_measured(b) if horizon_margin_deg is None else to_measured(b, horizon_margin_deg)
 
     return session_cached(path, f"{name}-{incident}-{horizon_margin_deg}", resample)
+
+
+@pytest.fixture
+def rgl_resampled_once(monkeypatch):
+    """``RGLBRDF.to_measured`` of a shared ``rgl/*.bsdf`` file made once per test session for the
+    code under test (``load_measured``, a command, a material's source), under the key of
+    :func:`rgl_measured` (:func:`session_cached`): the same result, computed once however many
+    tests and workers ask. For tests of a command or loader, not of the resampling itself
+    (tests/test_rgl.py); other files are resampled as they are."""
+    from fit.formats.rgl import RGLBRDF
+
+    real = RGLBRDF.to_measured
+
+    def to_measured(self, horizon_margin_deg: float = 1.0):
+        path = Path(self.source)
+        if not self.source or path.resolve() != (DATA / "rgl" / path.name).resolve() or path.stem != self.name:
+            return real(self, horizon_margin_deg)
+        margin = None if horizon_margin_deg == 1.0 else horizon_margin_deg
+        return session_cached(path, f"{self.name}-{self.incident}-{margin}", lambda: real(self, horizon_margin_deg))
+
+    to_measured.__wrapped__ = real          # what rgl_measured calls (no second lock on its key)
+    monkeypatch.setattr(RGLBRDF, "to_measured", to_measured)
 
 
 def session_cached(path: Path, what: str, make):
