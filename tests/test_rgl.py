@@ -436,7 +436,9 @@ def test_unreadable_path(tmp_path):
 # ------------------------------------------------------------------------------------------
 # Command line
 # ------------------------------------------------------------------------------------------
-def test_cli_info_on_rgl_file(capsys):
+def test_cli_info_on_rgl_file(capsys, rgl_resampled_once):
+    """``rbrdf-fit info`` on an RGL file (its resampling made once per session:
+    ``conftest.rgl_resampled_once``; the resampling's own tests are above)."""
     from fit.cli import main
 
     assert main(["info", str(_paper_path())]) == 0
