@@ -94,9 +94,11 @@ def test_cdf_table_only_writes_a_flagged_table(lambert_file, tmp_path, capsys):
     assert fit.table is not None and fit.table_params["n_t"] == 16
 
 
-def test_cdf_of_an_rgl_file_records_its_roles_and_a_scene_checks_them(tmp_path, capsys):
+def test_cdf_of_an_rgl_file_records_its_roles_and_a_scene_checks_them(tmp_path, capsys, rgl_resampled_once):
     """A table built from an RGL file depends on which direction is the tensors' theta_i: the
-    file records it and a scene whose material has the other roles refuses it in one line."""
+    file records it and a scene whose material has the other roles refuses it in one line. The
+    command and the scenes share the file's resampling with these roles (made once per test
+    session: ``conftest.rgl_resampled_once``)."""
     from conftest import data_file, rgl_measured
 
     from fit.sampling.cdf_file import load
