@@ -221,15 +221,17 @@ def test_measured_param_is_the_number_of_phi_d_bins(fold_renderer):
 
 def test_rgl_derived_table_has_no_terminator_line():
     """The pairs whose light grazes (85-89.9 deg, the terminator of a bright light): with the
-    table of rho at bin centres, rho(bin) * cos(actual light) was 0.87 of the file's f cos there
+    table of rho at bin centres, rho(bin) * cos(actual light) is 0.85 of the file's f cos there
     (the centre's 1/cos and bins straddling the horizon read 0: a dark line along each bright
     light's terminator); the weighted table gives the nearest bin's f cos exactly, within
-    nearest-bin error (mean within 3 %), in NumPy and in the kernel."""
+    nearest-bin error (mean within 3 %: 1.005), in NumPy and in the kernel. The matte paper,
+    whose table other tests of the default run resample too (the green metallic film
+    cm_toxic_green: 0.87 and 1.02)."""
     from fit.formats.colour import LUMINANCE
     from fit.formats.rgl import read_rgl
 
-    b = read_rgl(data_file("rgl/cm_toxic_green_rgb.bsdf"))
-    m = rgl_measured("cm_toxic_green_rgb")   # b.to_measured(), once per session
+    b = read_rgl(data_file("rgl/paper_white_rgb.bsdf"))
+    m = rgl_measured("paper_white_rgb")   # b.to_measured(), once per session
     rng = np.random.default_rng(4)
     n = 20000
     ct = np.cos(np.radians(85.0)) - rng.random(n) * (np.cos(np.radians(85.0)) - np.cos(np.radians(89.9)))
@@ -237,7 +239,7 @@ def test_rgl_derived_table_has_no_terminator_line():
     wv = spherical_to_direction(np.arccos(1 - rng.random(n) * (1 - np.cos(np.radians(80)))), rng.random(n) * 2 * np.pi)
     exact = (b.evaluate(wl, wv) @ LUMINANCE) * wl[:, 2]
     old = MeasuredBRDF(values=m.values, valid=m.valid)                 # rho at the centres only
-    assert ((old.evaluate(wl, wv, "nearest") @ LUMINANCE) * wl[:, 2]).mean() / exact.mean() < 0.9   # 0.87
+    assert ((old.evaluate(wl, wv, "nearest") @ LUMINANCE) * wl[:, 2]).mean() / exact.mean() < 0.9   # 0.85
     new = (m.evaluate(wl, wv) @ LUMINANCE) * wl[:, 2]
     assert new.mean() / exact.mean() == pytest.approx(1.0, abs=0.03)
     r = _multi_scene([MaterialSpec(name="rgl", type="measured", data=m, sampler="mis")])
