@@ -140,7 +140,7 @@ def truth(bsdf: Path, env: Path, base, a, out: Path) -> dict:
     if path.is_file():
         z = np.load(path)
         return {"img": z["img"], "delta": z["delta"], "source": "cached", "seconds": float(z["seconds"])}
-    r = Renderer(base)
+    r = Renderer(base, device="cpu")
     r.compile()
     half = a.truth_spp // 2
     per = min(TRUTH_PASS_SPP, half)
@@ -183,7 +183,7 @@ def ladder_ours(scene, a, ref, mask, expo, band) -> tuple[list, dict]:
     from warp_rbrdf.renderer import Renderer
 
     t0 = time.perf_counter()
-    r = Renderer(scene)
+    r = Renderer(scene, device="cpu")
     setup = time.perf_counter() - t0
     comp = r.compile()
     r.render(spp=1, seed=2**31 - 1, threads=a.threads)          # warm-up: first launches

@@ -164,7 +164,7 @@ def generic_renderer(scene):
     specialised = rational.kernel_eval
     rational.kernel_eval = lambda loaded_list: rational_eval
     try:
-        r = Renderer(scene)
+        r = Renderer(scene, device="cpu")
         r.compile()
     finally:
         rational.kernel_eval = specialised
@@ -304,7 +304,7 @@ def main(argv=None):
         print(f"bench_eval: {e}", file=sys.stderr)
         return 2
     scene = eval_scene(specs)
-    r = Renderer(scene)
+    r = Renderer(scene, device="cpu")
     compile_s = r.compile()
     g = generic_renderer(scene)
     runs = {row: (r, s.name) for row, s in specs.items()}

@@ -62,12 +62,12 @@ def machine_scaling(threads=2, repeats=3):
             s = s + wp.sin(float(k) * 0.001 + s)
         a[i] = s
 
-    arrs = [wp.zeros(256, dtype=float) for _ in range(threads)]
-    wp.launch(busy, dim=256, inputs=[arrs[0], 1])
+    arrs = [wp.zeros(256, dtype=float, device="cpu") for _ in range(threads)]
+    wp.launch(busy, dim=256, inputs=[arrs[0], 1], device="cpu")
     n = 20000
 
     def run(i):
-        wp.launch(busy, dim=256, inputs=[arrs[i], n])
+        wp.launch(busy, dim=256, inputs=[arrs[i], n], device="cpu")
 
     ratios = []
     for _ in range(repeats):
@@ -262,7 +262,7 @@ def bvh_rates(scene, spp, repeats, configs=(("sah", 1), ("sah", 2), ("sah", 4), 
     from warp_rbrdf import geometry
     from warp_rbrdf.renderer import Renderer
 
-    r = Renderer(scene)
+    r = Renderer(scene, device="cpu")
     if r.mesh is None:
         return {}
     r.compile()
@@ -327,7 +327,7 @@ def main(argv=None):
                   f"build {v['build_s']:.2f} s")
         print(json.dumps({"scene": str(a.scene), "bvh": rates}))
         return 0
-    r = Renderer(sc)
+    r = Renderer(sc, device="cpu")
     compile_s = r.compile()
     out = {"scene": str(a.scene), "resolution": a.resolution, "spp": a.spp, "repeats": a.repeats,
            "cpu_count": os.cpu_count(), "setup_s": round(r.setup_seconds, 3), "compile_s": round(compile_s, 3),
@@ -353,7 +353,7 @@ def main(argv=None):
         t = max(a.threads)
         runs = {"warp": lambda i: _timed(r, a.spp, t, i)}
         if a.icosphere:
-            ri = Renderer(sc, analytic_spheres=False)
+            ri = Renderer(sc, device="cpu", analytic_spheres=False)
             ri.compile()
             ri.render(spp=a.spp, threads=t)
             runs["warp icosphere"] = lambda i: _timed(ri, a.spp, t, i)

@@ -114,7 +114,7 @@ import numpy as np
 from fit.formats.angles import spherical_to_direction
 from warp_rbrdf import load_scene
 from warp_rbrdf.renderer import Renderer
-r = Renderer(load_scene(sys.argv[1]))
+r = Renderer(load_scene(sys.argv[1]), device="cpu")
 n, reps = int(sys.argv[2]), int(sys.argv[3])
 rng = np.random.default_rng(0)
 wi = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
@@ -237,7 +237,7 @@ def isa_levels(repeats: int) -> dict:
     rs = {}
     for sn, (make, _) in scenes.items():
         for vn, flags in variants.items():
-            r = Renderer(make())
+            r = Renderer(make(), device="cpu")
             wp.set_module_options({"cpu_compiler_flags": flags}, module=r.kernels.render_tile.module)
             r.compile()
             r.render(spp=1, threads=2)

@@ -321,7 +321,7 @@ class Ours:
             sc.integrator.sampler = sampler
         self.threads = threads
         t0 = time.perf_counter()
-        self.r = Renderer(sc)
+        self.r = Renderer(sc, device="cpu")
         self.setup_s = time.perf_counter() - t0
         self.compile_s = self.r.compile()
         t0 = time.perf_counter()

@@ -238,7 +238,7 @@ def run(a) -> dict:
     from benchmarks.lanes_scene import View
     from warp_rbrdf.runtime import init_warp
 
-    init_warp()
+    init_warp().set_device("cpu")   # a CPU study: its arrays and launches on the CPU whatever the machine has
     tb, mats, env, guides = load_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr")
     if any(a.spp % k for k in a.lanes):
         raise SystemExit(f"--spp {a.spp} must be a multiple of every K")
@@ -330,7 +330,7 @@ def print_remarks(a) -> int:
     from benchmarks.lanes_scene import View
     from warp_rbrdf.runtime import init_warp
 
-    init_warp()
+    init_warp().set_device("cpu")   # a CPU study: its arrays and launches on the CPU whatever the machine has
     tb, mats, env, guides = load_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr")
     view = View()
     view.res, view.spp, view.seed, view.tan_half = 16, 16, 7, float(np.tan(np.radians(FOV_Y_DEG / 2)))

@@ -199,7 +199,7 @@ def _child(a) -> None:
     integrator.render_module_options = lambda: {**base, "cpu_compiler_flags": flags}
     scene = MR.sphere_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr",
                             a.spp, a.resolution)
-    r = Renderer(scene)
+    r = Renderer(scene, device="cpu")
     r.render(spp=4, threads=1)
     r.render(spp=a.spp, threads=1)
 
