@@ -200,9 +200,9 @@ def test_brdf_3d_fit_renders_without_its_source(fit3d_file, tmp_path, monkeypatc
     """What the renderer shows of a 3-D fit is in the file: alone in a folder, its source
     measurement nowhere ($RBRDF_DATA empty), it loads with no note, its Warp evaluation equals the
     NumPy one (evaluate_directions) and the Warp evaluation's albedo at a normal view (what a
-    render of the plane under a unit sky shows) is paper_white's. The render kernel of 3-D fits
-    (a compile of its own) is run in tests/test_export.py's 3-D sphere test and the furnace
-    renders of tests/test_sampler_contract.py."""
+    render of the plane under a unit sky shows) is paper_white's. A 3-D fit's render (a render
+    kernel of its own to compile) is checked against Mitsuba's by
+    tests/test_export.py::test_mitsuba_plugin_sphere_3d_keeps_the_roles_of_our_render."""
     import shutil
 
     from lab import testing as T
