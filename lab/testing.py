@@ -82,25 +82,65 @@ def constant_measured():
     return const, table_only(const.evaluate, {"n_v": 4, "n_t": 8, "n_p": 8})
 
 
+@functools.lru_cache(maxsize=1)
+def rational_cdf():
+    """Verified rational inverse CDFs (pieces layout, 4 view rows) of a white Lambert material:
+    what a hidden material with a rational strategy needs (a fit that failed verification
+    would fall back to the table)."""
+    from fit.sampling.cdf_file import fit_cdf
+    from lab.analytic import lambert as lambert_brdf
+
+    cdf = fit_cdf(lambert_brdf((1.0, 1.0, 1.0)), name="hidden", table_params=dict(n_v=4, n_t=16, n_p=16))
+    assert cdf.layout == "pieces" and not cdf.fallback, cdf.reason
+    return cdf
+
+
+@functools.lru_cache(maxsize=1)
+def rational_model():
+    """A constant 2-D rational fit of the degree class of the tests' random fits
+    (``tests/test_warp_rational.random_model``: theta_h (sqrt) and theta_d, numerator tensor
+    degrees (5, 3), denominator total degree 2, three channels): the kernels' specialised
+    function of a scene that holds it and fits of that class is the one of those fits alone."""
+    import fit.rational.basis as basis
+    import fit.rational.function as function
+    import fit.rational.model as model_types
+
+    variables = [model_types.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                 model_types.Variable("theta_d", "rad", "identity", (0.0, np.radians(80.0)))]
+    dom = np.array([v.rf_domain for v in variables])
+    num_e, den_e = basis.tensor_exponents((5, 3)), basis.total_degree_exponents(2, 2)
+    funcs = []
+    for c in range(3):   # every coefficient non-zero (a zero one is skipped: another class)
+        p, q = np.full(len(num_e), 0.01), np.full(len(den_e), 0.01)
+        p[0], q[0] = 0.1 * (c + 1), 1.0
+        funcs.append(function.RationalFunction(dom, num_e, p, den_e, q))
+    return model_types.RationalModel(name="hidden", variables=variables, functions=funcs)
+
+
 #: the material kinds and BSDF techniques of :func:`common_kernel`
-COMMON_KINDS = ("lambert", "measured")
-COMMON_TECHNIQUES = ("cosine", "uniform", "tabulated")
+COMMON_KINDS = ("lambert", "measured", "rational")
+COMMON_TECHNIQUES = ("cosine", "uniform", "tabulated", "rational")
 
 
 def common_kernel(sc: Scene) -> Scene:
-    """``sc`` (``lambert`` and ``measured`` materials, cosine, uniform and tabulated BSDF
-    samples: :data:`COMMON_KINDS`, :data:`COMMON_TECHNIQUES`) with hidden materials
-    (:func:`hide`) of both kinds and the three techniques, and a hidden sphere or plane: its
-    render kernel is the common test kernel of triangles, analytic spheres, these kinds and
-    techniques (or, rendered with ``analytic_spheres=False``, of triangles only), which the
-    render tests of several files share (each kernel compiles once per kernel cache). The
-    hidden materials' strategies are ``mis`` (environment + cosine), ``uniform`` and
-    ``tabulated`` (BSDF sample only)."""
+    """``sc`` (``lambert``, ``measured`` and ``rational`` materials, the latter of the class
+    of :func:`rational_model`; cosine, uniform, tabulated and rational BSDF samples:
+    :data:`COMMON_KINDS`, :data:`COMMON_TECHNIQUES`) with hidden materials (:func:`hide`) of
+    these kinds and techniques, and a hidden sphere or plane: its render kernel is the common
+    test kernel of triangles, analytic spheres, these kinds and techniques (or, rendered with
+    ``analytic_spheres=False``, of triangles only), which the render tests of several files
+    share (each kernel compiles once per kernel cache). The hidden materials: Lambert with
+    ``mis`` (environment + cosine), ``tabulated`` (the table of :func:`constant_measured`)
+    and ``rational`` (:func:`rational_cdf`; BSDF sample only), the constant ``measured``
+    table with ``uniform``, :func:`rational_model` with ``mis``."""
     const, table = constant_measured()
     return hide(sc, [lambert(name="hidden-mis", albedo=1.0, sampler="mis"),
                      MaterialSpec(name="hidden-uniform", type="measured", data=const, sampler="uniform"),
-                     MaterialSpec(name="hidden-tabulated", type="measured", data=const, sampler="tabulated",
-                                  cdf=table)])
+                     MaterialSpec(name="hidden-tabulated", type="lambert", albedo=(1.0, 1.0, 1.0),
+                                  sampler="tabulated", cdf=table),
+                     MaterialSpec(name="hidden-rational", type="lambert", albedo=(1.0, 1.0, 1.0),
+                                  sampler="rational", cdf=rational_cdf()),
+                     MaterialSpec(name="hidden-fit", type="rational", data=rational_model(), sampler="mis")])
 
 
 def lambert(name="m", albedo=1.0, sampler="mis") -> MaterialSpec:
