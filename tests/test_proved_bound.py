@@ -163,7 +163,9 @@ def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
     from fit.rational.proved_bound import prove_fit3d
 
     brdf = RGLLike(_broad_lobe, "broad_lobe")
-    fit = dict(grid=(9, 8, 6), n_random=300, n_objective=0, verify=0, degrees=(4, 2), theta_h_edges=[0.3],
+    # a 7 x 6 x 5 grid: 100-400 cells per piece and channel after subdivision, each proof a
+    # tenth of a second (9 x 8 x 6: 7000 cells, 10 s for the two proofs)
+    fit = dict(grid=(7, 6, 5), n_random=200, n_objective=0, verify=0, degrees=(4, 2), theta_h_edges=[0.3],
                tol=0.05, time_limit=60.0, albedo=False)
     res = fit_rgl(brdf, prove_bound=True, **fit)
     assert len(res.bounds) == 2 * 3 and res.model.fit_info["bound"] == [b.record() for b in res.bounds]
