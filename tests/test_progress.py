@@ -139,7 +139,7 @@ def test_highs_banner_absent_unless_verbose(capfd, glossy, tmp_path, monkeypatch
     out, err = capfd.readouterr()
     assert "HiGHS" not in out and "HiGHS" not in err, (out, err)
     monkeypatch.setattr(lp, "_VERBOSE", False)      # restored after the test
-    main(argv + ["--verbose"])
+    main(argv + ["--verbose", "--no-sampler"])        # the fit's LPs (no sampler to make again)
     out, _ = capfd.readouterr()
     assert "Running HiGHS" in out
 
