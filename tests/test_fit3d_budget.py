@@ -10,9 +10,11 @@
 from __future__ import annotations
 
 import time as _time
+from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import session_cached
 
 from fit.rational import albedo3d, ceiling, fit3d, ladder3d, rgl3d, select3d, verify3d
 from fit.rational.fit3d import fit_rgl_select
@@ -57,9 +59,16 @@ class JumpingClock:
         return getattr(_time, name)
 
 
+def normal_selection():
+    """:func:`select`, made once per test session for every worker (:func:`conftest.session_cached`;
+    tests/test_fit_determinism.py runs it again under a fast wall clock): callers must not
+    modify it."""
+    return session_cached(Path(__file__), "normal-selection", select)
+
+
 @pytest.fixture(scope="module")
 def normal():
-    return select()
+    return normal_selection()
 
 
 @pytest.fixture(scope="module")
