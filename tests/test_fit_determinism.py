@@ -18,15 +18,11 @@ import pytest
 
 from fit.rational import ceiling as ceiling_module
 from fit.rational.ceiling import DEFAULT_TIME_LIMIT, Ceiling
-from fit.rational.fit3d import fit_rgl_select
 from fit.rational.settings import Fit3DSettings
 from lab.analytic import RGLLike, phi_d_lobe
+from test_fit3d_budget import normal_selection
+from test_fit3d_budget import select as budget_select
 
-#: two small layouts, a verification with a refit and the albedo policy: every step that checks
-#: the safety net runs
-VARIANTS = ({"theta_h_edges": [0.15], "degrees": (4, 2)}, {"theta_h_edges": [], "degrees": (4, 2)})
-FIT = {"grid": (9, 8, 6), "n_random": 300, "n_objective": 1000, "tol": 0.01, "verify": 1500,
-       "verify_rounds": 1, "albedo_tol": 0.01}
 FAST = 50.0       # the wall clock runs this many times fast
 
 
@@ -39,7 +35,9 @@ Lobe = functools.partial(RGLLike, lobe_brdf, "lobe")
 
 
 def select(**kw):
-    return fit_rgl_select(Lobe(), variants=VARIANTS, **dict(FIT, **kw))
+    """The selection of tests/test_fit3d_budget.py (two small layouts, a verification with refits
+    and the albedo policy: every step that checks the safety net runs)."""
+    return budget_select(**kw)
 
 
 def coefficients(res) -> np.ndarray:
@@ -60,7 +58,8 @@ def fast_wall_clock(monkeypatch, factor=FAST):
 
 @pytest.fixture(scope="module")
 def ordinary():
-    return select()
+    """The ordinary run: the one tests/test_fit3d_budget.py makes (once per test session)."""
+    return normal_selection()
 
 
 def test_a_fit_on_a_loaded_machine_gives_the_same_coefficients(ordinary, monkeypatch):
