@@ -117,22 +117,48 @@ def rational_model():
     return model_types.RationalModel(name="hidden", variables=variables, functions=funcs)
 
 
+@functools.lru_cache(maxsize=1)
+def synthetic_rgl():
+    """A tiny constant RGL-EPFL material (:class:`fit.formats.rgl.RGLBRDF`, 3 incidences,
+    4 x 4 tables, rho 0.1 / pi-ish; in memory, no data file): what a hidden ``rgl`` material
+    needs."""
+    from fit.formats.rgl import RGLBRDF
+    from fit.formats.tensor_file import TensorField
+
+    def field(name, a, code):   # dtype codes of the tensor format: 1 uint8, 10 float32
+        a = np.ascontiguousarray(a)
+        return TensorField(name, code, 0, tuple(a.shape), a)
+
+    n, f32 = 3, np.float32
+    fields = {"description": field("description", np.frombuffer(b"hidden", np.uint8), 1),
+              "jacobian": field("jacobian", np.array([1], np.uint8), 1),
+              "phi_i": field("phi_i", np.zeros(1, f32), 10),
+              "theta_i": field("theta_i", np.radians(np.array([0.0, 45.0, 90.0], f32)), 10),
+              "ndf": field("ndf", np.ones((4, 4), f32), 10),
+              "sigma": field("sigma", np.ones((4, 4), f32), 10),
+              "vndf": field("vndf", np.ones((1, n, 4, 4), f32), 10),
+              "luminance": field("luminance", np.ones((1, n, 4, 4), f32), 10),
+              "rgb": field("rgb", np.full((1, n, 3, 4, 4), 0.1, f32), 10)}
+    return RGLBRDF(fields, name="hidden")
+
+
 #: the material kinds and BSDF techniques of :func:`common_kernel`
-COMMON_KINDS = ("lambert", "measured", "rational")
-COMMON_TECHNIQUES = ("cosine", "uniform", "tabulated", "rational")
+COMMON_KINDS = ("lambert", "measured", "rational", "rgl")
+COMMON_TECHNIQUES = ("cosine", "uniform", "tabulated", "rational", "rgl")
 
 
 def common_kernel(sc: Scene) -> Scene:
-    """``sc`` (``lambert``, ``measured`` and ``rational`` materials, the latter of the class
-    of :func:`rational_model`; cosine, uniform, tabulated and rational BSDF samples:
-    :data:`COMMON_KINDS`, :data:`COMMON_TECHNIQUES`) with hidden materials (:func:`hide`) of
+    """``sc`` (``lambert``, ``measured``, ``rational`` and ``rgl`` materials, the rational ones
+    of the class of :func:`rational_model`; cosine, uniform, tabulated, rational and rgl BSDF
+    samples: :data:`COMMON_KINDS`, :data:`COMMON_TECHNIQUES`) with hidden materials (:func:`hide`) of
     these kinds and techniques, and a hidden sphere or plane: its render kernel is the common
     test kernel of triangles, analytic spheres, these kinds and techniques (or, rendered with
     ``analytic_spheres=False``, of triangles only), which the render tests of several files
     share (each kernel compiles once per kernel cache). The hidden materials: Lambert with
     ``mis`` (environment + cosine), ``tabulated`` (the table of :func:`constant_measured`)
     and ``rational`` (:func:`rational_cdf`; BSDF sample only), the constant ``measured``
-    table with ``uniform``, :func:`rational_model` with ``mis``."""
+    table with ``uniform``, :func:`rational_model` with ``mis``, :func:`synthetic_rgl` with
+    ``mis-rgl``."""
     const, table = constant_measured()
     return hide(sc, [lambert(name="hidden-mis", albedo=1.0, sampler="mis"),
                      MaterialSpec(name="hidden-uniform", type="measured", data=const, sampler="uniform"),
@@ -140,7 +166,8 @@ def common_kernel(sc: Scene) -> Scene:
                                   sampler="tabulated", cdf=table),
                      MaterialSpec(name="hidden-rational", type="lambert", albedo=(1.0, 1.0, 1.0),
                                   sampler="rational", cdf=rational_cdf()),
-                     MaterialSpec(name="hidden-fit", type="rational", data=rational_model(), sampler="mis")])
+                     MaterialSpec(name="hidden-fit", type="rational", data=rational_model(), sampler="mis"),
+                     MaterialSpec(name="hidden-rgl", type="rgl", data=synthetic_rgl(), sampler="mis-rgl")])
 
 
 def lambert(name="m", albedo=1.0, sampler="mis") -> MaterialSpec:
