@@ -114,11 +114,14 @@ def test_rough_grazing_band_is_flagged_not_hidden(tmp_path):
 
 
 def test_cli_brdf(lobe_file, tmp_path, capsys):
+    """The command's summary of a fit (no sampler: the command's own sampler is made by
+    tests/test_progress.py::test_highs_banner_absent_unless_verbose and
+    tests/test_cli_fit.py::test_brdf_2d_flagged_fit_carries_what_the_renderer_shows)."""
     from fit.cli import main
 
     out = tmp_path / "lobe.json"
     rc = main(["brdf", str(lobe_file), "--tol", "0.1", "--intervals", "tol", "--max-degree", "6",
-               "--max-den-degree", "3", "--out", str(out), "--sampler-time-limit", "1"])
+               "--max-den-degree", "3", "--out", str(out), "--no-sampler"])
     text = capsys.readouterr().out
     assert rc == 0 and out.exists()
     assert "coefs" in text and "proved within its intervals at every cluster of theta_d <= 60 deg" in text
