@@ -9,6 +9,8 @@ density by another warp; ``piecewise-constant``) through the lab's, and the lab'
 render (:mod:`lab.env_scheme_render`) against the renderer."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from chi2 import chi2_pvalue
@@ -40,8 +42,12 @@ def sun_map(H=32, W=64, seed=0):
     return img
 
 
+@functools.lru_cache(maxsize=1)
 def rooitou():
-    return read_latlong(data_file("envmaps/rooitou_park_1k.hdr"))
+    """The rooitou map, read once per process (read-only: the tests share it)."""
+    img = read_latlong(data_file("envmaps/rooitou_park_1k.hdr"))
+    img.setflags(write=False)
+    return img
 
 
 def build(img, scheme="hierarchical", rot=None):
@@ -136,10 +142,23 @@ def bin_probs(env, x0, x1, y0, y1, k, nx=2, nt=4):
     return p.reshape(len(ye), nt, len(xe), nx).sum(axis=(1, 3))
 
 
+_PATCH_PROBS = {}
+
+
 def patch_probs(env):
-    """(H - 1, W) probabilities of the lookup's patches (quadrature)."""
-    H, W = base(env).lum.shape
-    return bin_probs(env, 0, W, 0, H - 1, 1, nx=2, nt=3)
+    """(H - 1, W) probabilities of the lookup's patches (quadrature), computed once per
+    distribution object (the rooitou ones: :func:`rooitou_env`)."""
+    key = id(env)
+    if key not in _PATCH_PROBS:
+        H, W = base(env).lum.shape
+        _PATCH_PROBS[key] = (env, bin_probs(env, 0, W, 0, H - 1, 1, nx=2, nt=3))
+    return _PATCH_PROBS[key][1]
+
+
+@functools.lru_cache(maxsize=2)
+def rooitou_env(scheme="hierarchical"):
+    """``build(rooitou(), scheme)``, built once per process (the tests only read it)."""
+    return build(rooitou(), scheme)
 
 
 def fine_chi2(env, samples, k):
@@ -179,7 +198,7 @@ def test_chi2_rooitou(scheme):
     """The rooitou map (512 x 1024, a sun of a few texels with 2/3 of the power): blocks of
     8 x 8 patches over the whole map, and quarter-pixel bins on the 8 x 8 patches around the
     sun (the rest pooled into one bin)."""
-    env = build(rooitou(), scheme)
+    env = rooitou_env(scheme)
     H, W = base(env).lum.shape
     n = 2_000_000
     s = warp_sample(env, np.random.default_rng(4).random((n, 2)))[:, :3]
@@ -209,8 +228,7 @@ def test_chi2_rooitou(scheme):
 @pytest.mark.parametrize("scheme", SCHEMES)
 @pytest.mark.parametrize("which", ["sun", "rooitou"])
 def test_env_pdf_is_the_returned_pdf_and_integrates_to_one(scheme, which):
-    img = sun_map() if which == "sun" else rooitou()
-    env = build(img, scheme)
+    env = build(sun_map(), scheme) if which == "sun" else rooitou_env(scheme)
     s, pt = warp_sample_point(env, np.random.default_rng(5).random((200_000, 2)))
     d, p = s[:, :3], s[:, 3]
     assert np.all(p > 0)
@@ -235,8 +253,7 @@ def test_density_is_the_lookup_luminance(which):
     """pdf(w) = luminance(env_eval(w)) / integral of luminance(env_eval) dw at every direction
     (Warp env_pdf against Warp env_eval): a one-texel sun is sampled along its bilinear footprint,
     and an estimator of the map's luminance integral has zero variance."""
-    img = sun_map() if which == "sun" else rooitou()
-    env = build(img)
+    env = build(sun_map()) if which == "sun" else rooitou_env()
     H, W = env.lum.shape
     d = uv_to_direction(*np.random.default_rng(6).random((2, 100_000)))
     # and directions on the sun's footprint, where the old density was off by up to 2x
