@@ -6,7 +6,9 @@ probabilities come from Gauss-Legendre quadrature of the density on the lookup's
 from the sampler's own closed forms. The renderer's scheme (``hierarchical``) is tested through
 its own functions, the comparison schemes of :mod:`lab.env_schemes` (``marginal``: the same
 density by another warp; ``piecewise-constant``) through the lab's, and the lab's light-only
-render (:mod:`lab.env_scheme_render`) against the renderer."""
+render (:mod:`lab.env_scheme_render`) against the renderer. Tests of the lab's schemes and render
+are in the ``lab`` tier; the negative control (the piecewise-constant scheme rejected) stays in
+the default run, as it shows the product's test can fail."""
 from __future__ import annotations
 
 import functools
@@ -28,7 +30,8 @@ from warp_rbrdf.runtime import init_warp
 
 wp = init_warp()
 
-SCHEMES = ("hierarchical", "marginal")
+#: The renderer's scheme, and the lab's comparison scheme (a test of lab code: the ``lab`` tier).
+SCHEMES = ("hierarchical", pytest.param("marginal", marks=pytest.mark.lab))
 P_MIN = 1e-4   # chi-square p-values below this fail (several tests, fixed seeds)
 
 
@@ -335,6 +338,7 @@ def test_black_map_cannot_be_sampled():
     assert np.all(warp_pdf(env, np.tile([0.0, 1.0, 0.0], (4, 1))) == 0)
 
 
+@pytest.mark.lab
 @pytest.mark.parametrize("which", ["sun", "rooitou"])
 def test_lab_hierarchical_scheme_is_the_renderer_sampler(which):
     """The lab's comparison struct and kernels, with the ``hierarchical`` scheme, sample and
@@ -349,6 +353,7 @@ def test_lab_hierarchical_scheme_is_the_renderer_sampler(which):
     assert not np.array_equal(warp_sample(build(img, "marginal"), xi), warp_sample(env, xi))
 
 
+@pytest.mark.lab
 def test_light_only_render_is_the_renderer_render():
     """The benchmark's light-only kernel (lab.env_scheme_render) renders with the ``hierarchical``
     scheme what the renderer renders (same samples, same estimator), so the schemes it compares
