@@ -112,6 +112,24 @@ def rgl_resampled_once(monkeypatch):
     monkeypatch.setattr(RGLBRDF, "to_measured", to_measured)
 
 
+@functools.lru_cache(maxsize=1)
+def _fit_parser():
+    import fit.cli
+
+    return fit.cli.build_parser()
+
+
+@pytest.fixture
+def fit_parser_once(monkeypatch):
+    """``rbrdf-fit``'s argument parser built once per process for a module's many in-process
+    runs (each build registers every command's flags: 14 ms); each run still parses its own
+    arguments with it. Use as ``pytestmark = pytest.mark.usefixtures("fit_parser_once")``."""
+    import fit.cli
+
+    parser = _fit_parser()
+    monkeypatch.setattr(fit.cli, "build_parser", lambda: parser)
+
+
 def session_cached(path: Path, what: str, make):
     """``make()`` computed once per test session for all workers: pickled into this session's
     folder (:data:`SESSION_CACHE_ENV`) under the SHA-256 of the file ``path`` and ``what``,

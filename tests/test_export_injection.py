@@ -32,7 +32,6 @@ CI either fails (:func:`conftest.missing`).
 from __future__ import annotations
 
 import ast
-import functools
 import json
 import re
 import shutil
@@ -314,22 +313,8 @@ def check_output(text: str, ext: str, tmp_path, reference, original: str, three:
     assert_readable(text, original)
 
 
-@pytest.fixture(autouse=True)
-def _one_parser(monkeypatch):
-    """``rbrdf-fit``'s argument parser built once for the module's 200 in-process runs (each
-    build registers every command's flags: 14 ms, 2.3 s of the module's time); each run still
-    parses its own arguments with it."""
-    import fit.cli
-
-    parser = _parser()
-    monkeypatch.setattr(fit.cli, "build_parser", lambda: parser)
-
-
-@functools.lru_cache(maxsize=1)
-def _parser():
-    import fit.cli
-
-    return fit.cli.build_parser()
+#: the parser built once for the module's in-process runs (conftest.fit_parser_once)
+pytestmark = pytest.mark.usefixtures("fit_parser_once")
 
 
 # ----------------------------------------------------------------------------------------------

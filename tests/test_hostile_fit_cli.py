@@ -10,7 +10,6 @@ milliseconds. ``CLASSES`` as in test_hostile_fit_files.py.
 """
 from __future__ import annotations
 
-import functools
 import os
 
 import pytest
@@ -27,21 +26,8 @@ from hostile import (
 )
 
 
-@pytest.fixture(autouse=True)
-def _one_parser(monkeypatch):
-    """``rbrdf-fit``'s argument parser built once for the module's in-process runs (each build
-    registers every command's flags: 14 ms); each run still parses its own arguments with it."""
-    import fit.cli
-
-    parser = _parser()
-    monkeypatch.setattr(fit.cli, "build_parser", lambda: parser)
-
-
-@functools.lru_cache(maxsize=1)
-def _parser():
-    import fit.cli
-
-    return fit.cli.build_parser()
+#: the parser built once for the module's in-process runs (conftest.fit_parser_once)
+pytestmark = pytest.mark.usefixtures("fit_parser_once")
 
 
 @pytest.fixture(scope="module")
