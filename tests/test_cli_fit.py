@@ -206,6 +206,7 @@ def test_brdf_3d_fit_renders_without_its_source(fit3d_file, tmp_path, monkeypatc
     import shutil
 
     from lab import testing as T
+    from fit.formats.angles import cosine_directions
     from fit.rational.coefficient_file import load
     from fit.rational.variables3d import evaluate_directions
     from warp_rbrdf.renderer import Renderer
@@ -227,9 +228,7 @@ def test_brdf_3d_fit_renders_without_its_source(fit3d_file, tmp_path, monkeypatc
     wo /= np.linalg.norm(wo, axis=1, keepdims=True)
     ref = evaluate_directions(load(path), wi, wo)
     np.testing.assert_allclose(r.eval_material("m", wi, wo), ref, rtol=2e-4, atol=1e-6)
-    u = rng.random((20000, 2))                   # lights cosine-distributed, the view the normal
-    light = np.stack([np.sqrt(u[:, 0]) * np.cos(2 * np.pi * u[:, 1]), np.sqrt(u[:, 0]) * np.sin(2 * np.pi * u[:, 1]),
-                      np.sqrt(1.0 - u[:, 0])], axis=1)
+    light = cosine_directions(rng, 20000)        # lights cosine-distributed, the view the normal
     albedo = np.pi * r.eval_material("m", light, np.broadcast_to([0.0, 0.0, 1.0], light.shape)).mean(axis=0)
     assert np.all(np.isfinite(albedo)) and 0.5 < float(np.mean(albedo)) < 1.0     # albedo of paper_white
 
