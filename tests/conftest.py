@@ -9,7 +9,9 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import itertools
 import pickle
+import re
 import shutil
 import sys
 import tempfile
@@ -202,6 +204,50 @@ def pytest_unconfigure(config):
         if os.environ.get(SESSION_CACHE_ENV) == _SESSION_CACHE:
             del os.environ[SESSION_CACHE_ENV]
         _SESSION_CACHE = None
+
+
+#: the line that marks a whole test module ``lab`` (tests of lab code only)
+LAB_MODULE_LINE = re.compile(r"^pytestmark = pytest\.mark\.lab\b", re.M)
+
+
+@functools.lru_cache(maxsize=None)
+def deselects_every_lab_test(markexpr: str) -> bool:
+    """Whether the ``-m`` expression ``markexpr`` is false for every test marked ``lab``,
+    whatever other marks it has (every truth value of the expression's other names, ``lab``
+    true). False for no expression or one pytest cannot parse (pytest then reports it)."""
+    if not markexpr or "=" in markexpr:      # a mark's keyword arguments: not decided here
+        return False
+    try:
+        from _pytest.mark.expression import Expression   # pytest's own -m grammar (no public API)
+
+        expr = Expression.compile(markexpr)
+    except Exception:  # noqa: BLE001 - an old or changed pytest, a bad expression: collect as usual
+        return False
+    names = sorted(set(re.findall(r"[A-Za-z_][\w.\-]*", markexpr)) - {"and", "or", "not", "lab"})
+    if len(names) > 10:
+        return False
+    for values in itertools.product((False, True), repeat=len(names)):
+        marks = dict(zip(names, values), lab=True)
+        if expr.evaluate(lambda name, /, **kw: marks.get(name, False) and not kw):
+            return False
+    return True
+
+
+def pytest_ignore_collect(collection_path, config):
+    """A test module marked ``lab`` as a whole (its line ``pytestmark = pytest.mark.lab``) is
+    not imported when the run's ``-m`` expression deselects all its tests (the default run's):
+    each pytest-xdist worker imports every module it collects, and the lab modules' imports
+    (colour-science, the studies, the benchmarks) cost each worker about 3 s of the default run.
+    Such a module then counts neither as collected nor as deselected."""
+    if collection_path.suffix != ".py" or not collection_path.name.startswith("test_"):
+        return None
+    if not deselects_every_lab_test(config.getoption("markexpr", "") or ""):
+        return None
+    try:
+        head = collection_path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    return True if LAB_MODULE_LINE.search(head) else None
 
 
 def require_mitsuba():

@@ -1,40 +1,55 @@
+"""Rusinkiewicz half / difference angles (fit.formats.angles): round trips over many random
+angles and every combination of the domain's edge values (0, pi/2, +-pi, just inside them, the
+smallest doubles), all in one vectorised call each."""
+import itertools
+
 import numpy as np
-from hypothesis import given, settings, strategies as st
 
 from fit.formats.angles import (cos_theta_i_o, direction_to_spherical, directions_to_half_diff,
                                 half_diff_to_directions, spherical_to_direction)
 
-angle = st.floats(0.0, np.pi / 2, allow_nan=False)
-azimuth = st.floats(-np.pi, np.pi, allow_nan=False)
+HALF_PI = np.pi / 2
 
 
-@settings(max_examples=300, deadline=None)
-@given(angle, azimuth, angle, azimuth)
-def test_directions_round_trip(ti, pi_, to, po):
+def _cases(polar_max, n_random=20000, seed=0):
+    """(theta_1, phi_1, theta_2, phi_2) arrays: ``n_random`` uniform draws over [0, polar_max] x
+    [-pi, pi] twice, then every combination of the edge values of each range."""
+    rng = np.random.default_rng(seed)
+    polar_edges = [0.0, 5e-324, 1e-300, 1e-12, 1e-7, 0.5, polar_max - 1e-9, polar_max]
+    az_edges = [-np.pi, -np.pi + 1e-12, -1e-300, 0.0, 5e-324, 1.0, np.pi - 1e-12, np.pi]
+    edges = np.array(list(itertools.product(polar_edges, az_edges, polar_edges, az_edges)), float).T
+    rand = np.stack([rng.uniform(0, polar_max, n_random), rng.uniform(-np.pi, np.pi, n_random),
+                     rng.uniform(0, polar_max, n_random), rng.uniform(-np.pi, np.pi, n_random)])
+    return np.concatenate([rand, edges], axis=1)
+
+
+def test_directions_round_trip():
+    ti, pi_, to, po = _cases(HALF_PI)
     wi = spherical_to_direction(ti, pi_)
     wo = spherical_to_direction(to, po)
     th, ph, td, pd = directions_to_half_diff(wi, wo)
     wi2, wo2 = half_diff_to_directions(th, ph, td, pd)
-    if np.linalg.norm(wi + wo) > 1e-6:  # wi == -wo has no half vector
-        np.testing.assert_allclose(wi2, wi, atol=1e-9)
-        np.testing.assert_allclose(wo2, wo, atol=1e-9)
+    ok = np.linalg.norm(wi + wo, axis=-1) > 1e-6      # wi == -wo has no half vector
+    assert ok.sum() > 20000
+    np.testing.assert_allclose(wi2[ok], wi[ok], atol=1e-9)
+    np.testing.assert_allclose(wo2[ok], wo[ok], atol=1e-9)
 
 
-@settings(max_examples=300, deadline=None)
-@given(st.floats(0.0, np.pi / 2 - 1e-3), azimuth, st.floats(0.0, np.pi / 2 - 1e-3), azimuth)
-def test_half_diff_round_trip(th, ph, td, pd):
+def test_half_diff_round_trip():
+    th, ph, td, pd = _cases(HALF_PI - 1e-3, seed=1)
     wi, wo = half_diff_to_directions(th, ph, td, pd)
-    np.testing.assert_allclose(np.linalg.norm(wi), 1.0, atol=1e-12)
-    np.testing.assert_allclose(np.linalg.norm(wo), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(wi, axis=-1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(wo, axis=-1), 1.0, atol=1e-12)
     th2, ph2, td2, pd2 = directions_to_half_diff(wi, wo)
-    assert abs(th2 - th) < 1e-7 and abs(td2 - td) < 1e-7
-    def same_angle(a, b):
-        return abs(np.angle(np.exp(1j * (a - b)))) < 1e-6
+    assert np.abs(th2 - th).max() < 1e-7 and np.abs(td2 - td).max() < 1e-7
 
-    if th > 1e-6 and td > 1e-6:  # both azimuths defined
-        assert same_angle(ph2, ph) and same_angle(pd2, pd)
-    elif th <= 1e-6 and td > 1e-6:  # h = n: only phi_h + phi_d is defined (phi_h := 0)
-        assert same_angle(ph2 + pd2, ph + pd)
+    def same_angle(a, b):
+        return np.abs(np.angle(np.exp(1j * (a - b)))) < 1e-6
+
+    both = (th > 1e-6) & (td > 1e-6)                 # both azimuths defined
+    assert both.sum() > 10000 and np.all(same_angle(ph2, ph)[both]) and np.all(same_angle(pd2, pd)[both])
+    pole = (th <= 1e-6) & (td > 1e-6)                # h = n: only phi_h + phi_d is defined (phi_h := 0)
+    assert pole.sum() > 100 and np.all(same_angle(ph2 + pd2, ph + pd)[pole])
 
 
 def test_degenerate_cases_are_finite():
