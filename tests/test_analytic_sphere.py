@@ -4,6 +4,7 @@ rays off the surface; transforms that keep a sphere a sphere and those that do n
 analytic spheres equal the icosphere renders in expectation."""
 from __future__ import annotations
 
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -294,16 +295,48 @@ def test_white_furnace_analytic_sphere():
     assert np.all(np.abs(m - 1.0) <= 4 * se + 1e-5), (m, se)
 
 
-def _compare_renders(sc, spp):
+def _write_ply(path: Path, v, f) -> Path:
+    """A binary PLY of float64 vertices ``v`` (V, 3) and triangles ``f`` (F, 3)."""
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\nproperty double x\n"
+            f"property double y\nproperty double z\nelement face {len(f)}\n"
+            "property list uchar int vertex_indices\nend_header\n").encode()
+    faces = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    faces["n"], faces["i"] = 3, f
+    path.write_bytes(head + np.asarray(v, "<f8").tobytes() + faces.tobytes())
+    return path
+
+
+def icospheres_as_meshes(sc: Scene, folder: Path) -> Scene:
+    """A copy of ``sc`` (after :func:`lab.testing.common_kernel`) whose spheres, but the hidden
+    ones, are ``mesh`` shapes: PLY files of their icospheres (:func:`warp_rbrdf.geometry.sphere_mesh`,
+    the triangles ``analytic_spheres=False`` makes; vertex normals from the mesh loader, within
+    1.2e-3 of the sphere's at subdivision 5). The hidden sphere stays analytic, so the render
+    kernel is the common test kernel of triangles and spheres, not one of triangles only."""
+    out = copy.deepcopy(sc)
+    for k, sh in enumerate(out.shapes):
+        if sh.type == "sphere" and not sh.material.startswith("hidden-"):
+            v, f, _ = G.sphere_mesh(sh.center, sh.radius, sh.subdivisions)
+            out.shapes[k] = ShapeSpec(type="mesh", material=sh.material, transform=sh.transform,
+                                      file=_write_ply(folder / f"icosphere_{k}.ply", v, f))
+    return out
+
+
+def _compare_renders(sc, spp, folder):
+    """Renders of ``sc`` with analytic spheres and with icosphere meshes in their place
+    (:func:`icospheres_as_meshes`): ``(z of the channel means' difference, a, b, var a, var b)``."""
     a, va = Renderer(sc).render(spp=spp, return_variance=True)
-    b, vb = Renderer(sc, analytic_spheres=False).render(spp=spp, return_variance=True)
+    meshed = icospheres_as_meshes(sc, folder)
+    tess = Renderer(meshed)
+    hidden_spheres = sum(sh.type == "sphere" for sh in meshed.shapes)
+    assert hidden_spheres and tess.geometry.num_spheres == hidden_spheres and tess.geometry.num_triangles > 20000
+    b, vb = tess.render(spp=spp, return_variance=True)
     n = a.shape[0] * a.shape[1]
     se = np.sqrt((va.sum((0, 1)) + vb.sum((0, 1))) / spp) / n
     z = (a.mean((0, 1)) - b.mean((0, 1))) / se
     return z, a, b, va, vb
 
 
-def test_sphere_scene_render_equals_the_icosphere_render():
+def test_sphere_scene_render_equals_the_icosphere_render(tmp_path):
     """scenes/sphere.toml (measured satin sphere on a Lambert plane under a sky: closest hits
     and shadows over spheres and triangles): analytic and icosphere renders agree in their
     channel means to within 3 standard errors (each render's own; the two use the same sample
@@ -314,13 +347,13 @@ def test_sphere_scene_render_equals_the_icosphere_render():
     satin = sc.materials["satin"]
     assert satin.type == "measured" and Path(satin.file).name == "satin_rosaline_rgb.bsdf"
     satin.data = rgl_measured("satin_rosaline_rgb", satin.incident)   # resampled once for both renders
-    # the common test kernel (lab.testing; triangles only for the icosphere render)
-    z, a, _, _, _ = _compare_renders(T.common_kernel(sc), 64)
+    # the common test kernel (lab.testing) for both renders
+    z, a, _, _, _ = _compare_renders(T.common_kernel(sc), 64, tmp_path)
     assert np.all(np.abs(z) < 3), z
     assert a.mean() > 0.01
 
 
-def test_reference_sphere_render_equals_the_icosphere_render():
+def test_reference_sphere_render_equals_the_icosphere_render(tmp_path):
     """The Mitsuba reference scene (unit sphere, environment map, hidden) with a Lambert
     material, analytic vs the icosphere of mitsuba_reference.SPHERE_SUBDIVISIONS: channel means
     within 3 standard errors and per-pixel z-scores inside the silhouette noise-like."""
@@ -328,10 +361,9 @@ def test_reference_sphere_render_equals_the_icosphere_render():
 
     env = data_file("envmaps/studio_small_03_1k.hdr")
     sc = MR.sphere_scene(("lambert", (0.5, 0.5, 0.5)), env, 64, 48)
-    # hidden materials inside the sphere (lab.testing.common_kernel): the scene then has the
-    # kinds, techniques and geometry of the scene above, whose two compiled kernels (analytic
-    # spheres and triangles, triangles only) the renders share
-    z, a, b, va, vb = _compare_renders(T.common_kernel(sc), 64)
+    # hidden materials inside the sphere (lab.testing.common_kernel): both renders use the
+    # common test kernel, as the scene above does
+    z, a, b, va, vb = _compare_renders(T.common_kernel(sc), 64, tmp_path)
     assert np.all(np.abs(z) < 3), z
     mask = MR.sphere_mask(48)
     zp = (a - b)[mask] / np.sqrt((va + vb)[mask] / 64 + 1e-30)

@@ -169,7 +169,9 @@ def check_irradiance(img, sampler, spp=64, res=16, light=None):
     E = upward_irradiance(img)
     env = light if light is not None else T.image_env(img)
     sc = T.plane_scene(T.lambert(albedo=1.0, sampler=sampler), [env], spp=spp, resolution=res)
-    out, var = Renderer(sc).render(return_variance=True)
+    # the hidden materials and spheres under the plane of lab.testing.common_kernel: the common
+    # test kernel, shared with the render tests of other files
+    out, var = Renderer(T.common_kernel(sc)).render(return_variance=True)
     n = res * res
     m = out.mean(axis=(0, 1)) * np.pi
     se = np.pi * np.sqrt(var.mean(axis=(0, 1)) / spp / n)
