@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fit.errors import BRDFFileError
-from fit.rational.basis import chebyshev_basis, tensor_exponents, total_degree_exponents
+from fit.rational.basis import chebyshev_basis, chebyshev_series, tensor_exponents, total_degree_exponents
 from fit.rational.bernstein import bernstein_coefficients
 from fit.rational.coefficient_file import load, save
 from fit.rational.function import RationalFunction, RationalRGB
@@ -36,6 +36,26 @@ def test_chebyshev_basis_matches_numpy():
     t = (2 * x - 2) / 8
     ref = np.polynomial.chebyshev.chebvander(t, 5)
     assert np.allclose(B, ref)
+
+
+@pytest.mark.parametrize("n_vars, degree", [(1, 9), (2, 14), (3, 6)])
+def test_chebyshev_series_equals_the_basis_matrix_product(n_vars, degree):
+    """The series without the basis matrix (what P and Q evaluate with) against the basis
+    matrix times the coefficients: total-degree and tensor exponent lists, in any order, inside
+    and outside the domain, at any leading shape; no exponent: zero."""
+    rng = np.random.default_rng(n_vars)
+    dom = np.array([[0.0, 1.0], [-2.0, 3.0], [0.5, 1.5]][:n_vars])
+    x = dom[:, 0] - 0.5 + rng.random((3, 50, n_vars)) * (dom[:, 1] - dom[:, 0] + 1.0)
+    for E in (total_degree_exponents(n_vars, degree), tensor_exponents([3, 1, 2][:n_vars]),
+              rng.permutation(total_degree_exponents(n_vars, degree))[: max(3, degree)]):
+        c = rng.standard_normal(len(E))
+        ref = chebyshev_basis(x, E, dom) @ c
+        got = chebyshev_series(x, E, dom, c)
+        assert got.shape == (3, 50)
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    assert np.array_equal(chebyshev_series(x, np.zeros((0, n_vars), int), dom, []), np.zeros((3, 50)))
+    if n_vars == 1:
+        assert np.shape(chebyshev_series(0.3, [[0], [2]], dom, [1.0, 1.0])) == ()
 
 
 @pytest.mark.parametrize("n_vars", [1, 2, 3])

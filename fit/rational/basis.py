@@ -60,6 +60,19 @@ def chebyshev_table(t: np.ndarray, kmax: int) -> np.ndarray:
     return out
 
 
+def _chebyshev_rows(t: np.ndarray, kmax: int) -> np.ndarray:
+    """T_0..T_kmax at the points ``t`` (N,): shape (kmax + 1, N), each row contiguous."""
+    out = np.empty((kmax + 1, t.shape[0]))
+    out[0] = 1.0
+    if kmax >= 1:
+        out[1] = t
+    for k in range(2, kmax + 1):
+        np.multiply(t, out[k - 1], out=out[k])
+        out[k] *= 2.0
+        out[k] -= out[k - 2]
+    return out
+
+
 def chebyshev_derivative_table(t: np.ndarray, kmax: int) -> np.ndarray:
     """dT_k/dt = k U_{k-1}(t) for k = 0..kmax: shape t.shape + (kmax + 1,)."""
     out = np.zeros(t.shape + (kmax + 1,))
@@ -96,6 +109,35 @@ def chebyshev_basis(x, exponents, domain) -> np.ndarray:
             continue
         out *= chebyshev_table(t[..., v], kmax)[..., exponents[:, v]]
     return out
+
+
+def chebyshev_series(x, exponents, domain, coef) -> np.ndarray:
+    """``sum_j coef[j] prod_v T_{E[j, v]}(t_v)`` at ``x`` (``(..., n_vars)``): the value of
+    ``chebyshev_basis(x, exponents, domain) @ coef`` (shape ``(...)``) without the basis matrix.
+    The coefficients are scattered into a dense ``(k_1 + 1, ..., k_n + 1)`` tensor (``k_v`` the
+    highest exponent of variable ``v``) contracted one variable at a time against its Chebyshev
+    table: a matrix product for the first variable, products and sums over the others (the
+    basis matrix gathers ``n_terms`` columns per variable: about 5x slower on a 2-D fit of
+    degree 20). Equal to the basis-matrix form within rounding (sums in another order)."""
+    exponents = np.asarray(exponents, dtype=np.int64)
+    coef = np.asarray(coef, dtype=np.float64).reshape(-1)
+    domain = np.asarray(domain, dtype=np.float64).reshape(-1, 2)
+    n_vars = domain.shape[0]
+    t = _to_unit(_as_points(x, n_vars), domain)
+    lead = t.shape[:-1]
+    if exponents.shape[0] == 0:
+        return np.zeros(lead)
+    kmax = exponents.max(axis=0)
+    dense = np.zeros(tuple(int(k) + 1 for k in kmax))
+    np.add.at(dense, tuple(exponents.T), coef)
+    flat = np.ascontiguousarray(t.reshape(-1, n_vars).T)          # (n_vars, N)
+    n = flat.shape[1]
+    k0 = int(kmax[0]) + 1
+    acc = dense.reshape(k0, -1).T @ _chebyshev_rows(flat[0], k0 - 1)   # (rest, N)
+    for v in range(1, n_vars):
+        kv = int(kmax[v]) + 1
+        acc = np.einsum("krn,kn->rn", acc.reshape(kv, -1, n), _chebyshev_rows(flat[v], kv - 1))
+    return acc.reshape(lead)
 
 
 def chebyshev_basis_derivative(x, exponents, domain, var: int) -> np.ndarray:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .basis import chebyshev_basis, chebyshev_basis_derivative
+from .basis import chebyshev_basis_derivative, chebyshev_series
 from .bernstein import PositivityCertificate, certify_positive
 
 __all__ = ["RationalFunction", "RationalRGB"]
@@ -102,10 +102,12 @@ class RationalFunction:
 
     # Evaluation ------------------------------------------------------------------------------
     def numerator(self, x) -> np.ndarray:
-        return chebyshev_basis(x, self.num_exponents, self.domain) @ self.num_coef
+        """P(x) for ``x`` of shape ``(..., n_vars)``; returns shape ``(...)``."""
+        return chebyshev_series(x, self.num_exponents, self.domain, self.num_coef)
 
     def denominator(self, x) -> np.ndarray:
-        return chebyshev_basis(x, self.den_exponents, self.domain) @ self.den_coef
+        """Q(x) for ``x`` of shape ``(..., n_vars)``; returns shape ``(...)``."""
+        return chebyshev_series(x, self.den_exponents, self.domain, self.den_coef)
 
     def __call__(self, x) -> np.ndarray:
         """R(x) for ``x`` of shape ``(..., n_vars)``; returns shape ``(...)``."""
