@@ -120,6 +120,28 @@ def test_json_round_trip(tmp_path):
     assert d["variables"][0]["transform"] == "sqrt"
 
 
+def test_save_writes_only_what_the_reader_reads(tmp_path):
+    """A model the reader refuses (here a function vouched up to 2e8 1/sr, above
+    fit.limits.MAX_BRDF_VALUE) is not written: the reader's one-line error, the file at the
+    path untouched. The fitters' vouched envelope is capped at that limit."""
+    from fit.limits import MAX_BRDF_VALUE
+    from fit.rational.model import vouched_envelope
+
+    path = tmp_path / "m.json"
+    path.write_text("the user's file")
+    m = _model()
+    m.function_info = [{"vouched_range": [0.0, 2e8]}, {}, {}]
+    with pytest.raises(BRDFFileError, match=r"functions\[0\]\.vouched_range: \[0, 2e\+08\] 1/sr is not inside"):
+        save(m, path)
+    assert path.read_text() == "the user's file" and sorted(p.name for p in tmp_path.iterdir()) == ["m.json"]
+    y = np.array([3.0, 5e4])
+    assert vouched_envelope(y - 2000 * y, y + 2000 * y) == [0.0, MAX_BRDF_VALUE]
+    assert vouched_envelope(y * 0.9, y * 1.1) == pytest.approx([2.7, 5.5e4], rel=1e-15)
+    m.function_info = [{"vouched_range": vouched_envelope(y - 2000 * y, y + 2000 * y)}, {}, {}]
+    save(m, path)
+    assert load(path).function_info[0]["vouched_range"] == [0.0, MAX_BRDF_VALUE]
+
+
 def test_json_errors(tmp_path):
     m = _model()
     path = tmp_path / "m.json"

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..formats.angles import cosine_directions
 from .ceiling import Ceiling
+from .model import vouched_envelope
 from .refine import refine
 from .samples3d import grazing_weight, sample_grid
 from .secant import log_intervals, secant_slope, secant_weights
@@ -318,8 +319,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                            "valid": bool(cert.certified and stated <= T * (1 + 1e-9)),
                            "q_certificate": {"certified": bool(cert.certified), "lower_bound": float(cert.lower_bound),
                                              "method": "Bernstein coefficients, exact subdivision"},
-                           "vouched_range": [float(np.maximum(y - stated * scale, 0.0).min()),
-                                             float((y + stated * scale).max())]}
+                           "vouched_range": vouched_envelope(y - stated * scale, y + stated * scale)}
                     stage = dict(r0.get("stage", {}))
                     stage["albedo"] = {"weight": float(lam),
                                        "outside": [[kinds[i // A], angles[i % A]] for i in bad],

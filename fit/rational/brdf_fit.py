@@ -68,6 +68,7 @@ from .proved_bound import records as bound_records
 from .proved_bound import summary as bound_summary
 from .model import (
     Variable,
+    vouched_envelope,
     apply_input_transform,
     apply_value_transform,
     invert_value_transform,
@@ -350,8 +351,9 @@ def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: f
     ``measured_range``: [min, max] of the clusters' values (the measured data of the piece,
     in 1/sr): where the fit is flagged its output is clamped to it
     (:func:`fit.rational.model.flagged`); ``vouched_range``: [max(min lower bound, 0), max upper
-    bound] of the clusters' intervals: where the fit is valid its output is clamped to it, which
-    changes no value at a data point and bounds the fit in data-free clusters.
+    bound] of the clusters' intervals, the upper end at most the reader's limit
+    (:func:`fit.rational.model.vouched_envelope`): where the fit is valid its output is clamped to
+    it, which changes no value at a data point and bounds the fit in data-free clusters.
     """
     f = np.maximum(invert_value_transform(r.function(U), value_transform, offset), 0.0)
     e = np.abs(f - d.y)
@@ -367,4 +369,4 @@ def brdf_errors(r: FitResult, U, d: ChannelData, value_transform: str, offset: f
             "max_interval_ratio": float(np.max(ratio)),
             "inside_fraction": float(inside.mean()), "n_points": int(d.y.size),
             "measured_range": [float(d.y.min()), float(d.y.max())],
-            "vouched_range": [float(max(d.lower.min(), 0.0)), float(d.upper.max())]}
+            "vouched_range": vouched_envelope(d.lower, d.upper)}

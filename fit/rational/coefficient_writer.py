@@ -111,9 +111,13 @@ def jsonable(obj):
 def save(model, path) -> None:
     """Write ``model`` as an ``rbrdf-rational`` JSON file (version 1, or 2 if piecewise),
     through a temporary file renamed onto ``path`` when complete (an existing file is never
-    left half-written)."""
+    left half-written). The text is read back first with the reader's checks
+    (:func:`fit.rational.coefficient_reader.from_dict`, Q > 0 not proved again): a model the
+    reader would refuse raises its :class:`~fit.errors.BRDFFileError` and nothing is written."""
     from ..outputs import atomic_write
+    from .coefficient_reader import from_dict
 
     text = json.dumps(to_dict(model), indent=1, allow_nan=False)
+    from_dict(json.loads(text), path, certify=False)
     with atomic_write(Path(path)) as f:
         f.write(text + "\n")

@@ -14,7 +14,7 @@ import numpy as np
 from ..progress import report
 from .ceiling import Ceiling
 from .fitter import IntervalRationalFitter
-from .model import PiecewiseRationalModel, RationalModel, Variable
+from .model import PiecewiseRationalModel, RationalModel, Variable, vouched_envelope
 from .refine import refine
 from .result3d import INTERVALS, Fit3D
 from .samples3d import grazing_weight, noise_levels, objective_weights
@@ -127,7 +127,7 @@ def _fit_channel(U, y, scale, offset, domain, tol, degrees, ladder_steps=DEFAULT
                              "method": "Bernstein coefficients, exact subdivision"},
            "intervals": INTERVALS,
            "measured_range": [float(y.min()), float(y.max())],
-           "vouched_range": [float(np.maximum(y - stated * scale, 0.0).min()), float((y + stated * scale).max())]}
+           "vouched_range": vouched_envelope(y - stated * scale, y + stated * scale)}
     return f, rec
 
 
@@ -143,7 +143,7 @@ def _kept_channel(f, old, U, y, scale, offset):
                n_points=len(y), time_s=0.0, kept=True,
                valid=bool(old["q_certificate"]["certified"] and stated <= t_ok * (1 + 1e-9)),
                measured_range=[float(y.min()), float(y.max())],
-               vouched_range=[float(np.maximum(y - stated * scale, 0.0).min()), float((y + stated * scale).max())])
+               vouched_range=vouched_envelope(y - stated * scale, y + stated * scale))
     for key in ("piece", "channel", "noise"):
         rec.pop(key, None)
     return f, rec

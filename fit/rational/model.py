@@ -99,6 +99,18 @@ def vouched_range(info: dict):
     return _recorded_range(info, "vouched_range")
 
 
+def vouched_envelope(lower, upper) -> list:
+    """The ``vouched_range`` record of a function fitted to data with interval bounds
+    ``lower``, ``upper`` (arrays, 1/sr): ``[max(min lower, 0), min(max upper,
+    fit.limits.MAX_BRDF_VALUE)]``. The upper end is capped at the reader's limit on a BRDF
+    value: a function whose stated tolerance is huge (a 3-D fit missing its data by orders of
+    magnitude) would otherwise vouch for values no measurement holds and write a file its own
+    reader refuses; the cap changes no value at a data point (every measured value is below it)."""
+    from ..limits import MAX_BRDF_VALUE
+
+    return [float(max(np.min(lower), 0.0)), float(min(np.max(upper), MAX_BRDF_VALUE))]
+
+
 def output_clamp(info: dict):
     """Step 7 of one function: its ``measured_range`` when flagged, its ``vouched_range`` when
     not (None when the record has neither)."""
