@@ -183,8 +183,9 @@ def markdown(res: dict, image: str | None = None) -> str:
          f"index; render time: one render call at that spp after an untimed warm-up (set-up: files, tables, "
          f"BVH, and kernel load reported apart). Fits: 2-D at 5 % (`studies/fits.py`'s cache or shipped file, "
          f"else `rbrdf-fit brdf --model 2d --tol 0.05`), 3-D by `rbrdf-fit brdf --model 3d` with every "
-         f"default (`--layout select --tol 0.01 --time-limit 120`), cached under `results/chart/fits/` by the "
-         f"file's SHA-256 and the flags.", ""]
+         f"default (`--layout select --tol 0.01`, no time limit: a fit independent of the machine's load), "
+         f"cached under `results/chart/fits/` by the file's SHA-256 and the flags; a fit the command does not "
+         f"write (a 2-D fit not within its tolerance) is missing from its cases, never replaced.", ""]
     if image:
         L += [f"![ΔE2000 mean against render seconds]({image})", ""]
     n = len(cases)
