@@ -97,7 +97,11 @@ class Geometry:
 
 def load_mesh_file(path, file="<scene>", key="file"):
     """(vertices (V, 3) float64, faces (F, 3) int64, vertex_normals (V, 3) float64) of a mesh
-    file read with trimesh (all parts merged), in the file's units.
+    file read with trimesh (all parts merged), in the file's units. A PLY file's own vertex
+    normals (``nx ny nz``) are used as written (normalised; a zero or non-finite one replaced by
+    the normal trimesh computes from the vertex's faces) and its vertices kept as written, as
+    Mitsuba 3 reads a PLY; otherwise duplicate vertices are merged and trimesh computes the
+    normals (angle-weighted face normals). An OBJ's ``vn`` lines are not read.
 
     Checked before reading: a regular file (a named pipe or folder is refused, never opened) of
     at most :data:`~warp_rbrdf.limits.MAX_MESH_BYTES`. Checked after reading, before trimesh
@@ -143,12 +147,33 @@ def load_mesh_file(path, file="<scene>", key="file"):
         bad = int(np.flatnonzero(((f < 0) | (f >= len(v))).any(axis=1))[0]) \
             if np.issubdtype(f.dtype, np.integer) else 0
         raise SceneError(file, key, f"mesh {shown}: face {bad} has a vertex index outside [0, {len(v) - 1}]")
+    own = _ply_vertex_normals(m, len(v))
     try:
+        if own is not None:         # the file's own normals, its vertices as written (not merged)
+            usable = np.isfinite(own).all(axis=1) & (np.linalg.norm(own, axis=1) > 0)
+            length = np.linalg.norm(np.where(usable[:, None], own, 1.0), axis=1, keepdims=True)
+            normals = np.where(usable[:, None], own / length, 0.0)
+            if not usable.all():    # a zero or non-finite one: the vertex's normal from its faces
+                normals[~usable] = np.asarray(m.vertex_normals, float)[~usable]
+            return v, np.asarray(f, np.int64), normals
         m.process(validate=False)   # merge duplicate vertices, as trimesh.load(process=True) did
         normals = np.asarray(m.vertex_normals, float)
     except MemoryError:
         raise SceneError(file, key, f"mesh {shown}: out of memory while processing it") from None
     return np.asarray(m.vertices, float), np.asarray(m.faces, np.int64), normals
+
+
+def _ply_vertex_normals(mesh, n_vertices: int):
+    """A PLY file's own vertex normals (its vertex element's ``nx``, ``ny``, ``nz``), ``(V, 3)``
+    float64, or None (not a PLY, no such properties, or not one per vertex): read from the
+    element data trimesh keeps with the mesh (``metadata["_ply_raw"]``), since trimesh itself
+    does not use them. Mitsuba 3 shades with a PLY's normals when it has them."""
+    try:
+        data = mesh.metadata["_ply_raw"]["vertex"]["data"]
+        n = np.stack([np.asarray(data[k], np.float64).reshape(-1) for k in ("nx", "ny", "nz")], axis=1)
+    except (AttributeError, KeyError, TypeError, ValueError, IndexError):
+        return None
+    return n if n.shape == (n_vertices, 3) else None
 
 
 def _check_structure(path, shown, file, key) -> None:
