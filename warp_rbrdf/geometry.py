@@ -150,9 +150,9 @@ def load_mesh_file(path, file="<scene>", key="file"):
     own = _ply_vertex_normals(m, len(v))
     try:
         if own is not None:         # the file's own normals, its vertices as written (not merged)
-            usable = np.isfinite(own).all(axis=1) & (np.linalg.norm(own, axis=1) > 0)
-            length = np.linalg.norm(np.where(usable[:, None], own, 1.0), axis=1, keepdims=True)
-            normals = np.where(usable[:, None], own / length, 0.0)
+            length = np.linalg.norm(own, axis=1, keepdims=True)
+            usable = (np.isfinite(length) & (length > 0))[:, 0]
+            normals = own / np.where(usable[:, None], length, 1.0)
             if not usable.all():    # a zero or non-finite one: the vertex's normal from its faces
                 normals[~usable] = np.asarray(m.vertex_normals, float)[~usable]
             return v, np.asarray(f, np.int64), normals

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..formats.angles import directions_to_half_diff
+from ..limits import MAX_BRDF_VALUE
 
 INPUT_TRANSFORMS = ("identity", "sqrt")
 VALUE_TRANSFORMS = ("linear", "log")
@@ -106,8 +107,6 @@ def vouched_envelope(lower, upper) -> list:
     value: a function whose stated tolerance is huge (a 3-D fit missing its data by orders of
     magnitude) would otherwise vouch for values no measurement holds and write a file its own
     reader refuses; the cap changes no value at a data point (every measured value is below it)."""
-    from ..limits import MAX_BRDF_VALUE
-
     return [float(max(np.min(lower), 0.0)), float(min(np.max(upper), MAX_BRDF_VALUE))]
 
 
