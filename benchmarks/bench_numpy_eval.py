@@ -38,24 +38,6 @@ ROOT = Path(__file__).resolve().parents[1]
 FITS = sorted((ROOT / "warp_rbrdf" / "data").glob("*_rgb.json"))
 
 
-def _functions(model):
-    """Every RationalFunction of a loaded fit (all pieces, all channels)."""
-    from fit.rational.function import RationalFunction
-
-    out, stack = [], [model]
-    while stack:
-        obj = stack.pop()
-        if isinstance(obj, RationalFunction):
-            out.append(obj)
-        elif isinstance(obj, (list, tuple)):
-            stack.extend(obj)
-        else:
-            for name in ("pieces", "functions", "channels", "rgb"):
-                if hasattr(obj, name):
-                    stack.append(getattr(obj, name))
-    return out
-
-
 def _basis_form(f, x):
     from fit.rational.basis import chebyshev_basis
 
@@ -108,7 +90,7 @@ def main(argv=None) -> int:
     rows = []
     for path in FITS:
         model = load(path)
-        funcs = _functions(model)
+        funcs = model.functions                 # every piece's, every channel
         terms = sum(len(f.num_coef) + len(f.den_coef) for f in funcs)
         xs = [f.domain[:, 0] + rng.random((args.points, f.n_vars)) * (f.domain[:, 1] - f.domain[:, 0])
               for f in funcs]
