@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import os
 import itertools
+import os
 import pickle
 import re
 import shutil
@@ -244,10 +244,10 @@ def pytest_ignore_collect(collection_path, config):
     if not deselects_every_lab_test(config.getoption("markexpr", "") or ""):
         return None
     try:
-        head = collection_path.read_text(encoding="utf-8", errors="replace")
+        text = collection_path.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return None
-    return True if LAB_MODULE_LINE.search(head) else None
+    return True if LAB_MODULE_LINE.search(text) else None
 
 
 def require_mitsuba():

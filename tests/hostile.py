@@ -290,19 +290,22 @@ def obj_text(vertices, faces) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
-def ply_binary(vertices, faces, n_vertices=None, n_faces=None) -> bytes:
-    """A binary little-endian PLY of float32 ``vertices`` and int32 ``faces`` (0-based); the
-    header may state other counts (``n_vertices``, ``n_faces``) than the data hold."""
-    import struct
-
+def ply_binary(vertices, faces, n_vertices=None, n_faces=None, normals=None) -> bytes:
+    """A binary little-endian PLY of float32 ``vertices`` (and vertex ``normals`` ``nx ny nz``
+    when given) and int32 ``faces`` (0-based); the header may state other counts
+    (``n_vertices``, ``n_faces``) than the data hold."""
     nv = len(vertices) if n_vertices is None else n_vertices
     nf = len(faces) if n_faces is None else n_faces
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {nv}\nproperty float x\n"
-            f"property float y\nproperty float z\nelement face {nf}\n"
-            "property list uchar int vertex_indices\nend_header\n").encode()
-    body = b"".join(struct.pack("<3f", *v) for v in vertices)
-    body += b"".join(struct.pack("<B3i", 3, *f) for f in faces)
-    return head + body
+    props = "xyz" if normals is None else ("x", "y", "z", "nx", "ny", "nz")
+    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {nv}\n"
+            + "".join(f"property float {p}\n" for p in props)
+            + f"element face {nf}\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    v = np.asarray(vertices, float).reshape(-1, 3)
+    if normals is not None:
+        v = np.concatenate([v, np.asarray(normals, float).reshape(-1, 3)], axis=1)
+    f = np.zeros(len(faces), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    f["n"], f["i"] = 3, np.asarray(faces, np.int64).reshape(-1, 3)
+    return head + v.astype("<f4").tobytes() + f.tobytes()
 
 
 #: A unit quad as two triangles (OBJ faces 1-based).

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import warp as wp
 from conftest import ROOT, data_file, rgl_measured
+from hostile import ply_binary
 
 from warp_rbrdf import geometry as G
 from warp_rbrdf import load_scene, transforms
@@ -295,20 +296,9 @@ def test_white_furnace_analytic_sphere():
     assert np.all(np.abs(m - 1.0) <= 4 * se + 1e-5), (m, se)
 
 
-def _write_ply(path: Path, v, f) -> Path:
-    """A binary PLY of float64 vertices ``v`` (V, 3) and triangles ``f`` (F, 3)."""
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\nproperty double x\n"
-            f"property double y\nproperty double z\nelement face {len(f)}\n"
-            "property list uchar int vertex_indices\nend_header\n").encode()
-    faces = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-    faces["n"], faces["i"] = 3, f
-    path.write_bytes(head + np.asarray(v, "<f8").tobytes() + faces.tobytes())
-    return path
-
-
 def icospheres_as_meshes(sc: Scene, folder: Path) -> Scene:
     """A copy of ``sc`` (after :func:`lab.testing.common_kernel`) whose spheres, but the hidden
-    ones, are ``mesh`` shapes: PLY files of their icospheres (:func:`warp_rbrdf.geometry.sphere_mesh`,
+    ones, are ``mesh`` shapes: PLY files (float32) of their icospheres (:func:`warp_rbrdf.geometry.sphere_mesh`,
     the triangles ``analytic_spheres=False`` makes; vertex normals from the mesh loader, within
     1.2e-3 of the sphere's at subdivision 5). The hidden sphere stays analytic, so the render
     kernel is the common test kernel of triangles and spheres, not one of triangles only."""
@@ -316,8 +306,9 @@ def icospheres_as_meshes(sc: Scene, folder: Path) -> Scene:
     for k, sh in enumerate(out.shapes):
         if sh.type == "sphere" and not sh.material.startswith("hidden-"):
             v, f, _ = G.sphere_mesh(sh.center, sh.radius, sh.subdivisions)
-            out.shapes[k] = ShapeSpec(type="mesh", material=sh.material, transform=sh.transform,
-                                      file=_write_ply(folder / f"icosphere_{k}.ply", v, f))
+            path = folder / f"icosphere_{k}.ply"
+            path.write_bytes(ply_binary(v, f))
+            out.shapes[k] = ShapeSpec(type="mesh", material=sh.material, transform=sh.transform, file=path)
     return out
 
 

@@ -31,6 +31,7 @@ from hostile import (
     assert_one_line,
     assert_unchanged,
     obj_text,
+    ply_binary,
     render_run,
     render_work_folder,
     run,
@@ -367,17 +368,6 @@ def test_valid_mesh_variants_load(tmp_path):
     assert f.tolist() == [[0, 1, 2]]
 
 
-def _ply_with_normals(path, v, f, n):
-    """A binary PLY of float32 vertices ``v`` with vertex normals ``n`` and triangles ``f``."""
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\nproperty float x\nproperty float y\n"
-            f"property float z\nproperty float nx\nproperty float ny\nproperty float nz\nelement face {len(f)}\n"
-            "property list uchar int vertex_indices\nend_header\n").encode()
-    faces = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
-    faces["n"], faces["i"] = 3, f
-    path.write_bytes(head + np.concatenate([v, n], 1).astype("<f4").tobytes() + faces.tobytes())
-    return path
-
-
 def test_a_ply_files_own_normals_are_used(tmp_path):
     """A PLY's ``nx ny nz`` (as Mitsuba 3 reads them): used normalised, its vertices as written
     (a duplicate vertex with its own normal stays), a zero or NaN normal replaced by the one
@@ -385,7 +375,9 @@ def test_a_ply_files_own_normals_are_used(tmp_path):
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0, 1], [1, 0, 0]], float)
     f = np.array([[0, 2, 1], [1, 2, 3], [4, 2, 3]])
     odd = np.array([[0.6, 0.8, 0.0], [0, 2.0, 0], [0.0, 0.0, 0.0], [np.nan, 1, 0], [0.0, 0.6, -0.8]])
-    got_v, got_f, n = load_mesh_file(_ply_with_normals(tmp_path / "own.ply", v, f, odd))
+    p = tmp_path / "own.ply"
+    p.write_bytes(ply_binary(v, f, normals=odd))
+    got_v, got_f, n = load_mesh_file(p)
     assert len(got_v) == 5 and got_f.tolist() == f.tolist()          # not merged
     np.testing.assert_allclose(n[[0, 1, 4]], [[0.6, 0.8, 0], [0, 1, 0], [0, 0.6, -0.8]], atol=1e-7)
     np.testing.assert_allclose(np.abs(n[[2, 3]]), [[0, 1, 0], [0, 1, 0]], atol=1e-7)   # from the faces
@@ -409,10 +401,11 @@ def test_a_ply_files_normals_shade_the_render(tmp_path):
     tilt = np.tile([np.sin(np.pi / 3), np.cos(np.pi / 3), 0.0], (4, 1))
     out = []
     for name, n in (("up", up), ("tilt", tilt)):
+        (tmp_path / f"{name}.ply").write_bytes(ply_binary(v, f, normals=n))
         sc = Scene(camera=CameraSpec(origin=(0, 3, 0.01), target=(0, 0, 0), fov=20, resolution=(8, 8)),
                    integrator=IntegratorSpec(spp=1, hide_environment=True),
                    materials={"m": T.lambert(albedo=1.0, sampler="cosine")},
-                   shapes=[ShapeSpec(type="mesh", material="m", file=_ply_with_normals(tmp_path / f"{name}.ply", v, f, n))],
+                   shapes=[ShapeSpec(type="mesh", material="m", file=tmp_path / f"{name}.ply")],
                    lights=[T.directional((0, 1, 0), 1.0)])
         out.append(Renderer(sc).render()[2:6, 2:6].mean())
     assert out[0] > 0.1 and out[1] / out[0] == pytest.approx(0.5, rel=1e-3)
