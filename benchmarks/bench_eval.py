@@ -9,7 +9,7 @@ Materials (all of one RGL measurement, ``--material``, default ``satin_rosaline`
   (theta_h, theta_d) boxes from its flat record, :mod:`warp_rbrdf.materials.rational_flat2d`);
 * ``rational 3-D``: a 3-D fit (``--fit3d``: a coefficient file of ``fit.rational.fit3d``, e.g.
   one ``benchmarks/bench_fit_accuracy.py`` writes; without one, a stand-in of random positive
-  coefficients in the four-piece layout of ``fit.rational.fit3d.VARIANTS[0]``: same pieces and
+  coefficients in the layout of ``fit.rational.fit3d.VARIANTS[0]``: same pieces and
   degrees, so the same work per evaluation, said in the output);
 * ``... generic``: the same two fits through the one function for every fit
   (``rational_kernel.rational_eval``: packed Chebyshev groups, libm's ``atan2``), in the same

@@ -8,8 +8,9 @@ own command line, in a child process.
 * 3-D (``rational-3d``): ``rbrdf-fit brdf FILE --model 3d --out OUT`` with every default
   (``--layout select``, ``--tol 0.01``, no wall-clock limit, so a fit does not depend on the
   machine's load: docs/fitting.md, "The 3-D method"), cached as ``results/chart/fits/<stem>_3d_<key>.json`` where ``key`` is the first 12
-  hex digits of the SHA-256 of the measured file's SHA-256 and the command's flags: a new
-  file or other flags make a new fit, the same ones reuse it.
+  hex digits of the SHA-256 of the measured file's SHA-256, the command's flags and the fitter's
+  defaults (:func:`fitter_defaults`: its layouts and settings): a new file, other flags or a
+  fitter whose defaults changed make a new fit, the same ones reuse it.
 
 A fit the command does not write (exit status 1: a function not valid) or that does not end
 within ``time_limit_s`` is reported as missing (``None`` and the reason), never replaced by
@@ -42,9 +43,18 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
+def fitter_defaults() -> str:
+    """What a 3-D fit with the command's defaults depends on besides the file and the flags: the
+    layouts :func:`fit.rational.fit3d.fit_rgl_select` tries and the default
+    :class:`fit.rational.settings.Fit3DSettings`, as text (part of the cache key)."""
+    from fit.rational.fit3d import TARGET_LADDER, VARIANTS, Fit3DSettings
+
+    return repr((VARIANTS, TARGET_LADDER, Fit3DSettings()))
+
+
 def fit3d_path(bsdf: Path, flags=FIT3D_FLAGS, fit_dir: Path = FIT3D_DIR) -> Path:
-    """The cache file of the 3-D fit of ``bsdf`` made with ``flags``."""
-    key = hashlib.sha256(json.dumps([file_sha256(bsdf), list(flags)]).encode()).hexdigest()[:12]
+    """The cache file of the 3-D fit of ``bsdf`` made with ``flags`` by today's fitter."""
+    key = hashlib.sha256(json.dumps([file_sha256(bsdf), list(flags), fitter_defaults()]).encode()).hexdigest()[:12]
     return Path(fit_dir) / f"{Path(bsdf).stem}_3d_{key}.json"
 
 

@@ -46,7 +46,7 @@ def test_the_first_layout_within_the_target_is_kept_and_the_rest_skipped(untarge
 
 
 def test_default_ladder_and_settings():
-    assert [len(v["theta_h_edges"]) for v in TARGET_LADDER] == [0, 0, 0, 0, 0, 3]
+    assert [len(v["theta_h_edges"]) for v in TARGET_LADDER] == [0, 0, 0, 0, 0, 5]
     assert TARGET_LADDER[-1] == VARIANTS[0]
     assert Fit3DSettings().target_rmse is None
     for bad in (0.0, -0.1, float("nan")):

@@ -180,3 +180,24 @@ def test_cli_and_studies_use_the_settings_object(monkeypatch):
     monkeypatch.setattr("fit.formats.load_measured", lambda path: path)
     F.fit_material(str(ROOT / "x.binary"), 0.1, band_intervals="tol+spread")
     assert seen == [BRDFFitSettings(tol=0.1, band_intervals="tol+spread")]
+
+
+def test_3d_objective_flag_sets_the_objective_and_refuses_others(capsys):
+    """``rbrdf-fit brdf FILE --objective relative`` fits the relative objective (the setting of
+    :class:`Fit3DSettings`); without it the default; an unknown objective is refused by the
+    parser (exit 2, the flag named) before any file is read (tests/test_cli_fit.py: refused with a
+    MERL file, whose fit is 2-D)."""
+    from fit.cli import build_parser
+    from fit.cli.brdf3d import given, settings_from_args
+
+    p = build_parser()
+    a = p.parse_args(["brdf", "x.bsdf", "--out", "x.json"])
+    assert settings_from_args(a)[0].objective == Fit3DSettings().objective == "rho_cos_cos"
+    a = p.parse_args(["brdf", "x.bsdf", "--out", "x.json", "--objective", "relative"])
+    s, layouts = settings_from_args(a)
+    assert s.objective == "relative" and s.clone(objective="rho_cos_cos") == settings_from_args(
+        p.parse_args(["brdf", "x.bsdf", "--out", "x.json"]))[0]
+    assert "--objective" in given(a)
+    with pytest.raises(SystemExit) as e:
+        p.parse_args(["brdf", "x.bsdf", "--out", "x.json", "--objective", "rmse"])
+    assert e.value.code == 2 and "--objective" in capsys.readouterr().err

@@ -10,11 +10,11 @@ method"):
 * ``--tol``: the first tolerance of the ladder (default :data:`TOL_3D`, the benchmark's); the
   bound the file states is the one met;
 * ``--layout``: ``select`` (default: both layouts of :data:`fit.rational.fit3d.VARIANTS` fitted,
-  the lower validation RMSE kept), ``pieces`` (four theta_h pieces, 666 coefficients) or
+  the lower validation RMSE kept), ``pieces`` (six theta_h pieces, 1,125 coefficients) or
   ``single`` (one piece of ``--degrees``, default (7, 3): 420 coefficients);
 * ``--target-rmse R``: the coefficient count as the dial: the layouts of
-  :data:`fit.rational.select3d.TARGET_LADDER` (one piece of 72 to 420 coefficients, then the four
-  pieces' 666) fitted cheapest first, the first whose validation RMSE is within ``R`` kept (none:
+  :data:`fit.rational.select3d.TARGET_LADDER` (one piece of 72 to 420 coefficients, then the six
+  pieces' 1,125) fitted cheapest first, the first whose validation RMSE is within ``R`` kept (none:
   the lowest); only with ``--layout select``;
 * ``--time-limit S`` (default: none; 0: none): a wall-clock limit the user chooses, one
   :class:`fit.progress.Deadline` from the start of the command (reading the file included);
@@ -55,6 +55,7 @@ from ..rational.fit3d import (
     DEFAULT_RANDOM,
     DEFAULT_TIME_LIMIT,
     DEFAULT_VERIFY,
+    OBJECTIVES,
     TARGET_LADDER,
     VARIANTS,
     Fit3DSettings,
@@ -71,7 +72,7 @@ LAYOUTS = ("select", "pieces", "single")
 #: The flags of the 3-D fit (argparse destinations), refused with ``--model 2d``.
 FLAGS = {"layout": "--layout", "degrees": "--degrees", "target_rmse": "--target-rmse", "time_limit": "--time-limit",
          "grid": "--grid",
-         "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo"}
+         "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo", "objective": "--objective"}
 MAX_GRID = 200            # per dimension of --grid (8 million points at most)
 MAX_POINTS = 1_000_000    # --random (each kind) and --verify
 
@@ -95,15 +96,15 @@ def add_flags(p) -> None:
     d = Fit3DSettings()
     g = p.add_argument_group("3-D fit (--model 3d; auto for an RGL .bsdf)")
     g.add_argument("--layout", choices=LAYOUTS, default=None,
-                   help="select (default): four theta_h pieces (666 coefficients) and, below a validation "
+                   help="select (default): six theta_h pieces (1,125 coefficients) and, below a validation "
                         "RMSE of 0.065, one piece of degrees (7, 3) (420), the lower validation RMSE kept; "
-                        "pieces: the four pieces only; single: one piece of --degrees only")
+                        "pieces: the six pieces only; single: one piece of --degrees only")
     g.add_argument("--degrees", type=integers(2, 0, MAX_FIT_DEGREE, "NUM,DEN"), default=None, metavar="NUM,DEN",
                    help="total degrees of numerator and denominator of --layout single (default "
                         f"{','.join(map(str, VARIANTS[1]['degrees']))}; fewer coefficients, larger error)")
     g.add_argument("--target-rmse", dest="target_rmse", type=number(1e-6, 10.0), default=None, metavar="R",
                    help="the coefficient count as the dial: one piece of degrees (3,1), (4,2), (5,2), (6,3), "
-                        "(7,3) (72 to 420 coefficients), then the four pieces (666), fitted cheapest first; the "
+                        "(7,3) (72 to 420 coefficients), then the six pieces (1,125), fitted cheapest first; the "
                         "first whose validation RMSE (relative RMSE of rho cos cos at 20,000 held-out pairs) is "
                         "within R is kept, else the lowest. Fits up to six layouts where the default fits two")
     g.add_argument("--time-limit", dest="time_limit", type=number(0.0, MAX_TIME_LIMIT_S), default=None, metavar="S",
@@ -121,6 +122,12 @@ def add_flags(p) -> None:
     g.add_argument("--verify", type=integer(0, MAX_POINTS), default=None, metavar="N",
                    help=f"fresh points the fit is checked at, the worst refitted (default {DEFAULT_VERIFY}; "
                         "0: none)")
+    g.add_argument("--objective", choices=OBJECTIVES, default=None,
+                   help=f"what the second stage minimises and the layout selection compares (default "
+                        f"{d.objective}): relative, the squared relative error of rho over cosine-distributed "
+                        "pairs (dark regions count by their share of the value, as a colour difference sees "
+                        "them); rho_cos_cos, the squared error of rho cos cos there (dominated by the "
+                        "specular peak); blend, half each. docs/fitting.md, \"The second stage's objective\"")
     g.add_argument("--no-albedo", dest="no_albedo", action="store_true", default=None,
                    help=f"no directional-albedo policy (default: channels outside {100 * d.albedo_tol:g} %% "
                         "refitted)")
@@ -146,7 +153,8 @@ def settings_from_args(args, wall_limit=None) -> tuple:
                       grid=d.grid if args.grid is None else tuple(args.grid),
                       n_random=d.n_random if args.n_random is None else args.n_random,
                       verify=d.verify if args.verify is None else args.verify,
-                      albedo=not args.no_albedo, target_rmse=target)
+                      albedo=not args.no_albedo, target_rmse=target,
+                      objective=d.objective if args.objective is None else args.objective)
     if layout == "select":
         return s, (VARIANTS if target is None else TARGET_LADDER)
     if layout == "pieces":
