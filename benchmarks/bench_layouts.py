@@ -22,6 +22,7 @@ seed 11; the truth is the chart's cache (``--chart-out``, made there when missin
 
     python -m benchmarks.bench_layouts --layouts p4 p6 --objectives rho_cos_cos relative
     python -m benchmarks.bench_layouts --materials chm_mint --layouts m9 --spp 256
+    python -m benchmarks.bench_layouts --layouts p6 --set grazing_cos=0.1
 
 Outputs: ``<out>/layouts.json`` (every fit's record and every render's errors) and
 ``<out>/layouts.md`` (one table: ΔE2000 mean / p99 per case and column, and per column the
@@ -64,25 +65,50 @@ def layout(name: str) -> dict:
     return dict(LAYOUTS[name])
 
 
-def fit_file(bsdf: Path, lay: str, objective: str, out: Path) -> tuple[Path, dict]:
-    """The cached or new fit of ``bsdf`` with layout ``lay`` and ``objective``: ``(file, record)``."""
+def fit_file(bsdf: Path, lay: str, objective: str, out: Path, extra: dict | None = None) -> tuple[Path, dict]:
+    """The cached or new fit of ``bsdf`` with layout ``lay``, ``objective`` and the further
+    :class:`Fit3DSettings` values ``extra`` (``--set``): ``(file, record)``."""
     from fit.formats.rgl import read_rgl
     from fit.rational.coefficient_writer import save
     from fit.rational.fit3d import Fit3DSettings, fit_rgl_select
 
-    path = out / "fits" / f"{lay}_{objective}" / f"{bsdf.stem}.json"
+    path = out / "fits" / column(lay, objective, extra).replace("/", "_") / f"{bsdf.stem}.json"
     rec_path = path.with_suffix(".record.json")
     if path.is_file() and rec_path.is_file():
         return path, json.loads(rec_path.read_text())
     path.parent.mkdir(parents=True, exist_ok=True)
     t0 = time.process_time()
-    res = fit_rgl_select(read_rgl(bsdf), (layout(lay),), settings=Fit3DSettings(tol=0.01, objective=objective))
+    res = fit_rgl_select(read_rgl(bsdf), (layout(lay),),
+                         settings=Fit3DSettings(tol=0.01, objective=objective, **(extra or {})))
     rec = {"cpu_s": time.process_time() - t0, "coefficients": int(res.n_coefficients), "bound": float(res.tolerance),
            "valid": bool(res.valid), "validation_rmse": float(res.validation_rmse),
            "validation_score": float(res.validation_score)}
     save(res.model, path)
     rec_path.write_text(json.dumps(rec))
     return path, rec
+
+
+def column(lay: str, objective: str, extra: dict | None) -> str:
+    """The name of a fit's column: ``layout/objective`` and the ``--set`` values."""
+    return "/".join([lay, objective] + [f"{k}={v:g}" for k, v in sorted((extra or {}).items())])
+
+
+def settings_values(pairs) -> dict:
+    """``--set NAME=VALUE`` pairs as numbers, each a field of :class:`Fit3DSettings`."""
+    from fit.rational.fit3d import Fit3DSettings
+
+    names = set(Fit3DSettings().get_params())
+    out = {}
+    for p in pairs or ():
+        name, _, value = p.partition("=")
+        if name not in names or name in ("objective", "theta_h_edges", "piece_degrees", "degrees"):
+            raise SystemExit(f"bench_layouts: --set {p}: not a numeric Fit3DSettings field")
+        try:
+            v = float(value)
+            out[name] = int(v) if v.is_integer() and "." not in value and "e" not in value.lower() else v
+        except ValueError:
+            raise SystemExit(f"bench_layouts: --set {p}: VALUE must be a number") from None
+    return out
 
 
 def parse(argv):
@@ -93,6 +119,9 @@ def parse(argv):
     ap.add_argument("--materials", nargs="+", default=None, help="RGL file stems without _rgb (default: every shared file)")
     ap.add_argument("--layouts", nargs="+", choices=tuple(LAYOUTS), default=["p4", "p6"])
     ap.add_argument("--objectives", nargs="+", choices=OBJECTIVES, default=["rho_cos_cos"])
+    ap.add_argument("--set", nargs="+", default=None, metavar="NAME=VALUE",
+                    help="further numeric Fit3DSettings values of every fit (e.g. grazing_cos=0.1), part of "
+                         "the column's name and cache folder")
     ap.add_argument("--maps", nargs="+", choices=("studio", "rooitou"), default=["studio", "rooitou"])
     ap.add_argument("--spp", type=int, default=1024, help="spp of each fit's render (default 1024)")
     ap.add_argument("--res", type=int, default=64, help="image side in px, the truth's (default 64)")
@@ -116,6 +145,7 @@ def main(argv=None) -> int:
 
     data = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
     mats = a.materials or sorted(p.name[:-len("_rgb.bsdf")] for p in (data / "rgl").glob("*_rgb.bsdf"))
+    extra = settings_values(a.set)
     cols = [(lay, obj) for lay in a.layouts for obj in a.objectives]
     res_path = a.out / "layouts.json"
     res = json.loads(res_path.read_text()) if res_path.is_file() else {"fits": {}, "renders": {}}
@@ -127,9 +157,9 @@ def main(argv=None) -> int:
             return 2
         files = {}
         for lay, obj in cols:
-            files[lay, obj], rec = fit_file(bsdf, lay, obj, a.out)
-            res["fits"][f"{mat}/{lay}/{obj}"] = rec
-            log(f"{mat} {lay} {obj}: {rec['coefficients']} coefficients, validation RMSE {rec['validation_rmse']:.4f}, "
+            files[lay, obj], rec = fit_file(bsdf, lay, obj, a.out, extra)
+            res["fits"][f"{mat}/{column(lay, obj, extra)}"] = rec
+            log(f"{mat} {column(lay, obj, extra)}: {rec['coefficients']} coefficients, validation RMSE {rec['validation_rmse']:.4f}, "
                 f"{rec['cpu_s']:.0f} CPU s")
         for map_name in a.maps:
             env = data / BC.MAPS[map_name]
@@ -139,7 +169,7 @@ def main(argv=None) -> int:
             ref = BC.truth(bsdf, env, base, ta, a.chart_out)["img"]
             expo = M.exposure_for(ref, mask)
             specs = [("rgl", BC.spec_for("rgl", bsdf, None)[0])]
-            specs += [(f"{lay}/{obj}", BC.spec_for("rational-3d", bsdf, files[lay, obj])[0]) for lay, obj in cols]
+            specs += [(column(lay, obj, extra), BC.spec_for("rational-3d", bsdf, files[lay, obj])[0]) for lay, obj in cols]
             for col, spec in specs:
                 r = Renderer(BC.scene_with(base, spec), device="cpu")
                 r.compile()
@@ -150,7 +180,7 @@ def main(argv=None) -> int:
                     f"(rim {e['de_rim']:.2f}, inner {e['de_inner']:.2f})")
         a.out.mkdir(parents=True, exist_ok=True)
         res_path.write_text(json.dumps(res, indent=1))
-    (a.out / "layouts.md").write_text(report(res, mats, a.maps, ["rgl"] + [f"{lay}/{obj}" for lay, obj in cols]))
+    (a.out / "layouts.md").write_text(report(res, mats, a.maps, ["rgl"] + [column(lay, obj, extra) for lay, obj in cols]))
     log(f"wrote {res_path} and {a.out / 'layouts.md'}")
     return 0
 
