@@ -14,7 +14,7 @@ coefficients stay moderate. On the 20 RGL materials of docs/fit_accuracy.md the 
 relative RMSE (rho cos cos over cosine-distributed pairs) is 1.7-5.3x lower than the 2-D fit's
 at 5 % (median 3.2x, 19 materials with a 2-D fit), below the phi_d-median table that bounds every
 2-D fit on all 20; its directional albedo is within 5 % both ways at 0/30/60/75 deg on 17 of them;
-its renders are within ΔE2000 mean 1 of the measurement's on 36 of 40 cases (docs/chart.md); it
+its renders reach ΔE2000 mean <= 1 against the measurement on 35 of 40 cases (docs/chart.md); it
 has 1,125 coefficients (six theta_h pieces; 420 where one piece is better; 2-D: 160-835, median
 358) and takes 38-80 s on one core (median 54 s; 2-D: 3-31 s, median 9 s). A MERL table is reciprocal and folded over phi_d; the 3-D fit is made from an
 RGL file's own evaluation (with its light and view roles), so ``--model 3d`` refuses a
