@@ -13,6 +13,12 @@ and given the albedo policy like the command's fits, with ``tol`` 0.01 as the co
   1,530 coefficients).
 
 Objectives: ``Fit3DSettings.objective`` (docs/fitting.md, "The second stage's objective").
+``--fit-dir LABEL=DIR`` adds the fit files of a folder (``DIR/<stem>*.json``, the newest) as a
+column ``LABEL`` (e.g. the chart's fits). ``--image-check`` also computes each fit's own image
+check (:func:`fit.rational.image_check.image_check`: a sphere under generic lights, no map of
+the chart) and reports how well it ranks the columns as their renders do (Spearman over every
+material and column of the mean ΔE, the renders' mean over the maps; and per material whether
+the column the check puts first is the renders' best).
 Fits are cached under ``<out>/fits/<layout>_<objective>/`` by material (delete a directory to
 refit); the renders use each material kind's default sampler (``mis-rational`` when the file
 carries its inverse CDFs, else ``mis-tabulated``), ``--spp`` spp at the truth's resolution,
@@ -23,6 +29,7 @@ seed 11; the truth is the chart's cache (``--chart-out``, made there when missin
     python -m benchmarks.bench_layouts --layouts p4 p6 --objectives rho_cos_cos relative
     python -m benchmarks.bench_layouts --materials chm_mint --layouts m9 --spp 256
     python -m benchmarks.bench_layouts --layouts p6 --set grazing_cos=0.1
+    python -m benchmarks.bench_layouts --layouts p6 --objectives rho_cos_cos relative --fit-dir chart=results/chart/fits --image-check
 
 Outputs: ``<out>/layouts.json`` (every fit's record and every render's errors) and
 ``<out>/layouts.md`` (one table: ΔE2000 mean / p99 per case and column, and per column the
@@ -122,6 +129,10 @@ def parse(argv):
     ap.add_argument("--set", nargs="+", default=None, metavar="NAME=VALUE",
                     help="further numeric Fit3DSettings values of every fit (e.g. grazing_cos=0.1), part of "
                          "the column's name and cache folder")
+    ap.add_argument("--fit-dir", nargs="+", default=[], metavar="LABEL=DIR",
+                    help="also render the fit files of DIR (DIR/<stem>*.json, the newest) as column LABEL")
+    ap.add_argument("--image-check", action="store_true",
+                    help="also each fit's image check (fit.rational.image_check) and its agreement with the renders")
     ap.add_argument("--maps", nargs="+", choices=("studio", "rooitou"), default=["studio", "rooitou"])
     ap.add_argument("--spp", type=int, default=1024, help="spp of each fit's render (default 1024)")
     ap.add_argument("--res", type=int, default=64, help="image side in px, the truth's (default 64)")
@@ -130,6 +141,9 @@ def parse(argv):
     ap.add_argument("--chart-out", type=Path, default=ROOT / "results" / "chart", help="the chart's output folder (its truth cache)")
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "layouts")
     a = ap.parse_args(argv)
+    for fd in a.fit_dir:
+        if "=" not in fd or not Path(fd.partition("=")[2]).is_dir():
+            ap.error(f"--fit-dir {fd}: expected LABEL=DIR with DIR a folder")
     if not (8 <= a.res <= 512 and 2 <= a.spp <= 8192 and a.truth_spp >= 2 and a.truth_spp % 2 == 0):
         ap.error("--res 8..512, --spp 2..8192, --truth-spp an even number >= 2")
     return a
@@ -161,6 +175,22 @@ def main(argv=None) -> int:
             res["fits"][f"{mat}/{column(lay, obj, extra)}"] = rec
             log(f"{mat} {column(lay, obj, extra)}: {rec['coefficients']} coefficients, validation RMSE {rec['validation_rmse']:.4f}, "
                 f"{rec['cpu_s']:.0f} CPU s")
+        for fd in a.fit_dir:
+            label, _, d = fd.partition("=")
+            found = sorted((p for p in Path(d).glob(f"{bsdf.stem}*.json") if not p.name.endswith(".record.json")),
+                           key=lambda p: p.stat().st_mtime)
+            if found:
+                files[label] = found[-1]
+        if a.image_check:
+            from fit.formats.rgl import read_rgl
+            from fit.rational.coefficient_reader import load
+            from fit.rational.image_check import image_check
+
+            brdf = read_rgl(bsdf)
+            for key, f in files.items():
+                col = key if isinstance(key, str) else column(*key, extra)
+                res.setdefault("image_check", {})[f"{mat}/{col}"] = ic = image_check(brdf, load(f))
+                log(f"  image check {col}: ΔE2000 mean {ic['mean']:.2f} p99 {ic['p99']:.1f}")
         for map_name in a.maps:
             env = data / BC.MAPS[map_name]
             base = MR.sphere_scene(bsdf, env, a.truth_spp, a.res, pattern=BC.OUR_PATTERN)
@@ -170,6 +200,7 @@ def main(argv=None) -> int:
             expo = M.exposure_for(ref, mask)
             specs = [("rgl", BC.spec_for("rgl", bsdf, None)[0])]
             specs += [(column(lay, obj, extra), BC.spec_for("rational-3d", bsdf, files[lay, obj])[0]) for lay, obj in cols]
+            specs += [(k, BC.spec_for("rational-3d", bsdf, f)[0]) for k, f in files.items() if isinstance(k, str)]
             for col, spec in specs:
                 r = Renderer(BC.scene_with(base, spec), device="cpu")
                 r.compile()
@@ -180,7 +211,11 @@ def main(argv=None) -> int:
                     f"(rim {e['de_rim']:.2f}, inner {e['de_inner']:.2f})")
         a.out.mkdir(parents=True, exist_ok=True)
         res_path.write_text(json.dumps(res, indent=1))
-    (a.out / "layouts.md").write_text(report(res, mats, a.maps, ["rgl"] + [column(lay, obj, extra) for lay, obj in cols]))
+    names = [column(lay, obj, extra) for lay, obj in cols] + [fd.partition("=")[0] for fd in a.fit_dir]
+    text = report(res, mats, a.maps, ["rgl"] + names)
+    if a.image_check:
+        text += "\n" + agreement(res, mats, a.maps, names)
+    (a.out / "layouts.md").write_text(text)
     log(f"wrote {res_path} and {a.out / 'layouts.md'}")
     return 0
 
@@ -200,6 +235,28 @@ def report(res: dict, mats, maps, cols) -> str:
         tot.append(f"{sum(e['de_mean'] <= 1 for e in v)} / {sum(e['de_p99'] <= 3 for e in v)} of {len(v)}")
     L.append("| mean ≤ 1 / p99 ≤ 3 | | " + " | ".join(tot) + " |")
     return "\n".join(L) + "\n"
+
+
+def agreement(res: dict, mats, maps, cols) -> str:
+    """How the image check ranks the columns against their renders (module docstring)."""
+    from scipy.stats import spearmanr
+
+    R, C = res["renders"], res.get("image_check", {})
+    xs, ys, best, n = [], [], 0, 0
+    for m in mats:
+        pairs = []
+        for c in cols:
+            r = [R.get(f"{m}/{mp}/{c}") for mp in maps]
+            if f"{m}/{c}" in C and all(r):
+                pairs.append((c, C[f"{m}/{c}"]["mean"], float(np.mean([e["de_mean"] for e in r]))))
+        xs += [p[1] for p in pairs]
+        ys += [p[2] for p in pairs]
+        if len(pairs) > 1:
+            n += 1
+            best += min(pairs, key=lambda p: p[1])[0] == min(pairs, key=lambda p: p[2])[0]
+    rho = spearmanr(xs, ys).statistic if len(xs) > 2 else float("nan")
+    return (f"Image check against the renders: Spearman {rho:.2f} over {len(xs)} fits; the check's first "
+            f"column is the renders' best on {best} of {n} materials.\n")
 
 
 if __name__ == "__main__":

@@ -249,6 +249,10 @@ def _print_table(name: str, res, settings) -> None:
              (f"directional albedo within {100 * alb['tol']:g} %" if alb.get("within") else
               f"directional albedo off by up to {100 * alb['max_error']:.3g} %") if alb else "no albedo policy",
              "time limit reached" if info.get("stopped") == "time" else None]
+    img = info.get("image_check")
+    if img:
+        parts.insert(1, f"image ΔE2000 mean {img['mean']:.2f}, p99 {img['p99']:.2f} (a sphere under generic lights, "
+                        "against the measurement)")
     tgt = info.get("target")
     if tgt:
         parts.insert(1, f"target validation RMSE {tgt['rmse']:g} " + ("met" if tgt["met"] else "not met (the lowest kept)")

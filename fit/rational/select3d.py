@@ -14,6 +14,7 @@ import numpy as np
 from ..formats.angles import cosine_directions
 from ..progress import report
 from .ceiling import Ceiling
+from .image_check import image_check
 from .result3d import Fit3D, domain_record
 from .proved_bound import record_fit3d
 from .rgl3d import albedo_step, fit_rgl
@@ -56,7 +57,7 @@ SELECT_MARGIN = 0.05
 #: layout's fit: not listed in the layouts' ``"options"`` log.
 _SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above", "albedo",
                               "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
-                              "albedo_refits", "max_variants", "target_rmse"})
+                              "albedo_refits", "max_variants", "target_rmse", "image_check"})
 
 
 def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
@@ -195,6 +196,8 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
                                budgets={"max_variants": s.max_variants, "verify_rounds": int(chosen.verify_rounds),
                                         "albedo_refits": int(s.albedo_refits),
                                         "ladder_steps": int(s.ladder_steps)})
+    if s.image_check:       # what the fit looks like against the measurement (fit.rational.image_check)
+        best.model.fit_info["image_check"] = image_check(brdf, best.model)
     ceiling.record(best.model.fit_info)
     if s.prove_bound:       # the chosen fit's error between the grid nodes, proved
         record_fit3d(best, brdf)

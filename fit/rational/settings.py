@@ -225,7 +225,10 @@ class Fit3DSettings(_Settings):
     * ``prove_bound``: prove the error between the grid nodes of the measurement, per piece and
       channel (:func:`fit.rational.proved_bound.prove_fit3d`, recorded in
       ``fit_info["bound"]`` and ``fit_info["domain"]``); off by default: it costs about as much
-      CPU time as a small-budget fit (docs/fitting.md, "The proved bound").
+      CPU time as a small-budget fit (docs/fitting.md, "The proved bound");
+    * ``image_check``: record what the chosen fit looks like against the measurement, the ΔE2000
+      of a virtual sphere's images under generic lights (:mod:`fit.rational.image_check`,
+      ``fit_info["image_check"]``; about 3 s of a selection);
 
     Layout selection (:func:`~fit.rational.fit3d.fit_rgl_select`): ``select_share`` of
     ``time_limit`` (and of ``wall_limit``) after which no further layout starts; ``max_variants`` layouts at most
@@ -261,6 +264,7 @@ class Fit3DSettings(_Settings):
     albedo_total_growth: float = DEFAULT_ALBEDO_TOTAL_GROWTH
     albedo_refits: int = DEFAULT_ALBEDO_REFITS
     prove_bound: bool = False
+    image_check: bool = True
     select_share: float = 0.6
     max_variants: int | None = None
     target_rmse: float | None = None
@@ -304,6 +308,7 @@ class Fit3DSettings(_Settings):
              "a finite number >= 0"),
             ("albedo_refits", nonneg_int(self.albedo_refits), "an integer >= 0"),
             ("prove_bound", isinstance(self.prove_bound, bool), "True or False"),
+            ("image_check", isinstance(self.image_check, bool), "True or False"),
             ("select_share", _number(self.select_share) and 0.0 < self.select_share <= 1.0, "in (0, 1]"),
             ("max_variants", self.max_variants is None or nonneg_int(self.max_variants), "None or an integer >= 0"),
         ]

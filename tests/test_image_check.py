@@ -1,0 +1,66 @@
+"""The fitter's image check (:mod:`fit.rational.image_check`): its CIEDE2000 against published
+test pairs and colour-science, the sphere image's geometry under a uniform sky, and that the
+ΔE grows with a fit's error."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fit.rational import image_check as IC
+
+#: Sharma, Wu and Dalal (2005), Table 1: (Lab1, Lab2, ΔE00).
+SHARMA = [
+    ((50.0, 2.6772, -79.7751), (50.0, 0.0, -82.7485), 2.0425),
+    ((50.0, 3.1571, -77.2803), (50.0, 0.0, -82.7485), 2.8615),
+    ((50.0, 2.8361, -74.0200), (50.0, 0.0, -82.7485), 3.4412),
+    ((50.0, -1.3802, -84.2814), (50.0, 0.0, -82.7485), 1.0000),
+    ((50.0, 2.5, 0.0), (73.0, 25.0, -18.0), 27.1492),
+]
+
+
+@pytest.mark.parametrize("lab1, lab2, expected", SHARMA)
+def test_delta_e2000_matches_the_published_pairs(lab1, lab2, expected):
+    assert IC.delta_e2000(np.array(lab1), np.array(lab2)) == pytest.approx(expected, abs=1e-4)
+    assert IC.delta_e2000(np.array(lab2), np.array(lab1)) == pytest.approx(expected, abs=1e-4)
+
+
+def test_lab_and_delta_e_match_colour_science():
+    colour = pytest.importorskip("colour")
+    rng = np.random.default_rng(0)
+    a = rng.random((2000, 3)) * 2
+    b = np.maximum(a * (1 + 0.2 * rng.standard_normal((2000, 3))), 0)
+    cs = colour.RGB_COLOURSPACES["ITU-R BT.709"]
+
+    def lab(x):
+        xyz = colour.RGB_to_XYZ(x * 0.7, cs, illuminant=cs.whitepoint, chromatic_adaptation_transform=None,
+                                apply_cctf_decoding=False)
+        return colour.XYZ_to_Lab(xyz, cs.whitepoint)
+
+    assert np.abs(IC.rgb_to_lab(a, 0.7) - lab(a)).max() < 1e-9
+    ref = colour.delta_E(lab(a), lab(b), method="CIE 2000")
+    assert np.abs(IC.delta_e2000(IC.rgb_to_lab(a, 0.7), IC.rgb_to_lab(b, 0.7)) - ref).max() < 1e-9
+
+
+def test_a_lambertian_sphere_under_a_uniform_sky_shows_its_albedo():
+    """Radiance 1 from every light direction: each pixel of a Lambertian a / pi is a (the
+    cosine-weighted hemisphere is pi), within the light quadrature's error; the frames and the
+    horizon test are right or this fails (a wrong normal gives a cosine-dependent image)."""
+    views = IC.sphere_views(24)
+    dirs, _ = IC.generic_lights(1, 4096)
+    L = np.full((len(dirs), 3), 4 * np.pi / len(dirs))
+    a = np.array([0.2, 0.5, 0.8])
+    img = IC.sphere_image(lambda wi, wo: np.tile(a / np.pi, (len(wi), 1)), dirs, L, views)
+    assert np.allclose(img, a[None, :], rtol=0.02)
+    assert np.all(views[1][:, 2] > 0)                     # every view above its pixel's horizon
+
+
+def test_delta_e_is_zero_for_the_truth_and_grows_with_the_error():
+    def glossy(wi, wo):
+        h = wi + wo
+        h /= np.linalg.norm(h, axis=1, keepdims=True)
+        return np.array([0.3, 0.5, 0.2])[None, :] / np.pi + 2.0 * h[:, 2:3] ** 40
+
+    assert IC.image_delta_e(glossy, glossy, n=16, k=64)["mean"] == 0.0
+    means = [IC.image_delta_e(glossy, lambda wi, wo, s=s: glossy(wi, wo) * s, n=16, k=64)["mean"]
+             for s in (1.02, 1.05, 1.2)]
+    assert 0 < means[0] < means[1] < means[2]
