@@ -15,10 +15,10 @@ The colour difference is CIEDE2000 (Sharma, Wu and Dalal 2005) of CIE Lab under 
 Rec.709 primaries, computed here in NumPy (the fitter does not import the studies or
 colour-science; tests/test_image_check.py compares it with colour-science).
 
-Measured (docs/fit_accuracy.md, "Pieces for what users see"): over 102 fits of the 20 RGL
-materials (layouts and objectives), its mean ΔE ranks the fits as their renders under the
-chart's two environment maps do (Spearman 0.80), and the fit it ranks first is the render's best
-on 17 of the 20 materials.
+Measured (docs/fit_accuracy.md, "Pieces for what users see"; ``benchmarks/bench_layouts.py
+--image-check``): over 80 fits of the 20 RGL materials (four layouts and objectives each), its
+mean ΔE ranks the fits as their renders under the chart's two environment maps do (Spearman
+0.80), and the fit it ranks first is the renders' best on 18 of the 20 materials.
 """
 from __future__ import annotations
 
