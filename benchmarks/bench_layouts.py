@@ -164,16 +164,19 @@ def main(argv=None) -> int:
     res_path = a.out / "layouts.json"
     res = json.loads(res_path.read_text()) if res_path.is_file() else {"fits": {}, "renders": {}}
     ta = types.SimpleNamespace(res=a.res, truth_spp=a.truth_spp, threads=a.threads)
+    mask = MR.sphere_mask(a.res)
+    band = rim_band(a.res, mask)
     for mat in mats:
         bsdf = data / "rgl" / f"{mat}_rgb.bsdf"
         if not bsdf.is_file():
             log(f"bench_layouts: {bsdf}: no such file")
             return 2
-        files = {}
+        files = {}                                  # column name -> fit file
         for lay, obj in cols:
-            files[lay, obj], rec = fit_file(bsdf, lay, obj, a.out, extra)
-            res["fits"][f"{mat}/{column(lay, obj, extra)}"] = rec
-            log(f"{mat} {column(lay, obj, extra)}: {rec['coefficients']} coefficients, validation RMSE {rec['validation_rmse']:.4f}, "
+            col = column(lay, obj, extra)
+            files[col], rec = fit_file(bsdf, lay, obj, a.out, extra)
+            res["fits"][f"{mat}/{col}"] = rec
+            log(f"{mat} {col}: {rec['coefficients']} coefficients, validation RMSE {rec['validation_rmse']:.4f}, "
                 f"{rec['cpu_s']:.0f} CPU s")
         for fd in a.fit_dir:
             label, _, d = fd.partition("=")
@@ -187,20 +190,16 @@ def main(argv=None) -> int:
             from fit.rational.image_check import image_check
 
             brdf = read_rgl(bsdf)
-            for key, f in files.items():
-                col = key if isinstance(key, str) else column(*key, extra)
+            for col, f in files.items():
                 res.setdefault("image_check", {})[f"{mat}/{col}"] = ic = image_check(brdf, load(f))
                 log(f"  image check {col}: ΔE2000 mean {ic['mean']:.2f} p99 {ic['p99']:.1f}")
         for map_name in a.maps:
             env = data / BC.MAPS[map_name]
             base = MR.sphere_scene(bsdf, env, a.truth_spp, a.res, pattern=BC.OUR_PATTERN)
-            mask = MR.sphere_mask(a.res)
-            band = rim_band(a.res, mask)
             ref = BC.truth(bsdf, env, base, ta, a.chart_out)["img"]
             expo = M.exposure_for(ref, mask)
             specs = [("rgl", BC.spec_for("rgl", bsdf, None)[0])]
-            specs += [(column(lay, obj, extra), BC.spec_for("rational-3d", bsdf, files[lay, obj])[0]) for lay, obj in cols]
-            specs += [(k, BC.spec_for("rational-3d", bsdf, f)[0]) for k, f in files.items() if isinstance(k, str)]
+            specs += [(col, BC.spec_for("rational-3d", bsdf, f)[0]) for col, f in files.items()]
             for col, spec in specs:
                 r = Renderer(BC.scene_with(base, spec), device="cpu")
                 r.compile()

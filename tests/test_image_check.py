@@ -64,3 +64,18 @@ def test_delta_e_is_zero_for_the_truth_and_grows_with_the_error():
     means = [IC.image_delta_e(glossy, lambda wi, wo, s=s: glossy(wi, wo) * s, n=16, k=64)["mean"]
              for s in (1.02, 1.05, 1.2)]
     assert 0 < means[0] < means[1] < means[2]
+
+
+def test_the_selection_records_the_image_check_of_the_fit_it_keeps():
+    """``fit_rgl_select`` stores the kept fit's image check in ``fit_info["image_check"]`` (the
+    same numbers as checking that model again), and nothing with ``image_check=False``."""
+    from test_fit_determinism import Lobe
+    from test_fit3d_target import FIT, LADDER
+
+    from fit.rational.fit3d import fit_rgl_select
+
+    res = fit_rgl_select(Lobe(), variants=LADDER[:1], **FIT)
+    rec = res.model.fit_info["image_check"]
+    assert rec == IC.image_check(Lobe(), res.model) and rec["mean"] > 0 and rec["p99"] >= rec["mean"]
+    off = fit_rgl_select(Lobe(), variants=LADDER[:1], image_check=False, **FIT)
+    assert "image_check" not in off.model.fit_info

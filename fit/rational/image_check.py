@@ -24,11 +24,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..formats.colour import LUMINANCE
+
 #: Rec.709 / sRGB primaries and the D65 white (CIE xy).
 _PRIMARIES = np.array([[0.64, 0.33], [0.30, 0.60], [0.15, 0.06]])
 _WHITE = np.array([0.3127, 0.3290])
-#: Luminance weights of linear Rec.709 RGB.
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 DEFAULT_PIXELS = 40
 DEFAULT_LIGHTS = 192
 DEFAULT_SEEDS = (1, 2, 3)
