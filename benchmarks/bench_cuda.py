@@ -54,7 +54,7 @@ MATERIALS = {
     "measured-satin": 'type = "measured"\nfile = "${RBRDF_DATA}/rgl/satin_rosaline_rgb.bsdf"',
     "projected-satin": 'type = "projected"\nfile = "${RBRDF_DATA}/rgl/satin_rosaline_rgb.bsdf"',
     "rational2d-satin": 'type = "rational"\nfile = "{fits}/satin_rosaline_rgb_tol0p1_cli.json"',
-    "rational3d-satin": 'type = "rational"\nfile = "{fits}/satin_rosaline_rgb_3d_95bbba1a580e.json"',
+    "rational3d-satin": 'type = "rational"\nfile = "{fits}/satin_rosaline_rgb_3d_572555287ced.json"',
 }
 
 _SPHERE = """
