@@ -17,6 +17,23 @@ Also:
   error is the quadrature's, not its noise), the largest relative error over the channels;
 * coefficients (three channels, all pieces; the table: its 90 x 90 x 3 values) and fit seconds.
 
+Bootstrap intervals (``ci`` of each representation in results.json, in brackets in the tables):
+the 95 % percentile bootstrap interval of the relative RMSE, the median and the p95 over the
+direction pairs: ``--bootstrap`` (200) resamples, each ``n`` pairs drawn with replacement from the
+``n`` measured ones (seed ``--bootstrap-seed``, so deterministic), a pair carrying its three
+channels; the same resamples for every representation of a material (paired). Each resample
+recomputes the whole statistic, the tenth-of-the-median threshold included; its median and p95
+are exactly ``np.percentile``'s of the resampled multiset, found from one sort of the full sample
+and a weighted cumulative sum per resample (:func:`bootstrap_stats`; 2.6-9.3 s per
+representation, median 3.6 s, at 200,000 pairs on one shared core: 215 s of the 473 s
+``--fits-3d-from`` run). ``fit3d.ci_diff.table`` / ``.fit2d``: the interval of 3-D minus the
+other column from the same resamples, which the sentence under the tables counts (an interval
+excluding 0: the pairs tell the two apart). The intervals say how much the numbers depend on which
+pairs were drawn, not on the albedo quadrature, the fit's randomness or the measurement's noise;
+where a few pairs carry a relative RMSE (near-mirror highlights: chm_mint, ilm_solo_m_68) the
+interval is wide and skewed and the percentile bootstrap only a rough guide. The same fit before
+the albedo policy (``fit3d_before_albedo``) gets none.
+
 Representations (columns):
 
 * ``table``: the phi_d-median (theta_h, theta_d) projection of the full-circle MERL-grid
@@ -46,7 +63,15 @@ The render ΔE2000 of the 3-D fits against the ``rgl`` material is a separate st
     python -m benchmarks.bench_fit_accuracy --materials paper_blue --merge results/fit_accuracy/results.json
 
 ``--merge`` keeps an earlier run's rows (same pairs and seed) for the materials not run now; the
-table names the merged rows and their run.
+table names the merged rows and their run. ``--fits-3d-from DIR`` fits nothing: it measures the
+3-D fits an earlier run saved in ``DIR`` (its ``--out``: ``<stem>_rgb_3d.json``) again, with the
+table and the 2-D fits, and takes the fit records (coefficients, bound, fresh ratio, variant, fit
+seconds, the albedo policy's record; the before-the-policy numbers where the pairs and seed are the
+same) from ``DIR/results.json``; the table says where they came from (default materials: that
+run's)::
+
+    OMP_NUM_THREADS=1 taskset -c 0 python -m benchmarks.bench_fit_accuracy --fits-3d-from results/fit_accuracy_p6 \
+        --out results/fit_accuracy_p6_ci --docs
 """
 from __future__ import annotations
 
@@ -127,16 +152,94 @@ def albedo_errors(evaluate, truth_eval, n: int = 20000, seed: int = 11, fixed: s
     return out
 
 
-def measure(evaluate, truth, wi, wo, truth_eval, albedo_n: int) -> dict:
-    """Every metric of one representation (``evaluate(wi, wo)`` -> rho ``(n, 3)``)."""
+def bootstrap_counts(n: int, resamples: int = 200, seed: int = 0) -> np.ndarray:
+    """``(resamples, n)`` int32: how often each of ``n`` direction pairs is drawn in each
+    bootstrap resample (``n`` draws with replacement; seeded, so deterministic). One array per
+    material serves every representation: the resamples are paired."""
+    rng = np.random.default_rng(seed)
+    return np.stack([np.bincount(rng.integers(0, n, n), minlength=n) for _ in range(resamples)]).astype(np.int32)
+
+
+def _weighted_percentiles(values, weights, qs) -> np.ndarray:
+    """``np.percentile`` (linear) of the multiset holding each ``values[j]`` ``weights[j]`` times
+    (integer weights), for each q of ``qs``; ``values`` sorted ascending. Exact, without building
+    the multiset."""
+    cum = np.cumsum(weights)
+    pos = np.asarray(qs, np.float64) / 100.0 * (cum[-1] - 1)
+    lo = np.floor(pos)
+    vlo = values[np.searchsorted(cum, lo, side="right")]
+    vhi = values[np.searchsorted(cum, np.minimum(lo + 1, cum[-1] - 1), side="right")]
+    return vlo + (pos - lo) * (vhi - vlo)
+
+
+def bootstrap_stats(fit_rho, true_rho, wi, wo, counts) -> dict:
+    """``{"rel_rmse", "median_rel", "p95_rel"}``: each statistic of :func:`relative_rmse` (mean
+    over R, G, B) and :func:`relative_error_stats`, recomputed on every resample of ``counts``
+    (:func:`bootstrap_counts`); arrays ``(resamples,)``. A resample is the pairs drawn with
+    their multiplicity, each pair with its three channels, and the whole statistic is recomputed
+    on it, the tenth-of-the-median threshold included; the percentiles of a resample are those of
+    the multiset (``np.percentile``'s linear rule), found from one sort of the full sample and a
+    weighted cumulative sum, not by sorting 600,000 values per resample."""
+    c = (wi[:, 2] * wo[:, 2])[:, None]
+    e2, t2 = ((fit_rho - true_rho) * c) ** 2, (true_rho * c) ** 2
+    w = counts.astype(np.float64)
+    rr = np.sqrt(w @ e2) / np.maximum(np.sqrt(w @ t2), 1e-300)            # means' 1/n cancels
+    tr_order = np.argsort(true_rho, axis=0, kind="stable")
+    tr_sorted = np.take_along_axis(true_rho, tr_order, 0)
+    r = np.abs(fit_rho - true_rho) / np.where(true_rho > 0, true_rho, 1.0)   # used only where truth > thr >= 0
+    order = np.argsort(r.ravel(), kind="stable")
+    r_sorted = r.ravel()[order]
+    t_flat = true_rho.ravel()[order]
+    ch = order % 3
+    pair = order // 3
+    med, p95 = np.empty(len(counts)), np.empty(len(counts))
+    for b, cb in enumerate(counts):
+        thr = 0.1 * np.array([_weighted_percentiles(tr_sorted[:, k], cb[tr_order[:, k]], [50.0])[0]
+                              for k in range(3)])
+        wb = np.where(t_flat > thr[ch], cb[pair], 0)
+        med[b], p95[b] = _weighted_percentiles(r_sorted, wb, [50.0, 95.0])
+    return {"rel_rmse": rr.mean(axis=1), "median_rel": med, "p95_rel": p95}
+
+
+def percentile_interval(samples, level: float = 0.95) -> list:
+    """``[lo, hi]``: the percentile bootstrap interval of ``samples`` at ``level``."""
+    a = 100.0 * (1.0 - level) / 2.0
+    return [float(v) for v in np.percentile(samples, [a, 100.0 - a])]
+
+
+def paired_differences(row: dict) -> None:
+    """``row["fit3d"]["ci_diff"][other][stat]``: the 95 % interval of 3-D minus ``other``
+    ("table", "fit2d") of each bootstrapped statistic, from the same resamples (paired: tighter
+    than comparing the two intervals); then drops the resample arrays from ``row``."""
+    b3 = row.get("fit3d", {}).get("_boot")
+    if b3 is not None:
+        diff = {o: {k: percentile_interval(b3[k] - row[o]["_boot"][k]) for k in b3}
+                for o in ("table", "fit2d") if o in row and "_boot" in row[o]}
+        row["fit3d"]["ci_diff"] = diff
+    for x in row.values():
+        if isinstance(x, dict):
+            x.pop("_boot", None)
+
+
+def measure(evaluate, truth, wi, wo, truth_eval, albedo_n: int, counts=None) -> dict:
+    """Every metric of one representation (``evaluate(wi, wo)`` -> rho ``(n, 3)``); with
+    ``counts`` (:func:`bootstrap_counts`) the 95 % percentile bootstrap intervals of the relative
+    RMSE, median and p95 (``ci``)."""
     t0 = time.perf_counter()
     rho = np.asarray(evaluate(wi, wo), np.float64)
     eval_s = time.perf_counter() - t0
     rr = relative_rmse(rho, truth, wi, wo)
     med, p95 = relative_error_stats(rho, truth)
-    return {"rel_rmse": float(rr.mean()), "rel_rmse_rgb": rr.tolist(), "median_rel": med, "p95_rel": p95,
-            "albedo_err": albedo_errors(evaluate, truth_eval, albedo_n),
-            "albedo_err_view": albedo_errors(evaluate, truth_eval, albedo_n, fixed="view"), "eval_s": eval_s}
+    out = {"rel_rmse": float(rr.mean()), "rel_rmse_rgb": rr.tolist(), "median_rel": med, "p95_rel": p95}
+    if counts is not None and len(counts):
+        t0 = time.perf_counter()
+        bs = bootstrap_stats(rho, truth, wi, wo, counts)
+        out["ci"] = {k: percentile_interval(v) for k, v in bs.items()}
+        out["_boot"] = bs          # for the paired differences (:func:`paired_differences`), not saved
+        out["ci"].update(level=0.95, resamples=len(counts), seconds=time.perf_counter() - t0)
+    out.update(albedo_err=albedo_errors(evaluate, truth_eval, albedo_n),
+               albedo_err_view=albedo_errors(evaluate, truth_eval, albedo_n, fixed="view"), eval_s=eval_s)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -218,14 +321,55 @@ def fit_3d(brdf, out_dir: Path | None, options: dict):
 
 
 # --------------------------------------------------------------------------------------------
+#: The fit records of a 3-D row that ``--fits-3d-from`` takes from the earlier run (everything but
+#: the metrics, which are measured again).
+FIT3D_RECORDS = ("coefficients", "fit_s", "bound", "valid", "n_points", "file", "pieces", "options", "variant",
+                 "variants", "verified", "verify_max_ratio", "albedo_policy")
+
+
+def fits_3d_from(folder: Path, mats) -> tuple:
+    """``(meta, {material: (old row, model, file)})`` of ``--fits-3d-from``: an earlier run's
+    results.json in ``folder`` and the ``<stem>_rgb_3d.json`` it saved for each of ``mats``."""
+    from fit.rational.coefficient_file import load
+    from fit.rational.variables3d import is_3d
+
+    folder = Path(folder)
+    try:
+        d = json.loads((folder / "results.json").read_text())
+        meta, rows = d["meta"], {r["material"]: r for r in d["rows"]}
+        if not all(isinstance(r["fit3d"]["rel_rmse"], float) for r in rows.values()):
+            raise TypeError("fit3d.rel_rmse is not a number")
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise BenchError(f"--fits-3d-from {folder}: no results.json of this benchmark there ({e})") from None
+    out = {}
+    for m in mats:
+        f = folder / f"{m}_rgb_3d.json"
+        if m not in rows or not f.is_file():
+            raise BenchError(f"--fits-3d-from {folder}: no row or no file {f.name} for {m}")
+        try:
+            model = load(f)
+        except Exception as e:      # a file of another format: one line
+            raise BenchError(f"--fits-3d-from {folder}: {f.name} does not load ({e})") from None
+        if not is_3d(model):
+            raise BenchError(f"--fits-3d-from {folder}: {f.name} is not a 3-D fit")
+        out[m] = (rows[m], model, f)
+    return meta, out
+
+
 def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, out_dir, albedo_n: int,
-                 fit_options: dict, with_table: bool = True) -> dict:
+                 fit_options: dict, with_table: bool = True, bootstrap: int = 200, bootstrap_seed: int = 0,
+                 saved_3d=None) -> dict:
+    """One row: every representation of ``name`` measured on the same pairs, with bootstrap
+    intervals over ``bootstrap`` paired resamples (0: none); the 3-D fit made here, or with
+    ``saved_3d = (old row, model, file)`` an earlier run's saved fit measured again, its fit
+    records (seconds, bound, ...) that run's."""
     from fit.formats.rgl import read_rgl
     from fit.rational.variables3d import evaluate_directions
 
     path = data / "rgl" / f"{name}_rgb.bsdf"
     brdf = read_rgl(path)
     wi, wo = cosine_pairs(n_pairs, seed)
+    counts = bootstrap_counts(n_pairs, bootstrap, bootstrap_seed) if bootstrap else None
 
     def truth_eval(a, b):
         return np.maximum(np.asarray(brdf.evaluate(a, b), np.float64), 0.0)
@@ -234,15 +378,28 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
     row = {"material": name, "pairs": n_pairs, "seed": seed}
     if with_table:
         ev, secs = table_evaluator(brdf)
-        row["table"] = dict(measure(ev, truth, wi, wo, truth_eval, albedo_n), coefficients=90 * 90 * 3,
+        row["table"] = dict(measure(ev, truth, wi, wo, truth_eval, albedo_n, counts), coefficients=90 * 90 * 3,
                             fit_s=secs)
     m2 = load_2d(f"{name}_rgb", fits_2d)
     if m2 is not None:
-        row["fit2d"] = dict(measure(rendered_2d(m2, path), truth, wi, wo, truth_eval, albedo_n),
+        row["fit2d"] = dict(measure(rendered_2d(m2, path), truth, wi, wo, truth_eval, albedo_n, counts),
                             coefficients=int(m2.n_coefficients), fit_s=m2.fit_info.get("time_s"))
+    if saved_3d is not None:
+        old, model, fpath = saved_3d
+        row["fit3d"] = measure(lambda a, b: evaluate_directions(model, a, b), truth, wi, wo, truth_eval,
+                               albedo_n, counts)
+        row["fit3d"].update({k: old["fit3d"][k] for k in FIT3D_RECORDS if k in old["fit3d"]},
+                            file=str(fpath), loaded=True)
+        if "fit3d_before_albedo" in old and (old.get("pairs"), old.get("seed")) == (n_pairs, seed):
+            # the model before the albedo policy is not saved: that run's numbers (same pairs), no interval
+            row["fit3d_before_albedo"] = dict(old["fit3d_before_albedo"], loaded=True)
+        if name in NEURAL:
+            row["neural"] = {"rel_rmse": NEURAL[name], "coefficients": NEURAL_WEIGHTS, "source": "published"}
+        paired_differences(row)
+        return row
     res, fpath = fit_3d(brdf, out_dir, fit_options)
     row["fit3d"] = dict(measure(lambda a, b: evaluate_directions(res.model, a, b), truth, wi, wo, truth_eval,
-                                albedo_n),
+                                albedo_n, counts),
                         coefficients=res.n_coefficients, fit_s=res.time_s, bound=res.tolerance, valid=res.valid,
                         n_points=res.n_points, file=str(fpath) if fpath else None,
                         pieces=len(res.info["edges"]) - 1, options=_jsonable(fit_options),
@@ -257,6 +414,7 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
         row["fit3d"]["albedo_policy"] = _jsonable(res.info["albedo"])
     if name in NEURAL:
         row["neural"] = {"rel_rmse": NEURAL[name], "coefficients": NEURAL_WEIGHTS, "source": "published"}
+    paired_differences(row)
     return row
 
 
@@ -274,12 +432,38 @@ def _albedo_cell(errs) -> str:
     return "n/a" if errs is None else " / ".join(f"{100 * a:.1f} %" for a in errs)
 
 
+def _rmse_cell(x, digits=None) -> str:
+    """``"0.024 [0.023, 0.025]"``: a relative RMSE with its bootstrap interval (when measured);
+    four decimals below 0.02."""
+    v = x["rel_rmse"]
+    d = digits or (4 if v < 0.02 else 3)
+    ci = (x.get("ci") or {}).get("rel_rmse")
+    return f"{v:.{d}f}" + ("" if ci is None else f" [{ci[0]:.{d}f}, {ci[1]:.{d}f}]")
+
+
+def _pct_cell(x, key) -> str:
+    """``"2.9 % [2.8, 3.0]"``: a relative error in percent with its bootstrap interval."""
+    ci = (x.get("ci") or {}).get(key)
+    return f"{100 * x[key]:.1f} %" + ("" if ci is None else f" [{100 * ci[0]:.1f}, {100 * ci[1]:.1f}]")
+
+
 def markdown(rows: list, meta: dict) -> str:
     """The results as Markdown (docs/fit_accuracy.md's generated part)."""
     L = []
     L.append(f"Pairs: {meta['pairs']:,} cosine-distributed (ωi, ωo), seed {meta['seed']}; truth: the RGL "
              f"reference evaluation (negatives clamped); 3-D options `{meta['fit3d_options']}`; "
              f"run {meta['date']} in {meta['wall_s']:.0f} s.")
+    bs = meta.get("bootstrap")
+    if bs:
+        L.append(f"In brackets after a relative RMSE, median or p95: its 95 % percentile bootstrap interval over the "
+                 f"direction pairs ({bs['resamples']} resamples of the {meta['pairs']:,} pairs, each pair with its "
+                 f"three channels, the same resamples for every representation of a material, seed {bs['seed']}).")
+    f3f = meta.get("fits_3d_from")
+    if f3f:
+        L.append(f"3-D fits loaded from `{f3f['dir']}` (saved by the run of {f3f['date']}, "
+                 f"{_f(f3f['wall_s'], '{:.0f}')} s, "
+                 f"3-D options `{f3f['fit3d_options']}`), not refitted: their coefficients, bound, fresh ratio and "
+                 "fit seconds are that run's records; every metric is measured again in this run.")
     mg = meta.get("merged")
     if mg:          # an earlier run may itself have merged rows: name each run's own rows still shown
         parts = ["this run: " + ", ".join(r["material"] for r in rows if r["material"] not in mg["materials"])]
@@ -318,13 +502,14 @@ def markdown(rows: list, meta: dict) -> str:
         c2 = f" ({f2['coefficients']})" if f2 else ""
         fresh = f3.get("verify_max_ratio")
         fresh = "" if fresh is None else f" (fresh {fresh:.2f})"
-        L.append(f"| {r['material']} | {_f(t and t['rel_rmse'])} | "
-                 f"{_f(f2 and f2['rel_rmse'])}{c2} | "
-                 f"{f3['rel_rmse']:.{4 if f3['rel_rmse'] < 0.02 else 3}f} ({f3['coefficients']}) | "
+        L.append(f"| {r['material']} | {_rmse_cell(t, 3) if t else 'n/a'} | "
+                 f"{_rmse_cell(f2, 3) if f2 else 'n/a'}{c2} | "
+                 f"{_rmse_cell(f3)} ({f3['coefficients']}) | "
                  f"{100 * f3['bound']:.0f} % of s{'' if f3['valid'] else ' (NOT valid)'}{fresh} | "
                  f"{_f(nn and nn['rel_rmse'])} | {met} |")
     L.append("")
-    L.append("Median / 95th-percentile relative error where ρ > a tenth of its median; directional-albedo "
+    L.append("Median / 95th-percentile relative error where ρ > a tenth of its median (in brackets, in %: the 95 % "
+             "bootstrap interval); directional-albedo "
              "error (largest over R, G, B) at 0 / 30 / 60 / 75°, light-fixed (∫ρ cosθo dωo at θi) and view-fixed "
              "(∫ρ cosθi dωi at θo: what a uniformly lit surface shows); fit seconds.")
     L.append("")
@@ -338,9 +523,40 @@ def markdown(rows: list, meta: dict) -> str:
                 continue
             alb = _albedo_cell(x.get("albedo_err"))
             alv = _albedo_cell(x.get("albedo_err_view"))
-            L.append(f"| {r['material']} | {label} | {100 * x['median_rel']:.1f} % | {100 * x['p95_rel']:.1f} % | "
+            L.append(f"| {r['material']} | {label} | {_pct_cell(x, 'median_rel')} | {_pct_cell(x, 'p95_rel')} | "
                      f"{alb} | {alv} | {x['coefficients']} | {_f(x.get('fit_s'), '{:.1f}')} |")
+    s = comparison_summary(rows)
+    if s:
+        L += ["", s]
     return "\n".join(L) + "\n"
+
+
+def comparison_summary(rows: list) -> str:
+    """One sentence: on how many materials the 3-D statistic is below / above the table's and the
+    2-D fit's with the paired 95 % interval of the difference excluding 0, and where it includes
+    0 (the two cannot be told apart on these pairs); "" for rows without intervals."""
+    parts = []
+    for other, label in (("table", "the φd-median table"), ("fit2d", "the 2-D 5 % fit")):
+        cells = []
+        for stat, sl in (("rel_rmse", "relative RMSE"), ("median_rel", "median"), ("p95_rel", "p95")):
+            below, above, tie = [], [], []
+            for r in rows:
+                d = (r.get("fit3d", {}).get("ci_diff") or {}).get(other, {}).get(stat)
+                if d is None:
+                    continue
+                (below if d[1] < 0 else above if d[0] > 0 else tie).append(r["material"])
+            n = len(below) + len(above) + len(tie)
+            if n:
+                cells.append(f"{sl} below on {len(below)} of {n}"
+                             + (f", above on {len(above)} ({', '.join(above)})" if above else "")
+                             + (f", not told apart on {len(tie)} ({', '.join(tie)})" if tie else ""))
+        if cells:
+            parts.append(f"against {label}: " + "; ".join(cells))
+    if not parts:
+        return ""
+    return ("3-D against the other columns, by the paired bootstrap interval of the difference (the same "
+            "resamples; below / above: the 95 % interval of 3-D minus the other excludes 0): "
+            + "; ".join(parts) + ".")
 
 
 def render_errors(rows: list, maps, resolution: int, spp: int) -> list:
@@ -421,8 +637,9 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=os.environ.get("RBRDF_DATA", str(ROOT.parent / "shared" / "data")),
                     help="shared data folder (rgl/*.bsdf)")
-    ap.add_argument("--materials", nargs="+", default=list(NEURAL),
-                    help="RGL material names (file stems without _rgb.bsdf), or 'all'")
+    ap.add_argument("--materials", nargs="+", default=None,
+                    help="RGL material names (file stems without _rgb.bsdf), or 'all' (default: the six with a "
+                         "neural BRDF; with --fits-3d-from, that run's materials)")
     ap.add_argument("--pairs", type=int, default=200_000, help="direction pairs (default 200000)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--albedo-samples", type=int, default=20_000)
@@ -450,6 +667,12 @@ def main(argv=None) -> int:
                     help="3-D fits without the directional-albedo policy (fit.rational.albedo3d)")
     ap.add_argument("--albedo-rmse-growth", type=float, default=None,
                     help="the albedo policy's largest relative-RMSE growth per channel (default 0.10)")
+    ap.add_argument("--bootstrap", type=int, default=200,
+                    help="bootstrap resamples of the pairs for the 95 %% intervals (default 200; 0: none)")
+    ap.add_argument("--bootstrap-seed", type=int, default=0)
+    ap.add_argument("--fits-3d-from", default=None, metavar="DIR",
+                    help="no 3-D fitting: measure the <stem>_rgb_3d.json an earlier run saved in DIR (with --out), "
+                         "its fit records (seconds, bound, ...) from DIR/results.json; the table says so")
     ap.add_argument("--docs", action="store_true", help="write docs/fit_accuracy.md's table")
     args = ap.parse_args(argv)
     try:
@@ -481,7 +704,7 @@ def _run(args) -> int:
     if args.render_from is not None:
         try:
             rows = json.loads(Path(args.render_from).read_text())["rows"]
-            rows = [r for r in rows if r["material"] in args.materials]
+            rows = [r for r in rows if r["material"] in (args.materials or NEURAL)]
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise BenchError(f"--render-from {args.render_from}: not a results.json of this benchmark ({e})") from None
         if not (8 <= args.render_res <= 1024 and 2 <= args.render_spp <= 4096 and args.render_spp % 2 == 0):
@@ -499,7 +722,24 @@ def _run(args) -> int:
         raise BenchError(f"--pairs {args.pairs}: expected 100 to 10000000")
     if not 100 <= args.albedo_samples <= 10_000_000:
         raise BenchError(f"--albedo-samples {args.albedo_samples}: expected 100 to 10000000")
-    mats = args.materials
+    if not 0 <= args.bootstrap <= 10_000:
+        raise BenchError(f"--bootstrap {args.bootstrap}: expected 0 to 10000")
+    saved = None
+    if args.fits_3d_from is not None:
+        refit = [o for o, v in (("--degrees", args.degrees), ("--edges", args.edges), ("--grid", args.grid),
+                                ("--random", args.random), ("--verify", args.verify),
+                                ("--albedo-rmse-growth", args.albedo_rmse_growth)) if v is not None]
+        if args.no_albedo:
+            refit.append("--no-albedo")
+        if refit:
+            raise BenchError(f"--fits-3d-from fits nothing: {', '.join(refit)} would not apply")
+        try:
+            old = json.loads((Path(args.fits_3d_from) / "results.json").read_text())["rows"]
+            default_mats = [r["material"] for r in old]
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise BenchError(f"--fits-3d-from {args.fits_3d_from}: no results.json of this benchmark there "
+                             f"({e})") from None
+    mats = args.materials or (default_mats if args.fits_3d_from is not None else list(NEURAL))
     if mats == ["all"]:
         mats = sorted(p.name[:-len("_rgb.bsdf")] for p in (data / "rgl").glob("*_rgb.bsdf"))
     for m in mats:
@@ -542,6 +782,9 @@ def _run(args) -> int:
         if not 0.0 <= args.albedo_rmse_growth <= 10.0:
             raise BenchError(f"--albedo-rmse-growth {args.albedo_rmse_growth}: expected 0 to 10")
         opts["albedo_rmse_growth"] = args.albedo_rmse_growth
+    if args.fits_3d_from is not None:
+        saved_meta, saved = fits_3d_from(Path(args.fits_3d_from), mats)
+        opts = saved_meta.get("fit3d_options", opts)
     merged = _merge_rows(args, mats)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -549,7 +792,8 @@ def _run(args) -> int:
     rows = []
     for m in mats:
         r = run_material(m, data, args.pairs, args.seed, Path(args.fits_2d), out, args.albedo_samples, opts,
-                         with_table=not args.no_table)
+                         with_table=not args.no_table, bootstrap=args.bootstrap, bootstrap_seed=args.bootstrap_seed,
+                         saved_3d=None if saved is None else saved[m])
         f3 = r["fit3d"]
         print(f"{m}: table {_f(r.get('table', {}).get('rel_rmse'))}  2-D {_f(r.get('fit2d', {}).get('rel_rmse'))}  "
               f"3-D {f3['rel_rmse']:.3f} ({f3['coefficients']} coef., bound {100 * f3['bound']:.0f} %, "
@@ -563,6 +807,14 @@ def _run(args) -> int:
         rows.append(r)
     meta = {"pairs": args.pairs, "seed": args.seed, "fit3d_options": _jsonable(opts),
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "wall_s": time.perf_counter() - t0}
+    if args.bootstrap:
+        meta["bootstrap"] = {"resamples": args.bootstrap, "seed": args.bootstrap_seed, "level": 0.95,
+                             "kind": "percentile, pairs resampled with their three channels, paired across "
+                                     "representations"}
+    if saved is not None:
+        meta["fits_3d_from"] = {"dir": str(args.fits_3d_from), "date": saved_meta.get("date"),
+                                "wall_s": saved_meta.get("wall_s"), "fit3d_options": saved_meta.get("fit3d_options"),
+                                "pairs": saved_meta.get("pairs"), "seed": saved_meta.get("seed")}
     if merged is not None:
         old_meta, old_rows = merged
         meta["merged"] = {"file": str(args.merge), "date": old_meta.get("date"), "wall_s": old_meta.get("wall_s"),

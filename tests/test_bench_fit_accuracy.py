@@ -122,3 +122,100 @@ def test_the_2d_column_is_the_fit_as_the_renderer_shows_it():
     on = np.all(x == angles, axis=1)                   # on the measured domain: the file's recipe itself
     assert (~on).sum() > 20
     np.testing.assert_allclose(plain[on], raw[on], rtol=1e-12, atol=0)
+
+
+def _synthetic(n, seed=2):
+    rng = np.random.default_rng(seed)
+    wi, wo = B.cosine_pairs(n, seed)
+    truth = rng.gamma(2.0, 1.0, (n, 3))
+    truth[:n // 50] = 0.0                                        # zeros: below every threshold
+    fit = truth * (1 + 0.1 * rng.standard_normal((n, 3))) + 0.01 * rng.random((n, 3))
+    return fit, truth, wi, wo
+
+
+def test_bootstrap_is_the_statistic_of_each_resample():
+    """Each resample's relative RMSE, median and p95 are exactly those of the resampled pairs
+    (each with its three channels, threshold recomputed) that :func:`relative_rmse` and
+    :func:`relative_error_stats` give; the weighted percentile is ``np.percentile``'s."""
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 7, 300):
+        v, w = np.sort(rng.random(n)), rng.integers(0, 4, n)
+        w[-1] += 1
+        for q in (0.0, 2.5, 50.0, 95.0, 100.0):
+            assert np.isclose(B._weighted_percentiles(v, w, [q])[0], np.percentile(np.repeat(v, w), q))
+    fit, truth, wi, wo = _synthetic(1500)
+    counts = B.bootstrap_counts(1500, 6, seed=3)
+    assert counts.shape == (6, 1500) and np.all(counts.sum(axis=1) == 1500)
+    bs = B.bootstrap_stats(fit, truth, wi, wo, counts)
+    for b in range(6):
+        i = np.repeat(np.arange(1500), counts[b])
+        med, p95 = B.relative_error_stats(fit[i], truth[i])
+        assert np.isclose(bs["rel_rmse"][b], B.relative_rmse(fit[i], truth[i], wi[i], wo[i]).mean(), rtol=1e-12)
+        assert np.isclose(bs["median_rel"][b], med, rtol=1e-12) and np.isclose(bs["p95_rel"][b], p95, rtol=1e-12)
+
+
+def test_bootstrap_interval_contains_the_estimate_is_seeded_and_narrows():
+    def ci(n, seed=0, resamples=100):
+        fit, truth, wi, wo = _synthetic(n)
+        x = B.measure(lambda a, b: fit, truth, wi, wo, lambda a, b: truth, 100,
+                      B.bootstrap_counts(n, resamples, seed))
+        return x, {k: v for k, v in x["ci"].items() if k != "seconds"}
+
+    x, a = ci(2000)
+    for k in ("rel_rmse", "median_rel", "p95_rel"):
+        lo, hi = a[k]
+        assert lo < x[k] < hi, k
+    assert a["resamples"] == 100 and a["level"] == 0.95
+    assert ci(2000)[1] == a                                     # deterministic for a seed
+    assert ci(2000, seed=1)[1]["median_rel"] != a["median_rel"]
+    big = ci(32000)[1]                                          # 16x the pairs: about a quarter the width
+    for k in ("rel_rmse", "median_rel", "p95_rel"):
+        assert np.diff(big[k])[0] < 0.5 * np.diff(a[k])[0], k
+    # 3-D against the table from the same resamples: a fit twice as far off is above, itself is a tie
+    row = {"table": x, "fit3d": dict(x)}
+    fit, truth, wi, wo = _synthetic(2000)
+    counts = B.bootstrap_counts(2000, 100, 0)
+    row["table"] = B.measure(lambda a, b: truth + 2 * (fit - truth), truth, wi, wo, lambda a, b: truth, 100, counts)
+    row["fit3d"] = B.measure(lambda a, b: fit, truth, wi, wo, lambda a, b: truth, 100, counts)
+    row["fit2d"] = B.measure(lambda a, b: fit, truth, wi, wo, lambda a, b: truth, 100, counts)
+    B.paired_differences(row)
+    d = row["fit3d"]["ci_diff"]
+    assert all(d["table"][k][1] < 0 for k in d["table"]) and all(v[0] == v[1] == 0 for v in d["fit2d"].values())
+    assert not any("_boot" in v for v in row.values())
+    s = B.comparison_summary([dict(row, material="m")])
+    assert "relative RMSE below on 1 of 1" in s and "not told apart on 1 (m)" in s
+
+
+def test_fits_3d_from_measures_the_saved_fits_again(tmp_path, capsys):
+    """``--fits-3d-from``: no fitting; the saved 3-D fit measured again gives the earlier run's
+    numbers on the same pairs, its fit records are that run's, the table says where they came from."""
+    data = data_file("rgl/paper_white_rgb.bsdf").parents[1]
+    small = ["--data", str(data), "--pairs", "400", "--albedo-samples", "300", "--no-table", "--fits-2d",
+             str(tmp_path), "--bootstrap", "20"]
+    a, b = tmp_path / "a", tmp_path / "b"
+    assert B.main(small + ["--materials", "paper_white", "--out", str(a), "--degrees", "3,1", "--edges", "",
+                           "--grid", "8,7,5", "--random", "200", "--verify", "0"]) == 0
+    capsys.readouterr()
+    assert B.main(small + ["--out", str(b), "--fits-3d-from", str(a)]) == 0     # materials: that run's
+    old, new = (json.loads((d / "results.json").read_text()) for d in (a, b))
+    o3, n3 = old["rows"][0]["fit3d"], new["rows"][0]["fit3d"]
+    assert [r["material"] for r in new["rows"]] == ["paper_white"] and n3["loaded"]
+    for k in ("rel_rmse", "median_rel", "p95_rel", "albedo_err"):
+        assert n3[k] == o3[k], k
+    n_ci, o_ci = ({k: v for k, v in x["ci"].items() if k != "seconds"} for x in (n3, o3))
+    assert n_ci == o_ci
+    for k in ("fit_s", "coefficients", "bound", "valid", "albedo_policy"):
+        assert n3[k] == o3[k], k
+    assert new["meta"]["fits_3d_from"]["date"] == old["meta"]["date"]
+    assert new["meta"]["fit3d_options"] == old["meta"]["fit3d_options"]
+    assert not list(b.glob("*_3d.json"))
+    assert "3-D fits loaded from `" in capsys.readouterr().out
+    for extra, words in ((["--degrees", "3,1"], "--degrees"), (["--fits-3d-from", str(tmp_path)], "results.json"),
+                         (["--materials", "colodur_napoli_4f"], "colodur_napoli_4f")):
+        argv = small + ["--out", str(tmp_path / "c"), "--fits-3d-from", str(a)] + extra
+        if extra[0] == "--materials":
+            data_file("rgl/colodur_napoli_4f_rgb.bsdf")
+        assert B.main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and words in err, err
+    assert not (tmp_path / "c" / "results.json").exists()
