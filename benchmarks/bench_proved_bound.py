@@ -13,9 +13,12 @@ error observed (``verified``, at the cell centres) and the proof's wall seconds,
   projection it is proved against is rebuilt from the RGL file as the fitter builds it
   (:func:`fit.rational.brdf_data.project_for_fit`: median, 79 deg grazing cut-off), cached in
   ``--cache`` (``results/proved_bound/proj``);
-* ``3d``: 3-D fits: a coefficient file of a 3-D fit in ``--fits-3d`` (``results/chart/fits``,
-  :mod:`benchmarks.chart_fits`), else, with ``--fit-3d``, a small-budget
-  :func:`fit.rational.fit3d.fit_rgl` (:data:`SMALL_3D`), saved to ``--cache``.
+* ``3d``: 3-D fits: the chart's 3-D fit in ``--fits-3d`` (``results/chart/fits``,
+  :mod:`benchmarks.chart_fits`; :func:`chart_fit_3d`: the file of the chart's key of today's
+  fitter defaults, else the newest made with today's layouts and settings as the fit records
+  them; never a fit of earlier defaults such as the four-piece layout; the source column names
+  the file), else, with ``--fit-3d``, a small-budget :func:`fit.rational.fit3d.fit_rgl`
+  (:data:`SMALL_3D`), saved to ``--cache``.
 
 ``--enclosure`` picks the proof's enclosure (:data:`fit.rational.proved_bound.ENCLOSURES`;
 ``both``: each in turn on the same fits, for before/after). ``--docs`` writes the table into
@@ -30,6 +33,7 @@ import argparse
 import datetime
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -109,17 +113,80 @@ def model_2d(stem: str, tol: float, fits_dir: Path, fit_timeout: float):
     return load(p), f"cached ({p.name})"
 
 
+#: Settings a 3-D fit records in its ``fit_info`` (name there: name in
+#: :class:`fit.rational.settings.Fit3DSettings`) that :func:`chart_fit_3d` checks against the defaults.
+_RECORDED = {"grazing_cos": "grazing_cos", "channel_floor": "channel_floor", "objective": "objective",
+             "relative_floor": "relative_floor", "noise_frac": "noise_frac", "theta_max_deg": "theta_fit_deg",
+             "time_limit": "time_limit", "wall_limit": "wall_limit"}
+
+
+def _plain(x):
+    return json.loads(json.dumps(x))
+
+
+def todays_layouts() -> list:
+    """The layouts a 3-D fit with the fitter's defaults tries (:data:`fit.rational.select3d.VARIANTS`),
+    as its ``fit_info["variants"][i]["options"]`` records them (without the selection's own
+    settings)."""
+    from fit.rational.select3d import _SELECT_SETTINGS, VARIANTS
+    return [_plain({k: v for k, v in d.items() if k != "if_rmse_below" and k not in _SELECT_SETTINGS})
+            for d in VARIANTS]
+
+
+def is_todays_fit(fit_info: dict) -> bool:
+    """Whether a 3-D fit (its ``fit_info``) was made with the fitter's defaults of today as far as
+    the fit records them: the layouts it tried (:func:`todays_layouts`) and :data:`_RECORDED`."""
+    from fit.rational.settings import Fit3DSettings
+    d = Fit3DSettings()
+    today = todays_layouts()
+    keys = {k for v in today for k in v}     # a skipped layout's log also holds the command's settings (--tol)
+    tried = [{k: x for k, x in _plain(v.get("options") or {}).items() if k in keys}
+             for v in fit_info.get("variants") or []]
+    return (tried == today
+            and all(k in fit_info and _plain(fit_info[k]) == _plain(getattr(d, a)) for k, a in _RECORDED.items()))
+
+
+def chart_fit_3d(stem: str, fits_dir: Path):
+    """``(path, how)``: the 3-D fit of ``stem`` in ``fits_dir`` that the chart renders, picked
+    deterministically, or ``(None, why)``:
+
+    1. the chart's own cache file (:func:`benchmarks.chart_fits.fit3d_path`: its key is the
+       measured file's SHA-256, the command's flags and the fitter's defaults of today);
+    2. else (the chart's key moved on with a setting that does not change the coefficients, e.g.
+       ``image_check``, and the chart has not refitted yet) the files of ``stem`` whose fit was
+       made with today's defaults as far as it records them (:func:`is_todays_fit`: the layouts
+       tried and the recorded settings), the newest of them (modification time, then name).
+
+    Other files (fits of earlier defaults: the four-piece layout) are never used."""
+    from benchmarks.chart_fits import fit3d_path
+    chart = fit3d_path(data_dir() / f"{stem}.bsdf", fit_dir=fits_dir)
+    if chart.exists():
+        return chart, "the chart's key of today's fitter defaults"
+    files = sorted(fits_dir.glob(f"{stem}_3d_*.json")) if fits_dir.is_dir() else []
+    today = []
+    for p in files:
+        fi = json.loads(p.read_text()).get("fit") or {}
+        if is_todays_fit(fi):
+            today.append(p)
+    if not today:
+        return None, (f"no 3-D fit of today's fitter defaults ({chart.name} not cached; "
+                      f"{len(files)} fit(s) of other defaults left out)")
+    p = max(today, key=lambda q: (q.stat().st_mtime, q.name))
+    return p, (f"today's layouts and settings; the chart's key is now {chart.stem.rsplit('_', 1)[-1]} "
+               f"(not cached); {len(files) - 1} other file(s) left out")
+
+
 def model_3d(stem: str, fits_dir: Path, cache: Path, fit_small: bool):
     """``(result, brdf, source)``: a 3-D fit of ``stem`` as :func:`fit.rational.proved_bound.prove_fit3d`
     reads it, or ``(None, None, why)``."""
     from fit.formats.rgl import read_rgl
     from fit.rational.coefficient_file import load, save
     from fit.rational.proved_bound import leaves
-    files = sorted(fits_dir.glob(f"{stem}_3d_*.json")) if fits_dir.is_dir() else []
+    path, how = chart_fit_3d(stem, fits_dir)
     small = cache / "fits3d" / f"{stem}_3d_small.json"
     brdf = read_rgl(data_dir() / f"{stem}.bsdf")
-    if files:
-        m, src = load(files[0]), f"cached ({files[0].relative_to(ROOT) if files[0].is_relative_to(ROOT) else files[0]})"
+    if path is not None:
+        m, src = load(path), f"cached ({path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}; {how})"
     elif small.exists():
         m, src = load(small), f"small budget, cached ({small.name})"
     elif fit_small:
@@ -348,6 +415,25 @@ def _verdict(r, tgt: float) -> str:
     return "missed: the proof's budget"
 
 
+def _verdict_3d(r3, tgt: float, last: str) -> str:
+    """A 3-D bound against the material's target, in the unit of the fit's stated tolerance (the
+    ``--grazing`` row; without it, the row of ``last``): met, met where vouched, or missed and why:
+    the fit's stated tolerance (its bound at its own data points) above the target already, else
+    the fit's error between the nodes, else the proof's budget."""
+    g = r3.get("grazing") or r3[last]
+    allp, v = g["proved"], g["vouched"]
+    if allp is not None and allp <= tgt:
+        return "met"
+    if v["proved"] is not None and v["proved"] <= tgt:
+        return f"met where vouched ({', '.join(g['flagged'])} flagged)"
+    if r3.get("stated") is not None and r3["stated"] > tgt:
+        return f"missed: the fit's stated tolerance {_pct(r3['stated'])} is above it"
+    worst = v if v["proved"] is not None else g
+    if worst["verified"] is not None and worst["verified"] > tgt:
+        return f"missed: the fit's error between the nodes (verified {_pct(worst['verified'])})"
+    return "missed: the proof's budget"
+
+
 def _found(r) -> str:
     """The largest error found at dense points of the worst cells (``--gap``): observed, so a
     lower bound of the true largest error, like ``verified``."""
@@ -371,6 +457,13 @@ def merged(files) -> dict:
         for m, row in r["materials"].items():
             out["materials"].setdefault(m, {}).update(row)
     return out
+
+
+def _source_3d(src: str) -> str:
+    """A 3-D row's source in the table: the cached file's name (how it was picked and the grid it
+    was proved on stay in the results' ``source``)."""
+    m = re.match(r"cached \((?:[^;)]*/)?([^/;)]+\.json)", src)
+    return f"`{m.group(1)}`" if m else src
 
 
 def table(out) -> str:
@@ -397,17 +490,19 @@ def table(out) -> str:
         r3 = row.get("3d")
         if r3 is not None and last in r3:
             g = r3.get("grazing")
-            rows3.append(f"| {mat} | {r3['source']} | {r3.get('coefficients', '')} | {_pct(r3.get('stated'))} | "
+            rows3.append(f"| {mat} | {_source_3d(r3['source'])} | {r3.get('coefficients', '')} | {_pct(r3.get('stated'))} | "
                          f"{_arrow(r3, 'proved', encl)} | {_pct(g['proved']) if g else 'n/a'} | "
                          f"{_arrow(r3, 'proved_fraction', encl)} | {_frac(g['proved_fraction']) if g else 'n/a'} | "
                          f"{_pct(r3[last]['verified'])} | {_found(r3[last])} | {_pct(g['verified']) if g else 'n/a'} | "
                          + " → ".join(f"{r3[e]['wall_s']:.0f}" for e in encl if e in r3)
-                         + (f", {g['wall_s']:.0f}" if g else "") + " |")
+                         + (f", {g['wall_s']:.0f}" if g else "") + f" | {_pct(row['target'])} | "
+                         f"{_verdict_3d(r3, row['target'], last)} |")
     if rows3:
         lines += ["", "| material | 3-D fit | coefficients | stated tolerance | proved (no grazing weight), "
                   + " → ".join(encl) + " | proved in the stated unit | within the stated tolerance, "
                   + " → ".join(encl) + " | … in the stated unit | verified | found on the worst cells | verified in "
-                  "the stated unit | proof s |", "| " + " | ".join(["---"] * 12) + " |"] + rows3
+                  "the stated unit | proof s | target | against the target (stated unit) |",
+                  "| " + " | ".join(["---"] * 14) + " |"] + rows3
     return "\n".join(lines)
 
 

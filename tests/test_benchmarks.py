@@ -182,3 +182,43 @@ def test_bench_env_sampling_smoke(capsys):
                                                            for n in (1, 4)}
     assert all(0 < x["rel_rmse"] < 10 for x in r["rows"])
     assert "| studio | ours | hierarchical | stratified |" in capsys.readouterr().out
+
+
+# --------------------------------------------------------------------------------------------
+# bench_proved_bound: the 3-D fit it proves is the chart's, of today's fitter defaults
+
+
+def test_bench_proved_bound_picks_todays_3d_fit(tmp_path, monkeypatch):
+    """The chart's cache file when it exists; else the newest file whose recorded layouts and
+    settings are today's defaults, never a newer fit of an earlier layout; else none."""
+    import os
+
+    from benchmarks import bench_proved_bound as B
+    from benchmarks.chart_fits import fit3d_path
+    from fit.rational.settings import Fit3DSettings
+
+    data = tmp_path / "rgl"
+    data.mkdir()
+    (data / "x_rgb.bsdf").write_bytes(b"not a measurement")
+    monkeypatch.setattr(B, "data_dir", lambda: data)
+    fits = tmp_path / "fits"
+    fits.mkdir()
+    d = Fit3DSettings()
+    recorded = {k: getattr(d, a) for k, a in B._RECORDED.items()}
+    today = [{"options": o} for o in B.todays_layouts()]
+    today[-1] = {"options": dict(today[-1]["options"], tol=0.01), "skipped": "validation RMSE >= 0.065"}
+    old = [{"options": {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [[4, 2]] * 4}}]
+    assert B.chart_fit_3d("x_rgb", fits)[0] is None
+    for name, variants, t in (("x_rgb_3d_000000000000.json", today, 1), ("x_rgb_3d_ffffffffffff.json", old, 3),
+                              ("x_rgb_3d_111111111111.json", today, 2)):
+        (fits / name).write_text(json.dumps({"fit": dict(recorded, variants=variants)}))
+        os.utime(fits / name, (t, t))
+    p, how = B.chart_fit_3d("x_rgb", fits)
+    assert p.name == "x_rgb_3d_111111111111.json" and "today's layouts" in how   # newest of today's
+    (fits / "x_rgb_3d_111111111111.json").write_text(json.dumps({"fit": dict(recorded, variants=today,
+                                                                             wall_limit=60.0)}))
+    assert B.chart_fit_3d("x_rgb", fits)[0].name == "x_rgb_3d_000000000000.json"   # a wall limit: not the default
+    chart = fit3d_path(data / "x_rgb.bsdf", fit_dir=fits)
+    chart.write_text(json.dumps({"fit": {}}))
+    p, how = B.chart_fit_3d("x_rgb", fits)
+    assert p == chart and "chart's key" in how
