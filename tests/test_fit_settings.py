@@ -201,3 +201,21 @@ def test_3d_objective_flag_sets_the_objective_and_refuses_others(capsys):
     with pytest.raises(SystemExit) as e:
         p.parse_args(["brdf", "x.bsdf", "--out", "x.json", "--objective", "rmse"])
     assert e.value.code == 2 and "--objective" in capsys.readouterr().err
+
+
+def test_3d_select_by_flag_sets_what_the_selection_compares(capsys):
+    """``rbrdf-fit brdf FILE --select-by image`` selects the layout by the image check (the setting
+    ``select_by``); without it the default; an unknown value is refused by the parser (exit 2)."""
+    from fit.cli import build_parser
+    from fit.cli.brdf3d import given, settings_from_args
+
+    p = build_parser()
+    a = p.parse_args(["brdf", "x.bsdf", "--out", "x.json"])
+    assert settings_from_args(a)[0].select_by == Fit3DSettings().select_by
+    a = p.parse_args(["brdf", "x.bsdf", "--out", "x.json", "--select-by", "image"])
+    assert settings_from_args(a)[0].select_by == "image" and "--select-by" in given(a)
+    a = p.parse_args(["brdf", "x.bsdf", "--out", "x.json", "--select-by", "validation"])
+    assert settings_from_args(a)[0].select_by == "validation"
+    with pytest.raises(SystemExit) as e:
+        p.parse_args(["brdf", "x.bsdf", "--out", "x.json", "--select-by", "rmse"])
+    assert e.value.code == 2 and "--select-by" in capsys.readouterr().err

@@ -79,3 +79,30 @@ def test_the_selection_records_the_image_check_of_the_fit_it_keeps():
     assert rec == IC.image_check(Lobe(), res.model) and rec["mean"] > 0 and rec["p99"] >= rec["mean"]
     off = fit_rgl_select(Lobe(), variants=LADDER[:1], image_check=False, **FIT)
     assert "image_check" not in off.model.fit_info
+
+
+def test_the_selection_by_image_keeps_the_layout_the_image_check_prefers():
+    """``select_by="image"``: every layout's fit is checked (its check in its log entry), the one
+    with the lowest ``mean + p99 / 3`` is kept (a later one only when 5 % lower), and a layout may
+    fit its own objective; ``"validation"`` logs no checks."""
+    from test_fit_determinism import Lobe
+    from test_fit3d_target import FIT, LADDER
+
+    from fit.rational.fit3d import fit_rgl_select
+    from fit.rational.select3d import SELECT_MARGIN, image_score
+
+    variants = (LADDER[0], dict(LADDER[2], objective="relative"), LADDER[2])
+    res = fit_rgl_select(Lobe(), variants=variants, select_by="image", image_check=False, **FIT)
+    log = res.model.fit_info["variants"]
+    assert [e["options"].get("objective") for e in log] == [None, "relative", None]
+    scores = [image_score(e["image_check"]) for e in log]
+    assert [e["validation_score"] for e in log] == scores
+    kept = 0
+    for k in (1, 2):
+        if scores[k] < (1 - SELECT_MARGIN) * scores[kept]:
+            kept = k
+    assert res.variant == kept and res.model.fit_info["select_by"] == "image"
+    assert scores[2] < scores[0]          # the degree-(4, 2) fit looks better than the (2, 1) one
+    plain = fit_rgl_select(Lobe(), variants=variants[:1], image_check=False, **FIT)
+    assert "image_check" not in plain.model.fit_info["variants"][0]
+    assert plain.model.fit_info["select_by"] == "validation"

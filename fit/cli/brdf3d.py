@@ -61,6 +61,7 @@ from ..rational.fit3d import (
     Fit3DSettings,
     fit_rgl_select,
 )
+from ..rational.settings import SELECT_BY
 from .cdf import attach_sampler
 from .flags import integer, number
 
@@ -72,7 +73,8 @@ LAYOUTS = ("select", "pieces", "single")
 #: The flags of the 3-D fit (argparse destinations), refused with ``--model 2d``.
 FLAGS = {"layout": "--layout", "degrees": "--degrees", "target_rmse": "--target-rmse", "time_limit": "--time-limit",
          "grid": "--grid",
-         "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo", "objective": "--objective"}
+         "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo", "objective": "--objective",
+         "select_by": "--select-by"}
 MAX_GRID = 200            # per dimension of --grid (8 million points at most)
 MAX_POINTS = 1_000_000    # --random (each kind) and --verify
 
@@ -128,6 +130,11 @@ def add_flags(p) -> None:
                         "pairs (dark regions count by their share of the value, as a colour difference sees "
                         "them); rho_cos_cos, the squared error of rho cos cos there (dominated by the "
                         "specular peak); blend, half each. docs/fitting.md, \"The second stage's objective\"")
+    g.add_argument("--select-by", dest="select_by", choices=SELECT_BY, default=None,
+                   help=f"what the layout selection compares (default {d.select_by}): validation, the held-out "
+                        "error of --objective; image, the fitter's image check of each layout's fit (the ΔE2000 "
+                        "of a sphere under generic lights against the measurement, mean + p99 / 3). "
+                        "docs/fitting.md, \"The image check\"")
     g.add_argument("--no-albedo", dest="no_albedo", action="store_true", default=None,
                    help=f"no directional-albedo policy (default: channels outside {100 * d.albedo_tol:g} %% "
                         "refitted)")
@@ -154,7 +161,8 @@ def settings_from_args(args, wall_limit=None) -> tuple:
                       n_random=d.n_random if args.n_random is None else args.n_random,
                       verify=d.verify if args.verify is None else args.verify,
                       albedo=not args.no_albedo, target_rmse=target,
-                      objective=d.objective if args.objective is None else args.objective)
+                      objective=d.objective if args.objective is None else args.objective,
+                      select_by=d.select_by if args.select_by is None else args.select_by)
     if layout == "select":
         return s, (VARIANTS if target is None else TARGET_LADDER)
     if layout == "pieces":

@@ -18,7 +18,7 @@ from .image_check import image_check
 from .result3d import Fit3D, domain_record
 from .proved_bound import record_fit3d
 from .rgl3d import albedo_step, fit_rgl
-from .settings import Fit3DSettings
+from .settings import SELECT_BY, Fit3DSettings  # noqa: F401 (SELECT_BY: re-exported)
 from .variables3d import evaluate_directions
 from .verify3d import verify_and_refit
 
@@ -57,7 +57,7 @@ SELECT_MARGIN = 0.05
 #: layout's fit: not listed in the layouts' ``"options"`` log.
 _SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above", "albedo",
                               "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
-                              "albedo_refits", "max_variants", "target_rmse", "image_check"})
+                              "albedo_refits", "max_variants", "target_rmse", "image_check", "select_by"})
 
 
 def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
@@ -87,6 +87,13 @@ def validation_relative(brdf, model, n: int = 20000, seed: int = 12345, floor_fr
     floor = np.maximum(t, floor_frac * np.median(t, axis=0)[None, :])
     r = (np.abs(f - t) / np.maximum(floor, 1e-300)).reshape(-1)
     return float(np.median(r)), float(np.percentile(r, 95))
+
+
+def image_score(check: dict) -> float:
+    """The selection's criterion under ``select_by="image"``: ``mean + p99 / 3`` of an image
+    check (:func:`fit.rational.image_check.image_check`), the image targets' two numbers (ΔE2000
+    mean <= 1 and p99 <= 3) each in units of its target; lower is better."""
+    return float(check["mean"] + check["p99"] / 3.0)
 
 
 def validation_score(brdf, model, objective: str) -> float:
@@ -155,10 +162,13 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
         res = fit_rgl(brdf, settings=layout.clone(verify=0, albedo=False, prove_bound=False), ceiling=ceiling,
                       progress=progress)
         v_rmse = validation_rmse(brdf, res.model)
-        score = v_rmse if s.objective == "rho_cos_cos" else validation_score(brdf, res.model, s.objective)
+        check = image_check(brdf, res.model) if s.select_by == "image" else None
+        score = (image_score(check) if check is not None else v_rmse if s.objective == "rho_cos_cos"
+                 else validation_score(brdf, res.model, s.objective))
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
                     "bound": res.tolerance, "valid": res.valid, "validation_rmse": v_rmse,
-                    "validation_score": score, "time_s": res.time_s})
+                    "validation_score": score, "time_s": res.time_s}
+                   | ({"image_check": check} if check is not None else {}))
         if target is not None:       # the dial: the lowest validation RMSE so far, no margin
             better = res.valid and (best is None or v_rmse < best.validation_rmse)
         else:
@@ -191,8 +201,8 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
         best.model.fit_info["target"] = {"rmse": float(target), "met": bool(best.validation_rmse <= target),
                                          "coefficients": int(best.n_coefficients)}
     best.model.fit_info.update(time_s=best.time_s, variant=best.variant, variants=log,
-                               validation_rmse=best.validation_rmse, objective=s.objective,
-                               validation_score=best.validation_score,
+                               validation_rmse=best.validation_rmse, objective=chosen.objective,
+                               validation_score=best.validation_score, select_by=s.select_by,
                                budgets={"max_variants": s.max_variants, "verify_rounds": int(chosen.verify_rounds),
                                         "albedo_refits": int(s.albedo_refits),
                                         "ladder_steps": int(s.ladder_steps)})

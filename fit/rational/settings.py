@@ -46,6 +46,11 @@ DEFAULT_CHANNEL_FLOOR = 0.05        # a channel's error unit is at least this fr
 DEFAULT_VERIFY = 40000              # fresh points a fit is checked at (fit_rgl)
 DEFAULT_RELAX = 2.0                 # second stage: intervals at this multiple of the smallest tolerance met
 DEFAULT_OBJECTIVE = 4000            # objective points of the second stage per theta_h piece
+#: What the 3-D layout selection compares (``Fit3DSettings.select_by``): ``"validation"``, the
+#: held-out :func:`fit.rational.select3d.validation_score` of the setting ``objective``;
+#: ``"image"``, :func:`fit.rational.select3d.image_score` of the fitter's image check
+#: (:mod:`fit.rational.image_check`) of each layout's fit.
+SELECT_BY = ("validation", "image")
 DEFAULT_OBJECTIVE_KIND = "rho_cos_cos"   # what the second stage minimises and the selection compares
 DEFAULT_RELATIVE_FLOOR = 0.1        # "relative": values below this fraction of a channel's median count by it
 DEFAULT_ALBEDO_TOL = 0.05           # directional-albedo tolerance of the policy (fit.rational.albedo3d)
@@ -230,7 +235,10 @@ class Fit3DSettings(_Settings):
       of a virtual sphere's images under generic lights (:mod:`fit.rational.image_check`,
       ``fit_info["image_check"]``; about 3 s of a selection);
 
-    Layout selection (:func:`~fit.rational.fit3d.fit_rgl_select`): ``select_share`` of
+    Layout selection (:func:`~fit.rational.fit3d.fit_rgl_select`): ``select_by``, what it
+    compares (:data:`SELECT_BY`: the held-out validation score of ``objective``, or the image
+    check of each layout's fit, ``mean + p99 / 3``; a layout may set its own ``objective``);
+    ``select_share`` of
     ``time_limit`` (and of ``wall_limit``) after which no further layout starts; ``max_variants`` layouts at most
     (None: all); ``target_rmse``: the coefficient count as the dial (None, the default: the lowest
     validation error of the layouts wins): the layouts are tried cheapest first and the first whose
@@ -265,6 +273,7 @@ class Fit3DSettings(_Settings):
     albedo_refits: int = DEFAULT_ALBEDO_REFITS
     prove_bound: bool = False
     image_check: bool = True
+    select_by: str = "validation"
     select_share: float = 0.6
     max_variants: int | None = None
     target_rmse: float | None = None
@@ -309,6 +318,7 @@ class Fit3DSettings(_Settings):
             ("albedo_refits", nonneg_int(self.albedo_refits), "an integer >= 0"),
             ("prove_bound", isinstance(self.prove_bound, bool), "True or False"),
             ("image_check", isinstance(self.image_check, bool), "True or False"),
+            ("select_by", self.select_by in SELECT_BY, f"one of {SELECT_BY}"),
             ("select_share", _number(self.select_share) and 0.0 < self.select_share <= 1.0, "in (0, 1]"),
             ("max_variants", self.max_variants is None or nonneg_int(self.max_variants), "None or an integer >= 0"),
         ]
