@@ -92,7 +92,7 @@ def test_the_selection_by_image_keeps_the_layout_the_image_check_prefers():
     from fit.rational.select3d import SELECT_MARGIN, image_score
 
     variants = (LADDER[0], dict(LADDER[2], objective="relative"), LADDER[2])
-    res = fit_rgl_select(Lobe(), variants=variants, select_by="image", image_check=False, **FIT)
+    res = fit_rgl_select(Lobe(), variants=variants, image_check=False, **FIT)        # select_by: image, the default
     log = res.model.fit_info["variants"]
     assert [e["options"].get("objective") for e in log] == [None, "relative", None]
     scores = [image_score(e["image_check"]) for e in log]
@@ -103,6 +103,6 @@ def test_the_selection_by_image_keeps_the_layout_the_image_check_prefers():
             kept = k
     assert res.variant == kept and res.model.fit_info["select_by"] == "image"
     assert scores[2] < scores[0]          # the degree-(4, 2) fit looks better than the (2, 1) one
-    plain = fit_rgl_select(Lobe(), variants=variants[:1], image_check=False, **FIT)
+    plain = fit_rgl_select(Lobe(), variants=variants[:1], image_check=False, select_by="validation", **FIT)
     assert "image_check" not in plain.model.fit_info["variants"][0]
     assert plain.model.fit_info["select_by"] == "validation"

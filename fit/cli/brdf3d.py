@@ -10,8 +10,9 @@ method"):
 * ``--tol``: the first tolerance of the ladder (default :data:`TOL_3D`, the benchmark's); the
   bound the file states is the one met;
 * ``--layout``: ``select`` (default: both layouts of :data:`fit.rational.fit3d.VARIANTS` fitted,
-  the lower validation RMSE kept), ``pieces`` (six theta_h pieces, 1,125 coefficients) or
-  ``single`` (one piece of ``--degrees``, default (7, 3): 420 coefficients);
+  the six pieces with ``--objective``, the one piece with the relative objective; the better by
+  ``--select-by`` kept), ``pieces`` (six theta_h pieces, 1,125 coefficients) or ``single`` (one
+  piece of ``--degrees``, default (7, 3): 420 coefficients, with ``--objective``);
 * ``--target-rmse R``: the coefficient count as the dial: the layouts of
   :data:`fit.rational.select3d.TARGET_LADDER` (one piece of 72 to 420 coefficients, then the six
   pieces' 1,125) fitted cheapest first, the first whose validation RMSE is within ``R`` kept (none:
@@ -99,8 +100,9 @@ def add_flags(p) -> None:
     g = p.add_argument_group("3-D fit (--model 3d; auto for an RGL .bsdf)")
     g.add_argument("--layout", choices=LAYOUTS, default=None,
                    help="select (default): six theta_h pieces (1,125 coefficients) and, below a validation "
-                        "RMSE of 0.065, one piece of degrees (7, 3) (420), the lower validation RMSE kept; "
-                        "pieces: the six pieces only; single: one piece of --degrees only")
+                        "RMSE of 0.065, one piece of degrees (7, 3) (420) fitted to the relative objective, the "
+                        "better by --select-by kept; pieces: the six pieces only; single: one piece of --degrees "
+                        "only (both with --objective)")
     g.add_argument("--degrees", type=integers(2, 0, MAX_FIT_DEGREE, "NUM,DEN"), default=None, metavar="NUM,DEN",
                    help="total degrees of numerator and denominator of --layout single (default "
                         f"{','.join(map(str, VARIANTS[1]['degrees']))}; fewer coefficients, larger error)")
@@ -169,6 +171,7 @@ def settings_from_args(args, wall_limit=None) -> tuple:
         return s, (VARIANTS[0],)
     single = dict(VARIANTS[1])
     single.pop("if_rmse_below")               # the only layout: always fitted
+    single.pop("objective", None)             # the command's --objective
     if args.degrees is not None:
         single["degrees"] = tuple(args.degrees)
     return s, (single,)

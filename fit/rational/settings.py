@@ -273,7 +273,7 @@ class Fit3DSettings(_Settings):
     albedo_refits: int = DEFAULT_ALBEDO_REFITS
     prove_bound: bool = False
     image_check: bool = True
-    select_by: str = "validation"
+    select_by: str = "image"
     select_share: float = 0.6
     max_variants: int | None = None
     target_rmse: float | None = None
