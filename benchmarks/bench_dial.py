@@ -69,9 +69,15 @@ def layout_settings(entry: dict) -> dict:
 
 def default_pick(rows: list) -> int | None:
     """Index in ``rows`` of the layout :func:`fit.rational.fit3d.fit_rgl_select` keeps with its
-    default ``VARIANTS``: its rule on the rows' ``validation_rmse`` / ``validation_score`` and
-    ``valid`` (the objective ``rho_cos_cos``: the score is the validation RMSE)."""
+    default ``VARIANTS`` and settings: its rule on the rows' ``validation_rmse`` (the
+    ``if_rmse_below`` gates), ``valid`` and score: ``image_score`` under the default
+    ``select_by="image"`` (rows without it: ``validation_score``), else ``validation_score`` (the
+    selection's objective ``rho_cos_cos``: the validation RMSE)."""
     from fit.rational.fit3d import SELECT_MARGIN, VARIANTS
+    from fit.rational.settings import Fit3DSettings
+
+    key = "image_score" if Fit3DSettings().select_by == "image" and all("image_score" in r for r in rows) \
+        else "validation_score"
 
     by_variant = {r["variant"]: i for i, r in enumerate(rows) if r.get("variant") is not None}
     best = None
@@ -83,7 +89,7 @@ def default_pick(rows: list) -> int | None:
         if below is not None and best is not None and rows[best]["validation_rmse"] >= below:
             continue
         r = rows[i]
-        if r["valid"] and (best is None or r["validation_score"] < (1.0 - SELECT_MARGIN) * rows[best]["validation_score"]):
+        if r["valid"] and (best is None or r[key] < (1.0 - SELECT_MARGIN) * rows[best][key]):
             best = i
     return best
 
@@ -107,7 +113,8 @@ def run_material(name: str, data: Path, pairs: int, seed: int, tol: float) -> li
     from benchmarks.bench_fit_accuracy import cosine_pairs, relative_error_stats, relative_rmse
     from fit.formats.rgl import read_rgl
     from fit.rational.fit3d import fit_rgl
-    from fit.rational.select3d import validation_rmse, validation_score
+    from fit.rational.image_check import image_check
+    from fit.rational.select3d import image_score, validation_rmse, validation_score
     from fit.rational.settings import Fit3DSettings
     from fit.rational.variables3d import evaluate_directions
 
@@ -126,7 +133,8 @@ def run_material(name: str, data: Path, pairs: int, seed: int, tol: float) -> li
         row = {"layout": entry["name"], "variant": entry.get("variant"), "coefficients": int(res.n_coefficients),
                "valid": bool(res.valid), "bound": float(res.tolerance), "rel_rmse": float(relative_rmse(rho, truth, wi, wo).mean()),
                "median_rel": med, "p95_rel": p95, "validation_rmse": validation_rmse(brdf, res.model),
-               "validation_score": validation_score(brdf, res.model, s.objective), "cpu_s": cpu}
+               "validation_score": validation_score(brdf, res.model, base.objective),
+               "image_score": image_score(image_check(brdf, res.model)), "cpu_s": cpu}
         rows.append(row)
         print(f"{name}: {row['layout']}: {row['coefficients']} coef, rel RMSE {row['rel_rmse']:.4f}, "
               f"median {row['median_rel']:.4f}, p95 {row['p95_rel']:.4f}, {cpu:.1f} CPU s, bound "

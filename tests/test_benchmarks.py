@@ -222,3 +222,16 @@ def test_bench_proved_bound_picks_todays_3d_fit(tmp_path, monkeypatch):
     chart.write_text(json.dumps({"fit": {}}))
     p, how = B.chart_fit_3d("x_rgb", fits)
     assert p == chart and "chart's key" in how
+
+
+def test_bench_dial_default_pick_follows_the_selection_rule():
+    """bench_dial's offline copy of the default selection: the image score under
+    ``select_by="image"`` (5 % margin), the ``if_rmse_below`` gate on the validation RMSE."""
+    from benchmarks.bench_dial import default_pick
+
+    def row(v, rmse, img):
+        return {"variant": v, "valid": True, "validation_rmse": rmse, "validation_score": rmse, "image_score": img}
+
+    assert default_pick([row(0, 0.03, 1.5), row(1, 0.05, 1.0)]) == 1        # the image decides, not the RMSE
+    assert default_pick([row(0, 0.03, 1.0), row(1, 0.02, 0.97)]) == 0       # within the 5 % margin
+    assert default_pick([row(0, 0.09, 1.5), row(1, 0.05, 1.0)]) == 0       # gated: 0.09 >= 0.065
