@@ -114,8 +114,11 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
                    **params) -> Fit3D:
     """Fit every layout of ``variants`` (each a dict of settings that replace those of ``settings``,
     :class:`fit.rational.settings.Fit3DSettings`, default its defaults, whose names are also keyword
-    arguments that override it) with :func:`fit.rational.rgl3d.fit_rgl` and return the one with the
-    lowest :func:`validation_score` of the setting ``objective`` (a later layout must be
+    arguments that override it; a layout may set its own ``objective``) with
+    :func:`fit.rational.rgl3d.fit_rgl` and return the one with the lowest score: with the setting
+    ``select_by="image"`` (the default) :func:`image_score` of each layout's image check (logged in
+    its ``variants`` entry as ``image_check``), with ``"validation"`` its :func:`validation_score`
+    of the setting ``objective`` (a later layout must be
     :data:`SELECT_MARGIN` lower to replace an earlier one; a layout with ``"if_rmse_below"`` is tried
     only when the chosen one's :func:`validation_rmse` is below that RMSE); ``variants`` logs what
     each achieved (coefficients, stated bound, validation RMSE and score, seconds), ``variant`` is
@@ -167,7 +170,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
         res = fit_rgl(brdf, settings=layout.clone(verify=0, albedo=False, prove_bound=False), ceiling=ceiling,
                       progress=progress)
         v_rmse = validation_rmse(brdf, res.model)
-        check = image_check(brdf, res.model) if s.select_by == "image" else None
+        check = image_check(brdf, res.model) if s.select_by == "image" and target is None else None
         score = (image_score(check) if check is not None else v_rmse if s.objective == "rho_cos_cos"
                  else validation_score(brdf, res.model, s.objective))
         log.append({"variant": k, "options": _plain(v), "coefficients": res.n_coefficients,
@@ -207,7 +210,8 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
                                          "coefficients": int(best.n_coefficients)}
     best.model.fit_info.update(time_s=best.time_s, variant=best.variant, variants=log,
                                validation_rmse=best.validation_rmse, objective=chosen.objective,
-                               validation_score=best.validation_score, select_by=s.select_by,
+                               validation_score=best.validation_score,
+                               select_by=s.select_by if target is None else "validation",
                                budgets={"max_variants": s.max_variants, "verify_rounds": int(chosen.verify_rounds),
                                         "albedo_refits": int(s.albedo_refits),
                                         "ladder_steps": int(s.ladder_steps)})
