@@ -27,7 +27,8 @@ CLOCKED = (ladder3d, verify3d, rgl3d, select3d, albedo3d, ceiling)
 #: corrects on this lobe): every loop that used to stop on time runs
 VARIANTS = ({"theta_h_edges": [0.15], "degrees": (4, 2)}, {"theta_h_edges": [], "degrees": (4, 2)})
 FIT = {"grid": (8, 7, 5), "n_random": 200, "n_objective": 800, "tol": 0.01, "verify": 2000,
-       "verify_rounds": 2, "albedo_tol": 0.01}
+       "verify_rounds": 2, "albedo_tol": 0.01,
+       "select_by": "validation"}   # the budgets, not what compares layouts (tests/test_image_check.py: the image)
 
 
 def select(**kw):
