@@ -87,14 +87,6 @@ def sphere_pixels(res: int):
     return n / np.linalg.norm(n, axis=1, keepdims=True), -d[hit]
 
 
-def frames(n: np.ndarray) -> np.ndarray:
-    """``(P, 3, 3)``: rows tangent, bitangent, normal of each normal ``n`` (P, 3)."""
-    a = np.where(np.abs(n[:, :1]) > 0.9, np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0]))
-    t = np.cross(a, n)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    return np.stack([t, np.cross(n, t), n], axis=1)
-
-
 def _chunked(evaluate, wi, wo, n: int = 200_000) -> np.ndarray:
     """``max(evaluate(wi, wo), 0)`` (M, 3) in chunks of ``n`` pairs (bounded memory)."""
     return np.concatenate([np.maximum(np.asarray(evaluate(wi[i:i + n], wo[i:i + n]), np.float64), 0.0)
@@ -105,20 +97,19 @@ def error_sources(brdf, fit_eval, dirs, power, res: int = 64) -> dict:
     """The module docstring's numbers for one material and map: ``brdf.evaluate`` and
     ``fit_eval(wi, wo) -> rho (M, 3)`` under the blocks ``dirs``, ``power`` (:func:`block_map`)."""
     from fit.formats.colour import LUMINANCE
-    from fit.rational.image_check import delta_e2000, rgb_to_lab
+    from fit.rational.image_check import delta_e2000, rgb_to_lab, tangent_frames
 
     nrm, wo_w = sphere_pixels(res)
-    F = frames(nrm)
-    wo = np.einsum("pij,pj->pi", F, wo_w)
-    wi = np.einsum("pij,kj->pki", F, dirs)                     # (P, K, 3) every block in every frame
-    P, K = wi.shape[:2]
+    F = tangent_frames(nrm)                                    # (3, P, 3)
+    wo = np.einsum("fpj,pj->pf", F, wo_w)
+    wi = np.einsum("fpj,kj->pkf", F, dirs)                     # (P, K, 3) every block in every frame
+    P = wi.shape[0]
     pp, kk = np.nonzero(wi[..., 2] > 1e-4)
     w_i, w_o = wi[pp, kk], wo[pp]
     contrib_t = _chunked(brdf.evaluate, w_i, w_o) * w_i[:, 2:3] * power[kk]
     contrib_f = _chunked(fit_eval, w_i, w_o) * w_i[:, 2:3] * power[kk]
-    img_t, img_f = np.zeros((P, 3)), np.zeros((P, 3))
-    np.add.at(img_t, pp, contrib_t)
-    np.add.at(img_f, pp, contrib_f)
+    img_t = np.stack([np.bincount(pp, contrib_t[:, c], minlength=P) for c in range(3)], axis=1)
+    img_f = np.stack([np.bincount(pp, contrib_f[:, c], minlength=P) for c in range(3)], axis=1)
     Y = np.percentile(img_t @ LUMINANCE, 99.0)
     expo = 1.0 / Y if Y > 0 else 1.0
     de = delta_e2000(rgb_to_lab(img_f, expo), rgb_to_lab(img_t, expo))
@@ -126,29 +117,27 @@ def error_sources(brdf, fit_eval, dirs, power, res: int = 64) -> dict:
     lum = power @ LUMINANCE
     sun = lum > 0.2 * lum.max()
     worst = np.argsort(de)[-max(1, P // 100):]
-    sel = np.isin(pp, worst)
-    err = (contrib_f[sel] - contrib_t[sel]) @ LUMINANCE
+    rank = np.full(P, -1)
+    rank[worst] = np.arange(len(worst))
+    sel = rank[pp] >= 0                                        # the pairs of the worst pixels
+    rows, err = rank[pp[sel]], (contrib_f[sel] - contrib_t[sel]) @ LUMINANCE
     theta_i = np.degrees(np.arccos(np.clip(w_i[sel, 2], -1, 1)))
-    rows = np.searchsorted(worst, pp[sel], sorter=np.argsort(worst))
-    order = np.argsort(worst)
-    total = np.zeros(len(worst))
-    np.add.at(total, rows, err)
+    total = np.bincount(rows, err, minlength=len(worst))
 
     def share(mask):
-        part = np.zeros(len(worst))
-        np.add.at(part, rows[mask], err[mask])
+        part = np.bincount(rows[mask], err[mask], minlength=len(worst))
         return float(np.median(part / np.where(total == 0, 1.0, total)))
 
-    wt = img_t[worst[order]] @ LUMINANCE
-    wf = img_f[worst[order]] @ LUMINANCE
+    on_sun = sun[kk[sel]]
     return {"pixels": int(P), "de_mean": float(de.mean()), "de_p99": float(np.percentile(de, 99)),
             "de_by_view": {f"{a}-{b}": float(de[(theta_o >= a) & (theta_o < b)].mean())
                            for a, b in VIEW_BANDS if np.any((theta_o >= a) & (theta_o < b))},
             "worst": {"theta_o_median": float(np.median(theta_o[worst])),
-                      "fit_over_truth": float(np.median(wf / np.maximum(wt, 1e-300))),
+                      "fit_over_truth": float(np.median((img_f[worst] @ LUMINANCE)
+                                                        / np.maximum(img_t[worst] @ LUMINANCE, 1e-300))),
                       "error_share_theta_i_gt_80": share(theta_i > 80), "error_share_theta_i_gt_85": share(theta_i > 85),
-                      "error_share_sun": share(sun[kk[sel]]),
-                      "sun_theta_i_median": float(np.median(theta_i[sun[kk[sel]]])) if np.any(sun[kk[sel]]) else None}}
+                      "error_share_sun": share(on_sun),
+                      "sun_theta_i_median": float(np.median(theta_i[on_sun])) if np.any(on_sun) else None}}
 
 
 def newest_fit(fit_dir: Path, stem: str) -> Path | None:

@@ -92,18 +92,23 @@ def delta_e2000(lab1, lab2) -> np.ndarray:
     return np.sqrt((dLp / SL) ** 2 + (dCp / SC) ** 2 + (dHp / SH) ** 2 + RT * (dCp / SC) * (dHp / SH))
 
 
-def sphere_views(n: int = DEFAULT_PIXELS):
-    """``(frames (3, P, 3), wo (P, 3))``: per pixel of the sphere's disc (``n`` x ``n``) its local
-    frame (tangent, bitangent, normal; world vectors) and the view direction in it."""
-    c = (np.arange(n) + 0.5) / n * 2 - 1
-    x, y = np.meshgrid(c, -c)
-    inside = x * x + y * y < 1
-    nrm = np.stack([x[inside], y[inside], np.sqrt(1 - x[inside] ** 2 - y[inside] ** 2)], axis=1)
+def tangent_frames(normals) -> np.ndarray:
+    """``(3, P, 3)``: tangent, bitangent and normal (world unit vectors) of each unit normal
+    ``(P, 3)``; any tangent serves an isotropic BRDF."""
+    nrm = np.asarray(normals, np.float64)
     a = np.where(np.abs(nrm[:, 2:3]) < 0.9, np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0]]))
     t = np.cross(a, nrm)
     t /= np.linalg.norm(t, axis=1, keepdims=True)
-    b = np.cross(nrm, t)
-    frames = np.stack([t, b, nrm])
+    return np.stack([t, np.cross(nrm, t), nrm])
+
+
+def sphere_views(n: int = DEFAULT_PIXELS):
+    """``(frames (3, P, 3), wo (P, 3))``: per pixel of the sphere's disc (``n`` x ``n``) its local
+    frame (:func:`tangent_frames`) and the view direction in it."""
+    c = (np.arange(n) + 0.5) / n * 2 - 1
+    x, y = np.meshgrid(c, -c)
+    inside = x * x + y * y < 1
+    frames = tangent_frames(np.stack([x[inside], y[inside], np.sqrt(1 - x[inside] ** 2 - y[inside] ** 2)], axis=1))
     return frames, frames[:, :, 2].T.copy()            # the view (0, 0, 1) in each frame
 
 
