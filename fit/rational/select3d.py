@@ -18,7 +18,7 @@ from .image_check import image_check
 from .result3d import Fit3D, domain_record
 from .proved_bound import record_fit3d
 from .rgl3d import albedo_step, fit_rgl
-from .settings import SELECT_BY, Fit3DSettings  # noqa: F401 (SELECT_BY: re-exported)
+from .settings import Fit3DSettings
 from .variables3d import evaluate_directions
 from .verify3d import verify_and_refit
 
@@ -148,6 +148,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     ceiling = Ceiling.of(s)
     common = {k: v for k, v in s.changed_params().items() if k not in _SELECT_SETTINGS}
     best, chosen, log = None, None, []
+    checked = (None, None)     # the kept layout's model and its image check (select_by image)
     for k, v in enumerate(variants):
         v = dict(v)
         below = v.pop("if_rmse_below", None)
@@ -184,7 +185,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
         if better:
             best = res
             best.validation_rmse, best.validation_score, best.variant = v_rmse, score, k
-            chosen = layout
+            chosen, checked = layout, (res.model, check)
     if best is None:
         raise RuntimeError(f"no valid 3-D fit of {brdf.name}")
     variant = best.variant
@@ -216,7 +217,9 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
                                         "albedo_refits": int(s.albedo_refits),
                                         "ladder_steps": int(s.ladder_steps)})
     if s.image_check:       # what the fit looks like against the measurement (fit.rational.image_check)
-        best.model.fit_info["image_check"] = image_check(brdf, best.model)
+        unchanged = checked[0] is best.model and not (best.albedo or {}).get("refitted")   # no refit since
+        best.model.fit_info["image_check"] = dict(checked[1]) if unchanged and checked[1] is not None \
+            else image_check(brdf, best.model)
     ceiling.record(best.model.fit_info)
     if s.prove_bound:       # the chosen fit's error between the grid nodes, proved
         record_fit3d(best, brdf)
