@@ -124,6 +124,7 @@ def test_bad_arguments_are_one_line(tmp_path, capsys, monkeypatch, args, message
 
 
 # --- local cluster: Ctrl-C half-way, then resume ----------------------------------------------------
+@pytest.mark.heavy
 def test_interrupt_and_resume_on_local_cluster(materials, tmp_path, capsys):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "fit.cli", "batch", str(materials), "--out", str(out), "--workers", "1", *FAST]

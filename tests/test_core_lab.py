@@ -183,15 +183,15 @@ def test_lab_tests_carry_the_lab_marker():
 
 
 def test_lab_tests_are_opt_in_and_ci_runs_them():
-    """The default run (``addopts``) deselects the ``lab`` and ``extended`` tests, like the
-    ``slow`` and ``readme`` ones; ``.ci/run`` runs them after the README's test command."""
+    """The default run (``addopts``) deselects the ``lab``, ``extended`` and ``heavy`` tests, like
+    the ``slow`` and ``readme`` ones; ``.ci/run`` runs them after the README's test command."""
     import shlex
 
     with open(ROOT / "pyproject.toml", "rb") as f:
         addopts = shlex.split(tomllib.load(f)["tool"]["pytest"]["ini_options"]["addopts"])
     expr = addopts[addopts.index("-m") + 1]
-    assert {"not lab", "not extended", "not slow", "not readme"} <= {t.strip() for t in expr.split(" and ")}, expr
+    assert {"not lab", "not extended", "not heavy", "not slow", "not readme"} <= {t.strip() for t in expr.split(" and ")}, expr
     lines = [ln.strip() for ln in (ROOT / ".ci" / "run").read_text().splitlines()]
     test_command = next(i for i, ln in enumerate(lines) if ln.endswith("&& python -m pytest"))
-    assert 'python -m pytest -m "(lab or extended) and not slow"' in lines[test_command + 1:], \
-        ".ci/run does not run the lab and extended tests"
+    assert 'python -m pytest -m "(lab or extended or heavy) and not slow"' in lines[test_command + 1:], \
+        ".ci/run does not run the lab, extended and heavy tests"

@@ -97,6 +97,7 @@ def _band_ratio(img, ref):
     return img[band].mean(axis=0) / ref[band].mean(axis=0)
 
 
+@pytest.mark.heavy
 def test_rim_band_is_the_roles_and_is_gone(paper):
     """The lower-right rim band under rooitou: present with the light as the incident
     direction (the old reading), absent with the reference roles, for rgl and measured."""

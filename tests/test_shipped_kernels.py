@@ -79,6 +79,7 @@ def test_shipped_set_is_current():
                           f"regenerate them with `{REGENERATE}` and commit warp_rbrdf/data/kernels")
 
 
+@pytest.mark.heavy
 def test_fresh_cache_loads_shipped_kernel_and_matches_a_compile(tmp_path, monkeypatch):
     if not sk.cpu_supports_isa():
         pytest.skip(f"this CPU lacks {sk.ISA_LEVEL}: the shipped kernels are not used here")
