@@ -93,9 +93,11 @@ def _chunked(evaluate, wi, wo, n: int = 200_000) -> np.ndarray:
                            for i in range(0, len(wi), n)] or [np.zeros((0, 3))])
 
 
-def error_sources(brdf, fit_eval, dirs, power, res: int = 64) -> dict:
+def error_sources(brdf, fit_eval, dirs, power, res: int = 64, truth_cache: dict | None = None) -> dict:
     """The module docstring's numbers for one material and map: ``brdf.evaluate`` and
-    ``fit_eval(wi, wo) -> rho (M, 3)`` under the blocks ``dirs``, ``power`` (:func:`block_map`)."""
+    ``fit_eval(wi, wo) -> rho (M, 3)`` under the blocks ``dirs``, ``power`` (:func:`block_map`).
+    ``truth_cache``: a dict the measurement's values are kept in (key ``"rho"``) and taken from,
+    for several fits of one material under one map (the same pairs)."""
     from fit.formats.colour import LUMINANCE
     from fit.rational.image_check import delta_e2000, rgb_to_lab, tangent_frames
 
@@ -106,7 +108,13 @@ def error_sources(brdf, fit_eval, dirs, power, res: int = 64) -> dict:
     P = wi.shape[0]
     pp, kk = np.nonzero(wi[..., 2] > 1e-4)
     w_i, w_o = wi[pp, kk], wo[pp]
-    contrib_t = _chunked(brdf.evaluate, w_i, w_o) * w_i[:, 2:3] * power[kk]
+    if truth_cache is not None and "rho" in truth_cache:
+        rho_t = truth_cache["rho"]
+    else:
+        rho_t = _chunked(brdf.evaluate, w_i, w_o)
+        if truth_cache is not None:
+            truth_cache["rho"] = rho_t
+    contrib_t = rho_t * w_i[:, 2:3] * power[kk]
     contrib_f = _chunked(fit_eval, w_i, w_o) * w_i[:, 2:3] * power[kk]
     img_t = np.stack([np.bincount(pp, contrib_t[:, c], minlength=P) for c in range(3)], axis=1)
     img_f = np.stack([np.bincount(pp, contrib_f[:, c], minlength=P) for c in range(3)], axis=1)
@@ -172,6 +180,7 @@ def main(argv=None) -> int:
           "error share from theta_i > 80 / > 85 deg / the sun (sun's theta_i)")
     for mat in mats:
         brdf = read_rgl(data / "rgl" / f"{mat}_rgb.bsdf")
+        truth = {m: {} for m in a.maps}              # the measurement's values, once per map
         for label, d in dirs:
             f = newest_fit(Path(d), mat)
             if f is None:
@@ -179,7 +188,8 @@ def main(argv=None) -> int:
             model = load(f)
             for m in a.maps:
                 t0 = time.perf_counter()
-                r = error_sources(brdf, lambda wi, wo: evaluate_directions(model, wi, wo), *maps[m], res=a.res)
+                r = error_sources(brdf, lambda wi, wo: evaluate_directions(model, wi, wo), *maps[m], res=a.res,
+                                  truth_cache=truth[m])
                 r.update(file=str(f), seconds=time.perf_counter() - t0, res=a.res, block=a.block)
                 res[f"{mat}/{m}/{label}"] = r
                 w = r["worst"]
