@@ -1,7 +1,7 @@
 """The coefficient count as a dial: a 3-D fit's accuracy against its coefficients.
 
 For each material, every layout of a ladder (:data:`LADDER`: one theta_h piece of growing
-degrees, then four pieces, including the two layouts the default selection tries,
+degrees, then four and six pieces, including the three layouts the default selection tries,
 :data:`fit.rational.fit3d.VARIANTS`) is fitted the way :func:`fit.rational.fit3d.fit_rgl_select`
 fits its candidates (``fit_rgl`` with the command's settings, ``tol`` 0.01, no verification, no
 albedo policy, no proved bound: the selection verifies and corrects the chosen one only), and
@@ -41,7 +41,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- BEGIN bench:dial -->", "<!-- END bench:dial -->"
 #: The layouts of the dial, fewest coefficients first (``fit_rgl`` settings; ``name`` for the
-#: table). ``select-1`` and ``select-0`` are :data:`fit.rational.fit3d.VARIANTS` 1 and 0.
+#: table). ``select-0``, ``select-1`` and ``select-2`` are :data:`fit.rational.fit3d.VARIANTS` 0, 1
+#: and 2.
 LADDER = (
     {"name": "1 piece (3,1)", "theta_h_edges": [], "degrees": (3, 1)},
     {"name": "1 piece (4,2)", "theta_h_edges": [], "degrees": (4, 2)},
@@ -49,7 +50,8 @@ LADDER = (
     {"name": "1 piece (6,3)", "theta_h_edges": [], "degrees": (6, 3)},
     {"name": "1 piece (7,3) [select-1]", "variant": 1},
     {"name": "4 pieces (3,1)", "theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(3, 1)] * 4},
-    {"name": "4 pieces (4,2)/(5,2) [select-0]", "variant": 0},
+    {"name": "6 pieces (4,2)/(5,2) [select-0]", "variant": 0},
+    {"name": "6 pieces, relative [select-2]", "variant": 2},
 )
 TOLS = (0.02, 0.05, 0.1)
 

@@ -45,11 +45,14 @@ def file_sha256(path: Path) -> str:
 
 def fitter_defaults() -> str:
     """What a 3-D fit with the command's defaults depends on besides the file and the flags: the
-    layouts :func:`fit.rational.fit3d.fit_rgl_select` tries and the default
-    :class:`fit.rational.settings.Fit3DSettings`, as text (part of the cache key)."""
+    layouts :func:`fit.rational.fit3d.fit_rgl_select` tries, the default
+    :class:`fit.rational.settings.Fit3DSettings` and the image check's scene, which chooses the
+    layout (:mod:`fit.rational.image_check`), as text (part of the cache key)."""
+    from fit.rational import image_check as IC
     from fit.rational.fit3d import TARGET_LADDER, VARIANTS, Fit3DSettings
 
-    return repr((VARIANTS, TARGET_LADDER, Fit3DSettings()))
+    scene = (IC.DEFAULT_PIXELS, IC.DEFAULT_LIGHTS, IC.DEFAULT_SEEDS, IC.DEFAULT_SUN)
+    return repr((VARIANTS, TARGET_LADDER, Fit3DSettings(), scene))
 
 
 def fit3d_path(bsdf: Path, flags=FIT3D_FLAGS, fit_dir: Path = FIT3D_DIR) -> Path:

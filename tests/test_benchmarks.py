@@ -235,3 +235,5 @@ def test_bench_dial_default_pick_follows_the_selection_rule():
     assert default_pick([row(0, 0.03, 1.5), row(1, 0.05, 1.0)]) == 1        # the image decides, not the RMSE
     assert default_pick([row(0, 0.03, 1.0), row(1, 0.02, 0.97)]) == 0       # within the 5 % margin
     assert default_pick([row(0, 0.09, 1.5), row(1, 0.05, 1.0)]) == 0       # gated: 0.09 >= 0.065
+    assert default_pick([row(0, 0.03, 1.5), row(1, 0.05, 1.2), row(2, 0.03, 1.0)]) == 2   # the third layout
+    assert default_pick([row(0, 0.03, 1.5), row(1, 0.05, 1.0), row(2, 0.03, 0.97)]) == 1  # within the margin

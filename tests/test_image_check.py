@@ -106,3 +106,26 @@ def test_the_selection_by_image_keeps_the_layout_the_image_check_prefers():
     plain = fit_rgl_select(Lobe(), variants=variants[:1], image_check=False, select_by="validation", **FIT)
     assert "image_check" not in plain.model.fit_info["variants"][0]
     assert plain.model.fit_info["select_by"] == "validation"
+
+
+def test_the_sun_shows_a_fit_that_misses_the_grazing_light():
+    """The RGL data grow as 1 / cos(theta_i) beyond about 80 deg (rho cos theta_i constant); a fit
+    without that growth renders the terminator too dark. The check's sun carries most of its light
+    (``DEFAULT_SUN``) so that the terminator weighs in its p99 as under the chart's maps: with a
+    sky-dominated set (a sun of 40) the same miss looks 2.5 times smaller or less."""
+    c80 = np.cos(np.radians(80.0))
+
+    def truth(wi, wo):
+        ci = np.clip(wi[:, 2], 1e-4, 1.0)
+        return np.repeat((0.3 / np.pi * np.where(ci > c80, 1.0, c80 / ci))[:, None], 3, axis=1)
+
+    def fit(wi, wo):
+        return np.full((len(wi), 3), 0.3 / np.pi)
+
+    d, L = IC.generic_lights(1)
+    y = L @ np.array([0.2126, 0.7152, 0.0722])
+    assert y.max() > 0.75 * y.sum()                  # the sun: most of the light
+    assert IC.image_delta_e(truth, truth)["p99"] == 0.0
+    sun = IC.image_delta_e(truth, fit)
+    sky = IC.image_delta_e(truth, fit, sun=40.0)
+    assert sun["sun"] == IC.DEFAULT_SUN and sun["p99"] > 2.5 * sky["p99"] and sun["p99"] > 10.0

@@ -45,6 +45,8 @@ VARIANTS = (
     {"theta_h_edges": [0.05, 0.1, 0.2, 0.4, 0.8], "piece_degrees": [(4, 2), (5, 2), (5, 2), (5, 2), (5, 2), (5, 2)]},
     {"theta_h_edges": [], "degrees": (7, 3), "objective": "relative", "if_rmse_below": 0.065, "verify_rounds": 1,
      "verify_above": 4.0},
+    {"theta_h_edges": [0.05, 0.1, 0.2, 0.4, 0.8], "piece_degrees": [(4, 2), (5, 2), (5, 2), (5, 2), (5, 2), (5, 2)],
+     "objective": "relative", "if_rmse_below": 0.065},
 )
 #: The layouts a selection with ``target_rmse`` (the coefficient count as the dial) tries, cheapest
 #: first: one piece of degrees (3, 1), (4, 2), (5, 2), (6, 3), (7, 3) (72, 135, 198, 312, 420
