@@ -8,7 +8,9 @@ samples per pixel), and timed.
 The cases (:data:`MATERIALS` × :data:`SCENES`) are a sphere on a plane under the procedural sky
 and the teapot under the rooitou_park map (small strong sun). Each material is one kind: Lambert,
 ``rgl`` (exact, with the format's own sampling, ``mis-rgl``), ``measured`` and ``projected``
-(``mis-tabulated``), ``rational`` 2-D and 3-D fits (their default sampler).
+(``mis-tabulated``), ``rational`` 2-D and 3-D fits (their default sampler). The 3-D fit is the
+chart's fit of satin_rosaline made by today's fitter (``--fits-3d``, default the chart's fit
+folder; :func:`benchmarks.chart_fits.fit3d_path`: its name follows the fitter's defaults).
 
 Per case it reports:
 
@@ -46,7 +48,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: Material tables (TOML body of ``[materials.obj]``) by case name; ``{fits}`` is ``--fits``.
+#: Material tables (TOML body of ``[materials.obj]``) by case name; ``{fits}`` is ``--fits``,
+#: ``{fit3d}`` the chart's 3-D fit of satin_rosaline in ``--fits-3d`` (:func:`chart_fit3d`).
 MATERIALS = {
     "lambert": 'type = "lambert"\nalbedo = 0.6',
     "rgl-satin": 'type = "rgl"\nfile = "${RBRDF_DATA}/rgl/satin_rosaline_rgb.bsdf"',
@@ -54,7 +57,7 @@ MATERIALS = {
     "measured-satin": 'type = "measured"\nfile = "${RBRDF_DATA}/rgl/satin_rosaline_rgb.bsdf"',
     "projected-satin": 'type = "projected"\nfile = "${RBRDF_DATA}/rgl/satin_rosaline_rgb.bsdf"',
     "rational2d-satin": 'type = "rational"\nfile = "{fits}/satin_rosaline_rgb_tol0p1_cli.json"',
-    "rational3d-satin": 'type = "rational"\nfile = "{fits}/satin_rosaline_rgb_3d_572555287ced.json"',
+    "rational3d-satin": 'type = "rational"\nfile = "{fit3d}"',
 }
 
 _SPHERE = """
@@ -109,18 +112,31 @@ MAX_OUTLIER_FRACTION = 1e-3
 N_PAIRS = 4096
 
 
-def scene_text(scene: str, material: str, fits: Path, resolution: int, spp: int) -> str:
+def chart_fit3d(fits3d: Path | None = None) -> Path:
+    """The chart's 3-D fit of satin_rosaline in ``fits3d`` (default the chart's fit folder) under
+    the cache key of today's fitter defaults (:func:`benchmarks.chart_fits.fit3d_path`; the
+    measurement from ``RBRDF_DATA``, default ``../shared/data``)."""
+    from benchmarks.chart_fits import FIT3D_DIR, fit3d_path
+
+    data = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
+    return fit3d_path(data / "rgl" / "satin_rosaline_rgb.bsdf", fit_dir=fits3d or FIT3D_DIR)
+
+
+def scene_text(scene: str, material: str, fits: Path, resolution: int, spp: int, fits3d: Path | None = None) -> str:
     """TOML text of case (``scene``, ``material``) at ``resolution``² pixels and ``spp``."""
     body = SCENES[scene].replace("resolution = [64, 64]", f"resolution = [{resolution}, {resolution}]")
     mat = MATERIALS[material].replace("{fits}", str(fits))
+    if "{fit3d}" in mat:
+        mat = mat.replace("{fit3d}", str(chart_fit3d(fits3d)))
     return (body + f"\n[integrator]\nspp = {spp}\n\n[materials.obj]\n{mat}\n" + _FLOOR)
 
 
-def make_renderer(scene: str, material: str, fits: Path, resolution: int, spp: int, device: str):
+def make_renderer(scene: str, material: str, fits: Path, resolution: int, spp: int, device: str,
+                  fits3d: Path | None = None):
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene.parse import parse_scene
 
-    sc = parse_scene(scene_text(scene, material, fits, resolution, spp), base_dir=ROOT)
+    sc = parse_scene(scene_text(scene, material, fits, resolution, spp, fits3d), base_dir=ROOT)
     return Renderer(sc, device=device)
 
 
@@ -212,6 +228,8 @@ def main(argv=None) -> int:
     ap.add_argument("--write-reference", type=Path, help="render the CPU references into this folder and stop")
     ap.add_argument("--fits", type=Path, default=ROOT / "results" / "fits",
                     help="folder of the rational fit files named in MATERIALS")
+    ap.add_argument("--fits-3d", dest="fits_3d", type=Path, default=None,
+                    help="folder of the chart's 3-D fits (default results/chart/fits): the 3-D case's file")
     ap.add_argument("--cases", default="all", help="comma-separated material names (default all)")
     ap.add_argument("--scenes", default="all", help="comma-separated scene names (default all)")
     ap.add_argument("--check-resolution", type=int, default=96)
@@ -235,7 +253,7 @@ def main(argv=None) -> int:
                 "check_spp": a.check_spp, "cases": {}}
         for s, m in cases:
             t0 = time.perf_counter()
-            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu")
+            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu", a.fits_3d)
             p = probe(r, a.check_resolution, a.check_spp)
             np.savez_compressed(a.write_reference / f"{s}__{m}.npz",
                                 **{k: v for k, v in p.items() if isinstance(v, np.ndarray)}, spp=p["spp"])
@@ -256,11 +274,11 @@ def main(argv=None) -> int:
         key = f"{s}/{m}"
         row: dict = {}
         try:
-            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, a.device)
+            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, a.device, a.fits_3d)
             p = probe(r, a.check_resolution, a.check_spp)
             row["first_compile_s"], row["first_setup_s"] = r.compile_seconds, r.setup_seconds
             if cpu_here:
-                ref = probe(make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu"),
+                ref = probe(make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu", a.fits_3d),
                             a.check_resolution, a.check_spp)
             else:
                 z = np.load(a.reference / f"{s}__{m}.npz")
@@ -268,7 +286,7 @@ def main(argv=None) -> int:
                 ref["spp"] = int(ref["spp"])
             row["agreement"] = compare(p, ref)
             row["sample_error"] = p.get("sample_error")
-            big = make_renderer(s, m, a.fits, a.resolution, a.spp, a.device)
+            big = make_renderer(s, m, a.fits, a.resolution, a.spp, a.device, a.fits_3d)
             row["speed"] = speed(big, a.spp, a.repeats)
         except Exception as e:  # noqa: BLE001 - one failing case is a result, not the end of the run
             row["error"] = f"{type(e).__name__}: {e}"
