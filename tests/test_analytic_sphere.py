@@ -327,6 +327,7 @@ def _compare_renders(sc, spp, folder):
     return z, a, b, va, vb
 
 
+@pytest.mark.heavy
 def test_sphere_scene_render_equals_the_icosphere_render(tmp_path):
     """scenes/sphere.toml (measured satin sphere on a Lambert plane under a sky: closest hits
     and shadows over spheres and triangles): analytic and icosphere renders agree in their

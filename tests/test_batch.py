@@ -241,6 +241,7 @@ def scheduler(tmp_path_factory):
 
 
 # --- the fit's own sampler in each BRDF output, as rbrdf-fit brdf stores it --------------------------
+@pytest.mark.heavy
 def test_batch_stores_the_fits_own_sampler(materials, tmp_path, scheduler):
     """A BRDF output of the batch carries the fit's own inverse CDFs (the sampler record of
     rbrdf-fit brdf: made from the fit, its table the renderer's tabulation of the fit), reported
@@ -276,6 +277,7 @@ def test_batch_stores_the_fits_own_sampler(materials, tmp_path, scheduler):
     assert brdf_key(sha, bo, SamplerOptions(1.0)) != brdf_key(sha, bo) != brdf_key(sha, bo, SamplerOptions())
 
 
+@pytest.mark.heavy
 def test_external_scheduler_and_failure_isolation(materials, tmp_path, scheduler):
     from fit.batch import fit_database
 

@@ -133,6 +133,7 @@ def _direct_ratio(b, fit, v, n):
     return np.var(e_r) / np.var(e_t)
 
 
+@pytest.mark.heavy
 def test_pieces_variance_gate(paint):
     """The gate's per-row ratio is the ratio of the two samplers' variances on the same
     (mu, tau); rows measured from limit / 1.25 to twice the limit are measured again on 8x the

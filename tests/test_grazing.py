@@ -109,13 +109,14 @@ def test_rim_band_is_the_roles_and_is_gone(paper):
     assert np.all(np.abs(new - 1) < 0.05), new
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("material", rgl_params(["cc_ibiza_sunset_rgb", "vch_golden_yellow_rgb"]))
 def test_rim_fireflies_are_the_cosine_sample(material):
     """The brightest rim pixel over the rim's median: the ``measured`` table sampled with its
     tabulated inverse CDFs matches the reference (within 25 %) and keeps the band's mean; the
-    cosine technique of ``mis`` exceeds twice the reference (the witness: its variance). The
-    default run takes one clear-coat film (cc_ibiza_sunset), ``-m extended`` the other
-    (vch_golden_yellow) too."""
+    cosine technique of ``mis`` exceeds twice the reference (the witness: its variance). A
+    ``heavy`` test (six renders): ``-m heavy`` takes one clear-coat film (cc_ibiza_sunset), with
+    ``extended`` the other (vch_golden_yellow) too; ``.ci/run`` runs both."""
     band = _rim_band(frac=0.2)
 
     def firefly(img):
