@@ -115,28 +115,31 @@ N_PAIRS = 4096
 def chart_fit3d(fits3d: Path | None = None) -> Path:
     """The chart's 3-D fit of satin_rosaline in ``fits3d`` (default the chart's fit folder) under
     the cache key of today's fitter defaults (:func:`benchmarks.chart_fits.fit3d_path`; the
-    measurement from ``RBRDF_DATA``, default ``../shared/data``)."""
+    measurement in the shared data folder the scenes' ``${RBRDF_DATA}`` names,
+    :func:`warp_rbrdf.paths.require_data_root`)."""
     from benchmarks.chart_fits import FIT3D_DIR, fit3d_path
+    from warp_rbrdf.paths import require_data_root
 
-    data = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
-    return fit3d_path(data / "rgl" / "satin_rosaline_rgb.bsdf", fit_dir=fits3d or FIT3D_DIR)
+    bsdf = require_data_root("the 3-D case's measurement") / "rgl" / "satin_rosaline_rgb.bsdf"
+    return fit3d_path(bsdf, fit_dir=fits3d or FIT3D_DIR)
 
 
-def scene_text(scene: str, material: str, fits: Path, resolution: int, spp: int, fits3d: Path | None = None) -> str:
-    """TOML text of case (``scene``, ``material``) at ``resolution``² pixels and ``spp``."""
+def scene_text(scene: str, material: str, fits: Path, resolution: int, spp: int, fit3d: Path | None = None) -> str:
+    """TOML text of case (``scene``, ``material``) at ``resolution``² pixels and ``spp``; ``fit3d``
+    the 3-D fit file (:func:`chart_fit3d`) of a material that names ``{fit3d}``."""
     body = SCENES[scene].replace("resolution = [64, 64]", f"resolution = [{resolution}, {resolution}]")
     mat = MATERIALS[material].replace("{fits}", str(fits))
     if "{fit3d}" in mat:
-        mat = mat.replace("{fit3d}", str(chart_fit3d(fits3d)))
+        mat = mat.replace("{fit3d}", str(fit3d))
     return (body + f"\n[integrator]\nspp = {spp}\n\n[materials.obj]\n{mat}\n" + _FLOOR)
 
 
 def make_renderer(scene: str, material: str, fits: Path, resolution: int, spp: int, device: str,
-                  fits3d: Path | None = None):
+                  fit3d: Path | None = None):
     from warp_rbrdf.renderer import Renderer
     from warp_rbrdf.scene.parse import parse_scene
 
-    sc = parse_scene(scene_text(scene, material, fits, resolution, spp, fits3d), base_dir=ROOT)
+    sc = parse_scene(scene_text(scene, material, fits, resolution, spp, fit3d), base_dir=ROOT)
     return Renderer(sc, device=device)
 
 
@@ -246,6 +249,7 @@ def main(argv=None) -> int:
     mats = list(MATERIALS) if a.cases == "all" else a.cases.split(",")
     scenes = list(SCENES) if a.scenes == "all" else a.scenes.split(",")
     cases = [(s, m) for s in scenes for m in mats]
+    fit3d = chart_fit3d(a.fits_3d) if any("{fit3d}" in MATERIALS.get(m, "") for m in mats) else None   # hashed once
 
     if a.write_reference:
         a.write_reference.mkdir(parents=True, exist_ok=True)
@@ -253,7 +257,7 @@ def main(argv=None) -> int:
                 "check_spp": a.check_spp, "cases": {}}
         for s, m in cases:
             t0 = time.perf_counter()
-            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu", a.fits_3d)
+            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu", fit3d)
             p = probe(r, a.check_resolution, a.check_spp)
             np.savez_compressed(a.write_reference / f"{s}__{m}.npz",
                                 **{k: v for k, v in p.items() if isinstance(v, np.ndarray)}, spp=p["spp"])
@@ -274,11 +278,11 @@ def main(argv=None) -> int:
         key = f"{s}/{m}"
         row: dict = {}
         try:
-            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, a.device, a.fits_3d)
+            r = make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, a.device, fit3d)
             p = probe(r, a.check_resolution, a.check_spp)
             row["first_compile_s"], row["first_setup_s"] = r.compile_seconds, r.setup_seconds
             if cpu_here:
-                ref = probe(make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu", a.fits_3d),
+                ref = probe(make_renderer(s, m, a.fits, a.check_resolution, a.check_spp, "cpu", fit3d),
                             a.check_resolution, a.check_spp)
             else:
                 z = np.load(a.reference / f"{s}__{m}.npz")
@@ -286,7 +290,7 @@ def main(argv=None) -> int:
                 ref["spp"] = int(ref["spp"])
             row["agreement"] = compare(p, ref)
             row["sample_error"] = p.get("sample_error")
-            big = make_renderer(s, m, a.fits, a.resolution, a.spp, a.device, a.fits_3d)
+            big = make_renderer(s, m, a.fits, a.resolution, a.spp, a.device, fit3d)
             row["speed"] = speed(big, a.spp, a.repeats)
         except Exception as e:  # noqa: BLE001 - one failing case is a result, not the end of the run
             row["error"] = f"{type(e).__name__}: {e}"

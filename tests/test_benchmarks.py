@@ -52,7 +52,7 @@ def test_bench_cuda_agreement_flags_a_bias(tmp_path):
                  * np.sqrt(probe["variance"] / probe["spp"]))
     assert bench_cuda.compare(noisy, probe)["agrees"]
     # the 3-D case reads the chart's fit of today's fitter defaults, in --fits-3d
-    text = bench_cuda.scene_text("sphere-sky", "rational3d-satin", tmp_path, 16, 4, tmp_path / "f3")
+    text = bench_cuda.scene_text("sphere-sky", "rational3d-satin", tmp_path, 16, 4, bench_cuda.chart_fit3d(tmp_path / "f3"))
     assert f'file = "{bench_cuda.chart_fit3d(tmp_path / "f3")}"' in text
     assert bench_cuda.chart_fit3d(tmp_path / "f3").parent == tmp_path / "f3"
 
