@@ -9,7 +9,11 @@
   (stated tolerance :data:`RTOL`): shipped 2-D fits with their measured domain and a flagged
   piece read from the embedded fallback table, log and linear values, active clamps, vouched
   and measured ranges, nested theta_h pieces, 3-D fits with a phi_d split, a fit whose pieces
-  fall back to the packed form;
+  fall back to the packed form, 3-D fits (one box, pieces) with the value factor
+  ``"1/cos_theta_i"`` (step 8);
+* the value factor: a flag of every leaf (the records otherwise those of the same fit without
+  it); at light directions down to cos theta_i = 1e-4 (below ``COS_FLOOR``) both functions give
+  their value of the same fit without the factor divided by ``max(wi.z, COS_FLOOR)``;
 * against the one generic function (``rational_eval``, the packed form and libm's ``atan2``) at
   the same directions, the values differ only by the angles' float32 rounding;
 * the flat record's angles (``rational_flat2d.angles_2d``: no ``atan2``) against
@@ -32,7 +36,7 @@ from fit.formats.grid import theta_d_index, theta_h_index
 from fit.rational.coefficient_file import load as load_coefficients
 from fit.rational.domain import measured_domain, onto_measured_domain
 from fit.rational.flagged import flagged_regions
-from fit.rational.variables3d import is_3d
+from fit.rational.variables3d import evaluate_directions, half_diff_3d, is_3d
 from fit.rational.vouched import values_with_table
 from lab import testing as T
 from warp_rbrdf import chebyshev_dense as D
@@ -316,27 +320,42 @@ def test_vector_and_scalar_channels_agree():
 # --------------------------------------------------------------------------------------------
 # Fits and their NumPy reference
 # --------------------------------------------------------------------------------------------
-def model_3d(seed=0, phi_split=True):
+_TD_3D, _PD_3D = (0.0, np.radians(89.0)), (0.0, np.pi)   # theta_d and |phi_d| boxes of the 3-D fits
+
+
+def _leaf_3d(rng, th, ph, dn, dd, name, value_factor="none"):
+    """A 3-D single-box fit on theta_h in ``th``, |phi_d| in ``ph`` (radians) of total degrees
+    (``dn``, ``dd``): log values, clamps, vouched ranges; ``value_factor`` (step 8)."""
+    v = [M.Variable("theta_h", "rad", "sqrt", th), M.Variable("theta_d", "rad", "identity", _TD_3D),
+         M.Variable("phi_d", "rad", "identity", ph)]
+    dom = np.array([x.rf_domain for x in v])
+    ne, de = basis.total_degree_exponents(3, dn), basis.total_degree_exponents(3, dd)
+    fs = []
+    for c in range(3):
+        p = rng.normal(size=len(ne)) * 0.3
+        p[0] = -0.5 + 0.3 * c
+        q = rng.normal(size=len(de)) * 0.03
+        q[0] = 1.0
+        fs.append(function.RationalFunction(dom, ne, p, de, q))
+    info = [{"valid": True, "vouched_range": [0.0, 3.0 + c]} for c in range(3)]
+    return M.RationalModel(name=name, variables=v, functions=fs, value_transform="log", value_offset=0.02,
+                           value_min=0.0, value_max=2.5, function_info=info, value_factor=value_factor)
+
+
+def single_3d(seed=1, value_factor="1/cos_theta_i"):
+    """A 3-D fit of one box (the whole domain), total degrees (5, 2): :func:`_leaf_3d`."""
+    return _leaf_3d(np.random.default_rng(seed), (0.0, np.pi / 2), _PD_3D, 5, 2, "single3d", value_factor)
+
+
+def model_3d(seed=0, phi_split=True, value_factor="none"):
     """A 3-D fit (theta_h, theta_d, |phi_d|, log values, clamps): theta_h pieces of total degrees
-    (4, 2) and (5, 2), the second split again in phi_d (``phi_split``)."""
+    (4, 2) and (5, 2), the second split again in phi_d (``phi_split``); ``value_factor`` (step 8)
+    on the whole model (the same pieces whatever it is)."""
     rng = np.random.default_rng(seed)
-    td, pd = (0.0, np.radians(89.0)), (0.0, np.pi)
+    td, pd = _TD_3D, _PD_3D
 
     def leaf(th, ph, dn, dd, k):
-        v = [M.Variable("theta_h", "rad", "sqrt", th), M.Variable("theta_d", "rad", "identity", td),
-             M.Variable("phi_d", "rad", "identity", ph)]
-        dom = np.array([x.rf_domain for x in v])
-        ne, de = basis.total_degree_exponents(3, dn), basis.total_degree_exponents(3, dd)
-        fs = []
-        for c in range(3):
-            p = rng.normal(size=len(ne)) * 0.3
-            p[0] = -0.5 + 0.3 * c
-            q = rng.normal(size=len(de)) * 0.03
-            q[0] = 1.0
-            fs.append(function.RationalFunction(dom, ne, p, de, q))
-        info = [{"valid": True, "vouched_range": [0.0, 3.0 + c]} for c in range(3)]
-        return M.RationalModel(name=f"leaf{k}", variables=v, functions=fs, value_transform="log",
-                               value_offset=0.02, value_min=0.0, value_max=2.5, function_info=info)
+        return _leaf_3d(rng, th, ph, dn, dd, f"leaf{k}")
 
     def whole(th):
         return [M.Variable("theta_h", "rad", "sqrt", th), M.Variable("theta_d", "rad", "identity", td),
@@ -350,7 +369,8 @@ def model_3d(seed=0, phi_split=True):
                                           pieces=[leaf((edges[1], edges[2]), (0.0, 1.2), 5, 2, 1),
                                                   leaf((edges[1], edges[2]), (1.2, np.pi), 5, 2, 2)])
     return M.PiecewiseRationalModel(name="fit3d", variables=whole((0.0, np.pi / 2)), split_variable="theta_h",
-                                    edges=edges, pieces=[leaf((edges[0], edges[1]), pd, 4, 2, 0), second])
+                                    edges=edges, pieces=[leaf((edges[0], edges[1]), pd, 4, 2, 0), second],
+                                    value_factor=value_factor)
 
 
 def _clamped_piecewise():
@@ -382,6 +402,9 @@ def _cases():
                   "nested": spec("nested", data=piecewise_model("log")),
                   "clamped_table": spec("clamped_table", data=_clamped_piecewise()),
                   "fit3d": spec("fit3d", data=model_3d()),
+                  "fit3d_cos": spec("fit3d_cos", data=model_3d(value_factor="1/cos_theta_i")),
+                  "single3d": spec("single3d", data=single_3d(value_factor="none")),
+                  "single3d_cos": spec("single3d_cos", data=single_3d()),
                   "packed": spec("packed", data=_packed_fallback_model()),
                   "flat_h": spec("flat_h", data=_flat_theta_h_model())})
     return specs
@@ -496,13 +519,19 @@ def _evaluate(r, name, wi, wo):
     return out.numpy().astype(float), ang.numpy().astype(float), gen.numpy().astype(float)
 
 
-def _reference(lm, ang):
-    """The NumPy reference at the kernel's angles: the 3-D recipe at (theta_h, theta_d, |phi_d|),
-    or the 2-D fit moved onto its measured domain (the moved theta_d rounded to float32 as the
-    kernel rounds it) with its fallback table in flagged pieces (``fit.rational.vouched``)."""
+def _reference(lm, ang, wi, wo):
+    """The NumPy reference at the kernel's angles ``ang`` of the pairs ``wi``, ``wo``: the 3-D
+    recipe's steps 1-7 at (theta_h, theta_d, |phi_d|) and its step 8 (the value factor) at the
+    pairs' own float64 angles (:func:`fit.rational.variables3d.evaluate_directions` but for the
+    float32 angles of steps 1-7: 1 / cos theta_i near the horizon would magnify their rounding,
+    which the kernel's ``wi.z`` does not have), or the 2-D fit moved onto its measured domain
+    (the moved theta_d rounded to float32 as the kernel rounds it) with its fallback table in
+    flagged pieces (``fit.rational.vouched``)."""
     model, table = lm.data, lm.fallback_table
     if is_3d(model):
-        return np.asarray(model(np.stack([ang[:, 0], ang[:, 1], np.abs(ang[:, 2])], -1)), float), None
+        values = model.values(np.stack([ang[:, 0], ang[:, 1], np.abs(ang[:, 2])], -1))
+        x64 = half_diff_3d(wi.astype(float), wo.astype(float))
+        return M.apply_value_factor(np.asarray(values, float), x64, model.value_factor), None
     x = ang[:, :2]
     cut = measured_domain(model)
     if cut is not None:
@@ -534,7 +563,7 @@ def test_specialised_eval_equals_the_numpy_reference(scene, name):
     got, ang, gen = _evaluate(r, name, wi, wo)
     above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
     assert np.all(got[~above] == 0) and np.all(np.isfinite(got))
-    ref, x = _reference(lm, ang[above])
+    ref, x = _reference(lm, ang[above], wi[above], wo[above])
     ok = np.ones(len(ref), bool)
     if lm.fallback_table is not None:
         # flagged channels read the table's cluster of the angles clamped onto the piece's box;
@@ -579,6 +608,107 @@ def test_clamps_tables_and_pieces_are_reached(scene):
     nums = [(f.num_exponents, f.num_coef) for f in leaf.functions]
     assert D.dense_class(nums, [(f.den_exponents, f.den_coef) for f in leaf.functions], 2) is None
     assert np.mean((d > 30) & (d < 60) & above) > 0.1   # the packed leaf's theta_d piece
+
+
+#: the fits with the value factor "1/cos_theta_i" -> the same fit with "none" (among _cases)
+FACTOR_TWINS = {"fit3d_cos": "fit3d", "single3d_cos": "single3d"}
+
+
+def _leaf_offsets(ints) -> list:
+    """The int offsets of a packed fit's leaf records (:func:`rational_records.pack_model`)."""
+    R = rational_records
+    out, todo = [], [0]
+    while todo:
+        n = todo.pop()
+        kind = int(ints[n])
+        if kind == R.NODE_DOMAIN:
+            todo.append(int(ints[n + R.DOMAIN_CHILD]))
+        elif kind == R.NODE_FLAT2D:
+            todo.append(int(ints[n + R.FLAT_TREE]))
+        elif kind == R.NODE_SPLIT:
+            todo += [int(c) for c in ints[n + R.SPLIT_CHILDREN:n + R.SPLIT_CHILDREN + int(ints[n + R.SPLIT_N])]]
+        else:
+            out.append(n)
+    return sorted(out)
+
+
+@pytest.mark.parametrize("name", list(FACTOR_TWINS))
+def test_value_factor_is_a_flag_of_every_leaf(name):
+    """A fit with the value factor packs as its twin without one but for ``LEAF_INV_COS`` in the
+    flags of every leaf (the pieces' own factor is "none"; a single box is its own leaf); no
+    flat record; the kernels' floor is the model's."""
+    R = rational_records
+    model = _cases()[name].data
+    twin = _cases()[FACTOR_TWINS[name]].data
+    assert model.value_factor == "1/cos_theta_i" and twin.value_factor == "none"
+    ints, floats, rows = rational.pack_model(model)
+    ints0, floats0, rows0 = rational.pack_model(twin)
+    leaves = _leaf_offsets(ints)
+    assert leaves == _leaf_offsets(ints0) and len(leaves) == (3 if name == "fit3d_cos" else 1)
+    assert all(ints[n + R.LEAF_FLAGS] & R.LEAF_INV_COS for n in leaves)
+    assert not any(ints0[n + R.LEAF_FLAGS] & R.LEAF_INV_COS for n in leaves)
+    flag_slots = np.zeros(len(ints), bool)
+    flag_slots[[n + R.LEAF_FLAGS for n in leaves]] = True
+    np.testing.assert_array_equal(np.where(flag_slots, ints & ~R.LEAF_INV_COS, ints), ints0)
+    np.testing.assert_array_equal(floats, floats0)
+    np.testing.assert_array_equal(rows, rows0)
+    assert not _is_flat(ints)
+    assert RK.COS_FLOOR_F32.value == np.float32(M.COS_FLOOR)
+    with pytest.raises(ValueError, match="unknown value factor"):
+        bad = single_3d()
+        bad.value_factor = "cos_theta_o"
+        rational.pack_model(bad)
+
+
+def _grazing_light_pairs(n, seed):
+    """``n`` direction pairs above the horizon, float32: the light's cos theta_i log-uniform in
+    [1e-4, 1] (a quarter below ``COS_FLOOR``), the view uniform over the hemisphere (half of
+    them) or within about 0.6 deg of the light's mirror direction (its z made positive)."""
+    rng = np.random.default_rng(seed)
+    wi = spherical_to_direction(np.arccos(10.0 ** rng.uniform(-4.0, 0.0, n)), rng.random(n) * 2 * np.pi)
+    wo = spherical_to_direction(np.arccos(rng.random(n)), rng.random(n) * 2 * np.pi)
+    h = n // 2
+    wo[h:] = wi[h:] * [-1, -1, 1] + rng.normal(scale=0.01, size=(n - h, 3))
+    wo[h:, 2] = np.abs(wo[h:, 2])
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    return wi.astype(np.float32), wo.astype(np.float32)
+
+
+@pytest.mark.parametrize("name", list(FACTOR_TWINS))
+def test_value_factor_at_grazing_light(scene, name):
+    """Step 8 (``value_factor = "1/cos_theta_i"``: rho = y / max(cos theta_i, COS_FLOOR)) at
+    light directions from cos theta_i = 1e-4 to 1, a single box and pieces split in theta_h and
+    phi_d: the specialised function within float32 rounding (:data:`RTOL`) of the reference
+    (steps 1-7 at the kernel's angles, step 8 at the pairs', :func:`_reference`); the
+    specialised and the generic function each give their value of the same fit without the
+    factor divided by ``max(wi.z, COS_FLOOR)`` in float32 (so the factor is applied, and
+    applied once, after the clamps); both against
+    :func:`fit.rational.variables3d.evaluate_directions` at the float64 directions."""
+    r, _ = scene
+    lm = r.material_data.loaded[r.material_index(name)]
+    wi, wo = _grazing_light_pairs(40_000, seed=13)
+    assert np.all((wi[:, 2] > 0) & (wo[:, 2] > 0)) and np.mean(wi[:, 2] < M.COS_FLOOR) > 0.2
+    got, ang, gen = _evaluate(r, name, wi, wo)
+    assert np.all(np.isfinite(got)) and np.all(np.isfinite(gen))
+    ref, _ = _reference(lm, ang, wi, wo)
+    np.testing.assert_allclose(got, ref, rtol=RTOL, atol=ATOL, err_msg=name)
+    # the twin without the factor, through the same kernels: one float32 division apart
+    got0, _, gen0 = _evaluate(r, FACTOR_TWINS[name], wi, wo)
+    assert np.mean(got0 > 0) > 0.5 and np.median(wi[:, 2]) < 0.02
+    cos_i = np.maximum(wi[:, 2], np.float32(M.COS_FLOOR))[:, None]
+    for v, v0 in ((got, got0), (gen, gen0)):
+        np.testing.assert_allclose(v, (v0.astype(np.float32) / cos_i).astype(float), rtol=2.4e-7, atol=0,
+                                   err_msg=name)
+    # the float64 evaluation at the float64 directions: what the angles' float32 rounding costs
+    # (most near values that exp(y) - offset cancels to almost 0), the same with and without
+    # the factor
+    twin = r.material_data.loaded[r.material_index(FACTOR_TWINS[name])].data
+    ref64, ref64_0 = (evaluate_directions(m, wi.astype(float), wo.astype(float)) for m in (lm.data, twin))
+    for v, v0 in ((got, got0), (gen, gen0)):
+        rel, rel0 = (np.abs(a - b) / np.maximum(np.abs(b), 1e-6) for a, b in ((v, ref64), (v0, ref64_0)))
+        assert np.quantile(rel, 0.99) < 1e-5, (name, np.quantile(rel, 0.99))
+        for q in (0.999, 1.0):
+            assert np.quantile(rel, q) <= 1.5 * np.quantile(rel0, q) + 1e-6, (name, q, np.quantile(rel, q))
 
 
 def test_a_fit_of_compiled_classes_compiles_nothing():

@@ -1,6 +1,7 @@
 """``rational``: the fitter's ``rbrdf-rational`` coefficient files (:mod:`fit.rational.coefficient_file`,
-versions 1 and 2, and version 3: 3-D fits of (theta_h, theta_d, |phi_d|), :mod:`fit.rational.fit3d`)
-evaluated from data; ``scale`` multiplies them.
+versions 1 and 2, version 3: 3-D fits of (theta_h, theta_d, |phi_d|), :mod:`fit.rational.fit3d`, and
+version 4: 3-D fits whose functions give rho cos theta_i, the value factor ``"1/cos_theta_i"`` a
+flag of every leaf, :mod:`.rational_records`) evaluated from data; ``scale`` multiplies them.
 
 A fit is packed (:func:`pack_model`, :mod:`.rational_records`) into records of
 ``Materials.coef_i`` / ``coef_f`` / ``coef_q``: a split record per piecewise level and a leaf

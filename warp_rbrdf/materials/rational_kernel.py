@@ -5,7 +5,11 @@ Rusinkiewicz angles -> (moved onto the measured domain: the domain record) -> th
 (``x <= edge`` picks the lower piece) -> clamp onto the piece's box -> input transform (identity
 / sqrt) -> map onto [-1, 1] -> Chebyshev sums -> P/Q per channel -> value transform (linear /
 log) -> ``max(y, min)``, ``min(y, max)`` -> the step-7 range, or the fallback table in a
-flagged channel; 0 below the horizon. The polynomial part runs in float64; the angles come
+flagged channel -> step 8, the value factor: in a leaf flagged ``LEAF_INV_COS`` (a model with
+``value_factor = "1/cos_theta_i"``, :mod:`.rational_records`) the three channels divided by
+``max(wi.z, COS_FLOOR)`` (wi.z: cos theta_i of the light's local direction, which the
+unclamped Rusinkiewicz angles give; :data:`fit.rational.model.COS_FLOOR`), in float32 after
+their rounding; 0 below the horizon. The polynomial part runs in float64; the angles come
 from the float32 shading frame.
 
 * :func:`rational_eval`: one function for every fit (the packed Chebyshev groups,
@@ -34,6 +38,7 @@ import functools
 import warp as wp
 
 from fit.formats.grid import N_THETA_D
+from fit.rational.model import COS_FLOOR
 
 from .. import fastmath as fmath
 from ..chebyshev import cheb_sum6, vec6d
@@ -59,6 +64,7 @@ from .rational_records import (
     LEAF_DENSE,
     LEAF_FH,
     LEAF_FLAGS,
+    LEAF_INV_COS,
     LEAF_LOG,
     LEAF_MAX,
     LEAF_MIN,
@@ -86,6 +92,10 @@ from .rational_records import (
 DOMAIN_MARGIN = 1.0e-5
 
 vec6f = wp.types.vector(length=6, dtype=wp.float32)
+
+#: step 8's floor of cos theta_i (:data:`fit.rational.model.COS_FLOOR`) as the float32 the
+#: kernels compare ``wi.z`` with and divide by (relative rounding 5e-8)
+COS_FLOOR_F32 = wp.constant(wp.float32(COS_FLOOR))
 
 
 @wp.func
@@ -151,7 +161,9 @@ def _fallback_table(mats: Materials, m: int, cf: wp.array(dtype=wp.float64), h: 
 def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     """rho (1/sr) of rational material ``m``: its packed fit (:func:`.rational_records.pack_model`,
     ints from ``coef_i[3 m]``, floats from ``coef_i[3 m + 1]``, coefficient rows from
-    ``coef_i[3 m + 2]``) at (wi, wo), times ``Materials.scale[m]``; 0 below the horizon."""
+    ``coef_i[3 m + 2]``) at (wi, wo) (local unit directions, wi towards the light), divided by
+    ``max(wi.z, COS_FLOOR)`` in a leaf flagged ``LEAF_INV_COS``, times ``Materials.scale[m]``; 0
+    below the horizon."""
     if wi[2] <= 0.0 or wo[2] <= 0.0:
         return wp.vec3(0.0)
     ci = mats.coef_i
@@ -205,6 +217,8 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
     y = wp.vec3(_channel(cf, ci[r], h, flags, 0, pq[0], pq[3], tab[0]),
                 _channel(cf, ci[r + 1], h, flags, 1, pq[1], pq[4], tab[1]),
                 _channel(cf, ci[r + 2], h, flags, 2, pq[2], pq[5], tab[2]))
+    if (flags & LEAF_INV_COS) != 0:     # step 8: the value factor 1 / cos theta_i
+        y = y / wp.max(wi[2], COS_FLOOR_F32)
     return wp.cw_mul(y, mats.scale[m])
 
 
@@ -377,6 +391,8 @@ def make_rational_eval(classes: tuple):
         pq = wp.static(leaf_pq)(mats.coef_q, ci, cf, n, ib, fb, ci[3 * m + 2], ta, tb, tc)
         r = n + LEAF_MODES
         y = channels(pq, wp.address_of(cf[h]), flags, ci[r], ci[r + 1], ci[r + 2], tab)
+        if (flags & LEAF_INV_COS) != 0:     # step 8: the value factor 1 / cos theta_i
+            y = y / wp.max(wi[2], COS_FLOOR_F32)
         return wp.cw_mul(y, mats.scale[m])
 
     return rational_eval_classes

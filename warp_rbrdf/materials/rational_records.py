@@ -25,6 +25,13 @@ Records, offsets relative to the material's own starts, the root at int 0:
   class (:mod:`warp_rbrdf.chebyshev_dense`; 0: none) and the float offset of the same
   polynomials stored densely for that class (the form the scene's specialised code reads).
 
+Leaf flags: :data:`LEAF_CLAMP` (inputs clamped onto the box), :data:`LEAF_LOG` (log values),
+:data:`LEAF_MIN` / :data:`LEAF_MAX` (value clamps), :data:`LEAF_TABLE` (a channel reads the
+fallback table), :data:`LEAF_INV_COS` (step 8, the whole model's value factor
+``"1/cos_theta_i"``, :data:`fit.rational.model.VALUE_FACTORS`: the channels after step 7 are
+divided by ``max(cos theta_i, COS_FLOOR)``, cos theta_i = ``wi.z`` of the light's local
+direction; set on every leaf of such a model, whose pieces carry no factor of their own).
+
 The leaf header (floats): value offset, min, max, ``log(max + offset)``; per variable (lo, hi,
 u_lo + u_hi, 1 / (u_hi - u_lo)); per channel the step-7 range (lo, hi); the fallback table's
 box (theta_h lo, hi, theta_d lo, hi). Pure NumPy (the Warp types of the packed forms come with
@@ -34,7 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fit.rational.model import flagged, output_clamp
+from fit.rational.model import VALUE_FACTORS, flagged, output_clamp
 
 from ..chebyshev import FlatData
 from ..chebyshev_dense import dense_class, pack_dense
@@ -50,7 +57,10 @@ SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4   # split record (i
 # leaf record (ints)
 LEAF_NV, LEAF_FLAGS, LEAF_FH, LEAF_VARS, LEAF_POLY, LEAF_MODES, LEAF_CLASS, LEAF_DENSE = 1, 2, 3, 4, 7, 9, 12, 13
 N_LEAF = 14
-LEAF_CLAMP, LEAF_LOG, LEAF_MIN, LEAF_MAX, LEAF_TABLE = 1, 2, 4, 8, 16   # flags
+LEAF_CLAMP, LEAF_LOG, LEAF_MIN, LEAF_MAX, LEAF_TABLE, LEAF_INV_COS = 1, 2, 4, 8, 16, 32   # flags
+#: the leaf flags of each value factor (:data:`fit.rational.model.VALUE_FACTORS`)
+FACTOR_FLAGS = {"none": 0, "1/cos_theta_i": LEAF_INV_COS}
+assert set(FACTOR_FLAGS) == set(VALUE_FACTORS)
 CH_TABLE, CH_RANGE = 1, 2                                               # channel mode bits
 TRANSFORM_CODES = {"identity": 0, "sqrt": 1}
 # leaf header (floats)
@@ -72,15 +82,20 @@ def pack_model(model, table: bool = False, cutoff_deg: float | None = None) -> t
     are relative to the material's starts. ``table``: flagged channels read the fallback table
     (:mod:`.rational`). ``cutoff_deg``: the angles are first moved onto the measured domain of
     that grazing cut-off (:func:`fit.rational.domain.onto_measured_domain`; a domain record at
-    the root); None (default): the file's recipe alone."""
+    the root); None (default): the file's recipe alone. The model's ``value_factor`` (step 8)
+    becomes a flag of every leaf (:data:`FACTOR_FLAGS`); ValueError for an unknown one."""
+    factor = getattr(model, "value_factor", "none")
+    if factor not in FACTOR_FLAGS:
+        raise ValueError(f"unknown value factor {factor!r}")
+    leaf_flags = FACTOR_FLAGS[factor]
     fd = FlatData(6)
     if cutoff_deg is None:
-        _pack_flat(fd, model, table, (-2.0, 0.0))
+        _pack_flat(fd, model, table, (-2.0, 0.0), leaf_flags)
     else:
         cut = np.radians(float(cutoff_deg))
         n = fd.add_ints([NODE_DOMAIN, 0, 0])
         fd.ints[n + DOMAIN_FLOATS] = fd.add_floats([np.cos(cut), cut])
-        fd.ints[n + DOMAIN_CHILD] = _pack_flat(fd, model, table, (np.cos(cut), cut))
+        fd.ints[n + DOMAIN_CHILD] = _pack_flat(fd, model, table, (np.cos(cut), cut), leaf_flags)
     return fd.arrays()
 
 
@@ -100,16 +115,18 @@ def _flat_layout(model, table):
     return var, ([] if pieces is None else list(model.edges[1:-1])), leaves
 
 
-def _pack_flat(fd, model, table, domain) -> int:
+def _pack_flat(fd, model, table, domain, leaf_flags) -> int:
     """The flat record of ``model`` followed by its tree, or the tree alone (a fit the flat
-    record cannot hold); the int offset of the first."""
+    record cannot hold, among them every fit with a value factor: a 3-D one, so
+    :mod:`.rational_flat2d` has no step 8); the int offset of the first. ``leaf_flags``: the
+    flags every leaf carries (:data:`FACTOR_FLAGS`)."""
     layout = _flat_layout(model, table)
     if layout is None:
-        return _pack_node(fd, model, table)
+        return _pack_node(fd, model, table, leaf_flags)
     var, edges, leaves = layout
     k = len(leaves)
     n = fd.add_ints([NODE_FLAT2D, 0, 0, k, var, 0, 0, 0] + [0] * (FLAT_NI * k))
-    tree = _pack_node(fd, model, table)
+    tree = _pack_node(fd, model, table, leaf_flags)
     fd.ints[n + FLAT_TREE] = tree
     nodes = [tree] if k == 1 else [fd.ints[tree + SPLIT_CHILDREN + j] for j in range(k)]
     floats = [*domain, *edges, *[np.inf] * (FLAT_MAX_PIECES - 1 - len(edges))]
@@ -134,22 +151,22 @@ def _leaf_class(model, table):
     return dense_class(nums, dens, len(model.variables))
 
 
-def _pack_node(fd, model, table) -> int:
+def _pack_node(fd, model, table, leaf_flags) -> int:
     pieces = getattr(model, "pieces", None)
     if pieces is None:
-        return _pack_leaf(fd, model, table)
+        return _pack_leaf(fd, model, table, leaf_flags)
     n = fd.add_ints([NODE_SPLIT, SUPPORTED_VARIABLES[model.split_variable], len(pieces), 0] + [0] * len(pieces))
     fd.ints[n + SPLIT_EDGES] = fd.add_floats(model.edges[1:-1])
     for k, piece in enumerate(pieces):
-        fd.ints[n + SPLIT_CHILDREN + k] = _pack_node(fd, piece, table)
+        fd.ints[n + SPLIT_CHILDREN + k] = _pack_node(fd, piece, table, leaf_flags)
     return n
 
 
-def _pack_leaf(fd, model, table) -> int:
+def _pack_leaf(fd, model, table, leaf_flags) -> int:
     nv = len(model.variables)
     modes = channel_modes(model, table)
     vmax, vmin, off = model.value_max, model.value_min, float(model.value_offset)
-    flags = ((LEAF_CLAMP if model.domain_policy.get("outside", "clamp") == "clamp" else 0)
+    flags = (leaf_flags | (LEAF_CLAMP if model.domain_policy.get("outside", "clamp") == "clamp" else 0)
              | (LEAF_LOG if model.value_transform == "log" else 0)
              | (LEAF_MIN if vmin is not None else 0) | (LEAF_MAX if vmax is not None else 0)
              | (LEAF_TABLE if any(t for t, _ in modes) else 0))
