@@ -9,9 +9,12 @@ Mitsuba (the ``reference`` extra). Locally a missing tool skips; under CI it fai
 
 3-D fits (coefficient file version 3, (theta_h, theta_d, |phi_d|), not reciprocal) go through the
 same checks: a small 3-D fit of a synthetic non-reciprocal lobe (``fit_samples``, two theta_h
-pieces) and a copy with a flagged channel, compiled in C and compared with
-:func:`fit.rational.variables3d.evaluate_directions` (light and view roles kept), GLSL / HLSL /
-``.brdf`` compiled, the Mitsuba plugin's ``eval`` (``wo`` the light, ``si.wi`` the viewer).
+pieces; version 4: its functions give rho cos theta_i, the value factor ``"1/cos_theta_i"`` that
+the fitter makes by default), a copy with a flagged channel and a copy without the factor (version
+3), compiled in C and compared with :func:`fit.rational.variables3d.evaluate_directions` (light
+and view roles kept; a tenth of the pairs with a grazing light, wi.z down to 1e-4, where the
+factor is large and at its floor), GLSL / HLSL / ``.brdf`` compiled, the Mitsuba plugin's
+``eval`` (``wo`` the light, ``si.wi`` the viewer).
 
 Tolerances (measured, docs/exports.md, over 20 fits and 20 000 pairs each). C in double: the
 NumPy recipe to rounding (max relative 1.5e-10 where a value is above 1e-2 of its channel's
@@ -40,11 +43,12 @@ from fit.export import to_brdf_explorer, to_c, to_glsl, to_hlsl, to_mitsuba_plug
 from fit.export.brdf_explorer import extract_shader
 from fit.export.c_source import C, function_name
 from fit.export.emitter import Emitter, ExportError, flagged_summary, glsl_literal
+from fit.export.escape import literal
 from fit.export.glsl import GLSL
 from fit.rational import model as M
 from fit.rational.coefficient_file import load
 from fit.rational.domain import measured_domain
-from fit.rational.variables3d import evaluate_directions, is_3d
+from fit.rational.variables3d import evaluate_directions, half_diff_3d, is_3d
 
 FITS = [ROOT / "warp_rbrdf" / "data" / "paper_white_rgb.json",
         ROOT / "warp_rbrdf" / "data" / "satin_rosaline_rgb.json"]
@@ -125,9 +129,19 @@ def _fit3d():
 
 
 def fit3d_model():
-    """A 3-D fit (version 3: two theta_h pieces, log values, sqrt theta_h, vouched ranges) of
-    :func:`lobe3d`, made by the fitter (about 2 s, once per session)."""
-    return copy.deepcopy(_fit3d())
+    """A 3-D fit (version 4: two theta_h pieces, log values, sqrt theta_h, vouched ranges, the
+    value factor ``"1/cos_theta_i"``) of :func:`lobe3d`, made by the fitter (about 2 s, once per
+    session)."""
+    m = copy.deepcopy(_fit3d())
+    assert m.value_factor == "1/cos_theta_i"
+    return m
+
+
+def fit3d_none_model():
+    """:func:`fit3d_model` without its value factor (version 3: the functions' values are rho)."""
+    m = fit3d_model()
+    m.value_factor = "none"
+    return m
 
 
 def fit3d_flagged_model():
@@ -140,7 +154,8 @@ def fit3d_flagged_model():
 
 
 MODELS = {"paper_white": lambda: load(FITS[0]), "satin": lambda: load(FITS[1]), "tricky": tricky_model,
-          "single_linear": single_linear_model, "fit3d": fit3d_model, "fit3d_flagged": fit3d_flagged_model}
+          "single_linear": single_linear_model, "fit3d": fit3d_model, "fit3d_flagged": fit3d_flagged_model,
+          "fit3d_none": fit3d_none_model}
 
 
 def reference(model):
@@ -157,9 +172,19 @@ def reference(model):
     return evaluate_at_angles(model, None, measured_domain(model))
 
 
+def grazing(n, rng, lowest=1e-4, highest=3e-2):
+    """``n`` unit directions with z log-uniform in [``lowest``, ``highest``] (a light at the
+    horizon: a value factor 1/cos theta_i large, and at its floor 1e-3 below it), uniform azimuth."""
+    z = np.exp(rng.uniform(np.log(lowest), np.log(highest), n))
+    phi = rng.uniform(-np.pi, np.pi, n)
+    s = np.sqrt(1.0 - z * z)
+    return np.stack([s * np.cos(phi), s * np.sin(phi), z], axis=-1)
+
+
 def directions(n, seed=0):
     """(wi, wo) (n, 3): uniform on the upper hemisphere, a tenth near the mirror direction
-    (the specular peak) and a tenth with one direction below the horizon."""
+    (the specular peak), a tenth with one direction below the horizon and a tenth with a
+    grazing light (:func:`grazing`)."""
     rng = np.random.default_rng(seed)
 
     def hemi(k):
@@ -173,6 +198,7 @@ def directions(n, seed=0):
     wo[:k] = mirror / np.linalg.norm(mirror, axis=1, keepdims=True)
     wo[:k, 2] = np.abs(wo[:k, 2])
     wo[k:2 * k, 2] *= -1
+    wi[2 * k:3 * k] = grazing(k, rng)
     return wi, wo
 
 
@@ -219,8 +245,9 @@ def agreement(got, ref, above=1e-2):
 # --------------------------------------------------------------------------------------------
 # C: compiled, against NumPy
 #: models whose float and float-exp builds repeat another's paths (paper_white: satin's; fit3d:
-#: fit3d_flagged's, which adds the flagged clamp): those two builds of them are ``extended``
-C_REAL_REPEATS = ("paper_white", "fit3d")
+#: fit3d_flagged's, which adds the flagged clamp; fit3d_none: fit3d_flagged's without the value
+#: factor): those two builds of them are ``extended``
+C_REAL_REPEATS = ("paper_white", "fit3d", "fit3d_none")
 
 
 @pytest.mark.parametrize("which, real", [
@@ -240,8 +267,10 @@ def test_c_matches_numpy(tmp_path, which, real):
     print(f"{which} {real}: max rel {rel:.3g} (above 1e-2/1e-3 of max), max abs/max {absmax:.3g}")
     if real == "double":
         assert rel < 1e-7 and absmax < 1e-9, (rel, absmax)
-    elif real == "double-expf":          # the GLSL double variant's arithmetic: float exp, and
-        assert rel < 1e-3 and absmax < 1e-6, (rel, absmax)    # float cos / acos of the domain edge (2.1e-4)
+    elif real == "double-expf":          # the GLSL double variant's arithmetic: float exp, float cos /
+        # acos of the domain edge (rel 2.1e-4), float cos / sin of cos theta_i near the light's horizon
+        # (the value factor: rel 7.1e-5, abs 1.5e-5 of the max, where 1e-7 of cos theta_i is 1e-4 of rho)
+        assert rel < 1e-3 and absmax < (5e-5 if model.value_factor != "none" else 1e-6), (rel, absmax)
     else:
         assert rel < 1e-2 and absmax < 3e-3, (rel, absmax)
 
@@ -263,6 +292,60 @@ def test_c_3d_keeps_the_roles_of_light_and_view(tmp_path, real):
     assert np.median(np.abs(swapped - got)[lit] / got[lit]) > 0.1
     mirrored, _, _ = f(a * [1, -1, 1], b * [1, -1, 1])
     np.testing.assert_allclose(mirrored, got, rtol=1e-9 if real == "double" else 1e-4, atol=1e-12)
+
+
+def test_c_3d_value_factor_at_the_horizon(tmp_path):
+    """Step 8 in the compiled C (double) at grazing lights (wi.z from 1e-4 to 3e-2): the fit
+    with the value factor is its copy without it divided by max(wi.z, 1e-3), with cos theta_i
+    of the angles before any clamp (pairs beyond the fitted box, theta_h or theta_d above 80
+    deg, included) and at the floor below wi.z = 1e-3. Ignoring the factor, or dividing by cos
+    theta_i of the clamped angles, fails it."""
+    model, plain = MODELS["fit3d"](), MODELS["fit3d_none"]()
+    rng = np.random.default_rng(11)
+    n = 4000
+    wi = grazing(n, rng)
+    wo = np.concatenate([grazing(n // 2, rng, 1e-4, 0.3), rng.normal(size=(n - n // 2, 3))])
+    wo[:, 2] = np.abs(wo[:, 2])
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    (tmp_path / "factor").mkdir()
+    (tmp_path / "none").mkdir()              # the same function names: one library each
+    got, a, b = compile_c(model, tmp_path / "factor", "double")(wi, wo)
+    values, _, _ = compile_c(plain, tmp_path / "none", "double")(wi, wo)
+    x = half_diff_3d(a, b)
+    hi = np.array([v.domain[1] for v in model.variables])
+    beyond = np.any(x > hi, axis=1)
+    floor = a[:, 2] < M.COS_FLOOR
+    assert beyond.sum() > 200 and floor.sum() > 200 and (~floor).sum() > 200, (beyond.sum(), floor.sum())
+    assert np.all(values > 0.0)
+    np.testing.assert_allclose(got, values / np.maximum(a[:, 2], M.COS_FLOOR)[:, None], rtol=1e-9, atol=0.0)
+    np.testing.assert_allclose(got, reference(model)(a, b), rtol=1e-9, atol=0.0)
+    clamped = np.maximum(M.cos_theta_i_of(np.minimum(x, hi)), M.COS_FLOOR)[:, None]
+    assert np.median(np.abs(values / clamped - got)[beyond] / got[beyond]) > 0.5
+    assert np.median(got[~floor] / values[~floor]) > 30
+
+
+@pytest.mark.parametrize("flags", [[], ["-DRBRDF_REAL_DOUBLE"], ["-DRBRDF_REAL_DOUBLE", "-DRBRDF_EXP_FLOAT"]],
+                         ids=["float", "double", "double-expf"])
+def test_c_headers_with_and_without_the_factor_include_together(tmp_path, flags):
+    """The header of a fit with a value factor (its prelude defines RBRDF_SIN and, when not yet
+    defined, RBRDF_COS) and that of a fit with a measured domain (RBRDF_COS, RBRDF_ACOS) in one
+    translation unit, in either order: no conflicting macro definitions (-Werror -pedantic)."""
+    cc = need("cc")
+    fits = {"factor.h": MODELS["fit3d"](), "domain.h": MODELS["satin"]()}
+    for name, m in fits.items():
+        (tmp_path / name).write_text(to_c(m))
+    calls = "".join(f"    {function_name(m)}_angles(0.1, 0.2, {'0.3, ' if is_3d(m) else ''}rho);\n"
+                    for m in fits.values())
+    for order in (list(fits), list(fits)[::-1]):
+        prog = tmp_path / "main.c"
+        prog.write_text("".join(f'#include "{h}"\n' for h in order)
+                        + f"int main(void)\n{{\n    RBRDF_REAL rho[3];\n{calls}"
+                        + "    return rho[0] > 0 ? 0 : 1;\n}\n")
+        r = subprocess.run([cc, "-std=c99", "-Wall", "-Wextra", "-pedantic", "-Werror", *flags, "-o",
+                            str(tmp_path / "main"), str(prog), "-lm"],
+                           check=False, capture_output=True, text=True)
+        assert r.returncode == 0, (order, r.stderr[-2000:])
+        assert subprocess.run([str(tmp_path / "main")], check=False).returncode == 0
 
 
 def test_c_frame_function_and_cpp(tmp_path):
@@ -301,7 +384,7 @@ def c_to_glsl(line: str) -> str:
     line = re.sub(r"RBRDF_K\(([0-9.eE+-]+)\)", lambda m: glsl_literal(float(m.group(1))), line)
     for c, g in (("RBRDF_REAL", "float"), ("RBRDF_MIN", "min"), ("RBRDF_MAX", "max"),
                  ("rbrdf_clamp_", "clamp"), ("RBRDF_SQRT", "sqrt"), ("RBRDF_EXP", "exp"),
-                 ("RBRDF_ACOS", "acos"), ("RBRDF_COS", "cos"), ("RBRDF_ABS", "abs")):
+                 ("RBRDF_ACOS", "acos"), ("RBRDF_COS", "cos"), ("RBRDF_ABS", "abs"), ("RBRDF_SIN", "sin")):
         line = line.replace(c, g)
     return line
 
@@ -343,16 +426,21 @@ def test_glsl_compiles(tmp_path, version):
 
 
 @pytest.mark.parametrize("version", ["330 core", "410 core", "300 es", "400 core double"])
-def test_glsl_3d_compiles(tmp_path, version):
-    """A 3-D fit's GLSL (``_angles`` takes phi_d too; its flagged channel's clamp included), in
-    float and, as GLSL 4.00, in double."""
-    model = MODELS["fit3d_flagged"]()
+@pytest.mark.parametrize("which", ["fit3d_flagged", "fit3d_none"])
+def test_glsl_3d_compiles(tmp_path, version, which):
+    """A 3-D fit's GLSL (``_angles`` takes phi_d too; its flagged channel's clamp included; with
+    and without the value factor), in float and, as GLSL 4.00, in double (the factor's cos and
+    sin through float wrappers: GLSL has no double trigonometry)."""
+    model = MODELS[which]()
     fn = "rbrdf_" + model.name
     call = (f"{fn}(normalize(vec3(0.3, 0.1, 0.9)), normalize(vec3(-0.2, 0.1, 0.9))) + "
             f"{fn}_frame(vec3(0.0, 0.0, 1.0), vec3(0.0, 0.6, 0.8), vec3(0.0, 0.0, 1.0), "
             f"vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0)) + {fn}_angles(0.1, 0.2, -2.5)")
-    src = to_glsl(model, precision="double" if version.endswith("double") else "float")
+    double = version.endswith("double")
+    src = to_glsl(model, precision="double" if double else "float")
     assert f"vec3 {fn}_angles(float theta_h, float theta_d, float phi_d)" in src
+    assert ("value factor (step 8)" in src) == (which != "fit3d_none")
+    assert (f"double {fn}_sin_(double x)" in src) == (double and which != "fit3d_none")
     r = glslang(fragment(version.removesuffix(" double"), src, call), tmp_path)
     assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
 
@@ -389,9 +477,11 @@ def test_hlsl_compiles(tmp_path):
         assert (r.returncode == 0) == ok, (r.stdout + r.stderr)[-3000:]
 
 
-def test_hlsl_3d_compiles(tmp_path):
-    """A 3-D fit's HLSL: the GLSL statements verbatim, compiled by glslang's HLSL front end."""
-    model = MODELS["fit3d"]()
+@pytest.mark.parametrize("which", ["fit3d", "fit3d_none"])
+def test_hlsl_3d_compiles(tmp_path, which):
+    """A 3-D fit's HLSL (with and without the value factor): the GLSL statements verbatim,
+    compiled by glslang's HLSL front end."""
+    model = MODELS[which]()
     src = to_hlsl(model)
     assert "\n".join(Emitter(GLSL).rho(model)) in src
     fn = "rbrdf_" + model.name
@@ -438,6 +528,7 @@ def test_brdf_explorer_file_3d(tmp_path):
     shader = extract_shader(text)
     assert f"return scale * rbrdf_{model.name}_frame(L, V, N, X, Y);" in shader
     assert "# Fit 'lobe3d': rho(wi, wo) in 1/sr (no cosine), RGB, isotropic, NOT reciprocal:" in text
+    assert "\n".join(Emitter(GLSL).rho(model)) in shader and "# Value factor 1/cos(theta_i)" in text
     call = "BRDF(vec3(0.0, 0.0, 1.0), vec3(0.0, 0.6, 0.8), vec3(0.0, 0.0, 1.0), vec3(1.0, 0.0, 0.0), vec3(0.0, 1.0, 0.0))"
     r = glslang(fragment("410 core", shader, call, "uniform float scale;\n"), tmp_path)
     assert r.returncode == 0, (r.stdout + r.stderr)[-3000:]
@@ -454,6 +545,15 @@ def test_policy_in_comments():
     for text in (to_glsl(m3), to_c(m3), to_hlsl(m3)):
         assert "NOT reciprocal" in text and "|phi_d| in [0, 180] deg" in text and "piece 0, channel G" in text
         assert "grazing cut-off" not in text and "renderer refuses" in text
+    for which in ("fit3d", "fit3d_none"):
+        m = MODELS[which]()
+        for text in (to_glsl(m), to_c(m), to_hlsl(m), to_brdf_explorer(m), to_mitsuba_plugin(m)):
+            lines = [ln.lstrip("/*# ") for ln in text.splitlines()]
+            stated = {"Value factor 1/cos(theta_i): the fitted functions give rho cos(theta_i), and the clamps",
+                      "and ranges above bound that product; then rho = product / max(cos(theta_i), 0.001),"
+                      } <= set(lines)
+            plugin = "rho = the clamped value / max(cos theta_i, 0.001), cos theta_i of the" in text
+            assert (stated or plugin) == (which == "fit3d"), (which, text[:3000])
 
 
 def test_unsupported_fit_is_refused():
@@ -461,6 +561,33 @@ def test_unsupported_fit_is_refused():
     m.variables[0].name = "phi_d"
     with pytest.raises(ExportError, match="theta_h, theta_d"):
         to_glsl(m)
+
+
+EXPORTS = (to_glsl, to_c, to_hlsl, to_brdf_explorer, to_mitsuba_plugin)
+
+
+@pytest.mark.parametrize("case", ["unknown", "hostile", "2-D", "piece"])
+def test_value_factor_refused(case):
+    """Value factors the exports do not translate (set after the model's own checks): an
+    unknown one (named in one inert line), one on a 2-D fit, one on a piece."""
+    hostile = "x */ int INJECTED = 1; /*\n"
+    if case == "2-D":
+        m = MODELS["satin"]()
+        m.value_factor = "1/cos_theta_i"
+        match = r"value factor '1/cos_theta_i' on a fit in \['theta_h', 'theta_d'\]: only 3-D fits"
+    elif case == "piece":
+        m = MODELS["fit3d_none"]()
+        m.pieces[1].value_factor = "1/cos_theta_i"
+        match = "a piece has a value factor of its own"
+    else:
+        m = MODELS["fit3d"]()
+        m.value_factor = "1/cos_theta_o" if case == "unknown" else hostile
+        match = re.escape(f"value factor {literal(m.value_factor)}: only 'none', '1/cos_theta_i' are exported")
+        match = f"^{match}$"
+    for export in EXPORTS:
+        with pytest.raises(ExportError, match=match) as e:
+            export(m)
+        assert "\n" not in str(e.value) and "*/" not in str(e.value)
 
 
 # --------------------------------------------------------------------------------------------
@@ -499,17 +626,21 @@ def test_mitsuba_plugin_eval_matches_numpy():
     MR.set_variant(MR.VARIANT)
 
 
-@pytest.mark.parametrize("which", ["fit3d", "fit3d_flagged"])
+@pytest.mark.parametrize("which", ["fit3d", "fit3d_flagged", "fit3d_none"])
 def test_mitsuba_plugin_3d_eval_matches_numpy(which):
-    """A 3-D fit in the plugin: ``evaluate`` against NumPy, and ``eval`` through the BSDF
-    interface with Mitsuba's roles (``si.wi`` the viewer, ``wo`` the light): f(light = wo,
-    view = si.wi) cos(theta_wo); the swapped roles would differ (not reciprocal)."""
+    """A 3-D fit in the plugin (with and without the value factor, whose plan entry is there
+    only with it): ``evaluate`` against NumPy, and ``eval`` through the BSDF interface with
+    Mitsuba's roles (``si.wi`` the viewer, ``wo`` the light): f(light = wo, view = si.wi)
+    cos(theta_wo), grazing lights (:func:`directions`' third tenth) included; the swapped roles
+    would differ (not reciprocal)."""
     MR = need_mitsuba()
     import mitsuba as mi
 
     from fit.export import mitsuba_plugin as MP
 
     model = MODELS[which]()
+    factor = MP.plan(model).get("value_factor")
+    assert factor == (None if which == "fit3d_none" else {"kind": "1/cos_theta_i", "cos_floor": M.COS_FLOOR})
     bsdf = mi.load_dict({"type": MP.register(f"rbrdf_test_{which}", model)})
     wi, wo = directions(400, seed=3)
     a, b = wi.astype(np.float32).astype(float), wo.astype(np.float32).astype(float)
@@ -520,7 +651,7 @@ def test_mitsuba_plugin_3d_eval_matches_numpy(which):
     ctx = mi.BSDFContext()
     swapped = reference(model)(b, a)
     differ = 0
-    for k in range(60):
+    for k in [*range(60), *range(80, 120)]:         # mirror pairs, grazing lights
         si = mi.SurfaceInteraction3f()
         si.wi = mi.Vector3f(*b[k])
         e = np.array(bsdf.eval(ctx, si, mi.Vector3f(*a[k])), float)
@@ -528,6 +659,22 @@ def test_mitsuba_plugin_3d_eval_matches_numpy(which):
         differ += not np.allclose(swapped[k], ref[k], rtol=1e-2)
     assert differ > 20
     MR.set_variant(MR.VARIANT)
+
+
+def test_mitsuba_runtime_refuses_an_unknown_value_factor():
+    """A plan whose value factor the runtime does not know (a newer writer's) is refused, not
+    evaluated without it."""
+    need_mitsuba()
+    import drjit as dr
+    import mitsuba as mi
+
+    from fit.export import _mitsuba_runtime as RT
+    from fit.export import mitsuba_plugin as MP
+
+    plan = MP.plan(MODELS["fit3d"]())
+    plan["value_factor"] = dict(plan["value_factor"], kind="1/cos_theta_o")
+    with pytest.raises(ValueError, match="unknown value factor '1/cos_theta_o'"):
+        RT.evaluate(mi, dr, plan, mi.Vector3f(0.3, 0.1, 0.9486833), mi.Vector3f(-0.2, -0.1, 0.9746794))
 
 
 @pytest.fixture(scope="module")

@@ -19,8 +19,9 @@ fit exported under a plain name (the function name aside), and that plain export
 
 And the text is still there, readable: the comment's quoted form reads back (``ast.literal_eval``)
 as the text (its first 200 characters for a longer one), the plugin's docstring holds it.
-Version-3 fits (3-D: theta_h, theta_d, |phi_d|), whose exports have their own header lines and
-functions, go through the same cases, against the plain 3-D fit's export.
+3-D fits (theta_h, theta_d, |phi_d|), whose exports have their own header lines and functions,
+go through the same cases, against the plain 3-D fit's export; as version 4, the fitter's
+default, with the value factor 1/cos theta_i (its header lines, its statements and C prelude).
 The loader may refuse some texts (control characters, long names): then the run must be one
 line naming the file, exit 2, nothing written -- and the same fit with the text set in memory
 is exported through the library and checked as above.
@@ -107,9 +108,9 @@ def fit_dict(text: str) -> dict:
 
 
 def fit3d_dict(text: str) -> dict:
-    """A small valid version-3 (3-D) BRDF file with ``text`` as its name, source file and
-    tolerance record, and one flagged channel."""
-    d = v3_dict(text)
+    """A small valid version-4 (3-D, with the value factor 1/cos theta_i) BRDF file with
+    ``text`` as its name, source file and tolerance record, and one flagged channel."""
+    d = v3_dict(text, "1/cos_theta_i")
     d["source"] = {"file": text, "sha256": ""}
     d["fit"] = {"tolerance": text}
     d["functions"][1].update(valid=False, measured_range=[0.0, 1.0])
@@ -348,8 +349,9 @@ def test_library_export_holds_no_code_beyond_the_fit(tmp_path, reference, where,
         check_output(export_text(model, ext), ext, tmp_path, reference, PLAIN if channel else text, three)
 
 
-def v3_dict(name: str) -> dict:
-    """A small version-3 BRDF file (theta_h, theta_d, |phi_d|)."""
+def v3_dict(name: str, value_factor: str = "none") -> dict:
+    """A small version-3 BRDF file (theta_h, theta_d, |phi_d|); version 4 with a
+    ``value_factor`` other than ``"none"``."""
     from fit.rational.coefficient_file import to_dict
     from fit.rational.function import RationalFunction
     from fit.rational.model import RationalModel, Variable
@@ -360,13 +362,18 @@ def v3_dict(name: str) -> dict:
     dom = [v.domain for v in var]
     fs = [RationalFunction(dom, [[0, 0, 0], [1, 0, 0], [0, 0, 1]], [0.1 * (c + 1), 0.01, 0.02], [[0, 0, 0]], [1.0])
           for c in range(3)]
-    return to_dict(RationalModel(name=name, variables=var, functions=fs))
+    return to_dict(RationalModel(name=name, variables=var, functions=fs, value_factor=value_factor))
 
 
-def test_version_3_fit_is_exported_in_its_own_variables(tmp_path, capsys):
-    """A version-3 fit (phi_d; .brdf was a traceback, then a one-line refusal) is exported to
-    every format with phi_d in its functions, and an earlier output is replaced."""
-    fit = write_json(tmp_path / "v3.json", v3_dict(PLAIN))
+@pytest.mark.parametrize("value_factor", ["none", "1/cos_theta_i"], ids=["version-3", "version-4"])
+def test_version_3_fit_is_exported_in_its_own_variables(tmp_path, capsys, value_factor):
+    """A version-3 fit (phi_d; .brdf was a traceback, then a one-line refusal) and a version-4
+    one (its value factor) are exported to every format with phi_d in their functions (and the
+    factor, in the plugin's plan or the code's header, in version 4's), and an earlier output is
+    replaced."""
+    d = v3_dict(PLAIN, value_factor)
+    assert d["version"] == (3 if value_factor == "none" else 4)
+    fit = write_json(tmp_path / "v3.json", d)
     for ext in FORMATS:
         out = tmp_path / f"old{ext}"
         out.write_text("earlier output\n")
@@ -374,6 +381,8 @@ def test_version_3_fit_is_exported_in_its_own_variables(tmp_path, capsys):
         assert rc == 0 and err == "" and f"wrote {out}" in stdout
         text = out.read_text(encoding="utf-8")
         assert "phi_d" in text and "earlier output" not in text
+        factor = '"value_factor": {"kind": "1/cos_theta_i"' if ext == ".py" else "max(cos(theta_i), 0.001)"
+        assert (factor in text) == (value_factor != "none")
 
 
 def test_cutoff_record_not_a_number_is_refused(tmp_path, capsys):

@@ -11,7 +11,9 @@
 
 Both kinds of fit are exported: 2-D fits of (theta_h, theta_d) (file versions 1 and 2) and 3-D
 fits of (theta_h, theta_d, |phi_d|) (version 3, :mod:`fit.rational.variables3d`; not reciprocal,
-so every exported function takes the light's direction first and the viewer's second). The
+so every exported function takes the light's direction first and the viewer's second; version 4:
+their functions give rho cos theta_i, and every export divides by max(cos theta_i, 1e-3), the
+recipe's step 8, :mod:`fit.export.emitter`). The
 GLSL, HLSL and C code come from one statement emitter (:mod:`fit.export.emitter`) that follows
 the file's evaluation recipe, on the fit's measured domain when it records the grazing cut-off
 of its projection (:mod:`fit.rational.domain`, the renderer's rule: no extrapolation where the

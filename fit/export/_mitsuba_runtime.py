@@ -17,7 +17,11 @@ Mitsuba's sampled direction ``wo`` as the light and ``si.wi`` as the viewer. A f
 grazing cut-off of its projection adds ``"cutoff_deg": c``: the angles are moved onto its
 measured domain first (:func:`fit.rational.domain.onto_measured_domain`: ``theta_h = min(theta_h,
 c)``, then ``theta_d = min(theta_d, acos(min(cos c / cos theta_h, 1)))``); without the key they
-are not moved.
+are not moved. A 3-D fit whose functions give rho cos theta_i (coefficient file version 4) adds
+``"value_factor": {"kind": "1/cos_theta_i", "cos_floor": f}``: after the step-7 ranges every
+channel is divided by ``max(cos theta_i, f)``, cos theta_i = cos th cos td - sin th sin td cos pd
+of the angles before any clamp (the recipe's step 8, :func:`fit.rational.model.cos_theta_i_of`);
+another kind is refused (ValueError).
 
 Evaluation is vectorised Dr.Jit arithmetic (every piece is evaluated and the right one
 selected), in ``Float64`` for the polynomial part; it works in every variant (scalar or JIT).
@@ -41,13 +45,22 @@ VARIABLE_INDEX = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
 def _rho(mi, dr, plan, th, td, pd=None):
     """rho (1/sr) as three Float64 at Rusinkiewicz angles (Float64, radians; ``pd``: phi_d of
     a 3-D plan, folded here)."""
+    th_in, td_in = th, td                   # unclamped: the value factor's cos theta_i
     if plan.get("cutoff_deg") is not None:
         th, td = _onto_measured_domain(dr, plan["cutoff_deg"], th, td)
     box = plan["box"]
     x = [dr.clip(th, box[0][0], box[0][1]), dr.clip(td, box[1][0], box[1][1])]
     if len(box) == 3:
         x.append(dr.clip(dr.abs(pd), box[2][0], box[2][1]))
-    return _node(mi, dr, plan["root"], x)
+    rho = _node(mi, dr, plan["root"], x)
+    factor = plan.get("value_factor")
+    if factor is None:
+        return rho
+    if factor["kind"] != "1/cos_theta_i":
+        raise ValueError(f"unknown value factor {factor['kind']!r}")
+    cos_i = dr.maximum(dr.cos(th_in) * dr.cos(td_in) - dr.sin(th_in) * dr.sin(td_in) * dr.cos(pd),
+                       factor["cos_floor"])
+    return [r / cos_i for r in rho]
 
 
 def _onto_measured_domain(dr, cutoff_deg, th, td):

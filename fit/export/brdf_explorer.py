@@ -4,9 +4,10 @@ GLSL of :mod:`fit.export.glsl` and defines BRDF Explorer's entry point::
     vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)
 
 (world-space light and view directions and the shading frame, as BRDF Explorer passes them),
-returning rho in 1/sr (no cosine, as BRDF Explorer expects), times the parameter ``scale``
-(slider 0 to 4, default 1). The domain and clamp policy are in the file's comments (``#``
-lines before the blocks) and in the shader's header comment.
+returning rho in 1/sr (no cosine, as BRDF Explorer expects; a fit with the value factor
+``"1/cos_theta_i"`` divided by max(cos theta_i, 1e-3) as the GLSL does, emitter step 8), times
+the parameter ``scale`` (slider 0 to 4, default 1). The domain and clamp policy are in the
+file's comments (``#`` lines before the blocks) and in the shader's header comment.
 
 BRDF Explorer reads the parameters block (``float NAME MIN MAX DEFAULT``) as uniforms of the
 shader; :func:`shader_block` is the text between ``::begin shader`` and ``::end shader``.

@@ -21,18 +21,22 @@ moved onto its measured domain first (:mod:`fit.export.emitter`, step 0; ``cos``
 through ``RBRDF_COS`` / ``RBRDF_ACOS``, defined by a second guarded prelude only in such
 files; with ``-DRBRDF_EXP_FLOAT`` they run in float as well, as GLSL's double variant does).
 The ``fabs`` of a 3-D fit's fold is ``RBRDF_ABS``, defined by a third guarded prelude only in
-3-D files. Needs ``<math.h>`` (link with ``-lm``).
+3-D files. A fit with the value factor ``"1/cos_theta_i"`` (file version 4, emitter step 8)
+computes cos theta_i from its angles with ``RBRDF_COS`` and ``RBRDF_SIN``, defined by a fourth
+guarded prelude only in such files (float under ``-DRBRDF_EXP_FLOAT`` too; its ``RBRDF_COS``,
+when the domain prelude has not defined it, is that prelude's definition token for token, so
+that headers of both kinds of fit include together). Needs ``<math.h>`` (link with ``-lm``).
 """
 from __future__ import annotations
 
 from ..rational.domain import measured_domain
-from .emitter import Emitter, Language, c_literal, is_3d, policy_text
+from .emitter import Emitter, Language, c_literal, has_cos_factor, is_3d, policy_text
 from .escape import identifier
 
 C = Language(real="RBRDF_REAL", literal=c_literal,
              funcs={"min": "RBRDF_MIN", "max": "RBRDF_MAX", "clamp": "rbrdf_clamp_",
                     "sqrt": "RBRDF_SQRT", "exp": "RBRDF_EXP", "cos": "RBRDF_COS", "acos": "RBRDF_ACOS",
-                    "abs": "RBRDF_ABS"})
+                    "abs": "RBRDF_ABS", "sin": "RBRDF_SIN"})
 
 PRELUDE = r"""#include <math.h>
 
@@ -100,6 +104,32 @@ PHI_PRELUDE = r"""#ifndef RBRDF_PHI_PRELUDE_
 """
 
 
+# only in files of fits with the value factor "1/cos_theta_i" (step 8: cos theta_i of the angles;
+# RBRDF_COS exactly as DOMAIN_PRELUDE defines it, a permitted identical redefinition)
+FACTOR_PRELUDE = r"""#ifndef RBRDF_FACTOR_PRELUDE_
+#define RBRDF_FACTOR_PRELUDE_
+#ifdef RBRDF_REAL_DOUBLE
+#ifdef RBRDF_EXP_FLOAT  /* GLSL has no double sin / cos either */
+#define RBRDF_SIN(x) ((double)sinf((float)(x)))
+#ifndef RBRDF_COS
+#define RBRDF_COS(x) ((double)cosf((float)(x)))
+#endif
+#else
+#define RBRDF_SIN sin
+#ifndef RBRDF_COS
+#define RBRDF_COS cos
+#endif
+#endif
+#else
+#define RBRDF_SIN sinf
+#ifndef RBRDF_COS
+#define RBRDF_COS cosf
+#endif
+#endif
+#endif
+"""
+
+
 def function_name(model, name: str | None = None) -> str:
     return "rbrdf_" + identifier(name or model.name)
 
@@ -124,7 +154,7 @@ def to_c(model, name: str | None = None, header: bool = True) -> str:
         out += ["#ifndef RBRDF_API", "#define RBRDF_API", "#endif"]
     args = f"{R} theta_h, {R} theta_d, {R} phi_d" if three else f"{R} theta_h, {R} theta_d"
     out += [PRELUDE] + ([DOMAIN_PRELUDE] if measured_domain(model) is not None else []) + (
-            [PHI_PRELUDE] if three else []) + [
+            [PHI_PRELUDE] if three else []) + ([FACTOR_PRELUDE] if has_cos_factor(model) else []) + [
             "#ifdef __cplusplus", 'extern "C" {', "#endif", "",
             f"RBRDF_API void {fn}_angles({args}, {R} rho[3])", "{",
             f"    {R} rho0 = RBRDF_K(0.0);", f"    {R} rho1 = RBRDF_K(0.0);", f"    {R} rho2 = RBRDF_K(0.0);"]

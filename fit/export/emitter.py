@@ -2,13 +2,14 @@
 (:class:`fit.rational.model.RationalModel` or :class:`~fit.rational.model.PiecewiseRationalModel`,
 nested pieces included) as straight-line statements in the C-like subset common to GLSL and
 C99 (declarations, ``if``/``else``, ``+=``, calls of ``min``/``max``/``clamp``/``sqrt``/``exp``,
-for the measured domain ``cos``/``acos`` and for 3-D fits ``abs``, through a per-language name
-table).
+for the measured domain ``cos``/``acos``, for 3-D fits ``abs`` and for a value factor
+``cos``/``sin``, through a per-language name table).
 
 Two kinds of fits are exported: 2-D fits of ``(theta_h, theta_d)`` (coefficient file versions
 1 and 2) and 3-D fits of ``(theta_h, theta_d, |phi_d|)`` (version 3,
 :mod:`fit.rational.variables3d`: phi_d folded by the mirror symmetry of isotropy, not by
-reciprocity, so the light and the view keep their roles). The block :meth:`Emitter.rho` emits
+reciprocity, so the light and the view keep their roles; version 4: a 3-D fit whose functions
+give rho cos theta_i, step 8 below). The block :meth:`Emitter.rho` emits
 reads the angles in radians and assigns ``rho0, rho1, rho2``; the direction functions around it
 (:mod:`fit.export.glsl`, :mod:`fit.export.c_source`, :mod:`fit.export.hlsl`) compute the angles.
 
@@ -33,7 +34,17 @@ step, as :meth:`RationalModel.__call__` does in NumPy:
 5. ``y = P / Q`` (linear) or ``exp(min(P / Q, log(max + offset))) - offset`` (log);
 6. ``max(y, min)``, ``min(y, max)``;
 7. the function's step-7 range (:func:`fit.rational.model.output_clamp`: the vouched range
-   of a valid function, the measured range of a flagged one).
+   of a valid function, the measured range of a flagged one);
+8. a 3-D fit's value factor (``model.value_factor``, :data:`fit.rational.model.VALUE_FACTORS`;
+   only on the top-level model): for ``"1/cos_theta_i"`` every channel, after its step 7, is
+   divided by ``max(cos theta_i, COS_FLOOR)`` (:data:`fit.rational.model.COS_FLOOR` = 1e-3, a
+   literal), ``cos theta_i = cos(th) cos(td) - sin(th) sin(td) cos(pd)``
+   (:func:`fit.rational.model.cos_theta_i_of`) of the angles the block reads, before any clamp
+   or fold (``cos`` is even in phi_d). The block computes it from its angles rather than taking
+   the direction functions' ``wi.z`` so that every entry point (``_angles`` too) and every
+   language (the Mitsuba runtime included) evaluate the same ``model(x)`` of the NumPy
+   reference; in float the angles cost about 1e-7 of cos theta_i, a relative 1e-4 of rho at
+   the floor. Fits without a factor get no such statements.
 
 Everything runs in the language's ``real`` type (GLSL ``float``; C ``RBRDF_REAL``, float by
 default): the coefficients are printed with 17 significant digits so that a double build
@@ -48,7 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..rational.domain import measured_domain
-from ..rational.model import flagged, output_clamp
+from ..rational.model import COS_FLOOR, VALUE_FACTORS, flagged, output_clamp
 from ..rational.variables3d import VARIABLES_3D
 from .escape import comment_text, literal
 
@@ -65,7 +76,7 @@ class Language:
 
     real: str                         # scalar type
     literal: callable                 # float -> source literal
-    funcs: dict = field(default_factory=dict)   # min, max, clamp, sqrt, exp, cos, acos, abs -> names
+    funcs: dict = field(default_factory=dict)   # min, max, clamp, sqrt, exp, cos, acos, abs, sin -> names
 
     def call(self, f: str, *args) -> str:
         return f"{self.funcs.get(f, f)}({', '.join(args)})"
@@ -102,15 +113,27 @@ def leaves(model) -> list:
     return [leaf for p in pieces for leaf in leaves(p)]
 
 
+def sub_models(model) -> list:
+    """Every model below the top of a fit (pieces, nested ones and their pieces), depth first."""
+    return [m for p in getattr(model, "pieces", None) or [] for m in [p, *sub_models(p)]]
+
+
 def is_3d(model) -> bool:
-    """Whether ``model`` is a 3-D fit (variables ``theta_h, theta_d, phi_d``, file version 3)."""
+    """Whether ``model`` is a 3-D fit (variables ``theta_h, theta_d, phi_d``, file version 3 or 4)."""
     return tuple(v.name for v in model.variables) == VARIABLES_3D
+
+
+def has_cos_factor(model) -> bool:
+    """Whether ``model``'s value factor (step 8) is ``"1/cos_theta_i"`` (file version 4)."""
+    return model.value_factor == "1/cos_theta_i"
 
 
 def check_exportable(model) -> None:
     """ExportError unless ``model`` is a BRDF fit in (theta_h, theta_d) or (theta_h, theta_d,
     phi_d) with 3 outputs and the clamp policy, every leaf in the model's variables with finite
-    coefficients, and a grazing cut-off record (if any) that is a number."""
+    coefficients, a grazing cut-off record (if any) that is a number, and a value factor of
+    :data:`fit.rational.model.VALUE_FACTORS` (other than ``"none"`` only on the top-level model
+    of a 3-D fit)."""
     names = [v.name for v in model.variables]
     if getattr(model, "kind", "brdf") != "brdf":
         raise ExportError(f"kind {model.kind!r}: only BRDF fits (kind 'brdf') are exported")
@@ -119,6 +142,14 @@ def check_exportable(model) -> None:
                           "are exported")
     if len(model.outputs) != 3:
         raise ExportError(f"{len(model.outputs)} outputs: a BRDF fit has 3 (R, G, B)")
+    if model.value_factor not in VALUE_FACTORS:
+        raise ExportError(f"value factor {literal(model.value_factor, 80)}: only "
+                          f"{', '.join(map(repr, VALUE_FACTORS))} are exported")
+    if model.value_factor != "none" and not is_3d(model):
+        raise ExportError(f"value factor {model.value_factor!r} on a fit in {names}: only 3-D fits "
+                          "(theta_h, theta_d, phi_d) have one")
+    if any(m.value_factor != "none" for m in sub_models(model)):
+        raise ExportError("a piece has a value factor of its own (only the whole fit has one, step 8)")
     for leaf in leaves(model):
         if leaf.domain_policy.get("outside", "clamp") != "clamp":
             raise ExportError("domain policy 'outside' is not 'clamp'")
@@ -164,11 +195,13 @@ class Emitter:
     def rho(self, model, th: str = "theta_h", td: str = "theta_d",
             out=("rho0", "rho1", "rho2"), depth: int = 1, pd: str = "phi_d") -> list:
         """The block's lines; ``th``, ``td`` (and ``pd`` for a 3-D fit: phi_d in radians, any
-        sign, folded here) name the angles it reads."""
+        sign, folded here) name the angles it reads (never assigned: step 8 reads them
+        unclamped)."""
         check_exportable(model)
         L, R = self.lang, self.lang.real
         pad = self.ind * depth
         lines = []
+        th_in, td_in = th, td
         cut = measured_domain(model)
         if cut is not None:
             lines, th, td = self.onto_measured_domain(cut, th, td, depth)
@@ -183,7 +216,23 @@ class Emitter:
             lines.append(f"{pad}{R} {xp} = {L.call('clamp', L.call('abs', pd), self.lit(pl), self.lit(ph))};")
             xs["phi_d"] = xp
         lines += self._node(model, xs, out, depth)
+        if has_cos_factor(model):
+            lines += self.cos_factor(th_in, td_in, pd, out, depth)
         return lines
+
+    def cos_factor(self, th: str, td: str, pd: str, out, depth: int = 1) -> list:
+        """Step 8 of value factor ``"1/cos_theta_i"``: the channels ``out`` divided by
+        ``max(cos theta_i, COS_FLOOR)``, cos theta_i of the angles ``th``, ``td``, ``pd``
+        (radians, as the block read them: unclamped, phi_d of any sign)."""
+        L, R = self.lang, self.lang.real
+        pad = self.ind * depth
+        ci = self._fresh("cos_i")
+        cos_i = (f"{L.call('cos', th)} * {L.call('cos', td)} - "
+                 f"{L.call('sin', th)} * {L.call('sin', td)} * {L.call('cos', pd)}")
+        return ([f"{pad}/* value factor (step 8): rho = value / max(cos(theta_i), {COS_FLOOR:g}), "
+                 "cos(theta_i) of the unclamped angles */",
+                 f"{pad}{R} {ci} = {L.call('max', cos_i, self.lit(COS_FLOOR))};"]
+                + [f"{pad}{o} = {o} / {ci};" for o in out])
 
     def onto_measured_domain(self, cutoff_deg: float, th: str, td: str, depth: int = 1):
         """``(lines, theta_h name, theta_d name)``: statements moving ``th``, ``td`` (radians)
@@ -337,6 +386,16 @@ def policy_text(model, prefix: str = " * ") -> list:
         lines += [
             "Bound: every data point of the fit is within its stated bound and Q > 0 is certified on",
             "every piece; between the data points the bound is checked at fresh points, not proved.",
+        ]
+    if has_cos_factor(model):
+        lines += [
+            "Value factor 1/cos(theta_i): the fitted functions give rho cos(theta_i), and the clamps",
+            "and ranges above bound that product; then rho = product / max(cos(theta_i), "
+            f"{COS_FLOOR:g}),",
+            "cos(theta_i) (= wi.z) of the unclamped angles: cos(theta_h) cos(theta_d) - sin(theta_h)",
+            "sin(theta_d) cos(phi_d). rho grows as 1/cos(theta_i) towards the light's horizon, up to",
+            f"{1.0 / COS_FLOOR:g} times the product (from theta_i = "
+            f"{np.degrees(np.arccos(COS_FLOOR)):.4g} deg on, where the divisor stays at its floor).",
         ]
     cut = measured_domain(model)
     if cut is not None:

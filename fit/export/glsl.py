@@ -8,7 +8,8 @@ Emitted functions (``N`` = :func:`fit.export.escape.identifier` of the name):
   ``rbrdf_N_angles(float theta_h, float theta_d, float phi_d)``, phi_d of the pair (light, view)
   in (-pi, pi], folded to ``|phi_d|``): rho (1/sr) at Rusinkiewicz angles (radians), the fit's
   recipe with its clamps (:mod:`fit.export.emitter`), on the fit's measured domain when it
-  records its grazing cut-off (emitter step 0);
+  records its grazing cut-off (emitter step 0), divided by max(cos theta_i, 1e-3) (cos theta_i
+  of these angles) when it has the value factor ``"1/cos_theta_i"`` (emitter step 8);
 * ``vec3 rbrdf_N(vec3 wi, vec3 wo)``: rho at unit directions of the local shading frame (z =
   normal, both pointing away from the surface; ``wi`` towards the light, ``wo`` towards the
   viewer: a 3-D fit is not reciprocal); ``vec3(0)`` below the horizon;
@@ -33,6 +34,7 @@ from .emitter import (
     check_exportable,
     _digits,
     glsl_literal,
+    has_cos_factor,
     is_3d,
     policy_text,
 )
@@ -40,7 +42,7 @@ from .escape import identifier
 
 GLSL = Language(real="float", literal=glsl_literal,
                 funcs={"min": "min", "max": "max", "clamp": "clamp", "sqrt": "sqrt", "exp": "exp",
-                       "cos": "cos", "acos": "acos", "abs": "abs"})
+                       "cos": "cos", "acos": "acos", "abs": "abs", "sin": "sin"})
 
 
 def function_name(model, name: str | None = None) -> str:
@@ -59,7 +61,8 @@ def to_glsl(model, name: str | None = None, header: bool = True, precision: str 
     three functions (module docstring); ``name`` overrides the fit's name in the identifiers.
     ``precision="double"``: the recipe in ``double`` (GLSL 4.00 / ``GL_ARB_gpu_shader_fp64``;
     ``exp`` in float, GLSL has no double ``exp``; likewise ``cos`` and ``acos`` of the measured
-    domain): the statements of the C double build."""
+    domain and ``cos`` and ``sin`` of a value factor): the statements of the C double build with
+    ``-DRBRDF_EXP_FLOAT``."""
     check_exportable(model)
     fn = function_name(model, name)
     if precision == "float":
@@ -68,10 +71,11 @@ def to_glsl(model, name: str | None = None, header: bool = True, precision: str 
         lang = Language(real="double", literal=glsl_double_literal,
                         funcs=dict(GLSL.funcs, exp=f"{fn}_exp_"))
         pre = [f"double {fn}_exp_(double x)", "{", "    return double(exp(float(x)));", "}", ""]
-        if measured_domain(model) is not None:
-            lang.funcs.update(cos=f"{fn}_cos_", acos=f"{fn}_acos_")
-            for f in ("cos", "acos"):
-                pre += [f"double {fn}_{f}_(double x)", "{", f"    return double({f}(float(x)));", "}", ""]
+        trig = (["cos", "acos"] if measured_domain(model) is not None else []) + (
+            ["cos", "sin"] if has_cos_factor(model) else [])
+        for f in dict.fromkeys(trig):        # each once, in order
+            lang.funcs[f] = f"{fn}_{f}_"
+            pre += [f"double {fn}_{f}_(double x)", "{", f"    return double({f}(float(x)));", "}", ""]
         conv = "double"
     else:
         raise ExportError(f"precision {precision!r}: expected 'float' or 'double'")

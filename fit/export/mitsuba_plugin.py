@@ -20,7 +20,9 @@ exported) -- times ``cos(theta_o)`` as Mitsuba's ``eval`` includes it; property 
 (float, default 1) multiplies it. A 3-D fit (coefficient file version 3, ``(theta_h, theta_d,
 |phi_d|)``, :func:`fit.rational.variables3d.evaluate_directions`) is not reciprocal: the plugin
 evaluates it with Mitsuba's ``wo`` (the sampled direction, towards the light) as the fit's
-light and ``si.wi`` as its viewer. Sampling: cosine-weighted (``pdf = cos(theta_o) / pi``), or,
+light and ``si.wi`` as its viewer; one with the value factor ``"1/cos_theta_i"`` (version 4)
+divides by max(cos theta_i, 1e-3), cos theta_i of the unclamped angles (emitter step 8), before
+``eval``'s cosine. Sampling: cosine-weighted (``pdf = cos(theta_o) / pi``), or,
 given an ``rbrdf-cdf`` file (``cdf=``, ``--cdf``), its tabulated inverse CDFs
 (:class:`fit.sampling.table.CDFTable`, sample and closed-form pdf, as Mitsuba's MIS needs;
 the file's rational maps give a pdf only by inversion and are not used). The runtime
@@ -35,9 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from ..rational.domain import measured_domain
-from ..rational.model import output_clamp
+from ..rational.model import COS_FLOOR, output_clamp
 from . import _mitsuba_runtime
-from .emitter import check_exportable
+from .emitter import check_exportable, has_cos_factor
 from .escape import identifier, literal, python_string
 
 
@@ -101,6 +103,8 @@ def plan(model, cdf=None) -> dict:
     cut = measured_domain(model)
     if cut is not None:                  # a fit without a cut-off: no domain rule in the plan
         out["cutoff_deg"] = cut
+    if has_cos_factor(model):            # a fit without a factor: no factor in the plan
+        out["value_factor"] = {"kind": model.value_factor, "cos_floor": COS_FLOOR}
     return out
 
 
@@ -159,6 +163,10 @@ def to_mitsuba_plugin(model, name: str | None = None, cdf=None) -> str:
            + ("" if len(p["box"]) != 3 else
               "a 3-D fit of (theta_h, theta_d, |phi_d|), not reciprocal: eval's wo is the light,\n"
               "si.wi the viewer; ")
+           + ("" if p.get("value_factor") is None else
+              "rho = the clamped value / max(cos theta_i, "
+              f"{p['value_factor']['cos_floor']:g}), cos theta_i of the\nunclamped angles "
+              "(the functions give rho cos theta_i); ")
            + "sampling: "
            f"{'tabulated inverse CDFs' if p['cdf'] else 'cosine'}.\n"
            'Property ``scale`` (float) multiplies it."""\n')
