@@ -113,7 +113,7 @@ class Synthetic:
         return lobe_brdf(wi, wo)
 
 
-FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "verify": 0, "degrees": (4, 2),
+FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "verify": 0, "degrees": (4, 2), "value_factor": "none",
        "theta_h_edges": [0.15], "tol": 0.01, "time_limit": 600.0}
 TOL = 0.01
 #: the policy's sizes in the default run (its defaults: 9216 points per angle, 100,000 check
@@ -308,3 +308,25 @@ def test_a_view_fixed_miss_is_detected_and_corrected(plain, which):
     assert fine["view"]["error"].max() < 0.5 * before["view"].max() and fine["light"]["error"].max() < 2 * TOL
     for r in res.records:
         assert r["valid"] and r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9)
+
+
+def test_policy_on_a_fit_of_rho_cos_theta_i():
+    """A fit whose functions give ``rho cos theta_i`` (value factor ``"1/cos_theta_i"``, the 3-D
+    fitter's default; the other tests pin ``"none"``): the policy measures the albedo of rho (the
+    model divides by cos theta_i) and corrects the functions in their own unit (data, intervals,
+    objective and albedo sums converted): the albedo error falls on a finer quadrature than its
+    own, and every data point stays within the tolerance its channel met before."""
+    with small_policy("small"):
+        res = fit_rgl(Synthetic(), albedo=True, albedo_tol=TOL, **dict(FIT, value_factor="1/cos_theta_i"))
+    assert res.model.value_factor == "1/cos_theta_i"
+    rec = res.model.fit_info["albedo"]
+    assert rec["max_error_before"] > TOL and rec["refitted"], rec
+    assert rec["max_error"] < 0.75 * rec["max_error_before"], (rec["max_error_before"], rec["max_error"])
+    pre = res.info["model_before_albedo"]
+    fine = [albedo_errors(lambda a, b, m=m: evaluate_directions(m, a, b), lobe_brdf, rec["angles_deg"], n=128 ** 2)
+            for m in (pre, res.model)]
+    assert fine[1]["error"].max() < 0.75 * fine[0]["error"].max(), (fine[0]["error"].max(), fine[1]["error"].max())
+    from fit.rational.fit3d import verification_ratio
+
+    assert all(r["valid"] and r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9) for r in res.records)
+    assert np.max(verification_ratio(res, res.data.X, res.data.rho)) <= 1.0 + 1e-9

@@ -5,12 +5,16 @@ the renderer's evaluation of it.
   stated bound at every data point, Q > 0 is certified on every piece, and the bound is below
   what ANY function of (theta_h, theta_d) alone can reach on the same data (the half relative
   spread of each (theta_h, theta_d) column over phi_d);
-* a version-3 file round-trips exactly; versions 1/2 and 3 do not accept each other's variables;
+* the fit's functions give rho cos theta_i by default (value factor "1/cos_theta_i": the model
+  divides by cos theta_i of the unclamped angles, step 8), and the stated bound holds in that unit;
+* a version-4 file (a factor) and a version-3 file (none) round-trip exactly; versions 1/2 and
+  3/4 do not accept each other's variables, nor 3 and 4 each other's value factors;
 * the Warp evaluation of the packed fit equals its NumPy evaluation (|phi_d| fold, pieces, log
   values, clamps).
 """
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -18,7 +22,8 @@ import pytest
 
 from fit.errors import BRDFFileError
 from fit.formats.angles import half_diff_to_directions, spherical_to_direction
-from fit.rational.coefficient_file import VERSION_3D, from_dict, load, save
+from fit.rational.coefficient_file import VERSION_3D, VERSION_3D_FACTOR, from_dict, load, save
+from fit.rational.model import COS_FLOOR, cos_theta_i_of, value_factor_weights
 from fit.rational.fit3d import fit_samples, grazing_weight, sample_grid
 from fit.rational.variables3d import evaluate_directions, half_diff_3d
 
@@ -66,8 +71,12 @@ def _two_d_lower_bound(X, rho, noise):
 def test_3d_fit_meets_its_bound_everywhere_and_beats_any_2d_fit(synthetic_fit):
     X, rho, res = synthetic_fit
     assert res.valid and res.n_coefficients == 2 * 3 * (35 + 10)   # total degrees 4 and 2 in 3 variables
-    noise = np.array(res.noise)
-    fit = res.model(X)
+    assert res.model.value_factor == "1/cos_theta_i"            # the default: the functions give rho cos theta_i
+    noise = np.array(res.noise)                                # (in the functions' unit, as the bound)
+    rho_f = rho / value_factor_weights(X, res.model.value_factor)[:, None]
+    fit = res.model.values(X)
+    np.testing.assert_allclose(res.model(X), fit / np.maximum(cos_theta_i_of(X), COS_FLOOR)[:, None], rtol=1e-12)
+    rho = rho_f
     err = np.abs(fit - rho) / np.maximum(rho, noise)
     assert np.all(err <= res.tolerance * (1 + 1e-9))          # the stated bound, at every data point
     for leaf in res.model.pieces:                              # per piece and channel: its own bound
@@ -78,7 +87,7 @@ def test_3d_fit_meets_its_bound_everywhere_and_beats_any_2d_fit(synthetic_fit):
             assert leaf.functions[c].certify_denominator().certified
             e = np.abs(leaf(X[sel])[:, c] - rho[sel, c]) / np.maximum(rho[sel, c], noise[c])
             assert np.max(e) <= info["tolerance"] * (1 + 1e-9)
-    bound_2d = _two_d_lower_bound(X, rho, noise)
+    bound_2d = _two_d_lower_bound(X, rho, noise)                # in the same unit: any 2-D function of it
     assert bound_2d > 0.2                                      # the data really depend on phi_d
     assert res.tolerance < 0.5 * bound_2d, (res.tolerance, bound_2d)
 
@@ -110,15 +119,33 @@ def test_directions_use_mirror_fold_and_keep_roles(synthetic_fit):
     assert np.all(evaluate_directions(res.model, wi * [1, 1, -1], wo) == 0)
 
 
-def test_version_3_file_round_trip(synthetic_fit, tmp_path):
+def test_version_3_and_4_file_round_trip(synthetic_fit, tmp_path):
     X, _, res = synthetic_fit
     p = tmp_path / "lobe3d.json"
     save(res.model, p)
     d = json.loads(p.read_text())
-    assert d["version"] == VERSION_3D and [v["name"] for v in d["variables"]] == ["theta_h", "theta_d", "phi_d"]
+    assert d["version"] == VERSION_3D_FACTOR and [v["name"] for v in d["variables"]] == ["theta_h", "theta_d", "phi_d"]
+    assert d["value"]["factor"] == "1/cos_theta_i"
     back = load(p)
     np.testing.assert_array_equal(back(X), res.model(X))
+    assert back.value_factor == "1/cos_theta_i" and all(q.value_factor == "none" for q in back.pieces)
     assert back.pieces[1].function_info[2]["tolerance"] == res.model.pieces[1].function_info[2]["tolerance"]
+    # without the factor: version 3, the functions' values themselves
+    none = copy.deepcopy(res.model)
+    none.value_factor = "none"
+    p3 = tmp_path / "lobe3d_v3.json"
+    save(none, p3)
+    d3 = json.loads(p3.read_text())
+    assert d3["version"] == VERSION_3D and "factor" not in d3["value"]
+    np.testing.assert_array_equal(load(p3)(X), res.model.values(X))
+    assert not np.allclose(load(p3)(X), back(X))
+    # a factor needs version 4 and version 4 needs one; an unknown factor is refused
+    with pytest.raises(BRDFFileError, match="value.factor"):
+        from_dict(dict(d, version=3), "x.json")
+    with pytest.raises(BRDFFileError, match="value.factor"):
+        from_dict(dict(d3, version=4), "x.json")
+    with pytest.raises(BRDFFileError, match="value.factor"):
+        from_dict(dict(d, value=dict(d["value"], factor="cos")), "x.json")
     # a version-2 reader's body with 3 variables is refused, and so is a version-3 file of 2
     d2 = dict(d, version=2)
     with pytest.raises(BRDFFileError, match="variables are theta_h, theta_d, not theta_h, theta_d, phi_d"):

@@ -19,7 +19,7 @@ import numpy as np
 
 from ..formats.angles import cosine_directions
 from .ceiling import Ceiling
-from .model import vouched_envelope
+from .model import value_factor_weights, vouched_envelope
 from .refine import refine
 from .samples3d import grazing_weight, sample_grid
 from .secant import log_intervals, secant_slope, secant_weights
@@ -204,6 +204,10 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
         pieces = _pieces(model)
         offset = float(model.value_offset)
         noise = np.asarray(res.noise, np.float64)
+        # the functions give rho / fw (step 8's factor, 1 without one): values, intervals and
+        # the objective's and the sums' weights in their unit, as fit.rational.ladder3d fits them
+        factor = getattr(model, "value_factor", "none")
+        fwX, fwo, fwa = (value_factor_weights(P, factor) for P in (X, Xo, Xa))
         g = grazing_weight(X, float(fi.get("grazing_cos", 0.25)))
         cfloor = float(fi.get("channel_floor", 0.05))
         edges = res.edges
@@ -218,13 +222,14 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
         cc = (vi[:, 2] * vo[:, 2])[:, None]
         tv = np.maximum(np.asarray(brdf.evaluate(vi, vo), np.float64), 0.0) * cc
         Xv = half_diff_3d(vi, vo)
+        fwv = value_factor_weights(Xv, factor)
         kv = _piece_of(model, Xv)
         Uv = [p.rf_inputs(Xv[kv == k]) for k, p in enumerate(pieces)]
 
         def channel_rmse(c):
             f = np.zeros(len(Xv))
             for k, p in enumerate(pieces):
-                f[kv == k] = _channel_values(p, p.functions[c], Uv[k], offset)
+                f[kv == k] = _channel_values(p, p.functions[c], Uv[k], offset) * fwv[kv == k]
             e = f * cc[:, 0] - tv[:, c]
             return float(np.sqrt(np.mean(e ** 2)) / max(float(np.sqrt(np.mean(tv[:, c] ** 2))), 1e-300))
 
@@ -232,7 +237,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
         # fresh points of the spike check (uniform in the variables and cosine pairs, new seed)
         Xc = sample_grid(float(data.theta_max), (1, 1, 1), n_spike // 2, seed=4242)
         kc = _piece_of(model, Xc)
-        oc = np.asarray(model(Xc), np.float64)
+        oc = np.asarray(model.values(Xc), np.float64)      # in the functions' unit, as the spike check
         gc = grazing_weight(Xc, float(fi.get("grazing_cos", 0.25)))
         rec["spikes"] = []
         orig = {(k, c): p.functions[c] for k, p in enumerate(pieces) for c in range(3)}   # before any round
@@ -268,19 +273,19 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                         continue
                     r0 = by_key[(k, c)]
                     U = np.stack([np.sqrt(X[sel, 0]), X[sel, 1], X[sel, 2]], axis=1)
-                    y = rho[sel, c]
-                    scale = np.maximum(np.maximum(y, noise[c]), cfloor * rho[sel].max(axis=1)) * g[sel]
+                    y = rho[sel, c] / fwX[sel]
+                    scale = np.maximum(np.maximum(y, noise[c]), cfloor * rho[sel].max(axis=1) / fwX[sel]) * g[sel]
                     T = float(r0["tolerance_met"])
                     lo, hi = log_intervals(y, scale, offset, T)
                     Uo = np.stack([np.sqrt(Xo[so, 0]), Xo[so, 1], Xo[so, 2]], axis=1)
-                    yo = np.maximum(ro[so, c], 0.0)
+                    yo = np.maximum(ro[so, c], 0.0) / fwo[so]
                     to = np.log(yo + offset)
-                    w0 = wobj[so] * (yo + offset) ** 2
+                    w0 = wobj[so] * fwo[so] ** 2 * (yo + offset) ** 2
                     main = float(np.sum(w0))          # the piece's relative squared metric's denominator
                     W = piece.rf_inputs(Xa[ina])
-                    t2 = np.log(rt[ina, c] + offset)
+                    t2 = np.log(rt[ina, c] / fwa[ina] + offset)
                     groups = []
-                    angle_of, qj = ina // nv, qw.reshape(-1)[ina]
+                    angle_of, qj = ina // nv, qw.reshape(-1)[ina] * fwa[ina]
                     for i in range(G):       # every angle of both kinds: the ones within must not drift out
                         idx = np.flatnonzero(angle_of == i)
                         if len(idx) == 0:
@@ -291,7 +296,8 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                         groups.append((idx, qj[idx] / den[i, c], const, lam * main))
                     if not groups:
                         continue
-                    f2, info = refine(piece.functions[c], U, lo, hi, Uo, to, w0, reweight=secant_weights(wobj[so]),
+                    f2, info = refine(piece.functions[c], U, lo, hi, Uo, to, w0,
+                                      reweight=secant_weights(wobj[so] * fwo[so] ** 2),
                                       sums=(W, t2, groups, secant_slope))
                     if f2 is None:
                         continue
@@ -327,7 +333,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                     upd["stage"] = stage
                     piece.functions[c] = f2
                     piece.function_info[c] = dict(piece.function_info[c], **upd)
-                    rf[ina, c] = _channel_values(piece, f2, W, offset)
+                    rf[ina, c] = _channel_values(piece, f2, W, offset) * fwa[ina]
                     r0.update(upd)
                 new = relative_errors(albedo_from_values(rf, qw), at, floor_frac)
                 r_new = channel_rmse(c)

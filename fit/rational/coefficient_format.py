@@ -11,7 +11,9 @@ FORMAT = "rbrdf-rational"
 VERSION = 1            # single rational function per output
 VERSION_PIECEWISE = 2  # pieces along one variable (see PiecewiseRationalModel)
 VERSION_3D = 3         # a BRDF of (theta_h, theta_d, |phi_d|), single or piecewise (fit.rational.fit3d)
-VERSIONS = (VERSION, VERSION_PIECEWISE, VERSION_3D)
+VERSION_3D_FACTOR = 4  # version 3 whose functions give rho cos theta_i (value factor "1/cos_theta_i", step 8):
+                       # a new version so that a reader without step 8 refuses the file instead of misreading it
+VERSIONS = (VERSION, VERSION_PIECEWISE, VERSION_3D, VERSION_3D_FACTOR)
 #: The variables of a version-3 BRDF (fit.rational.variables3d: phi_d folded to |phi_d|).
 BRDF_VARIABLES_3D = ["theta_h", "theta_d", "phi_d"]
 

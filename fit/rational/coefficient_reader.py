@@ -32,6 +32,7 @@ from .coefficient_format import (
     SAMPLER_KEY,
     VERSION,
     VERSION_3D,
+    VERSION_3D_FACTOR,
     VERSION_PIECEWISE,
     VERSIONS,
     content_sha256,
@@ -40,6 +41,7 @@ from .fallback import table_from_record
 from .function import RationalFunction
 from .model import (
     INPUT_TRANSFORMS,
+    VALUE_FACTORS,
     VALUE_TRANSFORMS,
     PiecewiseRationalModel,
     RationalModel,
@@ -177,6 +179,7 @@ def _value(d, key: str, kind: str) -> dict:
         "value_max": F.number(v.get("max"), F.sub(key, "max"), optional=True),
         "value_name": F.name(v.get("name", "y"), F.sub(key, "name"), max_len=64),
         "value_unit": F.name(v.get("unit", ""), F.sub(key, "unit"), max_len=64),
+        "value_factor": F.string(v.get("factor", "none"), F.sub(key, "factor"), choices=VALUE_FACTORS),
     }
     lo, hi = out["value_min"], out["value_max"]
     if lo is not None and hi is not None and not hi > lo:
@@ -292,6 +295,8 @@ def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
         ki = F.sub(kp, i)
         F.obj(pd, ki)
         sub = {k: d[k] for k in ("name", "kind", "value", "basis", "outputs") if k in d}
+        if isinstance(sub.get("value"), dict):      # the value factor is the whole model's (step 8)
+            sub["value"] = {k: v for k, v in sub["value"].items() if k != "factor"}
         sub.update(variables=F.get(pd, "variables", ki), domain_policy=d.get("domain_policy", {"outside": "clamp"}))
         if "split" in pd:
             sub.update(split=pd["split"], pieces=F.get(pd, "pieces", ki))
@@ -299,9 +304,10 @@ def _piecewise(d, path, key, depth, budget, kind, variables, three_d=False):
             sub.update(functions=F.get(pd, "functions", ki))
         pieces.append(_model(sub, path, ki, depth + 1, budget, three_d))
         infos.append(dict(F.obj(pd.get("info", {}), F.sub(ki, "info"))))
+    factor = _value(d, F.sub(key, "value"), kind)["value_factor"] if depth == 0 else "none"
     try:
         return PiecewiseRationalModel(
-            name=name, variables=variables,
+            name=name, variables=variables, value_factor=factor,
             split_variable=var, edges=[float(e) for e in edges], pieces=pieces, kind=kind,
             domain_policy=_domain_policy(d, F.sub(key, "domain_policy")),
             fit_info=_fit_info(d, key), piece_info=infos,
@@ -327,13 +333,17 @@ def from_dict(d: dict, path=None, certify: bool = True):
                                   f"{ver if type(ver) is int else repr(ver)[:20]} (this reader knows the "
                                   f"integers {', '.join(map(str, VERSIONS))})")
     budget = FileBudget()
-    label = {VERSION_PIECEWISE: "version-2 ", VERSION_3D: "version-3 "}.get(ver, "")
+    label = {VERSION_PIECEWISE: "version-2 ", VERSION_3D: "version-3 ", VERSION_3D_FACTOR: "version-4 "}.get(ver, "")
     try:
         if ver == VERSION and ("split" in d or "pieces" in d):
             raise F.Invalid("version", "a version-1 file has no 'split' or 'pieces' (version 2)")
         if ver == VERSION_PIECEWISE and "split" not in d:
             raise F.Invalid("split", "missing (a version-2 file is piecewise)")
-        model = _model(d, path, "", 0, budget, three_d=ver == VERSION_3D)
+        model = _model(d, path, "", 0, budget, three_d=ver in (VERSION_3D, VERSION_3D_FACTOR))
+        if (model.value_factor != "none") != (ver == VERSION_3D_FACTOR):
+            raise F.Invalid("value.factor", f"{model.value_factor!r} in a version-{ver} file (a value factor "
+                                            f"other than 'none' is version {VERSION_3D_FACTOR}, and version "
+                                            f"{VERSION_3D_FACTOR} has one)")
         if "fallback" in d:       # optional (flagged 2-D fits): checked whole, kept as written
             table = table_from_record(d["fallback"], model, "fallback")
             if table.max(initial=0.0) > MAX_BRDF_VALUE:

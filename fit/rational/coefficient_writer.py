@@ -15,6 +15,7 @@ from .coefficient_format import (
     SAMPLER_KEY,
     VERSION,
     VERSION_3D,
+    VERSION_3D_FACTOR,
     VERSION_PIECEWISE,
     content_sha256,
     is_3d,
@@ -28,6 +29,10 @@ def to_dict(model) -> dict:
     d = _piecewise_to_dict(model) if isinstance(model, PiecewiseRationalModel) else _model_to_dict(model)
     if is_3d(model):
         d["version"] = VERSION_3D
+    factor = getattr(model, "value_factor", "none")
+    if factor != "none":            # step 8: a version the readers without it refuse
+        d["version"] = VERSION_3D_FACTOR
+        d["value"] = dict(d["value"], factor=factor)
     if getattr(model, "fallback", None) is not None:    # only flagged 2-D fits: others as before
         d["fallback"] = jsonable(model.fallback)
     sampler = getattr(model, "sampler", None)

@@ -14,7 +14,7 @@ import numpy as np
 from ..progress import report
 from .ceiling import Ceiling
 from .fitter import IntervalRationalFitter
-from .model import PiecewiseRationalModel, RationalModel, Variable, vouched_envelope
+from .model import PiecewiseRationalModel, RationalModel, Variable, value_factor_weights, vouched_envelope
 from .refine import refine
 from .result3d import INTERVALS, Fit3D
 from .samples3d import grazing_weight, noise_levels, objective_weights
@@ -152,7 +152,9 @@ def _kept_channel(f, old, U, y, scale, offset):
 def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d", theta_max=None, source=None,
                 objective=None, ceiling=None, noise=None, keep=None, progress=None, **params) -> Fit3D:
     """3-D fit of data ``X`` ``(N, 3)`` (theta_h, theta_d, |phi_d|, radians) with values ``rho``
-    ``(N, 3)`` (1/sr) with ``settings`` (:class:`fit.rational.settings.Fit3DSettings`, default its
+    ``(N, 3)`` (1/sr; the functions are fitted to ``rho / w``, ``w`` the weight of the setting
+    ``value_factor``, :func:`fit.rational.model.value_factor_weights`: ``rho cos theta_i`` by
+    default, and the noise levels, error units, ranges and objective are in that unit) with ``settings`` (:class:`fit.rational.settings.Fit3DSettings`, default its
     defaults; each of its names is also a keyword argument that overrides it): pieces along theta_h
     at ``theta_h_edges`` (inner edges), each channel a rational function of total degrees
     ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol`` (docs/fitting.md: the stated bound is
@@ -164,7 +166,7 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     within ``relax`` times the tolerance met (docs/fitting.md); without it (or ``relax <= 1``) the
     fit is the minimax one. ``noise``: the noise levels (default
     :func:`fit.rational.samples3d.noise_levels` of ``rho``); ``keep`` (a refit of
-    :func:`fit.rational.verify3d.verify_and_refit`, with the earlier fit's ``noise``): ``{(piece,
+    :func:`fit.rational.verify3d.verify_and_refit`, with the earlier fit's ``noise``, in the functions' unit): ``{(piece,
     channel): (function, record)}`` of functions kept as they are (their records measured again on
     this data; one that is no longer within the tolerance it met, or not certified, is fitted
     again), the others fitted with their tolerance ladder started one step below the earlier
@@ -178,7 +180,12 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     if ceiling is None:
         ceiling = Ceiling.of(s)
     X = np.asarray(X, np.float64)
-    rho = np.maximum(np.asarray(rho, np.float64), 0.0)
+    # step 8's factor (docs/fitting.md, "The light's cosine"): the functions are fitted to
+    # rho / fw (rho cos theta_i for "1/cos_theta_i"), and from here on the values, noise levels,
+    # error units and the objective are in that unit (fw = 1 without a factor)
+    factor = s.value_factor
+    fw = value_factor_weights(X, factor)
+    rho = np.maximum(np.asarray(rho, np.float64), 0.0) / fw[:, None]
     tm = float(theta_max if theta_max is not None else max(X[:, 0].max(), X[:, 1].max()))
     noise = noise_levels(rho, noise_frac) if noise is None else np.asarray(noise, np.float64)
     keep = keep or {}
@@ -202,13 +209,15 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
             Xo, ro, wo = objective
             so = (Xo[:, 0] >= a - 1e-12) & (Xo[:, 0] <= b + 1e-12) & (wo > 0)
             Uo = np.stack([np.sqrt(Xo[so, 0]), Xo[so, 1], Xo[so, 2]], axis=1)
+            fwo = value_factor_weights(Xo[so], factor)
+            yo = np.maximum(ro[so], 0.0) / fwo[:, None]
             floor = np.maximum(noise, s.relative_floor * np.median(rho, axis=0))
-            wc = objective_weights(s.objective, Xo[so], wo[so], ro[so], floor, channel_floor)   # (M, 3)
+            wc = objective_weights(s.objective, Xo[so], wo[so], yo, floor, channel_floor, fw=fwo)   # (M, 3)
         funcs, infos = [], []
         for c in range(3):
             scale = np.maximum(np.maximum(rho[sel, c], noise[c]), channel_floor * rho[sel].max(axis=1)) * g[sel]
             if objective is not None:
-                obj = (Uo, np.maximum(ro[so, c], 0.0), wc[:, c])
+                obj = (Uo, yo[:, c], wc[:, c])
             start = min(r["stage"].get("minimax_met", r["tolerance_met"]) for r in infos) / 1.6 if infos else None
             f = None
             if (k, c) in keep and keep[(k, c)][0] is not None:
@@ -242,6 +251,7 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
                 "theta_max_deg": float(np.degrees(tm)), "n_points": len(X), "time_s": elapsed,
                 "fitter": "fit.rational.fit3d (interval LP, constraint generation, fixed degrees)",
                 "theta_h_edges": edges[1:-1], "valid": valid, "ladder_steps": int(ladder_steps),
+                "value_factor": factor,
                 "guarantee": "every data point (theta_i, theta_o <= theta_max: the whole measured domain and the "
                              "file's own extrapolation beyond its last incidence up to theta_max) "
                              f"within {INTERVALS}; Q > 0 certified on every piece"}
@@ -249,11 +259,11 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     src = source or {"file": "", "sha256": ""}
     if n_pieces == 1:
         model = pieces[0]
-        model.fit_info, model.source = fit_info, src
+        model.fit_info, model.source, model.value_factor = fit_info, src, factor
     else:
         model = PiecewiseRationalModel(name=name, variables=_variables([(0.0, tm), (0.0, tm), (0.0, np.pi)]),
                                        split_variable="theta_h", edges=edges, pieces=pieces,
-                                       fit_info=fit_info, piece_info=piece_info, source=src)
+                                       fit_info=fit_info, piece_info=piece_info, source=src, value_factor=factor)
     return Fit3D(model, records, tol_all, valid, elapsed, len(X), tuple(noise.tolist()), edges=edges,
                  settings=s)
 

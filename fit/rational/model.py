@@ -5,6 +5,10 @@ value transforms and domain policy, evaluated at physical inputs.
   u = sqrt(x)) and domain in its own unit;
 * value transforms: ``"linear"`` (y = R(u)) or ``"log"`` (y = exp(R(u)) - offset), with the
   clamps ``value_min`` / ``value_max``;
+* value factors (3-D BRDFs only, step 8 of the recipe): ``"none"`` (rho = y) or
+  ``"1/cos_theta_i"`` (rho = y / max(cos theta_i, :data:`COS_FLOOR`): the functions give rho cos
+  theta_i, which stays finite where measured data grow as 1 / cos theta_i towards the light's
+  horizon; cos theta_i of the Rusinkiewicz angles before any clamp, :func:`cos_theta_i_of`);
 * :class:`RationalModel`: one rational function per output on one box;
 * :class:`PiecewiseRationalModel`: rational models on consecutive intervals of one variable;
 * :func:`flagged`: whether a function's record (``function_info``) says that its fit is not
@@ -28,6 +32,40 @@ from ..limits import MAX_BRDF_VALUE
 
 INPUT_TRANSFORMS = ("identity", "sqrt")
 VALUE_TRANSFORMS = ("linear", "log")
+#: Step 8 of the evaluation recipe (:mod:`fit.rational.coefficient_file`): ``"none"``, or
+#: ``"1/cos_theta_i"`` (the functions give rho cos theta_i; 3-D BRDF fits only).
+VALUE_FACTORS = ("none", "1/cos_theta_i")
+#: The smallest cos theta_i the factor ``"1/cos_theta_i"`` divides by (theta_i = 89.94 deg):
+#: below it rho cos theta_i falls linearly to 0 at the horizon instead of staying finite.
+COS_FLOOR = 1.0e-3
+
+
+def cos_theta_i_of(x) -> np.ndarray:
+    """``cos theta_i`` (wi . n) of Rusinkiewicz rows ``x`` ``(..., 3)`` = ``(theta_h, theta_d,
+    |phi_d|)`` (radians): ``cos th cos td - sin th sin td cos pd``
+    (:func:`fit.formats.angles.cos_theta_i_o`)."""
+    x = np.asarray(x, dtype=np.float64)
+    th, td, pd = x[..., 0], x[..., 1], x[..., 2]
+    return np.cos(th) * np.cos(td) - np.sin(th) * np.sin(td) * np.cos(pd)
+
+
+def apply_value_factor(y, x, factor: str):
+    """Step 8: the values ``y`` ``(..., n_out)`` at the (unclamped) physical inputs ``x``
+    ``(..., 3)`` times the model's value factor (:data:`VALUE_FACTORS`)."""
+    if factor == "none":
+        return y
+    if factor == "1/cos_theta_i":
+        return y / np.maximum(cos_theta_i_of(x), COS_FLOOR)[..., None]
+    raise ValueError(f"unknown value factor {factor!r}")
+
+
+def value_factor_weights(x, factor: str) -> np.ndarray:
+    """``(...)`` what the factor multiplies the functions' values by at rows ``x`` (1 for
+    ``"none"``): the fitter fits ``rho / weight`` (e.g. rho cos theta_i)."""
+    x = np.asarray(x, dtype=np.float64)
+    if factor == "none":
+        return np.ones(x.shape[:-1])
+    return 1.0 / np.maximum(cos_theta_i_of(x), COS_FLOOR)
 
 
 def apply_input_transform(x, transform: str):
@@ -116,6 +154,14 @@ def output_clamp(info: dict):
     return measured_range(info) if flagged(info) else vouched_range(info)
 
 
+def _check_factor(model) -> None:
+    if model.value_factor not in VALUE_FACTORS:
+        raise ValueError(f"unknown value factor {model.value_factor!r}")
+    if model.value_factor != "none" and (model.kind != "brdf" or [v.name for v in model.variables]
+                                         != ["theta_h", "theta_d", "phi_d"]):
+        raise ValueError(f"value factor {model.value_factor!r} needs a 3-D BRDF (theta_h, theta_d, phi_d)")
+
+
 @dataclass
 class Variable:
     name: str
@@ -178,6 +224,9 @@ class RationalModel(_BRDFEvaluation):
     domain_policy: dict = field(default_factory=lambda: {"outside": "clamp", "below_horizon": "zero"})
     fit_info: dict = field(default_factory=dict)
     function_info: list = field(default_factory=list)   # per-output dicts (errors, certificate)
+    #: step 8 (:data:`VALUE_FACTORS`); only on a model evaluated as a whole, never on a piece of a
+    #: PiecewiseRationalModel (whose own ``value_factor`` applies once, at the unclamped inputs)
+    value_factor: str = "none"
     source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
     #: the file's optional "fallback" record (fit.rational.fallback: the projected table of a
     #: flagged 2-D fit, so that it renders without its source measurement); None: none
@@ -193,6 +242,7 @@ class RationalModel(_BRDFEvaluation):
             raise ValueError("one function per output is required")
         if self.value_transform not in VALUE_TRANSFORMS:
             raise ValueError(f"unknown value transform {self.value_transform!r}")
+        _check_factor(self)
         for f in self.functions:
             if f.n_vars != len(self.variables):
                 raise ValueError("function and variable counts differ")
@@ -238,6 +288,11 @@ class RationalModel(_BRDFEvaluation):
         return [(self, np.ones(x.shape[:-1], bool), np.clip(x, lo, hi))]
 
     def __call__(self, x) -> np.ndarray:
+        """Steps 1-8 at physical inputs ``x`` ``(..., n_vars)``: ``(..., n_outputs)``."""
+        return apply_value_factor(self.values(x), x, self.value_factor)
+
+    def values(self, x) -> np.ndarray:
+        """Steps 1-7 (the functions' values, before the value factor of step 8)."""
         u = self.rf_inputs(x)
         vals = []
         for f in self.functions:
@@ -282,9 +337,11 @@ class PiecewiseRationalModel(_BRDFEvaluation):
     source: dict = field(default_factory=lambda: {"file": "", "sha256": ""})
     fallback: dict | None = None         # as RationalModel.fallback
     sampler: dict | None = None          # as RationalModel.sampler
+    value_factor: str = "none"           # step 8, once for the whole model (its pieces have "none")
 
     def __post_init__(self):
         self.variables = [v if isinstance(v, Variable) else Variable(**v) for v in self.variables]
+        _check_factor(self)
         names = [v.name for v in self.variables]
         if self.split_variable not in names:
             raise ValueError(f"split variable {self.split_variable!r} is not among {names}")
@@ -304,6 +361,8 @@ class PiecewiseRationalModel(_BRDFEvaluation):
             if (piece.value_transform, piece.value_offset) != (self.pieces[0].value_transform,
                                                                self.pieces[0].value_offset):
                 raise ValueError(f"piece {k}: value transform differs from piece 0")
+            if piece.value_factor != "none":
+                raise ValueError(f"piece {k}: a piece has no value factor of its own (the model's applies)")
         if not self.piece_info:
             self.piece_info = [{} for _ in self.pieces]
 
@@ -361,6 +420,11 @@ class PiecewiseRationalModel(_BRDFEvaluation):
         return out
 
     def __call__(self, x) -> np.ndarray:
+        """Steps 1-8 at physical inputs ``x`` ``(..., n_vars)``: ``(..., n_outputs)``."""
+        return apply_value_factor(self.values(x), x, self.value_factor)
+
+    def values(self, x) -> np.ndarray:
+        """Steps 1-7 (the pieces' values, before the value factor of step 8)."""
         x = np.asarray(x, dtype=np.float64)
         if self.domain_policy.get("outside", "clamp") == "clamp":
             lo = np.array([v.domain[0] for v in self.variables])

@@ -16,7 +16,11 @@ is the measurement's interpolant and ``s`` the error unit:
   with the piece's box; ``s = max(m_c, noise_c, channel_floor max(m_R, m_G, m_B))``: the fit's
   error unit without its grazing weight (>= 1, so a bound in this unit is one in the fit's)
   (:data:`UNIT_3D`), or, with ``grazing=True``, times a lower bound of the grazing weight on the
-  cell (:data:`UNIT_3D_GRAZING`: the unit of the fit's stated tolerance).
+  cell (:data:`UNIT_3D_GRAZING`: the unit of the fit's stated tolerance). A fit whose functions
+  give ``rho cos theta_i`` (value factor ``"1/cos_theta_i"``, :mod:`fit.rational.model`) is
+  bounded in that unit: ``m`` interpolates ``rho cos theta_i`` at the nodes, and the bound is
+  one on the relative error of the functions' values against it (the same relative error of
+  rho at the nodes; between them the interpolant is that of ``rho cos theta_i``).
 
 How it is proved, per cell of the measured domain (a box in the fit's coordinates;
 :func:`fit.rational.cell_proof.prove_cells`, enclosures in :mod:`fit.rational.cell_enclosure`):
@@ -57,7 +61,7 @@ import numpy as np
 
 from .cell_proof import (DEFAULT_MAX_CELLS, DEFAULT_ROUNDS, ENCLOSURES, EPS, WORST_KEPT,  # noqa: F401
                          ProvedBound, _leaf_output, _multilinear, prove_cells)
-from .model import apply_input_transform
+from .model import apply_input_transform, value_factor_weights
 
 
 UNIT_2D = "|fit - cluster| / max(cluster, abs_floor / tolerance) (relative, floored), nearest-cluster table"
@@ -219,6 +223,12 @@ def prove_fit3d(res, brdf, grid=None, grazing: bool = False, **kw) -> list:
     tm = float(res.data.theta_max) if res.data is not None else float(np.deg2rad(fi["theta_max_deg"]))
     grid = tuple(grid or (res.settings.grid if res.settings is not None else fi["grid"]))
     axes, rho, measured = measurement_grid(brdf, tm, grid)
+    factor = getattr(res.model, "value_factor", "none")
+    if factor != "none":        # the functions give rho / w (step 8): the nodes' values in their unit
+        U = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+        X = np.stack([U[..., 0] ** 2, U[..., 1], U[..., 2]], axis=-1)
+        rho = rho / value_factor_weights(X, factor)[..., None]
+    unit_note = f"; fit and m in the functions' unit, rho / ({factor})" if factor != "none" else ""
     noise = np.asarray(res.noise, np.float64)
     cf = float(fi.get("channel_floor", DEFAULT_CHANNEL_FLOOR))
     c_lo, c_hi, corners = _grid_cells(axes, rho, measured)
@@ -238,7 +248,7 @@ def prove_fit3d(res, brdf, grid=None, grazing: bool = False, **kw) -> list:
             def s0(cr, c=c):
                 return np.maximum(scale(cr)[1], noise[c])
             out.append(prove_cells(leaf, c, lo, hi, cc, scale_c, tol.get((k, c), 0.0), piece=k,
-                                   unit=UNIT_3D_GRAZING if grazing else UNIT_3D, floor=s0,
+                                   unit=(UNIT_3D_GRAZING if grazing else UNIT_3D) + unit_note, floor=s0,
                                    weight=grazing_weight_lower(leaf, gc) if grazing else None, **kw))
     return out
 

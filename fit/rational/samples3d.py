@@ -94,19 +94,24 @@ def relative_weights(w, rho, floor, channel_floor: float) -> np.ndarray:
     return np.asarray(w, np.float64)[:, None] / np.maximum(unit, 1e-300) ** 2
 
 
-def objective_weights(objective: str, X, w, rho, floor, channel_floor: float) -> np.ndarray:
-    """``(M, 3)`` per-channel weights of the squared error of rho at objective points ``X``
-    ``(M, 3)`` with the weights ``w`` of :func:`objective_points` for ``objective`` and values
+def objective_weights(objective: str, X, w, rho, floor, channel_floor: float, fw=None) -> np.ndarray:
+    """``(M, 3)`` per-channel weights of the squared error of the fitted value at objective points
+    ``X`` ``(M, 3)`` with the weights ``w`` of :func:`objective_points` for ``objective`` and values
     ``rho`` ``(M, 3)``: ``"rho_cos_cos"`` ``w`` itself; ``"relative"``
     :func:`relative_weights`; ``"blend"`` the sum of the relative weights and those of ``rho cos
-    cos``, each normalised to a unit sum per channel (half the objective each)."""
+    cos``, each normalised to a unit sum per channel (half the objective each). ``fw`` ``(M,)``
+    (default 1): the functions give ``rho / fw`` (:func:`fit.rational.model.value_factor_weights`)
+    and ``rho`` holds those values; an error of ``rho cos cos`` is then ``fw`` times theirs, so
+    its weights are multiplied by ``fw^2`` (the relative weights are those of the values given,
+    floors in their unit)."""
+    f2 = 1.0 if fw is None else np.asarray(fw, np.float64) ** 2
     if objective == "rho_cos_cos":
-        return np.repeat(np.asarray(w, np.float64)[:, None], 3, axis=1)
+        return np.repeat((np.asarray(w, np.float64) * f2)[:, None], 3, axis=1)
     rel = relative_weights(w, rho, floor, channel_floor)
     if objective == "relative":
         return rel
     ci, co = cos_theta_i_o(X[:, 0], X[:, 1], X[:, 2])
-    ab = np.repeat((np.asarray(w, np.float64) * (ci * co) ** 2)[:, None], 3, axis=1)
+    ab = np.repeat((np.asarray(w, np.float64) * (ci * co) ** 2 * f2)[:, None], 3, axis=1)
     return rel / np.maximum(rel.sum(axis=0), 1e-300) + ab / np.maximum(ab.sum(axis=0), 1e-300)
 
 

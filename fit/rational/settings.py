@@ -34,6 +34,7 @@ from ..limits import (
 )
 from .ceiling import DEFAULT_TIME_LIMIT
 from .domain import THETA_D_MAX_DEG
+from .model import VALUE_FACTORS
 from .samples3d import DEFAULT_GRID, DEFAULT_NOISE_FRAC, DEFAULT_RANDOM, DEFAULT_THETA_FIT_DEG, OBJECTIVES
 
 INTERVALS = ("tol", "tol+spread")               # interval policies of the 2-D fit
@@ -53,6 +54,7 @@ DEFAULT_OBJECTIVE = 4000            # objective points of the second stage per t
 SELECT_BY = ("validation", "image")
 DEFAULT_OBJECTIVE_KIND = "rho_cos_cos"   # what the second stage minimises and the selection compares
 DEFAULT_RELATIVE_FLOOR = 0.1        # "relative": values below this fraction of a channel's median count by it
+DEFAULT_VALUE_FACTOR = "1/cos_theta_i"   # 3-D functions give rho cos theta_i (step 8 divides): finite at the light's horizon
 DEFAULT_ALBEDO_TOL = 0.05           # directional-albedo tolerance of the policy (fit.rational.albedo3d)
 DEFAULT_ALBEDO_TIME = None          # the albedo step's own CPU-time safety net (s); None: the fit's (time_limit)
 DEFAULT_ALBEDO_REFITS = 27          # channel corrections the albedo policy may try (9 weights x 3 channels)
@@ -197,6 +199,10 @@ class Fit3DSettings(_Settings):
       is what is met); ``degrees``: ``(numerator, denominator)`` total degrees per piece;
       ``theta_h_edges``: inner theta_h edges of the pieces (radians; None: one piece);
       ``piece_degrees``: degrees per piece (None: ``degrees`` everywhere);
+    * ``value_factor``: what the functions give, one of :data:`fit.rational.model.VALUE_FACTORS`:
+      ``"1/cos_theta_i"`` (default: rho cos theta_i, which the evaluation divides by cos theta_i,
+      step 8 of the recipe; it stays finite where the measured data grow as 1 / cos theta_i towards
+      the light's horizon) or ``"none"`` (rho itself);
     * ``noise_frac``: noise level as a fraction of a channel's median; ``grazing_cos``: the
       product of the cosines below which the bound is on ``rho cos cos``; ``channel_floor``: a
       channel's error unit is at least this fraction of the brightest channel;
@@ -249,6 +255,7 @@ class Fit3DSettings(_Settings):
     degrees: tuple = DEFAULT_DEGREES
     theta_h_edges: list | None = None
     piece_degrees: list | None = None
+    value_factor: str = DEFAULT_VALUE_FACTOR
     noise_frac: float = DEFAULT_NOISE_FRAC
     grazing_cos: float = DEFAULT_GRAZING_COS
     channel_floor: float = DEFAULT_CHANNEL_FLOOR
@@ -290,6 +297,7 @@ class Fit3DSettings(_Settings):
             ("piece_degrees", pdeg is None or (isinstance(pdeg, (tuple, list)) and len(pdeg) == n_pieces
                                                and all(_degree_pair(d) for d in pdeg)),
              f"None or one degree pair per piece ({n_pieces})"),
+            ("value_factor", self.value_factor in VALUE_FACTORS, f"one of {VALUE_FACTORS}"),
             ("noise_frac", _number(self.noise_frac) and self.noise_frac > 0, "a finite number > 0"),
             ("grazing_cos", _number(self.grazing_cos) and 0.0 <= self.grazing_cos <= 1.0, "in [0, 1]"),
             ("channel_floor", _number(self.channel_floor) and 0.0 <= self.channel_floor <= 1.0, "in [0, 1]"),

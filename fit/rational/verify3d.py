@@ -15,6 +15,7 @@ from ..formats.angles import half_diff_to_directions
 from ..progress import report
 from .ceiling import Ceiling
 from .ladder3d import fit_samples
+from .model import value_factor_weights
 from .samples3d import grazing_weight, sample_grid
 from .settings import DEFAULT_CHANNEL_FLOOR, DEFAULT_GRAZING_COS, DEFAULT_VERIFY
 
@@ -25,9 +26,12 @@ def verification_ratio(res, X, rho, per_channel: bool = False) -> np.ndarray:
     :func:`fit.rational.ladder3d.fit_samples` with the fit's noise levels and policies, ``tol`` the
     stated tolerance of the piece and channel that evaluates the point); <= 1 where the fit is
     within its stated bound. ``per_channel``: the ``(N, 3)`` ratios of R, G, B instead of their
-    largest."""
+    largest. Measured in the functions' unit (``rho`` over the value factor's weight, as the fit
+    was made: :func:`fit.rational.ladder3d.fit_samples`)."""
     fi = res.model.fit_info
     noise = np.asarray(res.noise)
+    fw = value_factor_weights(X, getattr(res.model, "value_factor", "none"))
+    rho = np.asarray(rho, np.float64) / fw[:, None]
     g = grazing_weight(X, float(fi.get("grazing_cos", DEFAULT_GRAZING_COS)))
     s = np.maximum(np.maximum(rho, noise[None, :]), float(fi.get("channel_floor", DEFAULT_CHANNEL_FLOOR))
                    * rho.max(axis=1, keepdims=True)) * g[:, None]
@@ -36,7 +40,7 @@ def verification_ratio(res, X, rho, per_channel: bool = False) -> np.ndarray:
     tol = np.zeros((len(edges) - 1, 3))
     for r in res.records:
         tol[r["piece"], "RGB".index(r["channel"])] = r["tolerance"]
-    err = np.abs(res.model(X) - rho) / s
+    err = np.abs(res.model.values(X) - rho) / s
     ratio = err / np.maximum(tol[k], 1e-12)
     return ratio if per_channel else np.max(ratio, axis=1)
 
