@@ -169,8 +169,9 @@ def fit3d_file(tmp_path_factory):
     return out, rc, so.getvalue(), se.getvalue(), results[0]
 
 
-def test_brdf_3d_writes_a_version_3_fit_with_progress(fit3d_file):
-    """The 3-D command: exit 0, a version-3 file of (theta_h, theta_d, phi_d) whose every function
+def test_brdf_3d_writes_a_version_4_fit_with_progress(fit3d_file):
+    """The 3-D command: exit 0, a version-4 file of (theta_h, theta_d, phi_d) (functions of rho cos
+    theta_i, the default ``--value-factor``) whose every function
     is valid (its bound met at every data point, Q > 0 certified) and carries its vouched range,
     no fallback table; the summary table on stdout, one progress line per stage on stderr."""
     import json
@@ -180,7 +181,8 @@ def test_brdf_3d_writes_a_version_3_fit_with_progress(fit3d_file):
     out, rc, stdout, stderr, _ = fit3d_file
     assert rc == 0, stderr
     d = json.loads(out.read_text())
-    assert d["version"] == 3 and [v["name"] for v in d["variables"]] == ["theta_h", "theta_d", "phi_d"]
+    assert d["version"] == 4 and [v["name"] for v in d["variables"]] == ["theta_h", "theta_d", "phi_d"]
+    assert d["value"]["factor"] == "1/cos_theta_i"
     assert d["source"]["file"] == "paper_white_rgb.bsdf" and "fallback" not in d
     model = load(out)
     assert model.n_coefficients == 3 * (20 + 4)                  # degrees (3, 1) in three variables
@@ -314,6 +316,8 @@ def test_brdf_3d_that_is_not_valid_writes_nothing(fit3d_file, tmp_path, capsys, 
     (["{merl}", "--layout", "single"], "--layout", "a flag of the 3d fit"),
     (["{merl}", "--objective", "relative"], "--objective", "a flag of the 3d fit"),
     (["{merl}", "--select-by", "image"], "--select-by", "a flag of the 3d fit"),
+    (["{merl}", "--value-factor", "none"], "--value-factor", "a flag of the 3d fit"),
+    (["{rgl}", "--value-factor", "cos"], "--value-factor", "invalid choice"),
     (["{rgl}", "--model", "2d", "--time-limit", "10"], "--time-limit", "this run fits in 2d"),
     (["{rgl}", "--allow-infeasible"], "--allow-infeasible", "applies to --model 2d"),
     (["{rgl}", "--degrees", "3,1"], "--degrees", "--layout single only"),
@@ -328,3 +332,17 @@ def test_brdf_model_flags_are_one_line_errors(lambert_file, tmp_path, capsys, ar
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and flag in err and words in err, err
     assert "Traceback" not in err and not out.exists()
+
+
+def test_brdf_3d_value_factor_flag_sets_the_fit():
+    """``--value-factor none`` fits rho itself (a version-3 file), the default rho cos theta_i."""
+    import argparse
+
+    from fit.cli import brdf3d
+
+    base = dict(layout=None, degrees=None, target_rmse=None, tol=None, grid=None, n_random=None, verify=None,
+                no_albedo=None, objective=None, select_by=None)
+    s, _ = brdf3d.settings_from_args(argparse.Namespace(**base, value_factor=None))
+    assert s.value_factor == "1/cos_theta_i"
+    s, _ = brdf3d.settings_from_args(argparse.Namespace(**base, value_factor="none"))
+    assert s.value_factor == "none"

@@ -5,7 +5,8 @@ per-channel summary table. ``--model`` picks the fit:
 * ``2d``: the (theta_h, theta_d) fit of the median projection within ``--tol``
   (:func:`fit.rational.brdf_fit.fit_brdf`, file version 1 or 2);
 * ``3d``: the (theta_h, theta_d, |phi_d|) fit of an RGL ``.bsdf`` measurement
-  (:mod:`fit.cli.brdf3d`, :func:`fit.rational.fit3d.fit_rgl_select`, file version 3);
+  (:mod:`fit.cli.brdf3d`, :func:`fit.rational.fit3d.fit_rgl_select`, file version 4: functions of
+  rho cos theta_i; version 3 with ``--value-factor none``);
 * ``auto`` (default): ``3d`` for an RGL ``.bsdf`` file, ``2d`` for a MERL ``.binary`` file.
 
 Why ``3d`` where it exists (docs/fitting.md, "Which model"): the product renders measured
@@ -147,7 +148,7 @@ def register(subparsers) -> None:
         description="Fit R, G and B of a measured BRDF with rational functions P/Q, Q > 0 certified, and write "
                     "an rbrdf-rational JSON file (see fit.rational.coefficient_file). --model 3d (the default "
                     "for an RGL .bsdf file): rational functions of (theta_h, theta_d, |phi_d|) fitted to the "
-                    "file's own evaluation, the tolerance the outcome (version 3; 1,125 or 420 coefficients, "
+                    "file's own evaluation, the tolerance the outcome (version 4: functions of rho cos theta_i; 1,125 or 420 coefficients, "
                     "38-80 s on one core): the most accurate form, its relative RMSE 1.7-5.3x (median 3.2x) "
                     "below the 2-D fit's at 5 % on the 20 RGL materials of docs/fit_accuracy.md. --model 2d "
                     "(the default for a "

@@ -1,6 +1,7 @@
 """``rbrdf-fit brdf FILE.bsdf --model 3d --out material.json``: the 3-D rational fit of an RGL
 ``.bsdf`` measurement in (theta_h, theta_d, |phi_d|) (:func:`fit.rational.fit3d.fit_rgl_select`),
-written as an ``rbrdf-rational`` version-3 coefficient file, with a per-piece, per-channel
+written as an ``rbrdf-rational`` version-4 coefficient file (version 3 with ``--value-factor
+none``), with a per-piece, per-channel
 summary table. :mod:`fit.cli.brdf` registers the flags (:func:`add_flags`) and calls :func:`run`
 when the model is ``3d`` (``--model auto`` picks it for an RGL file).
 
@@ -27,6 +28,9 @@ method"):
   the fit's safety net applies (``time_limit``, :data:`DEFAULT_TIME_LIMIT` CPU seconds of the
   process, about 10x the largest fit: the same file and flags give the same coefficients on
   any load);
+* ``--value-factor``: what the functions give: ``1/cos_theta_i`` (default: rho cos theta_i,
+  which the evaluation divides by cos theta_i, finite where the RGL data grow as 1 / cos theta_i
+  towards the light's horizon; a version-4 file) or ``none`` (rho itself; a version-3 file);
 * ``--grid``, ``--random``, ``--verify``, ``--no-albedo``: the data grid, the random points of
   each kind, the fresh points of the verification and the directional-albedo policy.
 
@@ -63,6 +67,7 @@ from ..rational.fit3d import (
     Fit3DSettings,
     fit_rgl_select,
 )
+from ..rational.model import VALUE_FACTORS
 from ..rational.settings import SELECT_BY
 from .cdf import attach_sampler
 from .flags import integer, number
@@ -76,7 +81,7 @@ LAYOUTS = ("select", "pieces", "single")
 FLAGS = {"layout": "--layout", "degrees": "--degrees", "target_rmse": "--target-rmse", "time_limit": "--time-limit",
          "grid": "--grid",
          "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo", "objective": "--objective",
-         "select_by": "--select-by"}
+         "select_by": "--select-by", "value_factor": "--value-factor"}
 MAX_GRID = 200            # per dimension of --grid (8 million points at most)
 MAX_POINTS = 1_000_000    # --random (each kind) and --verify
 
@@ -138,6 +143,11 @@ def add_flags(p) -> None:
                         "error of --objective; image, the fitter's image check of each layout's fit (the ΔE2000 "
                         "of a sphere under generic lights against the measurement, mean + p99 / 3). "
                         "docs/fitting.md, \"The image check\"")
+    g.add_argument("--value-factor", dest="value_factor", choices=VALUE_FACTORS, default=None,
+                   help=f"what the functions give (default {d.value_factor}): 1/cos_theta_i, rho cos theta_i, "
+                        "which the evaluation divides by cos theta_i (it stays finite where the RGL data grow as "
+                        "1 / cos theta_i towards the light's horizon: the terminator under a small sun); a "
+                        "version-4 file. none: rho itself, a version-3 file. docs/fitting.md, \"The light's cosine\"")
     g.add_argument("--no-albedo", dest="no_albedo", action="store_true", default=None,
                    help=f"no directional-albedo policy (default: channels outside {100 * d.albedo_tol:g} %% "
                         "refitted)")
@@ -165,7 +175,8 @@ def settings_from_args(args, wall_limit=None) -> tuple:
                       verify=d.verify if args.verify is None else args.verify,
                       albedo=not args.no_albedo, target_rmse=target,
                       objective=d.objective if args.objective is None else args.objective,
-                      select_by=d.select_by if args.select_by is None else args.select_by)
+                      select_by=d.select_by if args.select_by is None else args.select_by,
+                      value_factor=d.value_factor if getattr(args, "value_factor", None) is None else args.value_factor)
     if layout == "select":
         return s, (VARIANTS if target is None else TARGET_LADDER)
     if layout == "pieces":

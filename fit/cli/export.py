@@ -8,8 +8,9 @@ tools use without this project (:mod:`fit.export`); the format is chosen by OUT'
 * ``.py``: standalone Mitsuba 3 BSDF plugin (:func:`fit.export.to_mitsuba_plugin`), sampled
   with the tables of ``--cdf CDF.json`` when given (else cosine).
 
-2-D fits (versions 1 and 2, (theta_h, theta_d)) and 3-D fits (version 3, (theta_h, theta_d,
-|phi_d|), not reciprocal: the exported functions take the light first) are exported alike.
+2-D fits (versions 1 and 2, (theta_h, theta_d)) and 3-D fits (versions 3 and 4, (theta_h,
+theta_d, |phi_d|), not reciprocal: the exported functions take the light first; version 4's
+functions give rho cos theta_i and the exported code divides by cos theta_i) are exported alike.
 Registered by :mod:`fit.cli`. Bad input: one line, exit status 2, nothing written (the output
 is checked first and renamed into place only when complete, :class:`fit.outputs.OutputSet`).
 Flagged pieces (the fit not within its tolerance there) are exported as the fitted function
@@ -91,9 +92,9 @@ def register(subparsers) -> None:
         description="Export an rbrdf-rational coefficient file as code: OUT's extension picks the "
                     "format (.glsl GLSL; .hlsl HLSL; .h C/C++ header; .c C translation unit; .brdf BRDF Explorer "
                     "analytic file; .py Mitsuba 3 BSDF plugin). 2-D fits (theta_h, theta_d) and 3-D fits "
-                    "(version 3: theta_h, theta_d, |phi_d|; not reciprocal, wi is the light) alike. See "
+                    "(versions 3 and 4: theta_h, theta_d, |phi_d|; not reciprocal, wi is the light) alike. See "
                     "docs/exports.md for the domain and clamp policy and the measured agreement.")
-    p.add_argument("fit", help="rbrdf-rational .json coefficient file (version 1, 2 or 3)")
+    p.add_argument("fit", help="rbrdf-rational .json coefficient file (version 1, 2, 3 or 4)")
     p.add_argument("out", help="output file: .glsl, .hlsl, .h, .c, .brdf or .py (replaced only if the run succeeds)")
     p.add_argument("--name", default=None,
                    help="identifier used in the function / plugin names (default: the fit's name)")
