@@ -154,7 +154,9 @@ def test_3d_fit_samples_with_its_own_sampler(fit3d, quadrature, strategy, monkey
     evaluate = vouched_evaluate(model)
     for tv_deg in (5.0, 45.0, 80.0):
         tv = np.radians(tv_deg)
-        xi = np.random.default_rng(11).random((20_000, 2)) * 0.998 + 0.001
+        # the whole square: an edge cut off (xi in [0.001, 0.999]) drops the strip at the light's
+        # horizon, where f cos of a fit of rho cos theta_i is finite (0.15 % low at 5 deg)
+        xi = np.clip(np.random.default_rng(11).random((20_000, 2)), 1e-9, 1.0 - 1e-9)
         wo = np.broadcast_to(spherical_to_direction(tv, 0.0), (len(xi), 3))
         wi, w = r.sample_material("m", wo, xi, strategy)
         wi, w = wi.astype(float), w.astype(float)

@@ -177,7 +177,11 @@ def fit3d_own():
 
     model, cdf = _fit3d_with_sampler()
     model = copy.deepcopy(model)
-    return Case("fit3d-own", vouched_evaluate(model), cdf, dict(type="rational", data=model), own_sampler=True)
+    case = Case("fit3d-own", vouched_evaluate(model), cdf, dict(type="rational", data=model), own_sampler=True)
+    # the whole square: the fit gives rho cos theta_i (the fitter's default), whose f cos is
+    # finite at the light's horizon, so the margin's strips would hold their share (0.16 % low)
+    case.xi_margin = 0.0
+    return case
 
 
 def _rgl_case(material):
