@@ -16,9 +16,10 @@ The public face of the format, one module per concern:
 from __future__ import annotations
 
 from .coefficient_certify import recertify
-from .coefficient_format import BRDF_VARIABLES_3D, FORMAT, VERSION, VERSION_3D, VERSION_3D_FACTOR, VERSION_PIECEWISE, VERSIONS
+from .coefficient_format import (BRDF_VARIABLES_3D, FORMAT, VERSION, VERSION_3D, VERSION_3D_FACTOR, VERSION_PIECEWISE,
+                                 VERSIONS)
 from .coefficient_reader import from_dict, load
 from .coefficient_writer import jsonable, save, to_dict
 
-__all__ = ["BRDF_VARIABLES_3D", "FORMAT", "VERSION", "VERSIONS", "VERSION_3D", "VERSION_3D_FACTOR", "VERSION_PIECEWISE", "from_dict",
-           "jsonable", "load", "recertify", "save", "to_dict"]
+__all__ = ["BRDF_VARIABLES_3D", "FORMAT", "VERSION", "VERSIONS", "VERSION_3D", "VERSION_3D_FACTOR", "VERSION_PIECEWISE",
+           "from_dict", "jsonable", "load", "recertify", "save", "to_dict"]

@@ -154,7 +154,8 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     """3-D fit of data ``X`` ``(N, 3)`` (theta_h, theta_d, |phi_d|, radians) with values ``rho``
     ``(N, 3)`` (1/sr; the functions are fitted to ``rho / w``, ``w`` the weight of the setting
     ``value_factor``, :func:`fit.rational.model.value_factor_weights`: ``rho cos theta_i`` by
-    default, and the noise levels, error units, ranges and objective are in that unit) with ``settings`` (:class:`fit.rational.settings.Fit3DSettings`, default its
+    default, and the noise levels, error units, ranges and objective are in that unit) with
+    ``settings`` (:class:`fit.rational.settings.Fit3DSettings`, default its
     defaults; each of its names is also a keyword argument that overrides it): pieces along theta_h
     at ``theta_h_edges`` (inner edges), each channel a rational function of total degrees
     ``degrees`` (or ``piece_degrees[k]``) aiming at ``tol`` (docs/fitting.md: the stated bound is
@@ -166,11 +167,11 @@ def fit_samples(X, rho, *, settings: Fit3DSettings | None = None, name="brdf3d",
     within ``relax`` times the tolerance met (docs/fitting.md); without it (or ``relax <= 1``) the
     fit is the minimax one. ``noise``: the noise levels (default
     :func:`fit.rational.samples3d.noise_levels` of ``rho``); ``keep`` (a refit of
-    :func:`fit.rational.verify3d.verify_and_refit`, with the earlier fit's ``noise``, in the functions' unit): ``{(piece,
-    channel): (function, record)}`` of functions kept as they are (their records measured again on
-    this data; one that is no longer within the tolerance it met, or not certified, is fitted
-    again), the others fitted with their tolerance ladder started one step below the earlier
-    record's ``minimax_met``. ``progress(stage, done, total)`` (:mod:`fit.progress`) is told the
+    :func:`fit.rational.verify3d.verify_and_refit`, with the earlier fit's ``noise``, in the
+    functions' unit): ``{(piece, channel): (function, record)}`` of functions kept as they are
+    (their records measured again on this data; one that is no longer within the tolerance it
+    met, or not certified, is fitted again), the others fitted with their tolerance ladder started
+    one step below the earlier record's ``minimax_met``. ``progress(stage, done, total)`` (:mod:`fit.progress`) is told the
     functions (piece x channel) done: stage ``"3-D fit"`` (``"3-D refit"`` with ``keep``)."""
     s = Fit3DSettings.resolve(settings, **params)
     tol, degrees, theta_h_edges, piece_degrees = s.tol, s.degrees, s.theta_h_edges, s.piece_degrees
