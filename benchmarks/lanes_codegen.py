@@ -38,8 +38,9 @@ SCALAR = re.compile(r"^v(?:add|sub|mul|div|fmadd\w*|fmsub\w*|fnmadd\w*|fnmsub\w*
 
 
 def instruction_counts(path: Path | None) -> dict:
-    """Counts in ``objdump -d`` of the object: all instructions, those on ymm registers, packed
-    single-precision arithmetic (xmm or ymm), gathers, scalar single-precision arithmetic."""
+    """Counts in ``objdump -d`` of the object: all instructions, those on ymm and on zmm registers,
+    packed single-precision arithmetic (xmm, ymm or zmm; and of it on ymm, on zmm), gathers, scalar
+    single-precision arithmetic."""
     if path is None or shutil.which("objdump") is None:
         return {}
     text = subprocess.run(["objdump", "-d", "--no-show-raw-insn", str(path)], capture_output=True, text=True,
@@ -49,7 +50,8 @@ def instruction_counts(path: Path | None) -> dict:
 
 def count_instructions(text: str) -> dict:
     """:func:`instruction_counts` of ``objdump -d --no-show-raw-insn`` output."""
-    counts = {"instructions": 0, "ymm": 0, "packed_ps": 0, "packed_ps_ymm": 0, "gathers": 0, "scalar_ss": 0}
+    counts = {"instructions": 0, "ymm": 0, "zmm": 0, "packed_ps": 0, "packed_ps_ymm": 0, "packed_ps_zmm": 0,
+              "gathers": 0, "scalar_ss": 0}
     for line in text.splitlines():
         parts = line.split("\t")
         if len(parts) < 2 or not re.match(r"^\s*[0-9a-f]+:$", parts[0]):
@@ -57,11 +59,13 @@ def count_instructions(text: str) -> dict:
         ins = parts[1].strip()
         op = ins.split(" ", 1)[0]
         counts["instructions"] += 1
-        ymm = "%ymm" in ins
+        ymm, zmm = "%ymm" in ins, "%zmm" in ins
         counts["ymm"] += ymm
+        counts["zmm"] += zmm
         if PACKED.match(op):
             counts["packed_ps"] += 1
             counts["packed_ps_ymm"] += ymm
+            counts["packed_ps_zmm"] += zmm
         counts["gathers"] += "gather" in op
         counts["scalar_ss"] += bool(SCALAR.match(op))
     return counts

@@ -156,15 +156,19 @@ def variant_names(lanes, kinds, guided: bool = False) -> list[str]:
             + (["unguided", "guided"] if guided else []))
 
 
-def build(name: str, stages: int = 3, extra_flags: str = ""):
+def build(name: str, stages: int = 3, extra_flags: str = "", target_cpu: str | None = None):
     """The kernel of variant ``name`` with the render kernels' module options (``stages``:
     the cost breakdown's early stop, :func:`benchmarks.lanes_kernels.make_scalar_kernel`;
-    ``extra_flags`` appended to the compiler flags)."""
+    ``extra_flags`` appended to the compiler flags; ``target_cpu``: LLVM's CPU in place of the
+    shipped ISA level, e.g. ``x86-64-v4`` for AVX-512)."""
     from benchmarks import lanes_kernels as LK
-    from warp_rbrdf.shipped_kernels import render_module_options
+    from warp_rbrdf.shipped_kernels import ISA_LEVEL, render_module_options
 
     opts = render_module_options()
     opts["cpu_compiler_flags"] = opts.get("cpu_compiler_flags", "") + extra_flags
+    if target_cpu:
+        base = opts["cpu_compiler_flags"].replace(f"-target-cpu {ISA_LEVEL}", "")
+        opts["cpu_compiler_flags"] = f"-target-cpu {target_cpu} {base}".strip()
     if name == "scalar":
         return LK.make_scalar_kernel(opts, stages)
     if name in ("guided", "unguided"):
@@ -256,7 +260,7 @@ def run(a) -> dict:
     kernels, compile_s, ref = {}, {}, None
     for job in jobs:
         t0 = time.perf_counter()
-        kernels[job] = build(*job)
+        kernels[job] = build(*job, target_cpu=a.target_cpu)
         first, extra = args(job[0])
         img = render(kernels[job], *first, 1, extra)   # compiles, warms up
         compile_s[job] = time.perf_counter() - t0
@@ -296,7 +300,8 @@ def run(a) -> dict:
     return {"machine": machine(), "load": [load_before, os.getloadavg()],
             "command": "python -m benchmarks.lanes_prototype " + shlex.join(a.argv or []),
             "settings": {"material": a.material, "envmap": a.envmap, "resolution": a.resolution, "spp": a.spp,
-                         "repeats": a.repeats, "threads": a.threads}, "rows": rows, "breakdown_ns": breakdown,
+                         "repeats": a.repeats, "threads": a.threads, "target_cpu": a.target_cpu},
+            "rows": rows, "breakdown_ns": breakdown,
             "image_mean": float(ref.mean())}
 
 
@@ -305,7 +310,7 @@ def table(res: dict) -> str:
     th = res["settings"]["threads"]
     head = (["variant", "M/s per CPU s, 1 thr", "ratio"] + [f"M/s wall, {t} thr" for t in th]
             + [f"ratio, {t} thr" for t in th]
-            + ["ymm", "packed ps (ymm)", "gathers", "scalar ss", "image vs scalar (mean / max rel.)"])
+            + ["ymm / zmm", "packed ps (ymm / zmm)", "gathers", "scalar ss", "image vs scalar (mean / max rel.)"])
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in res["rows"]:
         c = r["counts"]
@@ -313,7 +318,8 @@ def table(res: dict) -> str:
         cells = ([r["variant"], f"{r.get('cpu_samples_per_s', 0) / 1e6:.2f}", f"{r.get('cpu_ratio', 0):.2f}"]
                  + [f"{r['samples_per_s'][t] / 1e6:.2f}" for t in th]
                  + [f"{r['ratio'][t]:.2f}" for t in th]
-                 + [str(c.get("ymm", "-")), f"{c.get('packed_ps', '-')} ({c.get('packed_ps_ymm', '-')})",
+                 + [f"{c.get('ymm', '-')} / {c.get('zmm', '-')}",
+                    f"{c.get('packed_ps', '-')} ({c.get('packed_ps_ymm', '-')} / {c.get('packed_ps_zmm', '-')})",
                     str(c.get("gathers", "-")), str(c.get("scalar_ss", "-")),
                     f"{g['mean_rel']:.1e} / {g['max_rel']:.1e}"])
         lines.append("| " + " | ".join(cells) + " |")
@@ -362,6 +368,9 @@ def main(argv=None) -> int:
                    help="variants (e.g. scalar 'hybrid K=16') also timed stopped after each stage")
     p.add_argument("--remarks", metavar="VARIANT",
                    help="compile VARIANT (e.g. 'loop K=8') with the loop vectorizer's remarks, print them, exit")
+    p.add_argument("--target-cpu", dest="target_cpu", default=None, metavar="CPU",
+                   help="LLVM target CPU of every variant in place of the render kernels' x86-64-v3 "
+                        "(e.g. x86-64-v4 or znver4: AVX-512; the machine must run it)")
     p.add_argument("--json", type=Path)
     a = p.parse_args(argv)
     a.argv = list(sys.argv[1:] if argv is None else argv)

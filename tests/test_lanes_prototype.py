@@ -48,10 +48,13 @@ def test_count_instructions():
    9:\tvaddss %xmm1,%xmm2,%xmm3
    d:\tvgatherdps %ymm4,(%rax,%ymm5,4),%ymm6
   13:\tvmovaps %ymm1,%ymm2
-  17:\tret
+  17:\tvfmadd213ps %zmm1,%zmm2,%zmm3
+  1d:\tvgatherdps (%rax,%zmm5,4),%zmm6{%k1}
+  25:\tret
 """
     c = C.count_instructions(text)
-    assert c == {"instructions": 6, "ymm": 3, "packed_ps": 2, "packed_ps_ymm": 1, "gathers": 1, "scalar_ss": 1}
+    assert c == {"instructions": 8, "ymm": 3, "zmm": 2, "packed_ps": 3, "packed_ps_ymm": 1, "packed_ps_zmm": 1,
+                 "gathers": 2, "scalar_ss": 1}
 
 
 def test_quick_run_renders_the_scalar_image(tmp_path):
