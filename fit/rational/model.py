@@ -49,14 +49,20 @@ def cos_theta_i_of(x) -> np.ndarray:
     return np.cos(th) * np.cos(td) - np.sin(th) * np.sin(td) * np.cos(pd)
 
 
+def _factor_divisor(x, factor: str) -> np.ndarray:
+    """``(...)`` what step 8 divides the values at rows ``x`` by: ``max(cos theta_i, COS_FLOOR)``
+    for ``"1/cos_theta_i"``; ValueError for a factor other than that and ``"none"``."""
+    if factor != "1/cos_theta_i":
+        raise ValueError(f"unknown value factor {factor!r}")
+    return np.maximum(cos_theta_i_of(x), COS_FLOOR)
+
+
 def apply_value_factor(y, x, factor: str):
     """Step 8: the values ``y`` ``(..., n_out)`` at the (unclamped) physical inputs ``x``
     ``(..., 3)`` times the model's value factor (:data:`VALUE_FACTORS`)."""
     if factor == "none":
         return y
-    if factor == "1/cos_theta_i":
-        return y / np.maximum(cos_theta_i_of(x), COS_FLOOR)[..., None]
-    raise ValueError(f"unknown value factor {factor!r}")
+    return y / _factor_divisor(x, factor)[..., None]
 
 
 def value_factor_weights(x, factor: str) -> np.ndarray:
@@ -65,7 +71,7 @@ def value_factor_weights(x, factor: str) -> np.ndarray:
     x = np.asarray(x, dtype=np.float64)
     if factor == "none":
         return np.ones(x.shape[:-1])
-    return 1.0 / np.maximum(cos_theta_i_of(x), COS_FLOOR)
+    return 1.0 / _factor_divisor(x, factor)
 
 
 def apply_input_transform(x, transform: str):
