@@ -267,9 +267,7 @@ _EXP64 = []
 def _exp64(x):
     """``rbrdf_exp`` (:data:`rational_channels.EXP_SOURCE`) of float64 ``x``, lane by lane."""
     if not _EXP64:
-        snippet = ("typedef double rbrdf_v4d __attribute__((ext_vector_type(4)));\n"
-                   "typedef long long rbrdf_v4l __attribute__((ext_vector_type(4)));\n"
-                   + RC.EXP_SOURCE + "rbrdf_v4d v = x;\nreturn rbrdf_exp(v)[0];\n")
+        snippet = RC.VECTOR_TYPES + RC.EXP_SOURCE + "rbrdf_v4d v = x;\nreturn rbrdf_exp(v)[0];\n"
 
         @D.Native.func_native(snippet, "test_exp64")
         def exp64(x: wp.float64) -> wp.float64:

@@ -36,6 +36,8 @@ import warp as wp
 from . import camera as C
 from . import geometry as G
 from . import sample_patterns as P
+from . import lanes as L
+from .distribution.lanes import lane_types, lanes_out_type
 from .lights.directional import Directional
 from .lights.env_map import EnvMap, env_dir_to_uv, env_eval_uv, env_pdf_uv
 from .lights.env_sampling import env_sample_uv
@@ -79,6 +81,20 @@ def onb_bitangent(n: wp.vec3) -> wp.vec3:
 @wp.func
 def max3(v: wp.vec3) -> float:
     return wp.max(v[0], wp.max(v[1], v[2]))
+
+
+@G.inline_func
+def shading_frame(d: wp.vec3, ng: wp.vec3, ns: wp.vec3):
+    """``(ns', T, B, wo)`` at a hit of the ray direction ``d``: the shading normal (the geometric
+    one where the shading normal faces away from the view), its tangent and bitangent, and the
+    view in that frame."""
+    wo_w = -d
+    n = ns
+    if wp.dot(n, wo_w) <= 1.0e-6:
+        n = ng
+    T = onb_tangent(n)
+    B = onb_bitangent(n)
+    return n, T, B, wp.vec3(wp.dot(wo_w, T), wp.dot(wo_w, B), wp.dot(wo_w, n))
 
 
 # --------------------------------------------------------------------------------------------
@@ -249,11 +265,16 @@ class Kernels:
     pdf_bsdf: object
 
 
-def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = True) -> Kernels:
+def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = True,
+                 lanes: int | None = None) -> Kernels:
     """The scene's kernels: ``kinds`` as for :func:`make_bsdf_eval`, ``techniques`` as for
-    :func:`make_bsdf_sampling`; ``has_mesh`` / ``has_spheres``: whether the scene's
-    :class:`~warp_rbrdf.geometry.SceneGeometry` has triangles / analytic spheres (the ray
-    queries of :func:`warp_rbrdf.geometry.make_tracer` test only those)."""
+    :func:`make_bsdf_sampling` (a seventh entry, optional: the technique's ``kernel_lanes``
+    factory, or None; :func:`make_lanes_sampling`); ``has_mesh`` / ``has_spheres``: whether the
+    scene's :class:`~warp_rbrdf.geometry.SceneGeometry` has triangles / analytic spheres (the ray
+    queries of :func:`warp_rbrdf.geometry.make_tracer` test only those); ``lanes``: the samples
+    of a pixel the render kernel advances together where a technique has a lane form (0: one
+    at a time; None: :data:`warp_rbrdf.lanes.LANES`; module docstring)."""
+    lanes = L.LANES if lanes is None else int(lanes)
     closest_hit, any_hit = G.make_tracer(has_mesh, has_spheres)
     bsdf_eval = make_bsdf_eval(kinds)
     base = [t[:4] for t in techniques]
@@ -261,16 +282,34 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     bsdf_pdf_exact = make_pdf_exact(base)
     bsdf_sample_f, bsdf_eval_pdf = make_fused(techniques)
     sample_2d = P.sample_2d
+    lane_techniques = [(int(t[0]), t[6](lanes)) for t in techniques if len(t) > 6 and t[6] is not None]
+    lanes_on = lanes > 1 and bool(lane_techniques)
+    K = lanes if lanes_on else 1      # the lanes' types do not enter a kernel without them
+    vf, vi = lane_types(K)
+    out_t = lanes_out_type(K)
+    state_t = wp.types.matrix(shape=(L.N_LANE_STATE, K), dtype=float)
+    lanes_sample_f, is_lane_technique = L.make_lanes_sampling(lane_techniques, K)
 
     @G.inline_func
     def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: EnvMap, dl: Directional, mats: Materials,
                         pseed: wp.uint32, s: int, spp: int, pattern: int, max_depth: int,
-                        hide_env: int, eps: float, px: int, py: int) -> wp.vec3:
+                        hide_env: int, eps: float, px: int, py: int, pre: int, pre_d: wp.vec3,
+                        pre_hit: wp.vec3, pre_ng: wp.vec3, pre_ns: wp.vec3, pre_bs: wp.vec4,
+                        pre_f: wp.vec3) -> wp.vec3:
+        # what the lanes of render_tile computed for this sample (``pre``): 0 nothing; 1 the
+        # camera ray ``pre_d`` and its closest hit (``pre_hit`` = (hit, t, material), normals
+        # ``pre_ng``, ``pre_ns``); 2 also the first vertex's BSDF sample ``pre_bs`` with f_r ``pre_f``
         Lsum = wp.vec3(0.0)
         if max_depth < 1:
             return Lsum
-        j = sample_2d(pattern, pseed, s, spp, 0)
-        d = C.camera_ray(cam, float(px) + j[0], float(py) + j[1])
+        d = pre_d
+        if wp.static(lanes_on):
+            if pre == 0:
+                j = sample_2d(pattern, pseed, s, spp, 0)
+                d = C.camera_ray(cam, float(px) + j[0], float(py) + j[1])
+        else:
+            j = sample_2d(pattern, pseed, s, spp, 0)
+            d = C.camera_ray(cam, float(px) + j[0], float(py) + j[1])
         o = cam.origin
         thr = wp.vec3(1.0)
         # how to weight the environment when the ray escapes
@@ -289,6 +328,15 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
         while True:
             if shadow == 1:
                 hit = wp.where(any_hit(geo, o, d, 1.0e30), 1, 0)
+            elif wp.static(lanes_on):
+                if depth == 0 and pre != 0:
+                    hit = int(pre_hit[0])
+                    t = pre_hit[1]
+                    m = int(pre_hit[2])
+                    ng = pre_ng
+                    ns = pre_ns
+                else:
+                    hit, t, ng, ns, m = closest_hit(geo, o, d)
             else:
                 hit, t, ng, ns, m = closest_hit(geo, o, d)
             if hit == 0:
@@ -302,12 +350,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             if shadow == 1:
                 break
             p = o + d * t
-            wo_w = -d
-            if wp.dot(ns, wo_w) <= 1.0e-6:
-                ns = ng
-            T = onb_tangent(ns)
-            B = onb_bitangent(ns)
-            wo = wp.vec3(wp.dot(wo_w, T), wp.dot(wo_w, B), wp.dot(wo_w, ns))
+            ns, T, B, wo = shading_frame(d, ng, ns)
             comb = mats.combine[m]
             tech = mats.technique[m]
             org = p + ng * (eps * (1.0 + wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))))
@@ -351,7 +394,14 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                                 # f and the MIS pdf together where the technique shares their work
                                 fv, pf, has_f = bsdf_eval_pdf(mats, m, tech, wi, wo)
                 else:
-                    bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
+                    bs = pre_bs
+                    if wp.static(lanes_on):
+                        fv = pre_f
+                        has_f = 1
+                        if depth != 0 or pre != 2:
+                            bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
+                    else:
+                        bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
                     wi = wp.vec3(bs[0], bs[1], bs[2])
                     wb = bs[3]
                     if wb > 0.0 and wi[2] > 0.0:
@@ -422,11 +472,77 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
         pseed = P.pixel_seed(seed, pix)
         acc = wp.vec3(0.0)
         acc2 = wp.vec3(0.0)
-        for s in range(spp):
-            v = radiance_sample(geo, cam, env, dl, mats,
-                                pseed, s, spp, pattern, max_depth, hide_env, eps, px, py)
-            acc = acc + v
-            acc2 = acc2 + wp.cw_mul(v, v)
+        if wp.static(lanes_on):
+            # K samples at a time: their camera rays and first hits, then the first vertex's BSDF
+            # samples of every lane whose technique has a lane form, drawn together (one
+            # material), then each sample's radiance as below, given those
+            for g in range((spp + K - 1) // K):
+                st = state_t()
+                wox = vf()
+                woy = vf()
+                woz = vf()
+                xi0 = vf()
+                xi1 = vf()
+                on = vi()
+                lane_m = int(-1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
+                same = int(1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
+                i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
+                while i < K:
+                    s = g * K + i
+                    if s < spp and max_depth >= 1:
+                        j = sample_2d(pattern, pseed, s, spp, 0)
+                        d = C.camera_ray(cam, float(px) + j[0], float(py) + j[1])
+                        hit, t, ng, ns, m = closest_hit(geo, cam.origin, d)
+                        for c in range(3):
+                            st[L.LS_D + c, i] = d[c]
+                            st[L.LS_NG + c, i] = ng[c]
+                            st[L.LS_NS + c, i] = ns[c]
+                        st[L.LS_HIT, i] = float(hit)
+                        st[L.LS_T, i] = t
+                        st[L.LS_M, i] = float(m)
+                        if hit != 0:
+                            if is_lane_technique(mats.technique[m]):
+                                _n, _T, _B, wo = shading_frame(d, ng, ns)
+                                xi = sample_2d(pattern, pseed, s, spp, L.FIRST_BSDF_DIM)
+                                wox[i] = wo[0]
+                                woy[i] = wo[1]
+                                woz[i] = wo[2]
+                                xi0[i] = xi[0]
+                                xi1[i] = xi[1]
+                                on[i] = 1
+                                if lane_m < 0:
+                                    lane_m = m
+                                elif lane_m != m:
+                                    same = 0
+                    i += 1
+                drawn = lane_m >= 0 and same == 1
+                out = out_t()
+                if drawn:
+                    out = lanes_sample_f(mats, lane_m, mats.technique[lane_m], wox, woy, woz, xi0, xi1, on)
+                i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
+                while i < K:
+                    s = g * K + i
+                    if s < spp:
+                        pre = int(1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
+                        if drawn and on[i] != 0:
+                            pre = 2
+                        v = radiance_sample(geo, cam, env, dl, mats, pseed, s, spp, pattern, max_depth, hide_env,
+                                            eps, px, py, pre, wp.vec3(st[L.LS_D, i], st[L.LS_D + 1, i], st[L.LS_D + 2, i]),
+                                            wp.vec3(st[L.LS_HIT, i], st[L.LS_T, i], st[L.LS_M, i]),
+                                            wp.vec3(st[L.LS_NG, i], st[L.LS_NG + 1, i], st[L.LS_NG + 2, i]),
+                                            wp.vec3(st[L.LS_NS, i], st[L.LS_NS + 1, i], st[L.LS_NS + 2, i]),
+                                            wp.vec4(out[0, i], out[1, i], out[2, i], out[3, i]),
+                                            wp.vec3(out[4, i], out[5, i], out[6, i]))
+                        acc = acc + v
+                        acc2 = acc2 + wp.cw_mul(v, v)
+                    i += 1
+        else:
+            for s in range(spp):
+                v = radiance_sample(geo, cam, env, dl, mats, pseed, s, spp, pattern, max_depth, hide_env, eps,
+                                    px, py, 0, wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec4(0.0),
+                                    wp.vec3(0.0))
+                acc = acc + v
+                acc2 = acc2 + wp.cw_mul(v, v)
         inv = 1.0 / float(spp)
         out_mean[pix] = acc * inv
         out_sq[pix] = acc2 * inv

@@ -133,7 +133,9 @@ class Renderer:
             sample, pdf = t.impl().kernel_functions(fits)
             fused = getattr(t.impl(), "kernel_fused", None)   # optional: sample + f, f + pdf
             sample_f, eval_pdf = fused(fits) if fused is not None else (None, None)
-            techniques.append((c, sample, pdf, t.pdf_exact, sample_f, eval_pdf))
+            lanes = getattr(t.impl(), "kernel_lanes", None)   # optional: sample + f over K lanes
+            techniques.append((c, sample, pdf, t.pdf_exact, sample_f, eval_pdf,
+                               None if lanes is None else (lambda K, lanes=lanes, fits=fits: lanes(K, fits))))
         g = self.geometry
         return integrator.make_kernels(kinds, techniques, has_mesh=g.num_triangles > 0,
                                        has_spheres=g.num_spheres > 0)

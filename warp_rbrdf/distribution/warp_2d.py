@@ -61,6 +61,10 @@ def pc2d_invert(marg: wp.array(dtype=Any), moff: int, cond: wp.array(dtype=Any),
 # ----------------------------------------------------------------------------------- Marginal2D
 
 
+#: :func:`marginal2d_sample` clamps its uniforms to [2^-24, 1 - 2^-24]
+MARGINAL2D_EPS = wp.constant(5.9604645e-8)
+
+
 @wp.func
 def _node(u: float, n: int) -> int:
     """The cell in [0, n - 2] of ``n`` nodes on [0, 1] that holds ``u`` (clamped)."""
@@ -179,28 +183,24 @@ def marginal2d_invert(vals: wp.array(dtype=float), data: int, cond: int, marg: i
 
 
 @wp.func
-def marginal2d_sample(vals: wp.array(dtype=float), data: int, cond: int, marg: int, ny: int, nx: int,
-                      n_slices: int, t0: int, w1: float, sx_in: float, sy_in: float) -> wp.vec3:
-    """``(x, y, pdf)`` of uniforms (sx, sy), clamped to [2^-24, 1 - 2^-24]: the row by the
-    marginal CDF, the fraction inside it by the linear density of the row totals, then the
-    column by the conditional CDF interpolated between the row's two node rows (fractions by
-    :func:`format_fraction`)."""
-    eps = 5.9604645e-8
-    sx = wp.clamp(sx_in, eps, 1.0 - eps)
-    sy = wp.clamp(sy_in, eps, 1.0 - eps)
-    plane = ny * nx
-    stride = _stride(plane, n_slices)
-    mstride = _stride(ny, n_slices)
-    mb = marg + t0 * ny
-    row = _find_interval_lerped(vals, mb, 0, mstride, w1, 0.0, ny, sy)
+def marginal2d_row_setup(vals: wp.array(dtype=float), mb: int, mstride: int, cb: int, nx: int, stride: int,
+                         w1: float, row: int, sx: float, sy: float) -> wp.vec2:
+    """The step of :func:`marginal2d_sample` between its two searches: ``(fy, sx')`` -- the
+    fraction inside ``row`` by the linear density of the row totals, and ``sx`` scaled to the
+    row's total (``mb``, ``cb``: the slice's marginal CDF and the row's conditional CDF)."""
     sy = sy - _lerp_at(vals, mb + row, mstride, w1)
-    cb = cond + t0 * plane + row * nx
     r0 = _lerp_at(vals, cb + nx - 1, stride, w1)
     r1 = _lerp_at(vals, cb + nx + nx - 1, stride, w1)
     fy = format_fraction(r0, r1, sy)
     gy = 1.0 - fy
-    sx = sx * (gy * r0 + fy * r1)
-    col = _find_interval_lerped(vals, cb, nx, stride, w1, fy, nx, sx)
+    return wp.vec2(fy, sx * (gy * r0 + fy * r1))
+
+
+@wp.func
+def marginal2d_finish(vals: wp.array(dtype=float), data: int, cb: int, ny: int, nx: int, plane: int,
+                      stride: int, t0: int, w1: float, row: int, col: int, fy: float, sx: float) -> wp.vec3:
+    """The last step of :func:`marginal2d_sample` after its column search: ``(x, y, pdf)``."""
+    gy = 1.0 - fy
     sx = sx - (gy * _lerp_at(vals, cb + col, stride, w1) + fy * _lerp_at(vals, cb + nx + col, stride, w1))
     v = _corners(vals, data + t0 * plane + row * nx + col, nx, stride, w1)
     c0 = gy * v[0] + fy * v[2]
@@ -208,3 +208,23 @@ def marginal2d_sample(vals: wp.array(dtype=float), data: int, cond: int, marg: i
     fx = format_fraction(c0, c1, sx)
     pdf = ((1.0 - fx) * c0 + fx * c1) * float((nx - 1) * (ny - 1))
     return wp.vec3((float(col) + fx) / float(nx - 1), (float(row) + fy) / float(ny - 1), pdf)
+
+
+@wp.func
+def marginal2d_sample(vals: wp.array(dtype=float), data: int, cond: int, marg: int, ny: int, nx: int,
+                      n_slices: int, t0: int, w1: float, sx_in: float, sy_in: float) -> wp.vec3:
+    """``(x, y, pdf)`` of uniforms (sx, sy), clamped to [2^-24, 1 - 2^-24]: the row by the
+    marginal CDF, the fraction inside it by the linear density of the row totals, then the
+    column by the conditional CDF interpolated between the row's two node rows (fractions by
+    :func:`format_fraction`). :mod:`.lanes` draws K samples at once with the same steps."""
+    sx = wp.clamp(sx_in, MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
+    sy = wp.clamp(sy_in, MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
+    plane = ny * nx
+    stride = _stride(plane, n_slices)
+    mstride = _stride(ny, n_slices)
+    mb = marg + t0 * ny
+    row = _find_interval_lerped(vals, mb, 0, mstride, w1, 0.0, ny, sy)
+    cb = cond + t0 * plane + row * nx
+    r = marginal2d_row_setup(vals, mb, mstride, cb, nx, stride, w1, row, sx, sy)
+    col = _find_interval_lerped(vals, cb, nx, stride, w1, r[0], nx, r[1])
+    return marginal2d_finish(vals, data, cb, ny, nx, plane, stride, t0, w1, row, col, r[0], r[1])

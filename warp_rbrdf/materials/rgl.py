@@ -30,6 +30,8 @@ sigma) and a header of :data:`N_RGL_INFO` ints (fields ``RGL_*``: sizes and offs
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import warp as wp
 
@@ -39,6 +41,7 @@ from fit.formats.rgl_interpolants import interval
 from .. import fastmath as fmath
 from .. import registry
 from ..distribution import bilinear_lerp, find_interval, marginal2d_invert, marginal2d_pdf, marginal2d_sample
+from ..distribution.lanes import lane_types, lanes_out_type, make_marginal2d_sample_lanes
 from ..errors import SceneError
 from .data import LoadedMaterial, Materials
 
@@ -280,17 +283,23 @@ def kernel_eval(loaded_list):
 # Sample and pdf (the view incident)
 # --------------------------------------------------------------------------------------------
 @wp.func
-def _draw(mats: Materials, h: int, n: int, t0: int, w1: float, phi_t: float, wo: wp.vec3, xi: wp.vec2):
-    """The format's sample for view ``wo`` (theta_i slice ``t0``, weight ``w1``, azimuth
-    ``phi_t``): ``(wi, pdf, ok, u, s, phi_m)`` -- the light, its density in 1/sr, 1 when the sample
-    is usable (above both horizons, finite positive pdf), the VNDF warp's output ``u`` (u_x,
-    u_y, its density), the luminance warp's output ``s`` and the micro-normal's azimuth."""
+def _warps(mats: Materials, h: int, n: int, t0: int, w1: float, xi: wp.vec2):
+    """``(s, u)``: the luminance warp's output ``s`` of the uniforms ``xi`` and the VNDF warp's
+    output ``u`` of ``s`` (x, y, density each; theta_i slice ``t0``, weight ``w1``)."""
     s = marginal2d_sample(mats.rgl_f, mats.rgl_i[h + RGL_LUM_DATA], mats.rgl_i[h + RGL_LUM_COND],
                           mats.rgl_i[h + RGL_LUM_MARG], mats.rgl_i[h + RGL_LUM_NY],
                           mats.rgl_i[h + RGL_LUM_NX], n, t0, w1, xi[1], xi[0])
     u = marginal2d_sample(mats.rgl_f, mats.rgl_i[h + RGL_VNDF_DATA], mats.rgl_i[h + RGL_VNDF_COND],
                           mats.rgl_i[h + RGL_VNDF_MARG], mats.rgl_i[h + RGL_VNDF_NY],
                           mats.rgl_i[h + RGL_VNDF_NX], n, t0, w1, s[0], s[1])
+    return s, u
+
+
+@wp.func
+def _draw(phi_t: float, wo: wp.vec3, s: wp.vec3, u: wp.vec3):
+    """The format's sample for view ``wo`` (azimuth ``phi_t``) from the two warps' outputs
+    (:func:`_warps`): ``(wi, pdf, ok, phi_m)`` -- the light, its density in 1/sr, 1 when the
+    sample is usable (above both horizons, finite positive pdf) and the micro-normal's azimuth."""
     theta_m = u[0] * u[0] * wp.HALF_PI
     phi_m = (2.0 * u[1] - 1.0) * wp.pi + phi_t
     sct = fmath.sincos(theta_m)
@@ -304,7 +313,19 @@ def _draw(mats: Materials, h: int, n: int, t0: int, w1: float, phi_t: float, wo:
     ok = int(1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
     if c <= 0.0 or wi[2] <= 0.0 or not (p > 0.0) or p > 1.0e30:
         ok = 0
-    return wi, p, ok, u, s, phi_m
+    return wi, p, ok, phi_m
+
+
+@wp.func
+def _sample_f_from(mats: Materials, m: int, h: int, n: int, inc: wp.vec4, wo: wp.vec3, s: wp.vec3, u: wp.vec3):
+    """:func:`sample_f`'s result from the two warps' outputs (``inc``: :func:`_incidence` of
+    ``wo``)."""
+    t0 = int(inc[0])
+    wi, pdf_s, ok, phi_m = _draw(inc[2], wo, s, u)
+    if ok == 0:
+        return wp.vec4(0.0), wp.vec3(0.0), 1
+    v = _value(mats, h, n, t0, inc[1], inc[3], inc[2], u[0], phi_to_u(phi_m - inc[2]), s[0], s[1])
+    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf_s), wp.cw_mul(v, mats.scale[m]) / wi[2], 1
 
 
 @wp.func
@@ -325,13 +346,9 @@ def sample_f(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2):
         return wp.vec4(0.0), wp.vec3(0.0), 1
     h = mats.offset[m]
     inc = _incidence(mats, h, wo)
-    t0 = int(inc[0])
     n = mats.rgl_i[h + RGL_N_THETA]
-    wi, pdf_s, ok, u, s, phi_m = _draw(mats, h, n, t0, inc[1], inc[2], wo, xi)
-    if ok == 0:
-        return wp.vec4(0.0), wp.vec3(0.0), 1
-    v = _value(mats, h, n, t0, inc[1], inc[3], inc[2], u[0], phi_to_u(phi_m - inc[2]), s[0], s[1])
-    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf_s), wp.cw_mul(v, mats.scale[m]) / wi[2], 1
+    s, u = _warps(mats, h, n, int(inc[0]), inc[1], xi)
+    return _sample_f_from(mats, m, h, n, inc, wo, s, u)
 
 
 @wp.func
@@ -341,8 +358,8 @@ def sample(mats: Materials, m: int, wo: wp.vec3, xi: wp.vec2) -> wp.vec4:
         return wp.vec4(0.0)
     h = mats.offset[m]
     inc = _incidence(mats, h, wo)
-    wi, p, ok, _u, _s, _phi_m = _draw(mats, h, mats.rgl_i[h + RGL_N_THETA], int(inc[0]), inc[1], inc[2],
-                                      wo, xi)
+    s, u = _warps(mats, h, mats.rgl_i[h + RGL_N_THETA], int(inc[0]), inc[1], xi)
+    wi, p, ok, _phi_m = _draw(inc[2], wo, s, u)
     if ok == 0:
         return wp.vec4(0.0)
     return wp.vec4(wi[0], wi[1], wi[2], 1.0 / p)
@@ -401,6 +418,77 @@ def kernel_fused(cdfs=()):
     technique interface, :func:`warp_rbrdf.integrator.make_bsdf_sampling`)."""
     return sample_f, eval_pdf
 
+
+
+@functools.lru_cache(maxsize=None)
+def make_sample_f_lanes(K: int):
+    """``sample_f_lanes(mats, m, wox, woy, woz, xi0, xi1, on) -> out``: :func:`sample_f` of
+    ``K`` lanes of material ``m`` (views and uniforms as float lanes, ``on`` int lanes: 0 = an
+    idle lane, whose result is zero), its two warps drawn for all lanes at once
+    (:func:`warp_rbrdf.distribution.lanes.make_marginal2d_sample_lanes`); ``out`` a ``(7, K)``
+    matrix, per lane ``(wi, 1 / pdf, f_r)`` -- :func:`sample_f`'s sample and value. Cached: one
+    function per ``K``."""
+    vf, vi = lane_types(K)
+    out_t = lanes_out_type(K)
+    warp_lanes = make_marginal2d_sample_lanes(K)
+
+    @wp.func
+    def sample_f_lanes(mats: Materials, m: int, wox: vf, woy: vf, woz: vf, xi0: vf, xi1: vf, on: vi) -> out_t:
+        out = out_t()
+        if _view_incident(mats, m) == 0:
+            return out
+        h = mats.offset[m]
+        n = mats.rgl_i[h + RGL_N_THETA]
+        go = vi()
+        t0 = vi()
+        w1 = vf()
+        phi = vf()
+        theta = vf()
+        sx = vf()
+        sy = vf()
+        i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
+        while i < K:             # loops, not unrolled: one copy of each step's code
+            sx[i] = 0.5
+            sy[i] = 0.5
+            if on[i] != 0 and woz[i] > 0.0:
+                inc = _incidence(mats, h, wp.vec3(wox[i], woy[i], woz[i]))
+                go[i] = 1
+                t0[i] = int(inc[0])
+                w1[i] = inc[1]
+                phi[i] = inc[2]
+                theta[i] = inc[3]
+                sx[i] = xi1[i]
+                sy[i] = xi0[i]
+            i += 1
+        s0, s1, s2 = warp_lanes(mats.rgl_f, mats.rgl_i[h + RGL_LUM_DATA], mats.rgl_i[h + RGL_LUM_COND],
+                                mats.rgl_i[h + RGL_LUM_MARG], mats.rgl_i[h + RGL_LUM_NY],
+                                mats.rgl_i[h + RGL_LUM_NX], n, t0, w1, sx, sy)
+        u0, u1, u2 = warp_lanes(mats.rgl_f, mats.rgl_i[h + RGL_VNDF_DATA], mats.rgl_i[h + RGL_VNDF_COND],
+                                mats.rgl_i[h + RGL_VNDF_MARG], mats.rgl_i[h + RGL_VNDF_NY],
+                                mats.rgl_i[h + RGL_VNDF_NX], n, t0, w1, s0, s1)
+        i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
+        while i < K:
+            if go[i] != 0:
+                r, f, _has = _sample_f_from(mats, m, h, n, wp.vec4(float(t0[i]), w1[i], phi[i], theta[i]),
+                                            wp.vec3(wox[i], woy[i], woz[i]), wp.vec3(s0[i], s1[i], s2[i]),
+                                            wp.vec3(u0[i], u1[i], u2[i]))
+                out[0, i] = r[0]
+                out[1, i] = r[1]
+                out[2, i] = r[2]
+                out[3, i] = r[3]
+                out[4, i] = f[0]
+                out[5, i] = f[1]
+                out[6, i] = f[2]
+            i += 1
+        return out
+
+    return sample_f_lanes
+
+
+def kernel_lanes(K: int, cdfs=()):
+    """:func:`make_sample_f_lanes`: the technique's sample with f_r over ``K`` lanes (optional in
+    the technique interface; :func:`warp_rbrdf.integrator.make_kernels`)."""
+    return make_sample_f_lanes(K)
 
 # --------------------------------------------------------------------------------------------
 # NumPy references of the technique (float64), on the material's RGLBRDF ``b``
