@@ -131,22 +131,19 @@ def test_lanes_with_several_materials_and_a_mesh(monkeypatch):
     _same_image(_render(sc, 0, monkeypatch), _render(sc, K, monkeypatch))
 
 
-def test_lanes_only_where_a_technique_has_a_lane_form(monkeypatch):
-    """A scene without a lane technique compiles the same kernel whatever the lane count (the
-    lanes' code is left out: shipped kernels and caches are unaffected); one with the rgl
-    technique compiles another kernel per lane count."""
-    from warp_rbrdf.shipped_kernels import module_hash
+def test_lanes_for_every_material_and_strategy(monkeypatch):
+    """The environment samples of the lanes serve every material with an environment sample:
+    Lambert with ``mis`` and ``light``, a rational fit with its default sampler, beside a
+    directional light (its shadow rays come before the environment sample); and ``cosine`` (no
+    environment sample, only the first hits given). Same image with and without lanes."""
+    from warp_rbrdf.paths import PACKAGE_DATA
 
-    def hashes(material):
-        sc = _scene({material.name: material}, [ShapeSpec(type="sphere", material=material.name)], spp=4)
-        out = []
-        for lanes in (0, K):
-            monkeypatch.setattr(L, "LANES", lanes)
-            out.append(module_hash(Renderer(sc, device="cpu").kernels.render_tile.module))
-        return out
-
-    plain = hashes(MaterialSpec(name="c", type="lambert", albedo=(0.5, 0.5, 0.5), sampler="mis"))
-    with_rgl = hashes(MaterialSpec(name="m", type="rgl", file=data_file("rgl/paper_white_rgb.bsdf"),
-                                   sampler="mis-rgl"))
-    assert plain[0] == plain[1]
-    assert with_rgl[0] != with_rgl[1]
+    mats = {"l": MaterialSpec(name="l", type="lambert", albedo=(0.6, 0.5, 0.4), sampler="mis"),
+            "g": MaterialSpec(name="g", type="lambert", albedo=(0.3, 0.5, 0.7), sampler="light"),
+            "k": MaterialSpec(name="k", type="lambert", albedo=(0.5, 0.5, 0.5), sampler="cosine"),
+            "r": MaterialSpec(name="r", type="rational", file=PACKAGE_DATA / "paper_white_rgb.json")}
+    shapes = [ShapeSpec(type="sphere", material=n, center=(-0.9 + 0.6 * k, 0.0, 0.0), radius=0.3)
+              for k, n in enumerate(mats)]
+    sc = _scene(mats, shapes, spp=19, resolution=32)
+    sc.lights.append(LightSpec(type="directional", direction=(0.3, -1.0, -0.4), irradiance=(2.0, 2.0, 2.0)))
+    _same_image(_render(sc, 0, monkeypatch), _render(sc, K, monkeypatch))

@@ -17,6 +17,11 @@ strategy of the material hit (:data:`warp_rbrdf.registry.STRATEGIES`, stored as
 * ``max_depth = 1`` stops there (direct lighting); ``max_depth > 1`` continues the path along
   the BSDF sample (``COMBINE_LIGHT`` draws it only to continue).
 
+The render kernel takes a pixel's samples :data:`warp_rbrdf.lanes.LANES` at a time: their camera
+rays and first hits, the first vertex's environment samples and (where the technique has a lane
+form) BSDF samples drawn together, then each sample's path as above with those given
+(:mod:`warp_rbrdf.lanes`; the same samples, the same image).
+
 The integrator only calls the material and technique interfaces: :func:`make_kernels` receives
 the scene's material evaluations and techniques as Warp functions and builds, with closures and
 ``wp.static`` dispatch, kernels that contain exactly those (a scene compiles only what it uses).
@@ -40,6 +45,7 @@ from . import lanes as L
 from .distribution.lanes import lane_types, lanes_out_type
 from .lights.directional import Directional
 from .lights.env_map import EnvMap, env_dir_to_uv, env_eval_uv, env_pdf_uv
+from .lights.env_lanes import env_lanes_out_type, make_env_sample_lanes
 from .lights.env_sampling import env_sample_uv
 from .materials.data import Materials
 from .registry import COMBINE_BSDF, COMBINE_LIGHT, COMBINE_MIS
@@ -272,8 +278,8 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     factory, or None; :func:`make_lanes_sampling`); ``has_mesh`` / ``has_spheres``: whether the
     scene's :class:`~warp_rbrdf.geometry.SceneGeometry` has triangles / analytic spheres (the ray
     queries of :func:`warp_rbrdf.geometry.make_tracer` test only those); ``lanes``: the samples
-    of a pixel the render kernel advances together where a technique has a lane form (0: one
-    at a time; None: :data:`warp_rbrdf.lanes.LANES`; module docstring)."""
+    of a pixel the render kernel advances together (0 or 1: one at a time; None:
+    :data:`warp_rbrdf.lanes.LANES`; module docstring)."""
     lanes = L.LANES if lanes is None else int(lanes)
     closest_hit, any_hit = G.make_tracer(has_mesh, has_spheres)
     bsdf_eval = make_bsdf_eval(kinds)
@@ -283,28 +289,31 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     bsdf_sample_f, bsdf_eval_pdf = make_fused(techniques)
     sample_2d = P.sample_2d
     lane_techniques = [(int(t[0]), t[6](lanes)) for t in techniques if len(t) > 6 and t[6] is not None]
-    lanes_on = lanes > 1 and bool(lane_techniques)
+    lanes_on = lanes > 1
     K = lanes if lanes_on else 1      # the lanes' types do not enter a kernel without them
     vf, vi = lane_types(K)
     out_t = lanes_out_type(K)
     state_t = wp.types.matrix(shape=(L.N_LANE_STATE, K), dtype=float)
     lanes_sample_f, is_lane_technique = L.make_lanes_sampling(lane_techniques, K)
+    env_out_t = env_lanes_out_type(K)
+    env_lanes = make_env_sample_lanes(K)
 
     @G.inline_func
     def radiance_sample(geo: G.SceneGeometry, cam: C.Camera, env: EnvMap, dl: Directional, mats: Materials,
                         pseed: wp.uint32, s: int, spp: int, pattern: int, max_depth: int,
                         hide_env: int, eps: float, px: int, py: int, pre: int, pre_d: wp.vec3,
                         pre_hit: wp.vec3, pre_ng: wp.vec3, pre_ns: wp.vec3, pre_bs: wp.vec4,
-                        pre_f: wp.vec3) -> wp.vec3:
-        # what the lanes of render_tile computed for this sample (``pre``): 0 nothing; 1 the
-        # camera ray ``pre_d`` and its closest hit (``pre_hit`` = (hit, t, material), normals
-        # ``pre_ng``, ``pre_ns``); 2 also the first vertex's BSDF sample ``pre_bs`` with f_r ``pre_f``
+                        pre_f: wp.vec3, pre_ls: wp.vec4, pre_luv: wp.vec2) -> wp.vec3:
+        # what the lanes of render_tile computed for this sample (``pre``, bits of
+        # warp_rbrdf.lanes): PRE_HIT the camera ray ``pre_d`` and its closest hit (``pre_hit`` =
+        # (hit, t, material), normals ``pre_ng``, ``pre_ns``); PRE_BSDF the first vertex's BSDF
+        # sample ``pre_bs`` with f_r ``pre_f``; PRE_ENV its environment sample ``pre_ls``, ``pre_luv``
         Lsum = wp.vec3(0.0)
         if max_depth < 1:
             return Lsum
         d = pre_d
         if wp.static(lanes_on):
-            if pre == 0:
+            if (pre & L.PRE_HIT) == 0:
                 j = sample_2d(pattern, pseed, s, spp, 0)
                 d = C.camera_ray(cam, float(px) + j[0], float(py) + j[1])
         else:
@@ -329,7 +338,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             if shadow == 1:
                 hit = wp.where(any_hit(geo, o, d, 1.0e30), 1, 0)
             elif wp.static(lanes_on):
-                if depth == 0 and pre != 0:
+                if depth == 0 and (pre & L.PRE_HIT) != 0:
                     hit = int(pre_hit[0])
                     t = pre_hit[1]
                     m = int(pre_hit[2])
@@ -379,7 +388,13 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                 if li < n_dl:
                     wl = dl.to_light[li]
                 elif li < n_light:
-                    ls, luv = env_sample_uv(env, sample_2d(pattern, pseed, s, spp, dim))
+                    if wp.static(lanes_on):
+                        ls = pre_ls
+                        luv = pre_luv
+                        if depth != 0 or (pre & L.PRE_ENV) == 0:
+                            ls, luv = env_sample_uv(env, sample_2d(pattern, pseed, s, spp, dim))
+                    else:
+                        ls, luv = env_sample_uv(env, sample_2d(pattern, pseed, s, spp, dim))
                     wl = wp.vec3(ls[0], ls[1], ls[2])
                     pl = ls[3]
                 fv = wp.vec3(0.0)
@@ -398,7 +413,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                     if wp.static(lanes_on):
                         fv = pre_f
                         has_f = 1
-                        if depth != 0 or pre != 2:
+                        if depth != 0 or (pre & L.PRE_BSDF) == 0:
                             bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
                     else:
                         bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
@@ -473,9 +488,10 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
         acc = wp.vec3(0.0)
         acc2 = wp.vec3(0.0)
         if wp.static(lanes_on):
-            # K samples at a time: their camera rays and first hits, then the first vertex's BSDF
-            # samples of every lane whose technique has a lane form, drawn together (one
-            # material), then each sample's radiance as below, given those
+            # K samples at a time: their camera rays and first hits, then the first vertex's
+            # environment samples and the BSDF samples of the lanes whose technique has a lane
+            # form (one material), each drawn for all lanes together, then each sample's radiance
+            # as below, given those
             for g in range((spp + K - 1) // K):
                 st = state_t()
                 wox = vf()
@@ -484,6 +500,10 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                 xi0 = vf()
                 xi1 = vf()
                 on = vi()
+                exi0 = vf()
+                exi1 = vf()
+                env_on = vi()
+                any_env = int(0)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
                 lane_m = int(-1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
                 same = int(1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
                 i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
@@ -501,6 +521,12 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                         st[L.LS_T, i] = t
                         st[L.LS_M, i] = float(m)
                         if hit != 0:
+                            if env.can_sample == 1 and mats.combine[m] != COMBINE_BSDF:
+                                exi = sample_2d(pattern, pseed, s, spp, L.FIRST_LIGHT_DIM)
+                                exi0[i] = exi[0]
+                                exi1[i] = exi[1]
+                                env_on[i] = 1
+                                any_env = 1
                             if is_lane_technique(mats.technique[m]):
                                 _n, _T, _B, wo = shading_frame(d, ng, ns)
                                 xi = sample_2d(pattern, pseed, s, spp, L.FIRST_BSDF_DIM)
@@ -519,20 +545,27 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                 out = out_t()
                 if drawn:
                     out = lanes_sample_f(mats, lane_m, mats.technique[lane_m], wox, woy, woz, xi0, xi1, on)
+                eout = env_out_t()
+                if any_env == 1:
+                    eout = env_lanes(env, exi0, exi1, env_on)
                 i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
                 while i < K:
                     s = g * K + i
                     if s < spp:
-                        pre = int(1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch
+                        pre = int(L.PRE_HIT)
                         if drawn and on[i] != 0:
-                            pre = 2
+                            pre = pre | L.PRE_BSDF
+                        if env_on[i] != 0:
+                            pre = pre | L.PRE_ENV
                         v = radiance_sample(geo, cam, env, dl, mats, pseed, s, spp, pattern, max_depth, hide_env,
                                             eps, px, py, pre, wp.vec3(st[L.LS_D, i], st[L.LS_D + 1, i], st[L.LS_D + 2, i]),
                                             wp.vec3(st[L.LS_HIT, i], st[L.LS_T, i], st[L.LS_M, i]),
                                             wp.vec3(st[L.LS_NG, i], st[L.LS_NG + 1, i], st[L.LS_NG + 2, i]),
                                             wp.vec3(st[L.LS_NS, i], st[L.LS_NS + 1, i], st[L.LS_NS + 2, i]),
                                             wp.vec4(out[0, i], out[1, i], out[2, i], out[3, i]),
-                                            wp.vec3(out[4, i], out[5, i], out[6, i]))
+                                            wp.vec3(out[4, i], out[5, i], out[6, i]),
+                                            wp.vec4(eout[0, i], eout[1, i], eout[2, i], eout[3, i]),
+                                            wp.vec2(eout[4, i], eout[5, i]))
                         acc = acc + v
                         acc2 = acc2 + wp.cw_mul(v, v)
                     i += 1
@@ -540,7 +573,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             for s in range(spp):
                 v = radiance_sample(geo, cam, env, dl, mats, pseed, s, spp, pattern, max_depth, hide_env, eps,
                                     px, py, 0, wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec3(0.0), wp.vec4(0.0),
-                                    wp.vec3(0.0))
+                                    wp.vec3(0.0), wp.vec4(0.0), wp.vec2(0.0))
                 acc = acc + v
                 acc2 = acc2 + wp.cw_mul(v, v)
         inv = 1.0 / float(spp)

@@ -1,9 +1,12 @@
-"""The render kernel's lanes: the first vertex's BSDF samples of ``K`` samples of a pixel drawn
-together (:func:`warp_rbrdf.integrator.make_kernels`), through the lane forms of the techniques
-that have one (a technique module's optional ``kernel_lanes(K, fits)``: the ``rgl`` technique,
-:func:`warp_rbrdf.materials.rgl.make_sample_f_lanes`). A lane form draws ``K`` samples at once
-so that the independent loads of their binary searches overlap (``docs/cpu_lanes.md``); its
-samples are the one-at-a-time technique's, so a render does not depend on the lanes.
+"""The render kernel's lanes (:func:`warp_rbrdf.integrator.make_kernels`): ``K`` samples of a
+pixel advance together through their camera rays and first hits, then the first vertex's
+environment samples of all of them (:mod:`warp_rbrdf.lights.env_lanes`: every material whose
+strategy samples the environment) and its BSDF samples where the material's technique has a
+lane form (a technique module's optional ``kernel_lanes(K, fits)``: the ``rgl`` technique,
+:func:`warp_rbrdf.materials.rgl.make_sample_f_lanes`), each sample's radiance then one at a
+time with those given. A lane form draws ``K`` samples at once so that the independent loads and
+divisions of their searches and descents overlap (``docs/cpu_lanes.md``); its samples are the
+one-at-a-time samples, so a render does not depend on the lanes (``tests/test_lanes.py``).
 
 No ``from __future__ import annotations`` here: Warp reads the lane functions' argument types
 from their annotations, which name this module's closure types.
@@ -14,12 +17,18 @@ from . import geometry as G
 from .distribution.lanes import lane_types, lanes_out_type
 from .materials.data import Materials
 
-#: samples of a pixel the render kernel advances together where a technique has a lane form
-#: (``kernel_lanes``: the ``rgl`` technique); 0 or 1: one at a time
+#: samples of a pixel the render kernel advances together (0 or 1: one at a time, the kernel
+#: without the lanes' code)
 LANES = 16
-#: the 2-D sample dimension of the first vertex's BSDF sample (``dim + 1`` of the integrator's
-#: ``radiance_sample`` at depth 0)
+#: the 2-D sample dimensions of the first vertex's environment and BSDF samples (``dim`` and
+#: ``dim + 1`` of the integrator's ``radiance_sample`` at depth 0)
+FIRST_LIGHT_DIM = 1
 FIRST_BSDF_DIM = 2
+#: what the lanes give a sample's ``radiance_sample`` (bits): its camera ray and closest hit,
+#: the first vertex's BSDF sample with f_r, its environment sample
+PRE_HIT = 1
+PRE_BSDF = 2
+PRE_ENV = 4
 #: rows of a lane's state: camera ray, (hit, t, material), geometric and shading normals
 LS_D, LS_HIT, LS_T, LS_M, LS_NG, LS_NS = 0, 3, 4, 5, 6, 9
 N_LANE_STATE = 12

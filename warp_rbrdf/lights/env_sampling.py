@@ -119,42 +119,38 @@ def _patch_mass(env: EnvMap, j: int, c: int) -> wp.float64:
 
 
 @wp.func
-def sample_patch_point(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
-    """(u, v, lum) of the sample of uniforms ``xi`` (``xi[0]`` drives v, ``xi[1]`` u), float64:
-    its map coordinates and the bilinear luminance there (the lookup's own taps: the patch's
-    four texels with weights from the fractions ``t``, ``s``), so the pdf needs no second
-    lookup."""
+def descend_level(env: EnvMap, level: int, x: int, y: int, sx: wp.float64, sy: wp.float64):
+    """One level (>= 1) of the hierarchical warp: ``(x, y, sx, sy)`` of the chosen child block
+    of block (x, y) and the uniforms rescaled inside it. Each level stores its 2 x 2 children
+    blocks contiguously (v00, v10, v01, v11)."""
+    k = env.mip_offset[level - 1] + 4 * (y * env.mip_blocks_x[level - 1] + x)
+    v00 = wp.float64(env.mip[k])
+    v10 = wp.float64(env.mip[k + 1])
+    v01 = wp.float64(env.mip[k + 2])
+    v11 = wp.float64(env.mip[k + 3])
+    ry = _split(sy, v00 + v10, v01 + v11)
+    ca = v00
+    cb = v10
+    y = 2 * y
+    if ry[0] > wp.float64(0.5):
+        y = y + 1
+        ca = v01
+        cb = v11
+    rx = _split(sx, ca, cb)
+    x = 2 * x
+    if rx[0] > wp.float64(0.5):
+        x = x + 1
+    return x, y, rx[1], ry[1]
+
+
+@wp.func
+def patch_point(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64) -> wp.vec3d:
+    """(u, v, lum) of the sample whose descent ended at level-1 block (x, y) with the rescaled
+    uniforms (sx, sy): the last step over the four patches under it (their masses from the
+    texels), then the inversion inside the chosen patch (module docstring)."""
     H = env.height
     W = env.width
     one = wp.float64(1.0)
-    sy = wp.min(wp.float64(xi[0]), wp.float64(0.9999999999999999))
-    sx = wp.min(wp.float64(xi[1]), wp.float64(0.9999999999999999))
-    # levels >= 1: each stores its 2 x 2 children blocks contiguously (v00, v10, v01, v11)
-    x = int(0)
-    y = int(0)
-    level = env.levels - 2
-    while level >= 1:
-        k = env.mip_offset[level - 1] + 4 * (y * env.mip_blocks_x[level - 1] + x)
-        v00 = wp.float64(env.mip[k])
-        v10 = wp.float64(env.mip[k + 1])
-        v01 = wp.float64(env.mip[k + 2])
-        v11 = wp.float64(env.mip[k + 3])
-        ry = _split(sy, v00 + v10, v01 + v11)
-        sy = ry[1]
-        ca = v00
-        cb = v10
-        y = 2 * y
-        if ry[0] > wp.float64(0.5):
-            y = y + 1
-            ca = v01
-            cb = v11
-        rx = _split(sx, ca, cb)
-        sx = rx[1]
-        x = 2 * x
-        if rx[0] > wp.float64(0.5):
-            x = x + 1
-        level = level - 1
-    # level 0: the four patches under (x, y), their masses from the texels
     y = 2 * y
     x = 2 * x
     p00 = _patch_mass(env, y, x)
@@ -190,6 +186,23 @@ def sample_patch_point(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
         u = u - one
     v = (wp.float64(j) + t) / wp.float64(H - 1)
     return wp.vec3d(u, v, lum)
+
+
+@wp.func
+def sample_patch_point(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
+    """(u, v, lum) of the sample of uniforms ``xi`` (``xi[0]`` drives v, ``xi[1]`` u), float64:
+    its map coordinates and the bilinear luminance there (the lookup's own taps: the patch's
+    four texels with weights from the fractions ``t``, ``s``), so the pdf needs no second
+    lookup. :mod:`.env_lanes` steps the descent of K samples together."""
+    sy = wp.min(wp.float64(xi[0]), wp.float64(0.9999999999999999))
+    sx = wp.min(wp.float64(xi[1]), wp.float64(0.9999999999999999))
+    x = int(0)
+    y = int(0)
+    level = env.levels - 2
+    while level >= 1:
+        x, y, sx, sy = descend_level(env, level, x, y, sx, sy)
+        level = level - 1
+    return patch_point(env, x, y, sx, sy)
 
 
 @wp.func
