@@ -307,7 +307,8 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
         # what the lanes of render_tile computed for this sample (``pre``, bits of
         # warp_rbrdf.lanes): PRE_HIT the camera ray ``pre_d`` and its closest hit (``pre_hit`` =
         # (hit, t, material), normals ``pre_ng``, ``pre_ns``); PRE_BSDF the first vertex's BSDF
-        # sample ``pre_bs`` with f_r ``pre_f``; PRE_ENV its environment sample ``pre_ls``, ``pre_luv``
+        # sample ``pre_bs``, PRE_F with f_r there ``pre_f``; PRE_ENV its environment sample
+        # ``pre_ls``, ``pre_luv``
         Lsum = wp.vec3(0.0)
         if max_depth < 1:
             return Lsum
@@ -412,7 +413,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                     bs = pre_bs
                     if wp.static(lanes_on):
                         fv = pre_f
-                        has_f = 1
+                        has_f = wp.where((pre & L.PRE_F) != 0, 1, 0)
                         if depth != 0 or (pre & L.PRE_BSDF) == 0:
                             bs, fv, has_f = bsdf_sample_f(mats, m, tech, wo, sample_2d(pattern, pseed, s, spp, dim + 1))
                     else:
@@ -555,6 +556,8 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
                         pre = int(L.PRE_HIT)
                         if drawn and on[i] != 0:
                             pre = pre | L.PRE_BSDF
+                            if out[7, i] != 0.0:
+                                pre = pre | L.PRE_F
                         if env_on[i] != 0:
                             pre = pre | L.PRE_ENV
                         v = radiance_sample(geo, cam, env, dl, mats, pseed, s, spp, pattern, max_depth, hide_env,

@@ -3,8 +3,9 @@ pixel advance together through their camera rays and first hits, then the first 
 environment samples of all of them (:mod:`warp_rbrdf.lights.env_lanes`: every material whose
 strategy samples the environment) and its BSDF samples where the material's technique has a
 lane form (a technique module's optional ``kernel_lanes(K, fits)``: the ``rgl`` technique,
-:func:`warp_rbrdf.materials.rgl.make_sample_f_lanes`), each sample's radiance then one at a
-time with those given. A lane form draws ``K`` samples at once so that the independent loads and
+:func:`warp_rbrdf.materials.rgl.make_sample_f_lanes`, with f_r; ``tabulated``,
+:mod:`warp_rbrdf.techniques.tabulated_lanes`), each sample's radiance then one at a time with
+those given. A lane form draws ``K`` samples at once so that the independent loads and
 divisions of their searches and descents overlap (``docs/cpu_lanes.md``); its samples are the
 one-at-a-time samples, so a render does not depend on the lanes (``tests/test_lanes.py``).
 
@@ -25,10 +26,11 @@ LANES = 16
 FIRST_LIGHT_DIM = 1
 FIRST_BSDF_DIM = 2
 #: what the lanes give a sample's ``radiance_sample`` (bits): its camera ray and closest hit,
-#: the first vertex's BSDF sample with f_r, its environment sample
+#: the first vertex's BSDF sample, f_r at it, its environment sample
 PRE_HIT = 1
 PRE_BSDF = 2
 PRE_ENV = 4
+PRE_F = 8
 #: rows of a lane's state: camera ray, (hit, t, material), geometric and shading normals
 LS_D, LS_HIT, LS_T, LS_M, LS_NG, LS_NS = 0, 3, 4, 5, 6, 9
 N_LANE_STATE = 12

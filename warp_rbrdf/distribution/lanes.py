@@ -31,9 +31,34 @@ def lane_types(K: int) -> tuple:
 
 @functools.lru_cache(maxsize=None)
 def lanes_out_type(K: int):
-    """The Warp ``(7, K)`` float32 matrix of a lane BSDF sample with its value: per lane (column)
-    ``(wi_x, wi_y, wi_z, 1 / pdf, f_R, f_G, f_B)``."""
-    return wp.types.matrix(shape=(7, K), dtype=float)
+    """The Warp ``(8, K)`` float32 matrix of a lane BSDF sample: per lane (column) ``(wi_x, wi_y,
+    wi_z, 1 / pdf, f_R, f_G, f_B, has_f)``, f_r at the sample where the technique computes it on
+    the way (``has_f`` 1), else 0 (the caller evaluates the material)."""
+    return wp.types.matrix(shape=(8, K), dtype=float)
+
+
+@functools.lru_cache(maxsize=None)
+def make_find_interval_lanes(K: int):
+    """``find_interval_lanes(cdf, off, size, x) -> int lanes``: :func:`.warp_1d.find_interval` of
+    every lane (its CDF at ``cdf[off[i]]``, all of ``size`` entries), by halving steps over all
+    lanes. Cached: one function per ``K``."""
+    vf, vi = lane_types(K)
+
+    @wp.func
+    def find_interval_lanes(cdf: wp.array(dtype=float), off: vi, size: int, x: vf) -> vi:
+        base = vi()
+        m = size - 1
+        while m > 1:
+            half = m // 2
+            i = int(0)
+            while i < K:
+                b = base[i] + half
+                base[i] = wp.where(cdf[off[i] + b] <= x[i], b, base[i])
+                i += 1
+            m = m - half
+        return base
+
+    return find_interval_lanes
 
 
 @functools.lru_cache(maxsize=None)

@@ -69,12 +69,19 @@ def pc1d_sample(cdf: wp.array(dtype=Any), off: int, n: int, u: Any):
     past the last cell of mass) and the cell's probability. The point is ``(i + frac) / n``,
     its density ``mass * n``."""
     i = find_interval(cdf, off, n + 1, u)
+    frac, m = pc1d_in_cell(cdf, off, i, u)
+    return i, frac, m
+
+
+@wp.func
+def pc1d_in_cell(cdf: wp.array(dtype=Any), off: int, i: int, u: Any):
+    """:func:`pc1d_sample` in its cell ``i``: ``(frac, mass)``."""
     c0 = cdf[off + i]
     m = cdf[off + i + 1] - c0
     frac = type(u)(0.5)
     if m > type(u)(0.0):
         frac = wp.clamp((u - c0) / m, type(u)(0.0), type(u)(1.0))
-    return i, frac, m
+    return frac, m
 
 
 @wp.func

@@ -425,8 +425,8 @@ def make_sample_f_lanes(K: int):
     """``sample_f_lanes(mats, m, wox, woy, woz, xi0, xi1, on) -> out``: :func:`sample_f` of
     ``K`` lanes of material ``m`` (views and uniforms as float lanes, ``on`` int lanes: 0 = an
     idle lane, whose result is zero), its two warps drawn for all lanes at once
-    (:func:`warp_rbrdf.distribution.lanes.make_marginal2d_sample_lanes`); ``out`` a ``(7, K)``
-    matrix, per lane ``(wi, 1 / pdf, f_r)`` -- :func:`sample_f`'s sample and value. Cached: one
+    (:func:`warp_rbrdf.distribution.lanes.make_marginal2d_sample_lanes`); ``out`` a ``(8, K)``
+    matrix, per lane ``(wi, 1 / pdf, f_r, 1)`` -- :func:`sample_f`'s sample and value. Cached: one
     function per ``K``."""
     vf, vi = lane_types(K)
     out_t = lanes_out_type(K)
@@ -479,6 +479,7 @@ def make_sample_f_lanes(K: int):
                 out[4, i] = f[0]
                 out[5, i] = f[1]
                 out[6, i] = f[2]
+            out[7, i] = 1.0
             i += 1
         return out
 

@@ -14,7 +14,7 @@ import warp as wp
 
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
 
-from ..distribution import pc1d_mass, pc1d_sample
+from ..distribution import find_interval, pc1d_in_cell, pc1d_mass
 from ..materials.data import (
     CDF_N_P,
     CDF_N_T,
@@ -38,14 +38,24 @@ def tab_sample(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t
     piecewise-constant theta_l CDF, then the |phi_l| CDF of the theta_l cell (the sign from
     ``tau < 1/2``, ``|2 tau - 1|`` the uniform), each continuous in its cell."""
     v = tab_row(theta_v, n_v)
-    j, frac_t, m_t = pc1d_sample(cdf_t, off_t + v * (n_t + 1), n_t, mu)
+    j = find_interval(cdf_t, off_t + v * (n_t + 1), n_t + 1, mu)
+    k = find_interval(cdf_p, off_p + (v * n_t + j) * (n_p + 1), n_p + 1, wp.abs(2.0 * tau - 1.0))
+    return tab_sample_cells(cdf_t, cdf_p, off_t, off_p, n_t, n_p, v, j, k, mu, tau)
+
+
+@wp.func
+def tab_sample_cells(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
+                     n_t: int, n_p: int, v: int, j: int, k: int, mu: float, tau: float) -> wp.vec3:
+    """:func:`tab_sample` in view row ``v`` once its two searches have found the theta_l cell
+    ``j`` and the |phi_l| cell ``k``."""
+    frac_t, m_t = pc1d_in_cell(cdf_t, off_t + v * (n_t + 1), j, mu)
     dt = wp.HALF_PI / float(n_t)
     theta_l = (float(j) + frac_t) * dt
     s = 1.0
     if tau < 0.5:
         s = -1.0
     u = wp.abs(2.0 * tau - 1.0)
-    k, frac_p, m_p = pc1d_sample(cdf_p, off_p + (v * n_t + j) * (n_p + 1), n_p, u)
+    frac_p, m_p = pc1d_in_cell(cdf_p, off_p + (v * n_t + j) * (n_p + 1), k, u)
     dp = wp.pi / float(n_p)
     phi_l = s * (float(k) + frac_p) * dp
     pdf = (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
@@ -121,6 +131,12 @@ def table_sample(mats: Materials, m: int, va: wp.vec3, xi: wp.vec2) -> wp.vec4:
     q = tab_sample(mats.cdf_t, mats.cdf_p, mats.cdf_info[b + CDF_OFF_T], mats.cdf_info[b + CDF_OFF_P],
                    mats.cdf_info[b + CDF_N_V], mats.cdf_info[b + CDF_N_T], mats.cdf_info[b + CDF_N_P],
                    va[0], xi[0], xi[1])
+    return sample_at(q, va)
+
+
+@wp.func
+def sample_at(q: wp.vec3, va: wp.vec3) -> wp.vec4:
+    """(wi, 1/pdf) of :func:`tab_sample`'s ``q`` in the view frame ``va``."""
     wl = local_dir(q[0], q[1], va)
     wgt = 0.0
     if q[2] > 0.0:
@@ -150,6 +166,14 @@ def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
 def kernel_functions(cdfs):
     """(sample, pdf) for the scene's materials using this technique."""
     return sample, pdf
+
+
+def kernel_lanes(K: int, cdfs=()):
+    """The technique's sample over ``K`` lanes (:func:`.tabulated_lanes.make_sample_lanes`;
+    optional in the technique interface, :mod:`warp_rbrdf.lanes`)."""
+    from .tabulated_lanes import make_sample_lanes
+
+    return make_sample_lanes(K)
 
 
 # --------------------------------------------------------------------------------------------
