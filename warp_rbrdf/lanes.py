@@ -4,7 +4,7 @@ environment samples of all of them (:mod:`warp_rbrdf.lights.env_lanes`: every ma
 strategy samples the environment) and its BSDF samples where the material's technique has a
 lane form (a technique module's optional ``kernel_lanes(K, fits)``: the ``rgl`` technique,
 :func:`warp_rbrdf.materials.rgl.make_sample_f_lanes`, with f_r; ``tabulated``,
-:mod:`warp_rbrdf.techniques.tabulated_lanes`), each sample's radiance then one at a time with
+:func:`warp_rbrdf.techniques.tabulated.make_sample_lanes`), each sample's radiance then one at a time with
 those given. A lane form draws ``K`` samples at once so that the independent loads and
 divisions of their searches and descents overlap (``docs/cpu_lanes.md``); its samples are the
 one-at-a-time samples, so a render does not depend on the lanes (``tests/test_lanes.py``).
