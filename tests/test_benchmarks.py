@@ -12,7 +12,7 @@ from conftest import data_file, require_mitsuba
 
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
-BENCHMARKS = ("bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_layouts", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
+BENCHMARKS = ("bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_lanes", "bench_layouts", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba", "bench_mesh_vs_mitsuba")
 
 
@@ -241,3 +241,18 @@ def test_bench_dial_default_pick_follows_the_selection_rule():
     assert default_pick([row(0, 0.09, 1.5), row(1, 0.05, 1.0)]) == 0       # gated: 0.09 >= 0.065
     assert default_pick([row(0, 0.03, 1.5), row(1, 0.05, 1.2), row(2, 0.03, 1.0)]) == 2   # the third layout
     assert default_pick([row(0, 0.03, 1.5), row(1, 0.05, 1.0), row(2, 0.03, 0.97)]) == 1  # within the margin
+
+
+def test_bench_lanes_smoke(tmp_path):
+    """The lanes benchmark's two kernels render the same image (its agreement columns), on tiny
+    renders; no timing is read."""
+    from benchmarks import bench_lanes
+
+    data_file("rgl/cc_ibiza_sunset_rgb.bsdf")
+    out = tmp_path / "lanes.json"
+    assert bench_lanes.main(["--quick", "--cases", "rgl", "lambert", "--maps", "studio", "--json", str(out)]) == 0
+    cases = json.loads(out.read_text())["cases"]
+    assert set(cases) == {"rgl/studio", "lambert/studio"}
+    for r in cases.values():
+        assert r["image_mean_rel_diff"] < 1e-5 and r["speedup"] > 0
+
