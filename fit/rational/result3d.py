@@ -1,6 +1,7 @@
 """What a 3-D fit is made of and what it records: :class:`Fit3D` (the result, everything a fit
 finds in its attributes), :class:`FitData3D` (what a refit of it needs), :data:`INTERVALS` (the
-interval policy, written into every record) and :func:`domain_record` (the coefficient file's
+interval policy, written into every record), :func:`file_value_range` (the value range a coefficient
+file holds, given to the model a fit returns) and :func:`domain_record` (the coefficient file's
 statement of what is proved on the whole measured domain). The method is in
 docs/fitting.md ("The 3-D method").
 """
@@ -106,6 +107,30 @@ class Fit3D:
         return (f"3-D fit {self.model.name}: {self.n_coefficients} coefficients, bound "
                 f"{100 * self.tolerance:.3g} % of max(rho, noise) at {self.n_points} points, "
                 f"{'valid' if self.valid else 'NOT valid'}, {self.time_s:.1f} s")
+
+
+def file_value_range(model) -> None:
+    """Give every piece of a piecewise 3-D ``model`` the value range its coefficient file holds,
+    in place: a file has one ``value`` record for the whole model (the first piece's ``min`` and
+    ``max``, :mod:`fit.rational.coefficient_writer`), which every piece reads back, while
+    :func:`fit.rational.ladder3d.fit_samples` gives each theta_h piece its own ``value_max`` (2 x
+    the largest of its data + 1) for the fit, the verification and the albedo policy. Without it
+    the model a fit returns clamps its later pieces lower than the same fit saved and loaded (on
+    chm_mint a relative difference of 0.9 where a later piece exceeds its own ceiling, between or
+    beyond the data points): the entry points call
+    it last, so that the fit they return is the fit its file holds. A one-piece model is left
+    as it is (the offset and the transform are the same in every piece by construction)."""
+    pieces = getattr(model, "pieces", None)
+    if not pieces:
+        return
+    lo, hi = model.value_min, model.value_max          # the first piece's: what the file writes
+    stack = list(pieces)
+    while stack:
+        p = stack.pop()
+        if getattr(p, "pieces", None):
+            stack.extend(p.pieces)
+        else:
+            p.value_min, p.value_max = lo, hi
 
 
 def domain_record(fit_info: dict) -> dict:

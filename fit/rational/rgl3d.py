@@ -17,14 +17,14 @@ from .albedo3d import albedo_policy
 from .ceiling import Ceiling
 from .ladder3d import fit_samples
 from .proved_bound import record_fit3d
-from .result3d import FitData3D, Fit3D, domain_record
+from .result3d import FitData3D, Fit3D, domain_record, file_value_range
 from .samples3d import objective_points, sample_rgl
 from .settings import DEFAULT_ALBEDO_REFITS, DEFAULT_ALBEDO_RMSE_GROWTH, DEFAULT_ALBEDO_TOTAL_GROWTH, Fit3DSettings
 from .verify3d import verification_ratio, verify_and_refit
 
 
 def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=None, progress=None,
-            **params) -> Fit3D:
+            file_range: bool = True, **params) -> Fit3D:
     """:func:`fit.rational.ladder3d.fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by
     :func:`fit.rational.samples3d.sample_rgl` (the sampling time counts in ``time_s``) with
     ``settings`` (:class:`fit.rational.settings.Fit3DSettings`, default its defaults; each of its
@@ -53,7 +53,11 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     ``"verification"`` (rounds), ``"3-D refit"``, ``"albedo policy"``, ``"proving the bound"``.
     ``prove_bound`` (default off): last, the error between the grid nodes of the measurement is
     proved per piece and channel (:func:`fit.rational.proved_bound.record_fit3d`: ``bounds``,
-    ``fit_info["bound"]``, and ``fit_info["domain"]`` says what is proved)."""
+    ``fit_info["bound"]``, and ``fit_info["domain"]`` says what is proved). ``file_range`` (default
+    on): the model returned (and ``model_before_albedo``) holds the value range of its coefficient
+    file (:func:`fit.rational.result3d.file_value_range`), so that it evaluates as the saved fit;
+    off only for the layouts of :func:`fit.rational.select3d.fit_rgl_select`, which range the one
+    it keeps itself."""
     s = Fit3DSettings.resolve(settings, **params)
     t0 = time.perf_counter()
     if ceiling is None:
@@ -80,6 +84,9 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
                      refits=s.albedo_refits, total_growth=s.albedo_total_growth)
         report(progress, "albedo policy", 1, 1)
     ceiling.record(res.model.fit_info)
+    if file_range:          # the model its file holds (one value range), before a proof of it
+        file_value_range(res.model)
+        file_value_range(res.model_before_albedo)
     if s.prove_bound:       # the error between the grid nodes, proved (fit.rational.proved_bound)
         report(progress, "proving the bound", 0, 1)
         record_fit3d(res, brdf)

@@ -15,7 +15,7 @@ from ..formats.angles import cosine_directions
 from ..progress import report
 from .ceiling import Ceiling
 from .image_check import image_check
-from .result3d import Fit3D, domain_record
+from .result3d import Fit3D, domain_record, file_value_range
 from .proved_bound import record_fit3d
 from .rgl3d import albedo_step, fit_rgl
 from .settings import Fit3DSettings
@@ -147,7 +147,8 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     round; ``fit_info["stopped"] = "time"`` and ``stopped_at`` record it. ``time_s`` is the whole
     selection. ``progress(stage, done, total)`` (:mod:`fit.progress`): each layout's stages as in
     :func:`fit.rational.rgl3d.fit_rgl`, then the chosen one's ``"verification"`` and ``"albedo
-    policy"``."""
+    policy"``. The model returned holds the value range of its coefficient file
+    (:func:`fit.rational.result3d.file_value_range`): it evaluates as the fit saved and loaded."""
     s = Fit3DSettings.resolve(settings, **params)
     target = s.target_rmse
     if variants is None:
@@ -177,7 +178,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
             continue
         layout = s.clone(**v, verify_rounds=rounds, verify_above=above)
         res = fit_rgl(brdf, settings=layout.clone(verify=0, albedo=False, prove_bound=False), ceiling=ceiling,
-                      progress=progress)
+                      progress=progress, file_range=False)
         v_rmse = validation_rmse(brdf, res.model)
         check = image_check(brdf, res.model) if s.select_by == "image" and target is None else None
         score = (image_score(check) if check is not None else v_rmse if s.objective == "rho_cos_cos"
@@ -229,6 +230,11 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
         best.model.fit_info["image_check"] = dict(checked[1]) if unchanged and checked[1] is not None \
             else image_check(brdf, best.model)
     ceiling.record(best.model.fit_info)
+    # the model its file holds (fit.rational.result3d.file_value_range): one value range for every
+    # piece, as the file is read back; the steps above measured the fit with each piece's own (the
+    # file written is the same either way)
+    file_value_range(best.model)
+    file_value_range(best.model_before_albedo)
     if s.prove_bound:       # the chosen fit's error between the grid nodes, proved
         record_fit3d(best, brdf)
     domain_record(best.model.fit_info)
