@@ -54,9 +54,17 @@ def fit_once(name: str, core: int, out: str) -> dict:
 
 
 def pieces_of(path: str) -> str:
-    """The coefficients a file holds (its pieces and value record), as canonical JSON."""
+    """The coefficients a file holds (its pieces and value record, without the seconds each
+    function's fit took: ``time_s``), as canonical JSON."""
+    def untimed(x):
+        if isinstance(x, dict):
+            return {k: untimed(v) for k, v in x.items() if k != "time_s"}
+        if isinstance(x, list):
+            return [untimed(v) for v in x]
+        return x
+
     d = json.loads(Path(path).read_text())
-    return json.dumps({k: d.get(k) for k in ("pieces", "split", "value", "outputs")}, sort_keys=True)
+    return json.dumps(untimed({k: d.get(k) for k in ("pieces", "split", "value", "outputs")}), sort_keys=True)
 
 
 def run(names, load: bool) -> dict:

@@ -254,7 +254,7 @@ def markdown(res: dict, image: str | None = None) -> str:
         L += ["Notes:", ""] + [f"- {x}" for x in notes] + [""]
     L += [f"This run: {per_case_seconds(cases):.0f} s per case (median, set-up, truth and fits included). "
           "Full size on a quiet machine (every shared RGL file, both maps: 40 cases; the defaults: 128 px, "
-          "spp 4 16 64 256, truth 4096 spp; a 3-D fit is 12-73 s on one core and is made once, then cached):", "",
+          "spp 4 16 64 256, truth 4096 spp; a 3-D fit is 13-50 s on one core and is made once, then cached):", "",
           "    RBRDF_DATA=/work/shared/data python -m benchmarks.bench_chart --docs", ""]
     return "\n".join(L)
 

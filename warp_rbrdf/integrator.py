@@ -288,9 +288,10 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
     bsdf_pdf_exact = make_pdf_exact(base)
     bsdf_sample_f, bsdf_eval_pdf = make_fused(techniques)
     sample_2d = P.sample_2d
-    lane_techniques = [(int(t[0]), t[6](lanes)) for t in techniques if len(t) > 6 and t[6] is not None]
     lanes_on = lanes > 1
     K = lanes if lanes_on else 1      # the lanes' types do not enter a kernel without them
+    lane_techniques = [(int(t[0]), t[6](K)) for t in techniques
+                       if lanes_on and len(t) > 6 and t[6] is not None]
     vf, vi = lane_types(K)
     out_t = lanes_out_type(K)
     state_t = wp.types.matrix(shape=(L.N_LANE_STATE, K), dtype=float)

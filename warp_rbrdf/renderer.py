@@ -137,8 +137,9 @@ class Renderer:
             techniques.append((c, sample, pdf, t.pdf_exact, sample_f, eval_pdf,
                                None if lanes is None else (lambda K, lanes=lanes, fits=fits: lanes(K, fits))))
         g = self.geometry
+        # the lanes are a CPU form (one thread, K samples); a GPU thread takes one sample
         return integrator.make_kernels(kinds, techniques, has_mesh=g.num_triangles > 0,
-                                       has_spheres=g.num_spheres > 0)
+                                       has_spheres=g.num_spheres > 0, lanes=None if self.device.is_cpu else 0)
 
     @property
     def kernels(self):

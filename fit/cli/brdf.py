@@ -18,7 +18,8 @@ at 5 % (median 3.0x, 17 materials with a 2-D fit), below the phi_d-median table 
 directional albedo is within 5 % both ways at 0/30/60/75 deg on 10 of them; its renders reach
 ΔE2000 mean <= 1 against the measurement on 36 of 40 cases and p99 <= 3 on 29
 (docs/fit_accuracy.md, "The light's cosine"); it has 1,125 coefficients (six theta_h pieces; 420
-where one piece is better; 2-D: 160-835, median 358) and takes 12-73 s on one core (median 31 s;
+where one piece is better; 2-D: 160-835, median 358) and takes 13-50 s on one core (median 28 s,
+two fits at once on the two cores, benchmarks/bench_fit_time.py;
 2-D: 3-31 s, median 9 s). A MERL table is reciprocal and folded over phi_d; the 3-D fit is made from an
 RGL file's own evaluation (with its light and view roles), so ``--model 3d`` refuses a
 ``.binary`` file in one line.
@@ -152,7 +153,7 @@ def register(subparsers) -> None:
                     "for an RGL .bsdf file): rational functions of (theta_h, theta_d, |phi_d|) fitted to the "
                     "file's own evaluation, the tolerance the outcome (version 4: functions of rho cos theta_i; "
                     "1,125 or 420 coefficients, "
-                    "12-73 s on one core): the most accurate form, its relative RMSE 1.7-4.3x (median 3.0x) "
+                    "13-50 s on one core): the most accurate form, its relative RMSE 1.7-4.3x (median 3.0x) "
                     "below the 2-D fit's at 5 % on the 20 RGL materials of docs/fit_accuracy.md. --model 2d "
                     "(the default for a "
                     "MERL .binary file, which is reciprocal and has no 3-D fit): project onto (theta_h, "
