@@ -43,11 +43,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
 
-#: Components of a sample: (name, Warp functions whose inclusive time is the component's).
+#: Components of a sample: (name, Warp functions whose inclusive time is the component's; the
+#: render kernel's lane forms, ``warp_rbrdf.lanes``, with the one-at-a-time functions).
 #: A sample counts for the first component whose function is in its inline chain.
 COMPONENTS = (
-    ("environment sampling", ("env_sample_uv_0",)),
-    ("BSDF sampling (sample + f at the sample)", ("_sample_f_chain__locals__bsdf_sample_f_0",)),
+    ("environment sampling", ("env_sample_uv_0", "make_env_sample_lanes__locals__env_sample_uv_lanes_0")),
+    ("BSDF sampling (sample + f at the sample)", ("_sample_f_chain__locals__bsdf_sample_f_0",
+                                                  "make_lanes_sampling__locals__lanes_sample_f_0")),
     ("BSDF eval + pdf at the light sample", ("_eval_pdf_chain__locals__bsdf_eval_pdf_0",
                                              "make_bsdf_eval__locals__bsdf_eval_0")),
     ("environment lookups (radiance, MIS pdf)", ("env_eval_uv_0", "env_pdf_uv_0", "env_dir_to_uv_0")),
