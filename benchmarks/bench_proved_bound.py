@@ -288,8 +288,7 @@ def run(args) -> dict:
         old = json.loads(Path(args.out).read_text())
         if old.get("enclosures") == encl and old.get("tol") == args.tol:
             out["materials"] = old["materials"]
-            out["runs"] = old.get("runs", []) + [{"date": old["date"], "load": old["load"],
-                                                  "materials": list(old["materials"])}]
+            out["runs"] = old.get("runs") or [_run_record(old)]
     for mat in args.materials:
         stem = f"{mat}_rgb"
         prev = out["materials"].get(mat, {})
@@ -342,8 +341,18 @@ def run(args) -> dict:
         Path(args.out).parent.mkdir(parents=True, exist_ok=True)
         Path(args.out).write_text(json.dumps(out, indent=1))
     out["load_end"] = os.getloadavg()
+    if "runs" in out:       # merged: this run listed after the earlier ones, with its own materials
+        out["runs"].append(dict(_run_record(out), materials={m: sorted(k for k in args.models if k in out["materials"][m])
+                                                             for m in args.materials}))
     Path(args.out).write_text(json.dumps(out, indent=1))
     return out
+
+
+def _run_record(r: dict) -> dict:
+    """A run's entry of ``runs`` (what :func:`write_docs` lists): date, loads, and per material
+    the models it holds."""
+    return {"date": r["date"], "load": r["load"], "load_end": r.get("load_end", r["load"]),
+            "materials": {m: sorted(k for k in row if k in ("2d", "3d")) for m, row in r["materials"].items()}}
 
 
 def _pct(x) -> str:
@@ -452,8 +461,7 @@ def merged(files) -> dict:
     out = dict(runs[0], materials={}, runs=[])
     for r in runs:
         assert r["enclosures"] == out["enclosures"], "runs with different enclosures"
-        out["runs"].append({"date": r["date"], "load": r["load"], "load_end": r.get("load_end", r["load"]),
-                            "materials": {m: sorted(k for k in row if k in ("2d", "3d")) for m, row in r["materials"].items()}})
+        out["runs"].append(_run_record(r))
         for m, row in r["materials"].items():
             out["materials"].setdefault(m, {}).update(row)
     return out
@@ -509,9 +517,7 @@ def table(out) -> str:
 def write_docs(out) -> None:
     text = DOCS.read_text()
     a, b = text.index(MARK[0]), text.index(MARK[1])
-    runs = out.get("runs") or [{"date": out["date"], "load": out["load"], "load_end": out.get("load_end", out["load"]),
-                                "materials": {m: sorted(k for k in row if k in ("2d", "3d"))
-                                              for m, row in out["materials"].items()}}]
+    runs = out.get("runs") or [_run_record(out)]
     lines = [f"- {r['date']}, load average {r['load'][0]:.1f} at the start and {r['load_end'][0]:.1f} at the end: "
              + ", ".join(f"{m} ({'/'.join(k.upper().replace('D', '-D') for k in ks)})" for m, ks in r["materials"].items())
              for r in runs]

@@ -228,6 +228,33 @@ def test_bench_proved_bound_picks_todays_3d_fit(tmp_path, monkeypatch):
     assert p == chart and "chart's key" in how
 
 
+def test_bench_proved_bound_lists_every_run_it_merges(tmp_path, monkeypatch):
+    """``--merge`` keeps an earlier run's rows and lists both runs in the docs' run lines, each
+    with its own materials and models (the run lines of ``--docs`` read them)."""
+    from benchmarks import bench_proved_bound as B
+
+    earlier = {"date": "2026-11-27", "load": [2.0, 2.0, 2.0], "load_end": [3.0, 3.0, 3.0], "tol": 0.05,
+               "enclosures": ["joint"], "materials": {"a": {"target": 0.1, "2d": {}}, "b": {"target": 0.1, "2d": {}}}}
+    now = dict(earlier, date="2026-11-28", load=[1.0, 1.0, 1.0], load_end=[1.5, 1.5, 1.5],
+               materials={"b": {"target": 0.1, "3d": {}}})
+    files = []
+    for k, r in enumerate((earlier, now)):
+        files.append(tmp_path / f"r{k}.json")
+        files[-1].write_text(json.dumps(r))
+    out = B.merged([str(f) for f in files])
+    assert [r["materials"] for r in out["runs"]] == [{"a": ["2d"], "b": ["2d"]}, {"b": ["3d"]}]
+    assert set(out["materials"]["b"]) == {"target", "2d", "3d"}
+    docs = tmp_path / "doc.md"
+    docs.write_text(f"before\n{B.MARK[0]}\nold\n{B.MARK[1]}\nafter\n")
+    monkeypatch.setattr(B, "DOCS", docs)
+    monkeypatch.setattr(B, "table", lambda out: "TABLE")
+    B.write_docs(out)
+    text = docs.read_text()
+    assert "- 2026-11-27, load average 2.0 at the start and 3.0 at the end: a (2-D), b (2-D)" in text
+    assert "- 2026-11-28, load average 1.0 at the start and 1.5 at the end: b (3-D)" in text
+    assert "TABLE" in text and "old" not in text and text.startswith("before") and text.endswith("after\n")
+
+
 def test_bench_dial_default_pick_follows_the_selection_rule():
     """bench_dial's offline copy of the default selection: the image score under
     ``select_by="image"`` (5 % margin), the ``if_rmse_below`` gate on the validation RMSE."""
