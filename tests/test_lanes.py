@@ -147,3 +147,22 @@ def test_lanes_for_every_material_and_strategy(monkeypatch):
     sc = _scene(mats, shapes, spp=19, resolution=32)
     sc.lights.append(LightSpec(type="directional", direction=(0.3, -1.0, -0.4), irradiance=(2.0, 2.0, 2.0)))
     _same_image(_render(sc, 0, monkeypatch), _render(sc, K, monkeypatch))
+
+
+def test_a_gpu_renderer_takes_one_sample_at_a_time(monkeypatch):
+    """The lanes are a CPU form: a renderer on a CUDA device builds the kernel of one sample at a
+    time (the same module as ``LANES = 0`` on the CPU), whatever ``LANES`` says."""
+    from types import SimpleNamespace
+
+    from warp_rbrdf.shipped_kernels import module_hash
+
+    sc = _scene({"m": MaterialSpec(name="m", type="rgl", file=data_file("rgl/paper_white_rgb.bsdf"),
+                                   sampler="mis-rgl")}, [ShapeSpec(type="sphere", material="m")], spp=4)
+    r = Renderer(sc, device="cpu")
+    monkeypatch.setattr(L, "LANES", 0)
+    one = module_hash(r._make_kernels().render_tile.module)
+    monkeypatch.setattr(L, "LANES", K)
+    lanes = module_hash(r._make_kernels().render_tile.module)
+    r.device = SimpleNamespace(is_cpu=False)       # the one attribute _make_kernels reads
+    gpu = module_hash(r._make_kernels().render_tile.module)
+    assert lanes != one and gpu == one
