@@ -23,6 +23,9 @@ reflected: ``wx = 2 (wm . wt) wm - wt``. Its density is exact, the reference's `
 
     pdf(wx) = p_vndf(u_m) p_lum(s) / (max(2 pi^2 u_x sin theta_m, 1e-6) * 4 (wt . wm))
 
+The render kernel's lanes draw 16 such samples at once (:func:`make_sample_f_lanes`: the two
+warps' searches stepped over the lanes, :mod:`warp_rbrdf.lanes`), each the sample above.
+
 **Packing**: the material's float32 tables go to ``Materials.rgl_f`` (theta_i, the VNDF and
 luminance warps as normalized densities with their conditional and marginal CDFs, rgb, ndf,
 sigma) and a header of :data:`N_RGL_INFO` ints (fields ``RGL_*``: sizes and offsets into
