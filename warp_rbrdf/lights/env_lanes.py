@@ -2,9 +2,10 @@
 render kernel's lanes (:mod:`warp_rbrdf.lanes`). The hierarchical descent is a chain of
 dependent loads and float64 divisions per sample; here each level is taken for all lanes
 before the next (:func:`.env_sampling.descend_level` per lane), so the lanes' loads and
-divisions overlap. The last level and the inversion inside the patch run lane by lane
-(:func:`.env_sampling.patch_point`). Every lane's sample is the one-at-a-time sample, bit for
-bit (the same functions on the same values).
+divisions overlap; so is the last level, over the four patches under each lane's block
+(:func:`.env_sampling.patch_select`, with their texel loads). The inversion inside the patch
+runs lane by lane (:func:`.env_sampling.patch_invert`). Every lane's sample is the
+one-at-a-time sample, bit for bit (the same functions on the same values).
 
 No ``from __future__ import annotations``: Warp reads the lane function's argument types from
 annotations that name closure types.
@@ -15,7 +16,7 @@ import warp as wp
 
 from ..distribution.lanes import lane_types
 from .env_map import EnvMap
-from .env_sampling import descend_level, patch_point, point_sample
+from .env_sampling import descend_level, patch_invert, patch_select, point_sample
 
 
 @functools.lru_cache(maxsize=None)
@@ -66,8 +67,16 @@ def make_env_sample_lanes(K: int):
             level = level - 1
         i = int(0)
         while i < K:
+            a, b, c, d = patch_select(env, x[i], y[i], sx[i], sy[i])
+            x[i] = b          # the patch: column, row interval, rescaled uniforms
+            y[i] = a
+            sx[i] = c
+            sy[i] = d
+            i += 1
+        i = int(0)
+        while i < K:
             if on[i] != 0:
-                ds, uv = point_sample(env.rot, env.pdf_scale, patch_point(env, x[i], y[i], sx[i], sy[i]))
+                ds, uv = point_sample(env.rot, env.pdf_scale, patch_invert(env, y[i], x[i], sx[i], sy[i]))
                 for r in range(4):
                     out[r, i] = ds[r]
                 out[4, i] = uv[0]

@@ -144,13 +144,10 @@ def descend_level(env: EnvMap, level: int, x: int, y: int, sx: wp.float64, sy: w
 
 
 @wp.func
-def patch_point(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64) -> wp.vec3d:
-    """(u, v, lum) of the sample whose descent ended at level-1 block (x, y) with the rescaled
-    uniforms (sx, sy): the last step over the four patches under it (their masses from the
-    texels), then the inversion inside the chosen patch (module docstring)."""
-    H = env.height
-    W = env.width
-    one = wp.float64(1.0)
+def patch_select(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64):
+    """The last step of the descent from level-1 block (x, y) with the rescaled uniforms (sx,
+    sy): over the four patches under it (their masses from the texels), ``(j, c, sx, sy)`` of
+    the chosen patch (its row interval and column) and the uniforms rescaled inside it."""
     y = 2 * y
     x = 2 * x
     p00 = _patch_mass(env, y, x)
@@ -158,7 +155,6 @@ def patch_point(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64) -> 
     p01 = _patch_mass(env, y + 1, x)
     p11 = _patch_mass(env, y + 1, x + 1)
     ry = _split(sy, p00 + p10, p01 + p11)
-    sy = ry[1]
     ca = p00
     cb = p10
     if ry[0] > wp.float64(0.5):
@@ -166,11 +162,18 @@ def patch_point(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64) -> 
         ca = p01
         cb = p11
     rx = _split(sx, ca, cb)
-    sx = rx[1]
     if rx[0] > wp.float64(0.5):
         x = x + 1
-    j = y
-    c = x
+    return y, x, rx[1], ry[1]
+
+
+@wp.func
+def patch_invert(env: EnvMap, j: int, c: int, sx: wp.float64, sy: wp.float64) -> wp.vec3d:
+    """(u, v, lum) of the sample in patch (j, c) with the uniforms (sx, sy) rescaled inside it:
+    the row fraction by :func:`solve_row_fraction`, the column fraction in closed form."""
+    H = env.height
+    W = env.width
+    one = wp.float64(1.0)
     cn = next_column(c, W)
     L00 = wp.float64(env.lum[j, c])
     L10 = wp.float64(env.lum[j, cn])
@@ -186,6 +189,14 @@ def patch_point(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64) -> 
         u = u - one
     v = (wp.float64(j) + t) / wp.float64(H - 1)
     return wp.vec3d(u, v, lum)
+
+
+@wp.func
+def patch_point(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64) -> wp.vec3d:
+    """(u, v, lum) of the sample whose descent ended at level-1 block (x, y) with the rescaled
+    uniforms (sx, sy): :func:`patch_select`, then :func:`patch_invert` (module docstring)."""
+    j, c, px, py = patch_select(env, x, y, sx, sy)
+    return patch_invert(env, j, c, px, py)
 
 
 @wp.func
