@@ -323,12 +323,18 @@ def _draw(phi_t: float, wo: wp.vec3, s: wp.vec3, u: wp.vec3):
 def _sample_f_from(mats: Materials, m: int, h: int, n: int, inc: wp.vec4, wo: wp.vec3, s: wp.vec3, u: wp.vec3):
     """:func:`sample_f`'s result from the two warps' outputs (``inc``: :func:`_incidence` of
     ``wo``)."""
-    t0 = int(inc[0])
     wi, pdf_s, ok, phi_m = _draw(inc[2], wo, s, u)
     if ok == 0:
         return wp.vec4(0.0), wp.vec3(0.0), 1
-    v = _value(mats, h, n, t0, inc[1], inc[3], inc[2], u[0], phi_to_u(phi_m - inc[2]), s[0], s[1])
-    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf_s), wp.cw_mul(v, mats.scale[m]) / wi[2], 1
+    return wp.vec4(wi[0], wi[1], wi[2], 1.0 / pdf_s), _drawn_value(mats, m, h, n, inc, s, u, wi, phi_m), 1
+
+
+@wp.func
+def _drawn_value(mats: Materials, m: int, h: int, n: int, inc: wp.vec4, s: wp.vec3, u: wp.vec3, wi: wp.vec3,
+                 phi_m: float) -> wp.vec3:
+    """f_r at a usable sample of :func:`_draw` (light ``wi``, micro-normal azimuth ``phi_m``)."""
+    v = _value(mats, h, n, int(inc[0]), inc[1], inc[3], inc[2], u[0], phi_to_u(phi_m - inc[2]), s[0], s[1])
+    return wp.cw_mul(v, mats.scale[m]) / wi[2]
 
 
 @wp.func
@@ -469,20 +475,30 @@ def make_sample_f_lanes(K: int):
         u0, u1, u2 = warp_lanes(mats.rgl_f, mats.rgl_i[h + RGL_VNDF_DATA], mats.rgl_i[h + RGL_VNDF_COND],
                                 mats.rgl_i[h + RGL_VNDF_MARG], mats.rgl_i[h + RGL_VNDF_NY],
                                 mats.rgl_i[h + RGL_VNDF_NX], n, t0, w1, s0, s1)
+        pm = vf()
+        i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
+        while i < K:             # the samples' directions, then their values: the value's loads back to back
+            out[7, i] = 1.0
+            if go[i] != 0:
+                wi, pdf_s, ok, phi_m = _draw(phi[i], wp.vec3(wox[i], woy[i], woz[i]), wp.vec3(s0[i], s1[i], s2[i]),
+                                             wp.vec3(u0[i], u1[i], u2[i]))
+                go[i] = ok
+                if ok != 0:
+                    out[0, i] = wi[0]
+                    out[1, i] = wi[1]
+                    out[2, i] = wi[2]
+                    out[3, i] = 1.0 / pdf_s
+                    pm[i] = phi_m
+            i += 1
         i = int(0)  # noqa: UP018, RUF046 - a Warp loop variable
         while i < K:
             if go[i] != 0:
-                r, f, _has = _sample_f_from(mats, m, h, n, wp.vec4(float(t0[i]), w1[i], phi[i], theta[i]),
-                                            wp.vec3(wox[i], woy[i], woz[i]), wp.vec3(s0[i], s1[i], s2[i]),
-                                            wp.vec3(u0[i], u1[i], u2[i]))
-                out[0, i] = r[0]
-                out[1, i] = r[1]
-                out[2, i] = r[2]
-                out[3, i] = r[3]
+                f = _drawn_value(mats, m, h, n, wp.vec4(float(t0[i]), w1[i], phi[i], theta[i]),
+                                 wp.vec3(s0[i], s1[i], s2[i]), wp.vec3(u0[i], u1[i], u2[i]),
+                                 wp.vec3(out[0, i], out[1, i], out[2, i]), pm[i])
                 out[4, i] = f[0]
                 out[5, i] = f[1]
                 out[6, i] = f[2]
-            out[7, i] = 1.0
             i += 1
         return out
 
