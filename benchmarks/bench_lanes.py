@@ -4,6 +4,7 @@ and 16 at a time (the default), in one process, interleaved.
 
     python -m benchmarks.bench_lanes [--cases rgl rational-2d ...] [--maps studio rooitou]
         [--object sphere|bunny|teapot] [--resolution 64] [--spp 64] [--repeats 7] [--lanes 16] [--json FILE]
+        [--docs]
 
 The scene: :func:`lab.mitsuba_reference.sphere_scene` (unit sphere, camera at z = 4, hidden map,
 direct light). Cases (``--cases``; each material with its default sampler, so the lanes draw
@@ -31,6 +32,8 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs" / "cpu_lanes.md"
+MARK = ("<!-- bench_lanes: begin -->", "<!-- bench_lanes: end -->")
 MAPS = {"studio": "studio_small_03_1k.hdr", "rooitou": "rooitou_park_1k.hdr"}
 CASES = ("rgl", "rational-2d", "rational-3d", "projected", "lambert")
 
@@ -140,6 +143,7 @@ def main(argv=None) -> int:
     ap.add_argument("--lanes", type=int, default=16, help="the lane count measured against one at a time")
     ap.add_argument("--fit3d", type=Path, default=None, help="the 3-D fit of case rational-3d (default: the chart's)")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--docs", action="store_true", help=f"write the table between the markers of {DOCS.name}")
     ap.add_argument("--quick", action="store_true", help="tiny renders (a smoke test; no timing worth reading)")
     args = ap.parse_args(argv)
     from warp_rbrdf.runtime import init_warp
@@ -148,9 +152,10 @@ def main(argv=None) -> int:
     if args.quick:
         args.resolution, args.spp, args.repeats = 8, 20, 1
     fit3d = args.fit3d or default_fit3d()
-    import platform
+    from benchmarks.bench_eval import machine
 
-    res = {"machine": platform.processor() or platform.machine(), "object": args.object,
+    m = machine()
+    res = {"machine": f"{m['cpu']}, {m['cores']} cores, Warp {m['warp']}", "object": args.object,
            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
            "load_start": os.getloadavg(), "resolution": args.resolution, "spp": args.spp, "repeats": args.repeats,
            "lanes": args.lanes, "cases": {}}
@@ -169,6 +174,10 @@ def main(argv=None) -> int:
     res["load_start"] = " ".join(f"{x:.2f}" for x in res["load_start"])
     res["load_end"] = " ".join(f"{x:.2f}" for x in res["load_end"])
     print(markdown(res))
+    if args.docs:
+        text = DOCS.read_text()
+        a, b = text.index(MARK[0]), text.index(MARK[1])
+        DOCS.write_text(text[:a] + MARK[0] + "\n" + markdown(res) + "\n" + text[b:])
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(res, indent=1))
