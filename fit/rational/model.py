@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..formats.angles import directions_to_half_diff
+from ..formats.angles import cos_theta_i_o, directions_to_half_diff
 from ..limits import MAX_BRDF_VALUE
 
 INPUT_TRANSFORMS = ("identity", "sqrt")
@@ -43,10 +43,9 @@ COS_FLOOR = 1.0e-3
 def cos_theta_i_of(x) -> np.ndarray:
     """``cos theta_i`` (wi . n) of Rusinkiewicz rows ``x`` ``(..., 3)`` = ``(theta_h, theta_d,
     |phi_d|)`` (radians): ``cos th cos td - sin th sin td cos pd``
-    (:func:`fit.formats.angles.cos_theta_i_o`)."""
+    (:func:`fit.formats.angles.cos_theta_i_o` of the rows' columns)."""
     x = np.asarray(x, dtype=np.float64)
-    th, td, pd = x[..., 0], x[..., 1], x[..., 2]
-    return np.cos(th) * np.cos(td) - np.sin(th) * np.sin(td) * np.cos(pd)
+    return cos_theta_i_o(x[..., 0], x[..., 1], x[..., 2])[0]
 
 
 def _factor_divisor(x, factor: str) -> np.ndarray:

@@ -194,9 +194,15 @@ def make_sample_lanes(K: int):
         row = vi()
         st = vi()
         u = vf()
+        tv = vf()          # the views' frames (view_frame), kept for the directions
+        cv = vf()
+        sv = vf()
         i = int(0)
         while i < K:
             va = view_frame(wp.vec3(wox[i], woy[i], woz[i]))
+            tv[i] = va[0]
+            cv[i] = va[1]
+            sv[i] = va[2]
             row[i] = tab_row(va[0], n_v)
             st[i] = off_t + row[i] * (n_t + 1)
             u[i] = wp.abs(2.0 * xi1[i] - 1.0)
@@ -212,10 +218,9 @@ def make_sample_lanes(K: int):
         i = int(0)
         while i < K:
             if on[i] != 0:
-                va = view_frame(wp.vec3(wox[i], woy[i], woz[i]))
                 q = tab_sample_cells(mats.cdf_t, mats.cdf_p, off_t, off_p, n_t, n_p, row[i], j[i], k[i], xi0[i],
                                      xi1[i])
-                r = sample_at(q, va)
+                r = sample_at(q, wp.vec3(tv[i], cv[i], sv[i]))
                 for c in range(4):
                     out[c, i] = r[c]
             i += 1
