@@ -79,6 +79,16 @@ def test_shipped_set_is_current():
                           f"regenerate them with `{REGENERATE}` and commit warp_rbrdf/data/kernels")
 
 
+def test_shipped_set_is_the_cpu_kernel_whatever_rbrdf_device_says(monkeypatch):
+    """The tool checks and writes the CPU kernel also where ``$RBRDF_DEVICE`` names a GPU (a
+    CUDA renderer builds another module: one sample per thread). On a GPU machine the suite ran
+    with RBRDF_DEVICE=cuda and the check compared the CUDA module with the shipped CPU set."""
+    (cpu_module,) = ship.default_job_modules()
+    monkeypatch.setenv("RBRDF_DEVICE", "cuda")
+    (module,) = ship.default_job_modules()
+    assert module.get_module_identifier() == cpu_module.get_module_identifier()
+
+
 @pytest.mark.heavy
 def test_fresh_cache_loads_shipped_kernel_and_matches_a_compile(tmp_path, monkeypatch):
     if not sk.cpu_supports_isa():

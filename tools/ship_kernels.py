@@ -29,11 +29,13 @@ COMMAND = "python -m tools.ship_kernels"
 
 
 def default_job_modules():
-    """The Warp modules the README main job (``rbrdf render``, embedded default scene) loads."""
+    """The Warp modules the README main job (``rbrdf render``, embedded default scene) loads on the
+    CPU, whatever ``$RBRDF_DEVICE`` says (a CUDA renderer builds another kernel: one sample per
+    thread, no lanes)."""
     from warp_rbrdf.defaults import default_scene
     from warp_rbrdf.renderer import Renderer
 
-    return [Renderer(default_scene()).kernels.render_tile.module]
+    return [Renderer(default_scene(), device="cpu").kernels.render_tile.module]
 
 
 def check() -> list[str]:
