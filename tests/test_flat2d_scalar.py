@@ -1,19 +1,21 @@
-"""The scalar form of the flat 2-D record's function (``rational_flat2d.flat_source``: the CUDA
+"""The scalar form of the flat records' functions (``rational_flat2d.flat_source``: the CUDA
 build's, one sum per channel) computes what the vector form (the CPU build's, Clang vectors)
 computes: both compiled for the CPU and fed the same record pointers and angles, for the
 package's 2-D fits and synthetic flat records of both split variables (log values with an upper
-clamp, vouched ranges, flagged channels read from the fallback table), over random direction
-pairs including grazing ones (the measured-domain move)."""
+clamp, vouched ranges, flagged channels read from the fallback table), and 3-D flat records
+(theta_h pieces, a single box, with and without the value factor), over random direction pairs
+including grazing ones (the measured-domain move)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import warp as wp
-from test_rational_classes import _flat_theta_h_model, _pairs
+from test_rational_classes import _flat_theta_h_model, _pairs, model_3d, single_3d
 from test_warp_rational import random_model
 
 from lab import testing as T
 from warp_rbrdf.materials import rational_flat2d as RF
+from warp_rbrdf.materials import rational_flat3d as RF3
 from warp_rbrdf.materials import rational_records as R
 from warp_rbrdf.materials.data import Materials
 from warp_rbrdf.materials.rational_kernel import DOMAIN_MARGIN
@@ -25,7 +27,8 @@ _KERNELS: dict = {}
 
 
 def _kernel(keys: tuple):
-    """Per pair: the vector and the scalar form's ``(R, G, B, 1)`` of material ``m``'s flat record."""
+    """Per pair: the vector and the scalar form's ``(R, G, B, 1)`` of material ``m``'s flat record
+    (2-D, or 3-D with :func:`_kernel3`)."""
     if keys not in _KERNELS:
         vec, sca = RF.make_flat2d(keys, DOMAIN_MARGIN), RF.make_flat2d(keys, DOMAIN_MARGIN, scalar=True)
 
@@ -51,6 +54,30 @@ def _kernel(keys: tuple):
     return _KERNELS[keys]
 
 
+def _kernel3(keys: tuple):
+    """:func:`_kernel` for 3-D flat records (``rational_flat3d``: its angles and step 8's wi.z)."""
+    if ("3d", keys) not in _KERNELS:
+        vec, sca = RF3.make_flat3d(keys, DOMAIN_MARGIN), RF3.make_flat3d(keys, DOMAIN_MARGIN, scalar=True)
+
+        @wp.kernel(module="unique", enable_backward=False)
+        def k(mats: Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
+              out_v: wp.array(dtype=wp.vec4), out_s: wp.array(dtype=wp.vec4)):
+            i = wp.tid()
+            nf = mats.coef_i[3 * m]
+            fb = mats.coef_i[3 * m + 1]
+            ang = RF3.angles_3d(wi[i], wo[i])
+            fp = wp.address_of(mats.coef_f[fb + mats.coef_i[nf + wp.static(R.FLAT_FLOATS)]])
+            ip = wp.address_of(mats.coef_i[nf + wp.static(R.FLAT_PIECES)])
+            dp = wp.address_of(mats.coef_f[fb])
+            tp = wp.address_of(mats.tables[mats.param[m]])
+            var = mats.coef_i[nf + wp.static(R.FLAT_VAR)]
+            out_v[i] = vec(fp, ip, dp, tp, var, ang, wi[i][2])
+            out_s[i] = sca(fp, ip, dp, tp, var, ang, wi[i][2])
+
+        _KERNELS["3d", keys] = k
+    return _KERNELS["3d", keys]
+
+
 def _flat_theta_d_model():
     """Two theta_d pieces of linear fits (a flat record split in theta_d)."""
     import fit.rational.model as M
@@ -73,6 +100,8 @@ def scene():
     flat_h.fallback = _fallback_record(flat_h)
     specs["flat_h"] = spec("flat_h", data=flat_h)
     specs["flat_d"] = spec("flat_d", data=_flat_theta_d_model())
+    specs["flat3d_h"] = spec("flat3d_h", data=model_3d(phi_split=False, value_factor="1/cos_theta_i"))
+    specs["single3d"] = spec("single3d", data=single_3d(value_factor="none"))
     sc = T.spheres_scene(specs)
     return Renderer(sc, device="cpu"), list(specs)
 
@@ -88,16 +117,18 @@ def test_scalar_form_equals_the_vector_form(scene):
     keys = tuple(sorted(k for k in keys if k))
     wi, wo = _pairs(40_000)
     a = lambda x: wp.array(np.asarray(x, np.float32), dtype=wp.vec3, device="cpu")  # noqa: E731
-    flat = 0
+    flat = {R.NODE_FLAT2D: 0, R.NODE_FLAT3D: 0}
     for name in names:
         m = r.material_index(name)
         ints = md.loaded[m].coefficients[0]
         n = int(ints[R.DOMAIN_CHILD]) if ints[0] == R.NODE_DOMAIN else 0
-        if int(ints[n]) != R.NODE_FLAT2D:
+        kind = int(ints[n])
+        if kind not in flat:
             continue
-        flat += 1
+        flat[kind] += 1
+        kernel = _kernel(keys) if kind == R.NODE_FLAT2D else _kernel3(keys)
         out_v, out_s = (wp.zeros(len(wi), dtype=wp.vec4, device="cpu") for _ in range(2))
-        wp.launch(_kernel(keys), dim=len(wi), inputs=[r.materials, m, a(wi), a(wo)], outputs=[out_v, out_s],
+        wp.launch(kernel, dim=len(wi), inputs=[r.materials, m, a(wi), a(wo)], outputs=[out_v, out_s],
                   device="cpu")
         v, s = out_v.numpy(), out_s.numpy()
         above = (wi[:, 2] > 0) & (wo[:, 2] > 0)
@@ -106,4 +137,5 @@ def test_scalar_form_equals_the_vector_form(scene):
         # the same operations in another order (per-channel sums instead of lanes; wp::exp
         # instead of the inline exp: within one float32 ulp)
         np.testing.assert_allclose(s[above], v[above], rtol=4e-7, atol=1e-30, err_msg=name)
-    assert flat >= 3, "the scene must hold flat records of both split variables"
+    assert flat[R.NODE_FLAT2D] >= 3, "the scene must hold 2-D flat records of both split variables"
+    assert flat[R.NODE_FLAT3D] == 2

@@ -16,8 +16,9 @@
   their value of the same fit without the factor divided by ``max(wi.z, COS_FLOOR)``;
 * against the one generic function (``rational_eval``, the packed form and libm's ``atan2``) at
   the same directions, the values differ only by the angles' float32 rounding;
-* the flat record's angles (``rational_flat2d.angles_2d``: no ``atan2``) against
-  ``frame.half_diff`` and their NumPy form; which fits get a flat record, and what it holds;
+* the flat records' angles (``rational_flat2d.angles_2d``, ``rational_flat3d.angles_3d``: no
+  ``atan2``) against ``frame.half_diff`` and their NumPy forms; which fits get a flat record (2-D
+  and 3-D), and what it holds;
 * compile once per class: another fit of the same classes reuses the compiled kernels; a fit of
   another class gets other kernels (Warp's module hash tells the classes apart).
 """
@@ -43,6 +44,7 @@ from warp_rbrdf import chebyshev_dense as D
 from warp_rbrdf.materials import rational
 from warp_rbrdf.materials import rational_channels as RC
 from warp_rbrdf.materials import rational_flat2d as RF
+from warp_rbrdf.materials import rational_flat3d as RF3
 from warp_rbrdf.materials import rational_kernel as RK
 from warp_rbrdf.materials import rational_records
 from warp_rbrdf.materials.data import Materials
@@ -173,9 +175,34 @@ def test_flat_records():
     assert [m & R.CH_TABLE for m in got[4:7]] == [0, 0, R.CH_TABLE]      # the flagged blue of the band
     plain = rational.pack_model(random_model("log", 2))[0]
     assert plain[0] == rational_records.NODE_FLAT2D and plain[rational_records.FLAT_K] == 1
-    for model in (piecewise_model("log"), model_3d(), model_3d(phi_split=False), _packed_fallback_model()):
+    for model in (piecewise_model("log"), model_3d(), _packed_fallback_model()):
         assert not _is_flat(rational.pack_model(model)[0])
-    assert _is_flat(rational.pack_model(_flat_theta_h_model())[0])
+    assert _is_flat(rational.pack_model(_flat_theta_h_model())[0]) == 1
+    # 3-D fits of theta_h pieces (the 3-D fitter's layout) and single boxes, with or without the
+    # value factor: a 3-D flat record, its edges padded to FLAT3_MAX_PIECES - 1
+    for model in (model_3d(phi_split=False), model_3d(phi_split=False, value_factor="1/cos_theta_i"),
+                  single_3d(), single_3d(value_factor="none")):
+        ints, floats, _ = rational.pack_model(model)
+        assert ints[0] == R.NODE_FLAT3D and _is_flat(ints) == 2
+        k, fo = int(ints[R.FLAT_K]), int(ints[R.FLAT_FLOATS])
+        edges = list(model.edges[1:-1]) if k > 1 else []
+        assert k == (2 if k > 1 else 1) and ints[R.FLAT_VAR] == R.SUPPORTED_VARIABLES["theta_h"]
+        np.testing.assert_array_equal(floats[fo:fo + R.FF3_HEADS],
+                                      [-2.0, 0.0, *edges, *[np.inf] * (R.FLAT3_MAX_PIECES - 1 - len(edges))])
+        tree = int(ints[R.FLAT_TREE])
+        leaves = [tree] if k == 1 else [int(ints[tree + R.SPLIT_CHILDREN + j]) for j in range(k)]
+        for j, leaf in enumerate(leaves):
+            got = ints[R.FLAT_PIECES + R.FLAT_NI * j:R.FLAT_PIECES + R.FLAT_NI * (j + 1)]
+            assert list(got[[0, 2, 3]]) == list(ints[leaf + np.array([R.LEAF_FLAGS, R.LEAF_CLASS, R.LEAF_DENSE])])
+            assert got[1] == 1          # the sqrt bit of theta_h alone
+            assert bool(got[0] & R.LEAF_INV_COS) == (model.value_factor != "none")
+            h, head = int(ints[leaf + R.LEAF_FH]), fo + R.FF3_HEADS + R.N_FH * j
+            np.testing.assert_array_equal(floats[head:head + R.N_FH], floats[h:h + R.N_FH])
+    # more theta_h pieces than a 3-D flat record holds: the walk
+    many = model_3d(phi_split=False)
+    many.pieces = many.pieces * 5
+    many.edges = list(np.linspace(0.0, np.pi / 2, len(many.pieces) + 1))
+    assert not _is_flat(rational.pack_model(many)[0])
 
 
 _ANGLE_KERNEL = []
@@ -211,6 +238,42 @@ def test_flat_angles_against_half_diff():
     # the float64 angles of the same directions (fit.formats.angles)
     th, _, td, _ = directions_to_half_diff(wi.astype(float), wo.astype(float))
     assert np.abs(got[:, 0] - th).max() < 2 * RF.ANGLE_ATOL and np.abs(got[:, 1] - td).max() < 2 * RF.ANGLE_ATOL
+
+
+def test_flat_angles_3d_against_half_diff():
+    """``angles_3d`` (no atan2): theta_h and theta_d as ``angles_2d`` gives them (up to
+    contractions), |phi_d| within ``ANGLE_ATOL_3D`` of the float64 angle of the same float32
+    directions on the tests' pairs (grazing, near-mirror, near-retro), closer than
+    ``frame.half_diff``'s (float32, libm atan2f); its NumPy form; the fourth value cos theta_h
+    cos theta_d; with the half vector on the normal, the shading frame's phi_d."""
+    from warp_rbrdf.materials.frame import half_diff
+
+    @wp.kernel(module="unique", enable_backward=False, module_options=render_module_options())
+    def k(wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3), a: wp.array(dtype=wp.vec4),
+          a2: wp.array(dtype=wp.vec3), b: wp.array(dtype=wp.vec3)):
+        i = wp.tid()
+        a[i] = RF3.angles_3d(wi[i], wo[i])
+        a2[i] = RF.angles_2d(wi[i], wo[i])
+        b[i] = half_diff(wi[i], wo[i])
+
+    wi, wo = _pairs(N_PAIRS, seed=12)
+    up = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+    wi, wo = wi[up], wo[up]
+    # the half vector on the normal: mirror pairs (wo = wi mirrored about z)
+    nm = 1000
+    wi = np.vstack([wi, wi[:nm]])
+    wo = np.vstack([wo, wi[:nm] * np.float32([-1, -1, 1])])
+    a, a2, b = wp.zeros(len(wi), dtype=wp.vec4), wp.zeros(len(wi), dtype=wp.vec3), wp.zeros(len(wi), dtype=wp.vec3)
+    wp.launch(k, dim=len(wi), inputs=[wp.array(wi, dtype=wp.vec3), wp.array(wo, dtype=wp.vec3)], outputs=[a, a2, b])
+    got, got2, ref = a.numpy().astype(float), a2.numpy().astype(float), b.numpy().astype(float)
+    np.testing.assert_allclose(got[:, [0, 1, 3]], got2, rtol=1e-6, atol=3e-7)   # up to contractions
+    assert np.all((got[:, 2] >= 0) & (got[:, 2] <= np.float32(np.pi)))
+    _, _, _, pd = directions_to_half_diff(wi[:-nm].astype(float), wo[:-nm].astype(float))
+    err, err_libm = np.abs(got[:-nm, 2] - np.abs(pd)), np.abs(np.abs(ref[:-nm, 2]) - np.abs(pd))
+    assert err.max() <= RF3.ANGLE_ATOL_3D < err_libm.max(), (err.max(), err_libm.max())
+    np.testing.assert_allclose(got[-nm:, 2], np.abs(np.arctan2(wi[-nm:, 1], wi[-nm:, 0])), atol=1e-6)
+    num = RF3.angles_3d_numpy(wi, wo)
+    np.testing.assert_allclose(got, num, rtol=1e-6, atol=RF3.ANGLE_ATOL_3D)
 
 
 _CHANNEL_KERNELS = {}
@@ -401,6 +464,8 @@ def _cases():
                   "clamped_table": spec("clamped_table", data=_clamped_piecewise()),
                   "fit3d": spec("fit3d", data=model_3d()),
                   "fit3d_cos": spec("fit3d_cos", data=model_3d(value_factor="1/cos_theta_i")),
+                  "flat3d_h": spec("flat3d_h", data=model_3d(phi_split=False)),
+                  "flat3d_h_cos": spec("flat3d_h_cos", data=model_3d(phi_split=False, value_factor="1/cos_theta_i")),
                   "single3d": spec("single3d", data=single_3d(value_factor="none")),
                   "single3d_cos": spec("single3d_cos", data=single_3d()),
                   "packed": spec("packed", data=_packed_fallback_model()),
@@ -483,10 +548,13 @@ def _eval_kernel(classes):
             # the angles first, as the function computes them: the compiler computes each once
             # (an FMA contracted in one copy and not in the other would differ by an ulp)
             f = RF.angles_2d(wi[i], wo[i])
+            f3 = RF3.angles_3d(wi[i], wo[i])
             g = RK.half_diff_frame(wi[i], wo[i])
             out[i] = fast(mats, m, wi[i], wo[i])
-            if flat != 0:
+            if flat == 1:
                 ang[i] = f
+            elif flat == 2:
+                ang[i] = wp.vec3(f3[0], f3[1], f3[2])
             else:
                 ang[i] = wp.vec3(g[0], g[1], RK.phi_d_of(g))
             gen[i] = rational.rational_eval(mats, m, wi[i], wo[i])
@@ -495,16 +563,18 @@ def _eval_kernel(classes):
     return _EVAL_KERNELS[classes]
 
 
-def _is_flat(ints) -> bool:
-    """Whether a packed fit has a flat record (the specialised function reads it, with the
-    angles of ``rational_flat2d.angles_2d``)."""
-    n = int(ints[rational_records.DOMAIN_CHILD]) if ints[0] == rational.NODE_DOMAIN else 0
-    return int(ints[n]) == rational_records.NODE_FLAT2D
+def _is_flat(ints) -> int:
+    """Whether a packed fit has a flat record (the specialised function reads it): 0 none, 1 a
+    2-D one (the angles of ``rational_flat2d.angles_2d``), 2 a 3-D one (``rational_flat3d.angles_3d``)."""
+    R = rational_records
+    n = int(ints[R.DOMAIN_CHILD]) if ints[0] == rational.NODE_DOMAIN else 0
+    return {R.NODE_FLAT2D: 1, R.NODE_FLAT3D: 2}.get(int(ints[n]), 0)
 
 
 def _evaluate(r, name, wi, wo):
     """(specialised value, the angles it used (theta_h, theta_d, phi_d for the walk; theta_h,
-    theta_d, cos theta_h cos theta_d for a flat record), generic value) per pair."""
+    theta_d, cos theta_h cos theta_d for a 2-D flat record; theta_h, theta_d, |phi_d| for a 3-D
+    one), generic value) per pair."""
     md = r.material_data
     classes = set()
     for lm in md.loaded:
@@ -513,7 +583,7 @@ def _evaluate(r, name, wi, wo):
     out, ang, gen = (wp.zeros(n, dtype=wp.vec3) for _ in range(3))
     wp.launch(_eval_kernel(tuple(sorted(classes))), dim=n,
               inputs=[r.materials, r.material_index(name), wp.array(wi, dtype=wp.vec3), wp.array(wo, dtype=wp.vec3)],
-              outputs=[out, ang, gen, int(_is_flat(md.loaded[r.material_index(name)].coefficients[0]))])
+              outputs=[out, ang, gen, _is_flat(md.loaded[r.material_index(name)].coefficients[0])])
     return out.numpy().astype(float), ang.numpy().astype(float), gen.numpy().astype(float)
 
 
@@ -579,9 +649,12 @@ def test_specialised_eval_equals_the_numpy_reference(scene, name):
     if measured_domain(lm.data) is not None:
         assert np.mean(np.cos(th) * np.cos(td) < np.cos(np.radians(measured_domain(lm.data)))) > 0.01
     # the generic function (packed sums, libm atan2) at the same directions: the values differ
-    # only through the float32 rounding of the angles (fastmath.atan2: within 3 ulps)
+    # only through the float32 rounding of the angles (fastmath.atan2: within 3 ulps; a 3-D
+    # flat record's |phi_d| by another formula, as close to the float64 angle: one more ulp)
     rel = (np.abs(got - gen) / np.maximum(np.abs(gen), 1e-6))[above]
-    assert np.median(rel) < 1e-7 and np.quantile(rel, 0.999) < 1e-4, (name, np.quantile(rel, 0.999))
+    median_tol = 2e-7 if _is_flat(lm.coefficients[0]) == 2 else 1e-7
+    assert np.median(rel) < median_tol and np.quantile(rel, 0.999) < 1e-4, (name, np.median(rel),
+                                                                             np.quantile(rel, 0.999))
     # and both err from the float64 evaluation at the float64 directions alike
     ref64 = lm.evaluate(wi[above].astype(float), wo[above].astype(float))
     err = [np.abs(v[above] - ref64) / np.maximum(np.abs(ref64), 1e-6) for v in (got, gen)]
@@ -609,7 +682,7 @@ def test_clamps_tables_and_pieces_are_reached(scene):
 
 
 #: the fits with the value factor "1/cos_theta_i" -> the same fit with "none" (among _cases)
-FACTOR_TWINS = {"fit3d_cos": "fit3d", "single3d_cos": "single3d"}
+FACTOR_TWINS = {"fit3d_cos": "fit3d", "single3d_cos": "single3d", "flat3d_h_cos": "flat3d_h"}
 
 
 def _leaf_offsets(ints) -> list:
@@ -621,7 +694,7 @@ def _leaf_offsets(ints) -> list:
         kind = int(ints[n])
         if kind == R.NODE_DOMAIN:
             todo.append(int(ints[n + R.DOMAIN_CHILD]))
-        elif kind == R.NODE_FLAT2D:
+        elif kind in (R.NODE_FLAT2D, R.NODE_FLAT3D):
             todo.append(int(ints[n + R.FLAT_TREE]))
         elif kind == R.NODE_SPLIT:
             todo += [int(c) for c in ints[n + R.SPLIT_CHILDREN:n + R.SPLIT_CHILDREN + int(ints[n + R.SPLIT_N])]]
@@ -633,8 +706,8 @@ def _leaf_offsets(ints) -> list:
 @pytest.mark.parametrize("name", list(FACTOR_TWINS))
 def test_value_factor_is_a_flag_of_every_leaf(name):
     """A fit with the value factor packs as its twin without one but for ``LEAF_INV_COS`` in the
-    flags of every leaf (the pieces' own factor is "none"; a single box is its own leaf); no
-    flat record; the kernels' floor is the model's."""
+    flags of every leaf (the pieces' own factor is "none"; a single box is its own leaf) and of
+    the pieces of a 3-D flat record; the kernels' floor is the model's."""
     R = rational_records
     model = _cases()[name].data
     twin = _cases()[FACTOR_TWINS[name]].data
@@ -642,15 +715,18 @@ def test_value_factor_is_a_flag_of_every_leaf(name):
     ints, floats, rows = rational.pack_model(model)
     ints0, floats0, rows0 = rational.pack_model(twin)
     leaves = _leaf_offsets(ints)
-    assert leaves == _leaf_offsets(ints0) and len(leaves) == (3 if name == "fit3d_cos" else 1)
+    assert leaves == _leaf_offsets(ints0) and len(leaves) == {"fit3d_cos": 3, "flat3d_h_cos": 2}.get(name, 1)
     assert all(ints[n + R.LEAF_FLAGS] & R.LEAF_INV_COS for n in leaves)
     assert not any(ints0[n + R.LEAF_FLAGS] & R.LEAF_INV_COS for n in leaves)
     flag_slots = np.zeros(len(ints), bool)
     flag_slots[[n + R.LEAF_FLAGS for n in leaves]] = True
+    flat = _is_flat(ints)
+    assert flat == _is_flat(ints0) == (0 if name == "fit3d_cos" else 2)
+    if flat:
+        flag_slots[[R.FLAT_PIECES + R.FLAT_NI * j for j in range(int(ints[R.FLAT_K]))]] = True
     np.testing.assert_array_equal(np.where(flag_slots, ints & ~R.LEAF_INV_COS, ints), ints0)
     np.testing.assert_array_equal(floats, floats0)
     np.testing.assert_array_equal(rows, rows0)
-    assert not _is_flat(ints)
     assert RK.COS_FLOOR_F32.value == np.float32(M.COS_FLOOR)
     with pytest.raises(ValueError, match="unknown value factor"):
         bad = single_3d()

@@ -32,6 +32,8 @@ import hashlib
 import numpy as np
 import warp as wp
 
+from fit.rational.model import COS_FLOOR
+
 from .. import fastmath
 from ..chebyshev_dense import Native, class_of_key, dense_block, dense_block_scalar
 from .rational_channels import SCALAR_STEPS, VECTOR_PRELUDE, VECTOR_STEPS
@@ -39,11 +41,12 @@ from .rational_records import (
     FF_COS_CUT,
     FF_CUT,
     FF_EDGES,
-    FF_HEADS,
     FH_BOX,
     FH_VARS,
+    FLAT_KINDS,
     FLAT_NI,
     LEAF_CLAMP,
+    LEAF_INV_COS,
     LEAF_TABLE,
     N_FH,
 )
@@ -51,7 +54,10 @@ from .rational_records import (
 #: |angles_2d - frame.half_diff| on the tests' pairs is within this (radians)
 ANGLE_ATOL = 6e-7
 
-_P = [repr(float(np.float32(c))) + "f" for c in fastmath.ATAN_COEFFS]
+#: fastmath.ATAN_COEFFS as C++ float32 literals
+ATAN_LITERALS = [repr(float(np.float32(c))) + "f" for c in fastmath.ATAN_COEFFS]
+#: step 8's floor of cos theta_i as a float32 (:data:`.rational_kernel.COS_FLOOR_F32`)
+COS_FLOOR_F32 = float(np.float32(COS_FLOOR))
 
 #: C++ statements: ``ang`` (``wp::vec3``: theta_h, theta_d, cos theta_h cos theta_d) of ``wi``, ``wo``
 ANGLES_SOURCE = f"""const float sx = wi.c[0] + wo.c[0], sy = wi.c[1] + wo.c[1], sz = wi.c[2] + wo.c[2];
@@ -66,8 +72,8 @@ const float sw = sx * wi.c[0] + sy * wi.c[1] + sz * wi.c[2];
 const float a0 = sqrtf(rs2) / (ls + sz);
 const float a1 = sqrtf(cx * cx + cy * cy + cz * cz) / (ls * li + sw);
 const float s0 = a0 * a0, s1 = a1 * a1;
-float p0 = {_P[8]}, p1 = {_P[8]};
-""" + "".join(f"p0 = p0 * s0 + {c}; p1 = p1 * s1 + {c};\n" for c in _P[7::-1]) + """wp::vec3 ang;
+float p0 = {ATAN_LITERALS[8]}, p1 = {ATAN_LITERALS[8]};
+""" + "".join(f"p0 = p0 * s0 + {c}; p1 = p1 * s1 + {c};\n" for c in ATAN_LITERALS[7::-1]) + """wp::vec3 ang;
 ang.c[0] = 2.0f * (a0 * p0);
 ang.c[1] = 2.0f * (a1 * p1);
 ang.c[2] = sz * sw / (ls2 * li);
@@ -95,24 +101,27 @@ def angles_2d_numpy(wi, wo) -> np.ndarray:
     out = []
     for a in (np.sqrt(rs2) / (ls + s[:, 2]), np.sqrt((c * c).sum(-1, dtype=f)) / (ls * li + sw)):
         z = a * a
-        p = f(_P[8][:-1])
-        for k in _P[7::-1]:
+        p = f(ATAN_LITERALS[8][:-1])
+        for k in ATAN_LITERALS[7::-1]:
             p = p * z + f(k[:-1])
         out.append(f(2) * (a * p))
     return np.stack(out + [s[:, 2] * sw / (ls2 * li)], -1).astype(f)
 
 
-def flat_source(keys: tuple, margin: float, scalar: bool = False) -> str:
-    """The C++ body of :func:`make_flat2d`'s function for the 2-variable classes ``keys``: the
-    vector form on the CPU and the scalar one in a CUDA build (``scalar``: the scalar form
-    everywhere, for tests)."""
+def flat_source(keys: tuple, margin: float, scalar: bool = False, n_vars: int = 2) -> str:
+    """The C++ body of :func:`make_flat2d`'s function for the ``n_vars``-variable classes
+    ``keys`` (3: :func:`.rational_flat3d.make_flat3d`'s): the vector form on the CPU and the
+    scalar one in a CUDA build (``scalar``: the scalar form everywhere, for tests)."""
     if scalar:
-        return _flat_body(keys, margin, vector=False)
-    return ("#if defined(__CUDA_ARCH__)\n" + _flat_body(keys, margin, vector=False) + "#else\n"
-            + _flat_body(keys, margin, vector=True) + "#endif\n")
+        return _flat_body(keys, margin, False, n_vars)
+    return ("#if defined(__CUDA_ARCH__)\n" + _flat_body(keys, margin, False, n_vars) + "#else\n"
+            + _flat_body(keys, margin, True, n_vars) + "#endif\n")
 
 
-def _flat_body(keys: tuple, margin: float, vector: bool) -> str:
+def _flat_body(keys: tuple, margin: float, vector: bool, n_vars: int) -> str:
+    """The function's statements. ``ang``: (theta_h, theta_d, cos theta_h cos theta_d) for 2
+    variables, (theta_h, theta_d, |phi_d|, cos theta_h cos theta_d) for 3, whose records may
+    carry step 8 (the value factor: ``cos_i``, wi.z)."""
     block = dense_block if vector else dense_block_scalar
     cases = [f"case {key}: {{\n{block(key)}\nbreak;\n}}" for key in keys]
     switch = "switch (P[2]) {\n" + "\n".join(cases) + "\ndefault: break;\n}\n"
@@ -131,21 +140,11 @@ double p0 = 0.0, p1 = 0.0, p2 = 0.0, q0 = 0.0, q1 = 0.0, q2 = 0.0;
 """
         steps = ("wp::vec_t<6, double> pq;\npq.c[0] = p0; pq.c[1] = p1; pq.c[2] = p2; "
                  "pq.c[3] = q0; pq.c[4] = q1; pq.c[5] = q2;\n" + SCALAR_STEPS)
-    return (prelude + f"""const double* F = (const double*)fptr;
-const int* I = (const int*)iptr;
-double th = (double)ang.c[0], td = (double)ang.c[1];
-if ((double)ang.c[2] < F[{FF_COS_CUT}] + {margin!r}) {{
-    const double t = wp::min(th, F[{FF_CUT}]);
-    const double lim = wp::acos(wp::min(F[{FF_COS_CUT}] / wp::cos(t), 1.0));
-    th = (double)(float)t;
-    td = (double)(float)wp::min(td, lim);
-}}
-const double x = var ? td : th;
-const int k = (x > F[{FF_EDGES}]) + (x > F[{FF_EDGES + 1}]) + (x > F[{FF_EDGES + 2}]);
-const double* hd = F + {FF_HEADS} + {N_FH} * k;
-const int* P = I + {FLAT_NI} * k;
-const int flags = P[0];
-double xh = th, xd = td;
+    _, max_pieces, heads = FLAT_KINDS[n_vars]
+    cos_prod = n_vars                      # the index of cos theta_h cos theta_d in ang
+    pick = " + ".join(f"(x > F[{FF_EDGES + j}])" for j in range(max_pieces - 1))
+    if n_vars == 2:
+        inputs = f"""double xh = th, xd = td;
 if (flags & {LEAF_CLAMP}) {{
     xh = wp::clamp(xh, hd[{FH_VARS}], hd[{FH_VARS + 1}]);
     xd = wp::clamp(xd, hd[{FH_VARS + 4}], hd[{FH_VARS + 5}]);
@@ -154,7 +153,42 @@ if (P[1] & 1) xh = wp::sqrt(wp::max(xh, 0.0));
 if (P[1] & 2) xd = wp::sqrt(wp::max(xd, 0.0));
 const double tb = (2.0 * xh - hd[{FH_VARS + 2}]) * hd[{FH_VARS + 3}];
 const double tc = (2.0 * xd - hd[{FH_VARS + 6}]) * hd[{FH_VARS + 7}];
-""" + sums + switch + f"""wp::vec3 tab(0.0f);
+"""
+        factor = ""
+    else:
+        inputs = f"""double xh = th, xd = td, xp = (double)ang.c[2];
+if (flags & {LEAF_CLAMP}) {{
+    xh = wp::clamp(xh, hd[{FH_VARS}], hd[{FH_VARS + 1}]);
+    xd = wp::clamp(xd, hd[{FH_VARS + 4}], hd[{FH_VARS + 5}]);
+    xp = wp::clamp(xp, hd[{FH_VARS + 8}], hd[{FH_VARS + 9}]);
+}}
+if (P[1] & 1) xh = wp::sqrt(wp::max(xh, 0.0));
+if (P[1] & 2) xd = wp::sqrt(wp::max(xd, 0.0));
+if (P[1] & 4) xp = wp::sqrt(wp::max(xp, 0.0));
+const double ta = (2.0 * xh - hd[{FH_VARS + 2}]) * hd[{FH_VARS + 3}];
+const double tb = (2.0 * xd - hd[{FH_VARS + 6}]) * hd[{FH_VARS + 7}];
+const double tc = (2.0 * xp - hd[{FH_VARS + 10}]) * hd[{FH_VARS + 11}];
+"""
+        factor = f"""if (flags & {LEAF_INV_COS}) {{
+    const float c = wp::max(cos_i, {COS_FLOOR_F32!r}f);
+    out.c[0] = out.c[0] / c; out.c[1] = out.c[1] / c; out.c[2] = out.c[2] / c;
+}}
+"""
+    return (prelude + f"""const double* F = (const double*)fptr;
+const int* I = (const int*)iptr;
+double th = (double)ang.c[0], td = (double)ang.c[1];
+if ((double)ang.c[{cos_prod}] < F[{FF_COS_CUT}] + {margin!r}) {{
+    const double t = wp::min(th, F[{FF_CUT}]);
+    const double lim = wp::acos(wp::min(F[{FF_COS_CUT}] / wp::cos(t), 1.0));
+    th = (double)(float)t;
+    td = (double)(float)wp::min(td, lim);
+}}
+const double x = var ? td : th;
+const int k = {pick};
+const double* hd = F + {heads} + {N_FH} * k;
+const int* P = I + {FLAT_NI} * k;
+const int flags = P[0];
+""" + inputs + sums + switch + f"""wp::vec3 tab(0.0f);
 if (flags & {LEAF_TABLE}) {{
     const float bh = (float)wp::clamp(th, hd[{FH_BOX}], hd[{FH_BOX + 1}]);
     const float bd = (float)wp::clamp(td, hd[{FH_BOX + 2}], hd[{FH_BOX + 3}]);
@@ -164,7 +198,7 @@ if (flags & {LEAF_TABLE}) {{
     tab = wp::vec3(T[0], T[1], T[2]);
 }}
 const int m0 = P[4], m1 = P[5], m2 = P[6];
-""" + steps + "return wp::vec4(out.c[0], out.c[1], out.c[2], 1.0f);\n")
+""" + steps + factor + "return wp::vec4(out.c[0], out.c[1], out.c[2], 1.0f);\n")
 
 
 @functools.lru_cache(maxsize=None)
@@ -177,7 +211,7 @@ def make_flat2d(keys: tuple, margin: float, scalar: bool = False):
     packed as such); ``scalar``: the CUDA build's scalar form on every device (for tests).
     Cached: one function per tuple."""
     keys = tuple(k for k in keys if class_of_key(k)[0] == 2)
-    source = flat_source(keys, margin, scalar)
+    source = flat_source(keys, margin, scalar, 2)
     name = "rational_flat2d_" + "_".join(f"{k:06x}" for k in keys) + "_" + hashlib.sha256(source.encode()).hexdigest()[:8]
 
     @Native.func_native(source, name)

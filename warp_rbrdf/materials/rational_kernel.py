@@ -47,6 +47,7 @@ from . import frame as F
 from .data import Materials
 from .rational_channels import channels
 from .rational_flat2d import angles_2d, make_flat2d
+from .rational_flat3d import angles_3d, make_flat3d
 from .rational_records import (
     CH_RANGE,
     CH_TABLE,
@@ -79,6 +80,7 @@ from .rational_records import (
     FLAT_VAR,
     NODE_DOMAIN,
     NODE_FLAT2D,
+    NODE_FLAT3D,
     NODE_SPLIT,
     SPLIT_CHILDREN,
     SPLIT_EDGES,
@@ -176,7 +178,7 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
         d = fb + ci[n + DOMAIN_FLOATS]
         a = _onto_domain(a, cf[d], cf[d + 1])
         n = ib + ci[n + DOMAIN_CHILD]
-    if ci[n] == NODE_FLAT2D:       # the same fit's tree follows
+    if ci[n] == NODE_FLAT2D or ci[n] == NODE_FLAT3D:       # the same fit's tree follows
         n = ib + ci[n + FLAT_TREE]
     while ci[n] == NODE_SPLIT:     # piece k: the first with x <= edge k + 1
         x = wp.float64(a[ci[n + SPLIT_VAR]])
@@ -313,7 +315,9 @@ def make_rational_eval(classes: tuple):
     in). Cached: one function per tuple."""
     leaf_pq = make_leaf_pq(tuple(k for k in classes if k), 0 in classes or not classes)
     keys2d = tuple(k for k in classes if k and class_of_key(k)[0] == 2)
+    keys3d = tuple(k for k in classes if k and class_of_key(k)[0] == 3)
     flat2d = make_flat2d(keys2d, DOMAIN_MARGIN)
+    flat3d = make_flat3d(keys3d, DOMAIN_MARGIN)
 
     @functools.partial(wp.func, inline=True)
     def rational_eval_classes(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
@@ -336,6 +340,17 @@ def make_rational_eval(classes: tuple):
                                       angles_2d(wi, wo))
                 if v[3] != 0.0:
                     return wp.cw_mul(wp.vec3(v[0], v[1], v[2]), mats.scale[m])
+        if wp.static(len(keys3d) > 0):       # a 3-D flat record: no walk (.rational_flat3d)
+            nf = ib
+            if ci[nf] == NODE_DOMAIN:
+                nf = ib + ci[nf + DOMAIN_CHILD]
+            if ci[nf] == NODE_FLAT3D:
+                v = wp.static(flat3d)(wp.address_of(cf[fb + ci[nf + FLAT_FLOATS]]),
+                                      wp.address_of(ci[nf + FLAT_PIECES]), wp.address_of(cf[fb]),
+                                      wp.address_of(mats.tables[mats.param[m]]), ci[nf + FLAT_VAR],
+                                      angles_3d(wi, wo), wi[2])
+                if v[3] != 0.0:
+                    return wp.cw_mul(wp.vec3(v[0], v[1], v[2]), mats.scale[m])
         g = half_diff_frame(wi, wo)
         a = wp.vec3(g[0], g[1], 0.0)
         have_phi = int(0)  # noqa: UP018, RUF046 - Warp: a dynamic int
@@ -345,7 +360,7 @@ def make_rational_eval(classes: tuple):
             if wp.float64(g[4]) * wp.float64(g[5]) < cf[d] + wp.float64(DOMAIN_MARGIN):
                 a = _onto_domain(a, cf[d], cf[d + 1])
             n = ib + ci[n + DOMAIN_CHILD]
-        if ci[n] == NODE_FLAT2D:
+        if ci[n] == NODE_FLAT2D or ci[n] == NODE_FLAT3D:
             n = ib + ci[n + FLAT_TREE]
         while ci[n] == NODE_SPLIT:
             var = ci[n + SPLIT_VAR]

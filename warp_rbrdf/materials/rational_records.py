@@ -10,14 +10,17 @@ Records, offsets relative to the material's own starts, the root at int 0:
   (:data:`SUPPORTED_VARIABLES`), the number of pieces K, the float offset of its K - 1 inner
   edges, the K children's int offsets;
 * a **flat record** (after the domain record, or at the root without one) of a fit whose pieces
-  are at most :data:`FLAT_MAX_PIECES` boxes of (theta_h, theta_d) in one split (or one box),
-  each of a degree class: kind, the int offset of the fit's tree (the records below, which the
-  flat record repeats), the float offset of its floats, the number of pieces K, the split
-  variable, then per piece :data:`FLAT_NI` ints (flags, the two inputs' sqrt bits, class, the
-  float offset of its dense rows, the three channel modes); its floats: ``(cos c, c)`` of the
-  domain record (``(-2, 0)`` without one), the K - 1 inner edges padded with +inf to
-  ``FLAT_MAX_PIECES - 1``, then per piece a copy of its leaf header (:data:`N_FH` floats): one
-  contiguous run per fit that :mod:`.rational_flat2d` reads without a walk;
+  are boxes in one split of theta_h or theta_d (or one box), each of a degree class: at most
+  :data:`FLAT_MAX_PIECES` boxes of (theta_h, theta_d) without a value factor (kind
+  :data:`NODE_FLAT2D`, read by :mod:`.rational_flat2d`), or at most :data:`FLAT3_MAX_PIECES`
+  boxes of (theta_h, theta_d, phi_d) (kind :data:`NODE_FLAT3D`, read by :mod:`.rational_flat3d`):
+  kind, the int offset of the fit's tree (the records below, which the flat record repeats),
+  the float offset of its floats, the number of pieces K, the split variable, then per piece
+  :data:`FLAT_NI` ints (flags, the inputs' sqrt bits, class, the float offset of its dense
+  rows, the three channel modes); its floats: ``(cos c, c)`` of the domain record (``(-2, 0)``
+  without one), the K - 1 inner edges padded with +inf to the kind's maximum minus one, then
+  per piece a copy of its leaf header (:data:`N_FH` floats, from :data:`FLAT_KINDS`' offset): one
+  contiguous run per fit that is read without a walk;
 * a **leaf record** per single-box piece: kind, variables, flags, the float offset of its
   header, three variable codes (source angle | transform << 2), the int and row offsets of its
   numerators and denominators packed as one group of six Chebyshev polynomials
@@ -47,11 +50,15 @@ from ..chebyshev import FlatData
 from ..chebyshev_dense import dense_class, pack_dense
 
 SUPPORTED_VARIABLES = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
-NODE_LEAF, NODE_SPLIT, NODE_DOMAIN, NODE_FLAT2D = 0, 1, 2, 3
+NODE_LEAF, NODE_SPLIT, NODE_DOMAIN, NODE_FLAT2D, NODE_FLAT3D = 0, 1, 2, 3, 4
 FLAT_TREE, FLAT_FLOATS, FLAT_K, FLAT_VAR, FLAT_PIECES = 1, 2, 3, 4, 8    # flat record (ints)
 FLAT_NI = 8                   # ints per piece: flags, sqrt bits, class, dense offset, modes (3)
-FLAT_MAX_PIECES = 4
+FLAT_MAX_PIECES = 4           # pieces of a 2-D flat record
+FLAT3_MAX_PIECES = 8          # pieces of a 3-D flat record (the 3-D fitter's theta_h pieces: 6)
 FF_COS_CUT, FF_CUT, FF_EDGES, FF_HEADS = 0, 1, 2, 2 + FLAT_MAX_PIECES - 1   # flat record (floats)
+FF3_HEADS = 2 + FLAT3_MAX_PIECES - 1          # the first header of a 3-D flat record
+#: the flat record's kind, most pieces and first header's float, by number of variables
+FLAT_KINDS = {2: (NODE_FLAT2D, FLAT_MAX_PIECES, FF_HEADS), 3: (NODE_FLAT3D, FLAT3_MAX_PIECES, FF3_HEADS)}
 DOMAIN_FLOATS, DOMAIN_CHILD = 1, 2                       # domain record (ints)
 SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4   # split record (ints)
 # leaf record (ints)
@@ -99,42 +106,51 @@ def pack_model(model, table: bool = False, cutoff_deg: float | None = None) -> t
     return fd.arrays()
 
 
-def _flat_layout(model, table):
-    """``(split variable, inner edges, leaves)`` of a fit the flat record can hold (module
-    docstring), else None."""
+#: the variables of a flat record's pieces, in this order, by number of variables
+_FLAT_VARIABLES = {2: ["theta_h", "theta_d"], 3: ["theta_h", "theta_d", "phi_d"]}
+
+
+def _flat_layout(model, table, leaf_flags):
+    """``(number of variables, split variable, inner edges, leaves)`` of a fit a flat record can
+    hold (module docstring), else None. A 2-D fit with a value factor has none (its function
+    has no step 8)."""
     pieces = getattr(model, "pieces", None)
     leaves = [model] if pieces is None else list(pieces)
-    if (pieces is not None and model.split_variable not in ("theta_h", "theta_d")) or len(leaves) > FLAT_MAX_PIECES:
+    names = [v.name for v in leaves[0].variables]
+    nv = next((k for k, v in _FLAT_VARIABLES.items() if v == names), None)
+    if nv is None or (nv == 2 and leaf_flags):
+        return None
+    if (pieces is not None and model.split_variable not in ("theta_h", "theta_d")) or len(leaves) > FLAT_KINDS[nv][1]:
         return None
     for leaf in leaves:
-        if getattr(leaf, "pieces", None) is not None or [v.name for v in leaf.variables] != ["theta_h", "theta_d"]:
+        if getattr(leaf, "pieces", None) is not None or [v.name for v in leaf.variables] != names:
             return None
         if _leaf_class(leaf, table) is None:
             return None
     var = 0 if pieces is None else SUPPORTED_VARIABLES[model.split_variable]
-    return var, ([] if pieces is None else list(model.edges[1:-1])), leaves
+    return nv, var, ([] if pieces is None else list(model.edges[1:-1])), leaves
 
 
 def _pack_flat(fd, model, table, domain, leaf_flags) -> int:
-    """The flat record of ``model`` followed by its tree, or the tree alone (a fit the flat
-    record cannot hold, among them every fit with a value factor: a 3-D one, so
-    :mod:`.rational_flat2d` has no step 8); the int offset of the first. ``leaf_flags``: the
-    flags every leaf carries (:data:`FACTOR_FLAGS`)."""
-    layout = _flat_layout(model, table)
+    """The flat record of ``model`` followed by its tree, or the tree alone (a fit no flat
+    record can hold); the int offset of the first. ``leaf_flags``: the flags every leaf carries
+    (:data:`FACTOR_FLAGS`)."""
+    layout = _flat_layout(model, table, leaf_flags)
     if layout is None:
         return _pack_node(fd, model, table, leaf_flags)
-    var, edges, leaves = layout
+    nv, var, edges, leaves = layout
+    kind, max_pieces, _ = FLAT_KINDS[nv]
     k = len(leaves)
-    n = fd.add_ints([NODE_FLAT2D, 0, 0, k, var, 0, 0, 0] + [0] * (FLAT_NI * k))
+    n = fd.add_ints([kind, 0, 0, k, var, 0, 0, 0] + [0] * (FLAT_NI * k))
     tree = _pack_node(fd, model, table, leaf_flags)
     fd.ints[n + FLAT_TREE] = tree
     nodes = [tree] if k == 1 else [fd.ints[tree + SPLIT_CHILDREN + j] for j in range(k)]
-    floats = [*domain, *edges, *[np.inf] * (FLAT_MAX_PIECES - 1 - len(edges))]
+    floats = [*domain, *edges, *[np.inf] * (max_pieces - 1 - len(edges))]
     for j, leaf in enumerate(nodes):
         li = fd.ints
-        codes = li[leaf + LEAF_VARS:leaf + LEAF_VARS + 2]
+        codes = li[leaf + LEAF_VARS:leaf + LEAF_VARS + nv]
         fd.ints[n + FLAT_PIECES + FLAT_NI * j:n + FLAT_PIECES + FLAT_NI * (j + 1)] = [
-            li[leaf + LEAF_FLAGS], (codes[0] >> 2) | (codes[1] >> 2) << 1, li[leaf + LEAF_CLASS],
+            li[leaf + LEAF_FLAGS], sum((c >> 2) << v for v, c in enumerate(codes)), li[leaf + LEAF_CLASS],
             li[leaf + LEAF_DENSE], *li[leaf + LEAF_MODES:leaf + LEAF_MODES + 3], 0]
         h = li[leaf + LEAF_FH]
         floats += fd.floats[h:h + N_FH]
@@ -210,7 +226,7 @@ def packed_classes(ints) -> set:
         kind = int(ints[n])
         if kind == NODE_DOMAIN:
             todo.append(int(ints[n + DOMAIN_CHILD]))
-        elif kind == NODE_FLAT2D:
+        elif kind in (NODE_FLAT2D, NODE_FLAT3D):
             todo.append(int(ints[n + FLAT_TREE]))
         elif kind == NODE_SPLIT:
             todo += [int(c) for c in ints[n + SPLIT_CHILDREN:n + SPLIT_CHILDREN + int(ints[n + SPLIT_N])]]
