@@ -3,9 +3,12 @@ Warp functions it inlines.
 
     python -m benchmarks.profile_render [--material cc_ibiza_sunset_rgb] [--envmap rooitou_park_1k]
                                         [--spp 256] [--resolution 128] [--json FILE] [--lines]
+                                        [--fit FIT.json]
 
 How: the reference sphere scene of :mod:`lab.mitsuba_reference` (the scene of
-``benchmarks/bench_vs_mitsuba.py``) is rendered on one thread under Linux ``perf record``. Its
+``benchmarks/bench_vs_mitsuba.py``), its material the ``rgl`` one of ``--material`` or the
+``rational`` fit of ``--fit`` (a coefficient file, with its default sampler), is rendered on one
+thread under Linux ``perf record``. Its
 render kernel is compiled in a private Warp cache with the same flags as always plus DWARF line
 tables (``-debug-info-kind=line-tables-only``: the same machine code, the object is
 byte-for-byte the same ``.ltext``), so ``addr2line -i`` gives, for every sampled instruction, the
@@ -201,6 +204,10 @@ def _child(a) -> None:
     integrator.render_module_options = lambda: {**base, "cpu_compiler_flags": flags}
     scene = MR.sphere_scene(DATA / "rgl" / f"{a.material}.bsdf", DATA / "envmaps" / f"{a.envmap}.hdr",
                             a.spp, a.resolution)
+    if a.fit:
+        from warp_rbrdf.scene import MaterialSpec
+
+        scene.materials["obj"] = MaterialSpec(name="obj", type="rational", file=Path(a.fit))
     r = Renderer(scene, device="cpu")
     r.render(spp=4, threads=1)
     r.render(spp=a.spp, threads=1)
@@ -223,6 +230,8 @@ def profile(a) -> dict:
             raise ProfileError(f"{tool} not found: install linux-perf / binutils to profile")
     if not (DATA / "rgl" / f"{a.material}.bsdf").is_file():
         raise ProfileError(f"--material: {DATA / 'rgl' / (a.material + '.bsdf')} not found")
+    if a.fit and not Path(a.fit).is_file():
+        raise ProfileError(f"--fit: {a.fit} not found")
     with tempfile.TemporaryDirectory(prefix="rbrdf-profile-") as tmp:
         tmp = Path(tmp)
         env = dict(os.environ, WARP_CACHE_PATH=str(tmp / "cache"), PYTHONPATH=str(ROOT))
@@ -230,7 +239,7 @@ def profile(a) -> dict:
         cmd = ["perf", "record", "-F", str(a.frequency), "-o", str(data), "--",
                sys.executable, "-m", "benchmarks.profile_render", "--child",
                "--material", a.material, "--envmap", a.envmap, "--spp", str(a.spp),
-               "--resolution", str(a.resolution)]
+               "--resolution", str(a.resolution)] + (["--fit", str(Path(a.fit).resolve())] if a.fit else [])
         p = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, check=False)
         if p.returncode != 0:
             tail = p.stderr.strip().splitlines()[-1:] or [""]
@@ -264,7 +273,7 @@ def profile(a) -> dict:
             cpps = sorted((tmp / "cache").rglob("*render_tile*.cpp"))
             if cpps:
                 by_line = attribute_lines(inside, innermost_cpp_lines(a2l), cpps[-1].read_text().splitlines())
-    return {"material": a.material, "envmap": a.envmap, "spp": a.spp, "resolution": a.resolution,
+    return {"material": Path(a.fit).name if a.fit else a.material, "envmap": a.envmap, "spp": a.spp, "resolution": a.resolution,
                 "samples": total, "kernel_samples": sum(inside.values()), "aligned_share": share,
                 "libm_samples": sum(libm.values()), "libm": dict(libm.most_common()),
                 "inclusive": dict(inc.most_common()), "exclusive": dict(exc.most_common()),
@@ -301,6 +310,7 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--material", default="cc_ibiza_sunset_rgb", help="RGL file name under $RBRDF_DATA/rgl")
     ap.add_argument("--envmap", default="rooitou_park_1k", help="map name under $RBRDF_DATA/envmaps")
+    ap.add_argument("--fit", default=None, help="a rational coefficient file: profile it instead of --material")
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--frequency", type=int, default=4000, help="perf sampling frequency (Hz)")

@@ -16,6 +16,7 @@ import warp as wp
 
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
 
+from .. import fastmath as fmath
 from ..distribution import find_interval, pc1d_in_cell, pc1d_mass
 from ..distribution.lanes import lane_types, lanes_out_type, make_find_interval_lanes
 from ..materials.data import (
@@ -84,47 +85,36 @@ def tab_pdf(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: i
 
 
 @wp.func
-def view_angles(wo: wp.vec3) -> wp.vec2:
-    """(theta_v, phi_v) of the local view direction."""
-    rxy = wp.sqrt(wo[0] * wo[0] + wo[1] * wo[1])
-    phi = 0.0
-    if rxy > 1.0e-12:
-        phi = wp.atan2(wo[1], wo[0])
-    return wp.vec2(wp.atan2(rxy, wo[2]), phi)
-
-
-@wp.func
 def view_frame(wo: wp.vec3) -> wp.vec3:
     """(theta_v, cos phi_v, sin phi_v) of the local view direction (phi_v = 0 at the pole):
-    the view's azimuth as a rotation, so that sampled directions need no atan2."""
+    the view's azimuth as a rotation, so that sampled directions need no atan2 (theta_v by
+    :func:`warp_rbrdf.fastmath.atan2`, within 3 float32 ulps of libm's)."""
     rxy = wp.sqrt(wo[0] * wo[0] + wo[1] * wo[1])
     c = 1.0
     s = 0.0
     if rxy > 1.0e-12:
         c = wo[0] / rxy
         s = wo[1] / rxy
-    return wp.vec3(wp.atan2(rxy, wo[2]), c, s)
+    return wp.vec3(fmath.atan2(rxy, wo[2]), c, s)
 
 
 @wp.func
 def local_dir(theta_l: float, phi_l: float, vf: wp.vec3) -> wp.vec3:
     """Direction at polar angle theta_l and azimuth phi_l measured from the view's azimuth
-    (``vf`` from :func:`view_frame`)."""
-    st = wp.sin(theta_l)
-    cp = wp.cos(phi_l)
-    sp = wp.sin(phi_l)
-    return wp.vec3(st * (cp * vf[1] - sp * vf[2]), st * (sp * vf[1] + cp * vf[2]), wp.cos(theta_l))
+    (``vf`` from :func:`view_frame`; sines and cosines by :func:`warp_rbrdf.fastmath.sincos`)."""
+    t = fmath.sincos(theta_l)
+    p = fmath.sincos(phi_l)
+    return wp.vec3(t[0] * (p[1] * vf[1] - p[0] * vf[2]), t[0] * (p[0] * vf[1] + p[1] * vf[2]), t[1])
 
 
 @wp.func
-def rel_phi_abs(wi: wp.vec3, phi_v: float) -> float:
-    """|phi_l - phi_v| folded into [0, pi]."""
-    p = wp.atan2(wi[1], wi[0]) - phi_v
-    if p > wp.pi:
-        p = p - 2.0 * wp.pi
-    if p < -wp.pi:
-        p = p + 2.0 * wp.pi
-    return wp.abs(p)
+def rel_phi_abs(wi: wp.vec3, vf: wp.vec3) -> float:
+    """|phi_l - phi_v| in [0, pi] of the light's local direction in the view frame ``vf``
+    (:func:`view_frame`): the angle between the azimuths, one inline ``atan2`` of their cross
+    and dot products."""
+    cross = wi[1] * vf[1] - wi[0] * vf[2]
+    dot = wi[0] * vf[1] + wi[1] * vf[2]
+    return fmath.atan2(wp.abs(cross), dot)
 
 
 @wp.func
@@ -159,11 +149,11 @@ def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
     if wi[2] <= 0.0:
         return 0.0
     b = m * N_CDF_INFO
-    va = view_angles(wo)
-    tl = wp.atan2(wp.sqrt(wi[0] * wi[0] + wi[1] * wi[1]), wi[2])
+    va = view_frame(wo)
+    tl = fmath.atan2(wp.sqrt(wi[0] * wi[0] + wi[1] * wi[1]), wi[2])
     return tab_pdf(mats.cdf_t, mats.cdf_p, mats.cdf_info[b + CDF_OFF_T], mats.cdf_info[b + CDF_OFF_P],
                    mats.cdf_info[b + CDF_N_V], mats.cdf_info[b + CDF_N_T], mats.cdf_info[b + CDF_N_P],
-                   va[0], tl, rel_phi_abs(wi, va[1]))
+                   va[0], tl, rel_phi_abs(wi, va))
 
 
 def kernel_functions(cdfs):
