@@ -104,6 +104,13 @@ def test_missing_tool_is_one_line_exit_2(monkeypatch, capsys):
     assert len(err) == 1 and "perf not found" in err[0]
 
 
+def test_missing_fit_is_one_line_exit_2(monkeypatch, capsys, tmp_path):
+    monkeypatch.setattr(PR.shutil, "which", lambda name: "/usr/bin/" + name)
+    assert PR.main(["--fit", str(tmp_path / "no_such_fit.json")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--fit" in err[0] and "no_such_fit.json" in err[0]
+
+
 CPP = """// header
     // a = mats.rgl_f[i]  <L 87>
     var_1 = wp::address(var_2, var_i);
