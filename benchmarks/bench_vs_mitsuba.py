@@ -34,7 +34,9 @@ relative RMSE is above ``--extend-rmse`` (0.25), the standard error of its log M
 (:class:`ExtendRule`, :func:`untrusted`); while any renderer still above the target is untrusted,
 all of them render one more rung at 4x the spp (two new seeds, interleaved), up to
 ``--extend-max-spp`` (1024) while the case's render time so far plus 4x its last rung's stays
-within ``--extend-budget`` (480 s). Cases that stay untrusted are marked. Uncertainty: per rung
+within ``--extend-budget`` (480 s); past the cap or the budget the top rung pools more seed
+pairs, up to ``--extend-pairs`` (8) while one more pair fits the budget
+(:func:`seed_pairs_estimate`). Cases that stay untrusted are marked. Uncertainty: per rung
 the standard error of the log relative MSE (first order, successive differences over pixels:
 :func:`seed_pair_estimate`), propagated to the times and the ratio (:func:`log_time_se`): the
 table's ``ratio ± 1 s.e.``.
@@ -50,7 +52,7 @@ standard errors.
         [--resolution 256] [--spp 4 16 64] [--ours rgl:mis-rgl measured:mis-tabulated]
         [--variant auto|llvm_ad_rgb|scalar_rgb] [--threads N] [--check 2] [--check-spp 1024]
         [--json results/bench_vs_mitsuba.json] [--docs] [--no-extend] [--extend-max-spp 1024]
-        [--extend-budget 480] [--extend-rmse 0.25] [--extend-se 0.1]
+        [--extend-budget 480] [--extend-rmse 0.25] [--extend-se 0.1] [--extend-pairs 8]
 
 ``--quick``: 2 materials, the studio map, 64 px, spp 4 16, check at 256 spp (the smoke test).
 ``--docs`` writes docs/bench_vs_mitsuba.md (generated; edits there are overwritten).
@@ -140,6 +142,38 @@ def seed_pair_estimate(x1: np.ndarray, x2: np.ndarray, mask: np.ndarray) -> tupl
     return rel, M, float(np.sqrt(np.sum(np.diff(z) ** 2) / 2) / len(z))
 
 
+def seed_pairs_estimate(pairs: list, mask: np.ndarray) -> tuple[float, float, float]:
+    """:func:`seed_pair_estimate` pooled over ``pairs`` (a list of (x1, x2), independent seed
+    pairs of one spp): per pixel v and m averaged over the pairs, then the same relative RMSE and
+    first-order standard error; with two pairs or more the standard error is at least the spread
+    of the pairs' own log MSE over sqrt(pairs) (model-free: it sees the rare large samples one
+    pair drew and another did not). One pair: :func:`seed_pair_estimate` itself."""
+    if len(pairs) == 1:
+        return seed_pair_estimate(*pairs[0], mask)
+    vs, ms, logs = [], [], []
+    for x1, x2 in pairs:
+        a = np.asarray(x1, np.float64)[mask]
+        b = np.asarray(x2, np.float64)[mask]
+        v = ((a - b) ** 2 / 2).reshape(len(a), -1).mean(axis=1)
+        m = ((a + b) / 2).reshape(len(a), -1).mean(axis=1)
+        vs.append(v)
+        ms.append(m)
+        if v.mean() > 0 and m.mean() > 0:
+            logs.append(np.log(v.mean() / m.mean() ** 2))
+    v, m = np.mean(vs, axis=0), np.mean(ms, axis=0)
+    V, M = float(v.mean()), float(m.mean())
+    if not (M > 0) or len(v) < 2:
+        return float("inf"), M, float("inf")
+    rel = float(np.sqrt(V) / M)
+    if not (V > 0):
+        return rel, M, float("inf")
+    z = v / V - 2 * m / M
+    se = float(np.sqrt(np.sum(np.diff(z) ** 2) / 2) / len(z))
+    if len(logs) == len(pairs):
+        se = max(se, float(np.std(logs, ddof=1) / np.sqrt(len(logs))))
+    return rel, M, se
+
+
 def relative_rmse(x1: np.ndarray, x2: np.ndarray, mask: np.ndarray) -> tuple[float, float]:
     """(relative RMSE of one render, mean): the first two numbers of :func:`seed_pair_estimate`."""
     rel, mean, _ = seed_pair_estimate(x1, x2, mask)
@@ -153,7 +187,8 @@ class Rung:
     rel_rmse: float         # of one render (seed-pair estimate)
     mean: float             # image mean over the mask (both renders)
     times: list = field(default_factory=list)
-    mse_se: float = 0.0     # standard error of log(rel_rmse^2) (seed_pair_estimate)
+    mse_se: float = 0.0     # standard error of log(rel_rmse^2) (seed_pairs_estimate)
+    pairs: int = 1          # independent seed pairs pooled at this spp
 
     @property
     def samples_per_s(self) -> float:
@@ -243,10 +278,13 @@ class ExtendRule:
       than the band's margin means the estimate is noise-dominated (a firefly at one rung and
       not the other) or the case is not yet in its asymptotic regime.
 
-    The case is extended while any renderer still above the target is untrusted, unless the
-    next rung would exceed ``max_spp`` or the case's render time so far plus ``factor`` x its
-    last rung's time would exceed ``budget_s`` (then the case is reported as unresolved, with
-    the reasons). ``enabled=False`` (``--no-extend``) only reports."""
+    The case is extended while any renderer still above the target is untrusted. Where the next
+    rung would exceed ``max_spp``, or the case's render time so far plus ``factor`` x its last
+    rung's time would exceed ``budget_s``, the top rung gets another seed pair instead (pooled:
+    :func:`seed_pairs_estimate`) while it holds fewer than ``max_pairs`` and the time so far
+    plus one more pair (the last pair's time) stays within ``budget_s``; after that the case
+    is reported as unresolved, with the reasons. ``enabled=False`` (``--no-extend``) only
+    reports."""
 
     enabled: bool = True
     max_rel_rmse: float = 0.25
@@ -255,6 +293,7 @@ class ExtendRule:
     max_spp: int = 1024
     budget_s: float = 480.0
     factor: int = 4
+    max_pairs: int = 8
 
 
 def untrusted(rungs: dict[str, list[Rung]], target: float, rule: ExtendRule) -> list[str]:
@@ -283,20 +322,26 @@ def next_rung(rungs: dict[str, list[Rung]], target: float, rule: ExtendRule, spe
               last_rung_s: float) -> tuple[int | None, list[str], str]:
     """The extension decision after the ladder's rungs so far: (next spp or None, reasons
     (:func:`untrusted`), status). Status: "trusted" (nothing to do), "extend" (render the next
-    spp), "cap" (the next rung would pass ``rule.max_spp``), "budget" (``spent_s`` seconds of
-    rendering so far plus ``rule.factor`` x ``last_rung_s`` would pass ``rule.budget_s``) or
-    "off" (``rule.enabled`` is false)."""
+    spp), "seeds" (render one more seed pair at the top spp: the next rung would pass
+    ``rule.max_spp`` or the budget, and the top rung holds fewer than ``rule.max_pairs`` pairs
+    with ``spent_s + last_rung_s`` within ``rule.budget_s``), "cap" (the next rung would pass
+    ``rule.max_spp``), "budget" (``spent_s`` seconds of rendering so far plus ``rule.factor`` x
+    ``last_rung_s`` would pass ``rule.budget_s``) or "off" (``rule.enabled`` is false)."""
     reasons = untrusted(rungs, target, rule)
     if not reasons:
         return None, [], "trusted"
     if not rule.enabled:
         return None, reasons, "off"
-    nxt = rule.factor * max(rs[-1].spp for rs in rungs.values() if rs)
-    if nxt > rule.max_spp:
-        return None, reasons, "cap"
-    if spent_s + rule.factor * last_rung_s > rule.budget_s:
-        return None, reasons, "budget"
-    return nxt, reasons, "extend"
+    top = max(rs[-1].spp for rs in rungs.values() if rs)
+    nxt = rule.factor * top
+    if nxt <= rule.max_spp and spent_s + rule.factor * last_rung_s <= rule.budget_s:
+        return nxt, reasons, "extend"
+    # the renderers that would render the pair: at the top spp and still above the target
+    pairs = min((rs[-1].pairs for rs in rungs.values() if rs and rs[-1].spp == top and rs[-1].rel_rmse > target),
+                default=rule.max_pairs)
+    if pairs < rule.max_pairs and spent_s + last_rung_s <= rule.budget_s:
+        return top, reasons, "seeds"
+    return None, reasons, ("cap" if nxt > rule.max_spp else "budget")
 
 
 # --------------------------------------------------------------------------------------------
@@ -379,11 +424,13 @@ def climb(renderers: list, ladder: list[int], target: float, rule: ExtendRule, m
     (:func:`next_rung`). A renderer is an object with ``label`` and ``render(spp, seed) ->
     (image (H, W, 3), seconds)``, and optionally ``warm(spp)`` (an untimed warm-up before each
     of its rungs). Per rung: two seeds, the renderers interleaved render by render; a renderer
-    whose last rung is at or below ``target`` stops. Returns (label -> list of :class:`Rung`,
-    label -> the top rung's two images, the extension record: its rungs with their reasons,
-    the final status and reasons, the top spp, the case's render seconds)."""
+    whose last rung is at or below ``target`` stops; another seed pair at the top spp (status
+    "seeds") is pooled into the top rung. Returns (label -> list of :class:`Rung`, label -> the
+    top rung's last two images, the extension record: its rungs (and seed pairs) with their
+    reasons, the final status and reasons, the top spp, the case's render seconds)."""
     rungs = {r.label: [] for r in renderers}
     last_images = {}
+    top_pairs = {r.label: [] for r in renderers}      # the seed pairs of each renderer's top rung
     extension = {"rungs": [], "status": "trusted", "reasons": []}
     t_case = time.perf_counter()
     last_rung_s = 0.0
@@ -398,8 +445,12 @@ def climb(renderers: list, ladder: list[int], target: float, rule: ExtendRule, m
                 if reasons:
                     log(f"  not extended ({status}): " + "; ".join(reasons))
                 break
-            extension["rungs"].append({"spp": spp, "reasons": reasons})
-            log(f"  extending to {spp} spp: " + "; ".join(reasons))
+            if status == "seeds":
+                extension["rungs"].append({"spp": spp, "reasons": reasons, "seed_pair": True})
+                log(f"  another seed pair at {spp} spp: " + "; ".join(reasons))
+            else:
+                extension["rungs"].append({"spp": spp, "reasons": reasons})
+                log(f"  extending to {spp} spp: " + "; ".join(reasons))
         active = [r for r in renderers if not rungs[r.label] or rungs[r.label][-1].rel_rmse > target]
         if not active:
             break
@@ -416,12 +467,21 @@ def climb(renderers: list, ladder: list[int], target: float, rule: ExtendRule, m
                 imgs[r.label].append(img)
                 times[r.label].append(dt)
         for r in active:
-            e, mean, se = seed_pair_estimate(*imgs[r.label], mask)
-            rungs[r.label].append(Rung(spp, statistics.median(times[r.label]), e, mean, times[r.label], se))
+            rs = rungs[r.label]
+            if rs and rs[-1].spp == spp:               # another seed pair at the top spp: pooled
+                top_pairs[r.label].append(tuple(imgs[r.label]))
+                times[r.label] = rs[-1].times + times[r.label]
+                rs.pop()
+            else:
+                top_pairs[r.label] = [tuple(imgs[r.label])]
+            e, mean, se = seed_pairs_estimate(top_pairs[r.label], mask)
+            rs.append(Rung(spp, statistics.median(times[r.label]), e, mean, times[r.label], se,
+                           len(top_pairs[r.label])))
             last_images[r.label] = imgs[r.label]
         last_rung_s = time.perf_counter() - t_rung
         log("  " + "  ".join(f"{r.label} {spp} spp {rungs[r.label][-1].seconds:.2f} s "
-                             f"rmse {rungs[r.label][-1].rel_rmse:.4f} (s.e. {rungs[r.label][-1].mse_se:.2g})"
+                             f"rmse {rungs[r.label][-1].rel_rmse:.4f} (s.e. {rungs[r.label][-1].mse_se:.2g}"
+                             f"{', ' + str(rungs[r.label][-1].pairs) + ' pairs' if rungs[r.label][-1].pairs > 1 else ''})"
                              for r in active))
         k += 1
     extension["top_spp"] = max(rs[-1].spp for rs in rungs.values() if rs)
@@ -446,7 +506,7 @@ def run_case(material: str, path: Path, map_name: str, envmap: Path, a, mask, lo
             "time_slope_log_se": log_time_se(rs, a.target, time_to_target_slope),
             "slope": last_slope(rs), "samples_per_s": npx * rs[-1].samples_per_s,
             "rungs": [{"spp": x.spp, "seconds": x.seconds, "times": x.times, "rel_rmse": x.rel_rmse,
-                       "mean": x.mean, "mse_se": x.mse_se} for x in rs]}
+                       "mean": x.mean, "mse_se": x.mse_se, "pairs": x.pairs} for x in rs]}
     best = min((c for c in a.ours), key=lambda c: out["renderers"][c]["time_to_target_s"])
     out["best"] = best
     out["ratio"] = out["renderers"][best]["time_to_target_s"] / out["renderers"]["mitsuba"]["time_to_target_s"]
@@ -546,6 +606,16 @@ def _top(c: dict) -> str:
     return f"{e.get('top_spp', '–')}{mark}"
 
 
+def _extension_rungs(rungs: list[dict]) -> str:
+    """The extension's rungs for the table: their spp, then ``+ k pairs at N`` for the seed
+    pairs added at the top spp."""
+    spps = [str(x["spp"]) for x in rungs if not x.get("seed_pair")]
+    pairs = [x["spp"] for x in rungs if x.get("seed_pair")]
+    if pairs:
+        spps.append(f"+ {len(pairs)} seed pair{'s' if len(pairs) > 1 else ''} at {pairs[-1]}")
+    return ", ".join(spps)
+
+
 def _compact(reasons: list[str]) -> str:
     """:func:`untrusted`'s lines as "label: RMSE x, s.e. y, slope z; label: ..."."""
     import re
@@ -592,11 +662,15 @@ def _method_extension(a: dict) -> str:
         f"untrusted top rung, every renderer still above the target renders one more rung at {e.factor}× "
         "the spp (two new seeds, interleaved as above), up to "
         f"{e.max_spp} spp and while the case's render time so far plus {e.factor}× its last rung's stays "
-        f"within {e.budget_s:g} s. More spp rather than more seeds at the top rung: at equal cost both "
-        "draw the same number of samples (the same chance to draw rare, large contributions), and more "
-        "spp also shortens the extrapolation and brings both renderers closer to their asymptotic "
-        "slope. *top spp*: the last rung (* extended; ! still untrusted where the cap or the budget "
-        "stopped it, reasons below the table).")
+        f"within {e.budget_s:g} s. More spp first rather than more seeds: at equal cost both draw the "
+        "same number of samples (the same chance to draw rare, large contributions), and more spp also "
+        "shortens the extrapolation and brings both renderers closer to their asymptotic slope. Where "
+        "the next rung would pass the cap or the budget, the top rung gets more seed pairs instead (two "
+        f"new seeds each, interleaved), up to {e.max_pairs} pairs while the case's render time plus one "
+        "more pair stays within the budget: the pairs are pooled (per pixel the mean of their squared "
+        "differences and of their means), and the standard error is at least the spread of the pairs' "
+        "own log MSE over √pairs. *top spp*: the last rung (* extended; ! still untrusted where the cap "
+        "or the budget stopped it, reasons below the table).")
     unc = (
         "**Uncertainty** (the ± of the ratios, 1 σ, first order): per rung, the standard error of the "
         "log of the seed-pair relative MSE to first order: per pixel the channel means v = (X1 − X2)²/2 "
@@ -696,7 +770,7 @@ def report(res: dict) -> str:
     ext = [c for c in cases if c.get("extension", {}).get("rungs") or c.get("extension", {}).get("reasons")]
     if ext:
         rows = [[c["material"].removesuffix("_rgb"), c["map"], _top(c), c["extension"]["status"],
-                 ", ".join(str(x["spp"]) for x in c["extension"]["rungs"]) or "–",
+                 _extension_rungs(c["extension"]["rungs"]) or "–",
                  _compact(c["extension"]["rungs"][0]["reasons"] if c["extension"]["rungs"]
                           else c["extension"]["reasons"]),
                  _compact(c["extension"]["reasons"]) if c["extension"]["status"] != "trusted" else "–"]
@@ -799,6 +873,9 @@ def main(argv=None):
                     help="never extend the ladder (untrusted cases are still reported)")
     ap.add_argument("--extend-max-spp", type=int, default=d.max_spp,
                     help=f"no extension rung above this spp (default {d.max_spp})")
+    ap.add_argument("--extend-pairs", type=int, default=d.max_pairs,
+                    help=f"seed pairs the top rung may pool where another rung would pass the cap or the "
+                         f"budget (default {d.max_pairs}; 1: none added)")
     ap.add_argument("--extend-budget", type=float, default=d.budget_s,
                     help=f"render seconds per case the extension may reach (default {d.budget_s:g})")
     ap.add_argument("--extend-rmse", type=float, default=d.max_rel_rmse,
@@ -830,7 +907,7 @@ def main(argv=None):
     if min(a.spp) < 1:
         ap.error(f"--spp {min(a.spp)}: expected positive sample counts")
     a.extend_rule = ExtendRule(enabled=not a.no_extend, max_rel_rmse=a.extend_rmse, max_mse_se=a.extend_se,
-                               max_spp=a.extend_max_spp, budget_s=a.extend_budget)
+                               max_spp=a.extend_max_spp, budget_s=a.extend_budget, max_pairs=a.extend_pairs)
     sel = [m for m in CHECK_MATERIALS if m in a.materials] or a.materials[:1]
     a.check_materials = sel[:a.check]
     for c in a.ours:

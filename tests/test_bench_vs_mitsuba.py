@@ -1,6 +1,7 @@
-"""benchmarks.bench_vs_mitsuba: the seed-pair estimate's standard error, the rule that extends a
-case's spp ladder while its estimate is not trustworthy, and the ladder itself on synthetic
-renderers (no rendering; the smoke run is in test_benchmarks.py)."""
+"""benchmarks.bench_vs_mitsuba: the seed-pair estimate's standard error (one pair and pooled
+pairs), the rule that extends a case's spp ladder (then pools seed pairs at its top) while its
+estimate is not trustworthy, and the ladder itself on synthetic renderers (no rendering; the
+smoke run is in test_benchmarks.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -13,6 +14,7 @@ from benchmarks.bench_vs_mitsuba import (
     log_time_se,
     next_rung,
     seed_pair_estimate,
+    seed_pairs_estimate,
     time_to_target,
     untrusted,
 )
@@ -66,6 +68,28 @@ def test_seed_pair_standard_error_matches_replicates():
     assert seed_pair_estimate(x1, x2, MASK) == a
 
 
+def test_pooled_seed_pairs():
+    """One pair is the one-pair estimate; k pairs pool their squared differences (the relative
+    RMSE of one render, unchanged in expectation) and their standard error falls about as
+    1/sqrt(k) on Gaussian noise; with fireflies in one pair the spread of the pairs' log MSE
+    sets a larger standard error than the first-order one."""
+    rng = np.random.default_rng(5)
+    truth = rng.uniform(0.5, 1.5, (40, 40, 3))
+    sigma = 0.05 * truth
+    pairs = [_pair(rng, truth, sigma) for _ in range(8)]
+    assert seed_pairs_estimate(pairs[:1], MASK) == seed_pair_estimate(*pairs[0], MASK)
+    one = [seed_pair_estimate(*p, MASK) for p in pairs]
+    pooled = seed_pairs_estimate(pairs, MASK)
+    assert np.isclose(pooled[0], np.sqrt(np.mean([e[0] ** 2 for e in one])), rtol=0.02)
+    assert 0.25 < pooled[2] / np.median([e[2] for e in one]) < 0.5      # 1/sqrt(8) = 0.35
+    x1, x2 = (p.copy() for p in pairs[0])
+    x1[10, 10, 0] += 30.0
+    x2[30, 12, 2] += 30.0
+    fire = seed_pairs_estimate([(x1, x2)] + pairs[1:4], MASK)
+    logs = [np.log(seed_pair_estimate(*p, MASK)[0] ** 2) for p in [(x1, x2)] + pairs[1:4]]
+    assert np.isclose(fire[2], np.std(logs, ddof=1) / 2) and fire[2] > 0.5
+
+
 def _rs(spps, rel, se=0.01, rate=1e3):
     return [Rung(n, n / rate, e, 1.0, [], se) for n, e in zip(spps, rel, strict=True)]
 
@@ -102,9 +126,20 @@ def test_extension_rule_on_synthetic_ladders():
     assert next_rung(done, 0.01, rule, 10.0, 3.0) == (None, [], "trusted")
 
     top = {k: _rs([256, 1024], [0.8, 0.6], se=0.3) for k in ("ours", "mitsuba")}
+    # at the cap: seed pairs at the top spp while fewer than max_pairs and one more fits the budget
+    assert next_rung(top, 0.01, rule, 10.0, 3.0)[::2] == (1024, "seeds")
+    assert next_rung(top, 0.01, rule, 470.0, 25.0)[::2] == (None, "cap")          # 470 + 25 > 480
+    top["ours"][-1].pairs = rule.max_pairs
+    assert next_rung(top, 0.01, rule, 10.0, 3.0)[::2] == (1024, "seeds")        # mitsuba has 1 pair
+    top["mitsuba"][-1].pairs = rule.max_pairs
+    assert next_rung(top, 0.01, rule, 10.0, 3.0)[::2] == (None, "cap")
+    top["mitsuba"][-1].pairs, top["mitsuba"][-1].rel_rmse = 1, 0.009     # below the target: renders no pair
     assert next_rung(top, 0.01, rule, 10.0, 3.0)[::2] == (None, "cap")
     assert next_rung(top, 0.01, ExtendRule(max_spp=4096), 10.0, 3.0)[::2] == (4096, "extend")
-    assert next_rung(hard, 0.01, rule, 400.0, 25.0)[::2] == (None, "budget")     # 400 + 4 * 25 > 480
+    # over the budget for 4x the spp but not for one more pair at this spp
+    assert next_rung(hard, 0.01, rule, 400.0, 25.0)[::2] == (64, "seeds")          # 400 + 4 * 25 > 480
+    assert next_rung(hard, 0.01, rule, 460.0, 25.0)[::2] == (None, "budget")        # 460 + 25 > 480
+    assert next_rung(hard, 0.01, ExtendRule(max_pairs=1), 400.0, 25.0)[::2] == (None, "budget")
     assert next_rung(hard, 0.01, ExtendRule(enabled=False), 40.0, 25.0)[::2] == (None, "off")
     assert next_rung(hard, 0.01, ExtendRule(enabled=False), 40.0, 25.0)[1] == why
 
@@ -156,8 +191,19 @@ def test_climb_extends_a_heavy_tailed_case(enabled):
         assert ext["status"] == "off" and ext["reasons"] and ext["top_spp"] == 64
         return
     assert [r.spp for r in rungs["a"]] == [r.spp for r in rungs["b"]] == [4, 16, 64, 256, 1024]
-    assert [x["spp"] for x in ext["rungs"]] == [256, 1024] and ext["top_spp"] == 1024
+    spps = [x["spp"] for x in ext["rungs"]]
+    assert spps[:2] == [256, 1024] and ext["top_spp"] == 1024
+    # past the cap: seed pairs pooled at 1024 spp by the renderer still above the target (b is
+    # below it at 1024 spp), up to max_pairs, new seeds each time
+    seeds = [x for x in ext["rungs"] if x.get("seed_pair")]
+    assert spps[2:] == [1024] * len(seeds) and len(seeds) == rule.max_pairs - 1 and ext["status"] == "cap"
+    assert rungs["a"][-1].pairs == rule.max_pairs and rungs["b"][-1].pairs == 1
+    assert rungs["b"][-1].rel_rmse <= 0.01 < rungs["a"][-1].rel_rmse
+    assert len(rungs["a"][-1].times) == 2 * rule.max_pairs
+    assert a.calls[:len(b.calls)] == b.calls               # same spp and seeds for both on the ladder
+    assert a.calls[len(b.calls):] == [(1024, s) for s in range(1010, 1010 + 2 * len(seeds))]
+    assert len(set(a.calls)) == len(a.calls)               # every render its own seed
     assert all(x["reasons"] and all(w.startswith("a ") for w in x["reasons"]) for x in ext["rungs"])
-    assert a.calls == b.calls                              # same spp and seeds for both
     assert imgs["a"][0].shape == (40, 40, 3) and len(imgs["b"]) == 2
     assert any(line.startswith("  extending to 256 spp") for line in logs)
+    assert any(line.startswith("  another seed pair at 1024 spp") for line in logs)
