@@ -128,10 +128,19 @@ def seed_pair_estimate(x1: np.ndarray, x2: np.ndarray, mask: np.ndarray) -> tupl
     (fireflies) carry the sum; for such heavy-tailed noise it is a lower bound (it sees only
     the rare events that were drawn, and the log is nonlinear: 1.6-2.7x below the spread over
     independent pairs on synthetic Pareto fireflies)."""
+    return _estimate(*_pixel_terms(x1, x2, mask))
+
+
+def _pixel_terms(x1, x2, mask) -> tuple[np.ndarray, np.ndarray]:
+    """Per pixel of ``mask``: v, the channel mean of (x1 - x2)^2 / 2, and m, of (x1 + x2) / 2."""
     a = np.asarray(x1, np.float64)[mask]
     b = np.asarray(x2, np.float64)[mask]
-    v = ((a - b) ** 2 / 2).reshape(len(a), -1).mean(axis=1)      # (P,)
-    m = ((a + b) / 2).reshape(len(a), -1).mean(axis=1)
+    return ((a - b) ** 2 / 2).reshape(len(a), -1).mean(axis=1), ((a + b) / 2).reshape(len(a), -1).mean(axis=1)
+
+
+def _estimate(v: np.ndarray, m: np.ndarray) -> tuple[float, float, float]:
+    """(relative RMSE, mean, first-order standard error of the log relative MSE) of the per-pixel
+    terms of :func:`_pixel_terms` (:func:`seed_pair_estimate`'s formula)."""
     V, M = float(v.mean()), float(m.mean())
     if not (M > 0) or len(v) < 2:
         return float("inf"), M, float("inf")
@@ -150,26 +159,10 @@ def seed_pairs_estimate(pairs: list, mask: np.ndarray) -> tuple[float, float, fl
     pair drew and another did not). One pair: :func:`seed_pair_estimate` itself."""
     if len(pairs) == 1:
         return seed_pair_estimate(*pairs[0], mask)
-    vs, ms, logs = [], [], []
-    for x1, x2 in pairs:
-        a = np.asarray(x1, np.float64)[mask]
-        b = np.asarray(x2, np.float64)[mask]
-        v = ((a - b) ** 2 / 2).reshape(len(a), -1).mean(axis=1)
-        m = ((a + b) / 2).reshape(len(a), -1).mean(axis=1)
-        vs.append(v)
-        ms.append(m)
-        if v.mean() > 0 and m.mean() > 0:
-            logs.append(np.log(v.mean() / m.mean() ** 2))
-    v, m = np.mean(vs, axis=0), np.mean(ms, axis=0)
-    V, M = float(v.mean()), float(m.mean())
-    if not (M > 0) or len(v) < 2:
-        return float("inf"), M, float("inf")
-    rel = float(np.sqrt(V) / M)
-    if not (V > 0):
-        return rel, M, float("inf")
-    z = v / V - 2 * m / M
-    se = float(np.sqrt(np.sum(np.diff(z) ** 2) / 2) / len(z))
-    if len(logs) == len(pairs):
+    terms = [_pixel_terms(x1, x2, mask) for x1, x2 in pairs]
+    rel, M, se = _estimate(np.mean([v for v, _ in terms], axis=0), np.mean([m for _, m in terms], axis=0))
+    logs = [np.log(v.mean() / m.mean() ** 2) for v, m in terms if v.mean() > 0 and m.mean() > 0]
+    if np.isfinite(se) and len(logs) == len(pairs):
         se = max(se, float(np.std(logs, ddof=1) / np.sqrt(len(logs))))
     return rel, M, se
 

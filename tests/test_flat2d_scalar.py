@@ -26,11 +26,12 @@ from warp_rbrdf.scene import MaterialSpec
 _KERNELS: dict = {}
 
 
-def _kernel(keys: tuple):
+def _kernel(keys: tuple, n_vars: int):
     """Per pair: the vector and the scalar form's ``(R, G, B, 1)`` of material ``m``'s flat record
-    (2-D, or 3-D with :func:`_kernel3`)."""
-    if keys not in _KERNELS:
-        vec, sca = RF.make_flat2d(keys, DOMAIN_MARGIN), RF.make_flat2d(keys, DOMAIN_MARGIN, scalar=True)
+    of ``n_vars`` variables (3: ``rational_flat3d``, its angles and step 8's wi.z)."""
+    if (keys, n_vars) not in _KERNELS:
+        make = RF.make_flat2d if n_vars == 2 else RF3.make_flat3d
+        vec, sca = make(keys, DOMAIN_MARGIN), make(keys, DOMAIN_MARGIN, scalar=True)
 
         @wp.kernel(module="unique", enable_backward=False)
         def k(mats: Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
@@ -41,41 +42,22 @@ def _kernel(keys: tuple):
             nf = ib
             if mats.coef_i[nf] == wp.static(R.NODE_DOMAIN):
                 nf = ib + mats.coef_i[nf + wp.static(R.DOMAIN_CHILD)]
-            ang = RF.angles_2d(wi[i], wo[i])
             fp = wp.address_of(mats.coef_f[fb + mats.coef_i[nf + wp.static(R.FLAT_FLOATS)]])
             ip = wp.address_of(mats.coef_i[nf + wp.static(R.FLAT_PIECES)])
             dp = wp.address_of(mats.coef_f[fb])
             tp = wp.address_of(mats.tables[mats.param[m]])
             var = mats.coef_i[nf + wp.static(R.FLAT_VAR)]
-            out_v[i] = vec(fp, ip, dp, tp, var, ang)
-            out_s[i] = sca(fp, ip, dp, tp, var, ang)
+            if wp.static(n_vars == 2):
+                ang = RF.angles_2d(wi[i], wo[i])
+                out_v[i] = vec(fp, ip, dp, tp, var, ang)
+                out_s[i] = sca(fp, ip, dp, tp, var, ang)
+            else:
+                ang3 = RF3.angles_3d(wi[i], wo[i])
+                out_v[i] = vec(fp, ip, dp, tp, var, ang3, wi[i][2])
+                out_s[i] = sca(fp, ip, dp, tp, var, ang3, wi[i][2])
 
-        _KERNELS[keys] = k
-    return _KERNELS[keys]
-
-
-def _kernel3(keys: tuple):
-    """:func:`_kernel` for 3-D flat records (``rational_flat3d``: its angles and step 8's wi.z)."""
-    if ("3d", keys) not in _KERNELS:
-        vec, sca = RF3.make_flat3d(keys, DOMAIN_MARGIN), RF3.make_flat3d(keys, DOMAIN_MARGIN, scalar=True)
-
-        @wp.kernel(module="unique", enable_backward=False)
-        def k(mats: Materials, m: int, wi: wp.array(dtype=wp.vec3), wo: wp.array(dtype=wp.vec3),
-              out_v: wp.array(dtype=wp.vec4), out_s: wp.array(dtype=wp.vec4)):
-            i = wp.tid()
-            nf = mats.coef_i[3 * m]
-            fb = mats.coef_i[3 * m + 1]
-            ang = RF3.angles_3d(wi[i], wo[i])
-            fp = wp.address_of(mats.coef_f[fb + mats.coef_i[nf + wp.static(R.FLAT_FLOATS)]])
-            ip = wp.address_of(mats.coef_i[nf + wp.static(R.FLAT_PIECES)])
-            dp = wp.address_of(mats.coef_f[fb])
-            tp = wp.address_of(mats.tables[mats.param[m]])
-            var = mats.coef_i[nf + wp.static(R.FLAT_VAR)]
-            out_v[i] = vec(fp, ip, dp, tp, var, ang, wi[i][2])
-            out_s[i] = sca(fp, ip, dp, tp, var, ang, wi[i][2])
-
-        _KERNELS["3d", keys] = k
-    return _KERNELS["3d", keys]
+        _KERNELS[keys, n_vars] = k
+    return _KERNELS[keys, n_vars]
 
 
 def _flat_theta_d_model():
@@ -126,7 +108,7 @@ def test_scalar_form_equals_the_vector_form(scene):
         if kind not in flat:
             continue
         flat[kind] += 1
-        kernel = _kernel(keys) if kind == R.NODE_FLAT2D else _kernel3(keys)
+        kernel = _kernel(keys, 2 if kind == R.NODE_FLAT2D else 3)
         out_v, out_s = (wp.zeros(len(wi), dtype=wp.vec4, device="cpu") for _ in range(2))
         wp.launch(kernel, dim=len(wi), inputs=[r.materials, m, a(wi), a(wo)], outputs=[out_v, out_s],
                   device="cpu")

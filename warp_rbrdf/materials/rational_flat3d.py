@@ -38,7 +38,7 @@ import numpy as np
 import warp as wp
 
 from ..chebyshev_dense import Native, class_of_key
-from .rational_flat2d import ANGLES_SOURCE, ATAN_LITERALS, flat_source
+from .rational_flat2d import ANGLES_SOURCE, ATAN_LITERALS, angles_2d_numpy, flat_source
 
 #: |phi_d| of :func:`angles_3d` is within this of the float64 angle of the same float32
 #: directions on the tests' pairs (radians; grazing, near-mirror and near-retro pairs included)
@@ -70,8 +70,6 @@ def angles_3d(wi: wp.vec3, wo: wp.vec3) -> wp.vec4:
 
 def angles_3d_numpy(wi, wo) -> np.ndarray:
     """:func:`angles_3d` in NumPy float32 (the same operations up to fused multiply-adds)."""
-    from .rational_flat2d import angles_2d_numpy
-
     f = np.float32
     wi, wo = np.asarray(wi, f), np.asarray(wo, f)
     a2d = angles_2d_numpy(wi, wo)
