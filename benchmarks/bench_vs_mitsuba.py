@@ -58,17 +58,16 @@ standard errors.
 ``--docs`` writes docs/bench_vs_mitsuba.md (generated; edits there are overwritten).
 The full benchmark is the one command ``python -m benchmarks.bench_vs_mitsuba --docs
 --json results/bench_vs_mitsuba.json``: every ``.bsdf`` of ``$RBRDF_DATA/rgl`` (20) under both maps,
-256 px, spp 4 16 64, the check on 2 materials at 1024 spp. Estimated 15-20 min on the 2-core
-machine at load 1-2 (the 6-material run, 12 cases with the check, took 249 s; a case is about
-20 s, the check about 20 s a material and map); ``--resolution 128`` takes about a quarter of
-that (the 2-material, 1-map, 128 px run without the check: 39-72 s at load 8-11). The
-extension adds, per heavy-tailed case, a 256- and a 1024-spp rung: about 2.5 min on a quiet
-machine at the samples/s of the last full run (ours 2 M/s, Mitsuba 5.5 M/s at 256 px), 6-8 min at
-load 4-7 (ilm_solo_m_68 / rooitou: 256 spp 26-33 s / 8-10 s a render, 1024 spp 97-107 s / 33-38 s,
-ours / Mitsuba); expect 4 such cases (ilm_solo_m_68 and chm_mint under both maps). Those two
-stay untrusted at 1024 spp under rooitou: their RMSE barely falls from 64 to 1024 spp (Mitsuba,
-ilm_solo_m_68: 0.72, 0.94, 0.80), the sign of rare events (the sun in a near-mirror lobe) not
-yet sampled often enough for N^-1/2; their ratio carries +-50-60 % (a lower bound).
+256 px, spp 4 16 64, the check on 2 materials at 1024 spp: the 36 cases that need no extension
+take a few seconds each, the check about 20 s a material and map; ``--resolution 128`` takes
+about a quarter of that. The extension adds, per heavy-tailed case, a 256- and a 1024-spp rung and then up to 7 seed pairs at
+1024 spp (16 and 7 s a render, ours / Mitsuba, on the 2-core Zen 5 machine at load 1-2): the
+whole run took 33 min there (2026-11-28, 1,989 s); expect 4 such cases (ilm_solo_m_68 and
+chm_mint under both maps). They stay untrusted at 1024 spp with 8 pairs: the standard error of
+log MSE is 0.12-0.14 under studio (the threshold 0.1) and the relative RMSE 0.38-0.66 under
+rooitou, where it barely falls from 64 to 1024 spp (Mitsuba, ilm_solo_m_68: 0.72, 0.94, 0.66),
+the sign of rare events (the sun in a near-mirror lobe) not yet sampled often enough for
+N^-1/2; their ratios carry +-18-20 % (studio) and +-38 % (rooitou), lower bounds.
 Mitsuba comes with the ``reference`` extra; its LLVM variant needs a shared libLLVM (Debian:
 ``apt-get install libllvm19``; found automatically, or set ``DRJIT_LIBLLVM_PATH``).
 """
