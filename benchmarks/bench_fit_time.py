@@ -24,16 +24,13 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+from warp_rbrdf.paths import require_data_root
+
 TOL = 0.01          # the command's first tolerance of the 3-D ladder (fit/cli/brdf3d.py TOL_3D)
 
 
-def data_dir() -> Path:
-    return Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
-
-
 def materials() -> list:
-    return sorted(p.name[:-len("_rgb.bsdf")] for p in (data_dir() / "rgl").glob("*_rgb.bsdf"))
+    return sorted(p.name[:-len("_rgb.bsdf")] for p in (require_data_root("bench_fit_time") / "rgl").glob("*_rgb.bsdf"))
 
 
 def fit_once(name: str, core: int, out: str) -> dict:
@@ -45,7 +42,7 @@ def fit_once(name: str, core: int, out: str) -> dict:
     from fit.rational.coefficient_file import save
     from fit.rational.fit3d import fit_rgl_select
 
-    brdf = read_rgl(data_dir() / "rgl" / f"{name}_rgb.bsdf")
+    brdf = read_rgl(require_data_root("bench_fit_time") / "rgl" / f"{name}_rgb.bsdf")
     c0, t0 = time.process_time(), time.perf_counter()
     res = fit_rgl_select(brdf, tol=TOL)
     cpu, wall = time.process_time() - c0, time.perf_counter() - t0
@@ -112,7 +109,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     names = args.materials or materials()
     if not names:
-        raise SystemExit(f"no RGL files under {data_dir() / 'rgl'}")
+        raise SystemExit(f"no RGL files under {require_data_root('bench_fit_time') / 'rgl'}")
     res = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load": args.load,
            "load_start": " ".join(f"{x:.2f}" for x in os.getloadavg())}
     res["rows"] = run(names, args.load)

@@ -31,15 +31,13 @@ from pathlib import Path
 
 import numpy as np
 
+from warp_rbrdf.paths import require_data_root
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "cpu_lanes.md"
 MARK = ("<!-- bench_lanes: begin -->", "<!-- bench_lanes: end -->")
 MAPS = {"studio": "studio_small_03_1k.hdr", "rooitou": "rooitou_park_1k.hdr"}
 CASES = ("rgl", "rational-2d", "rational-3d", "projected", "lambert")
-
-
-def data_dir() -> Path:
-    return Path(os.environ.get("RBRDF_DATA", ROOT.parent / "shared" / "data"))
 
 
 def default_fit3d() -> Path | None:
@@ -58,7 +56,7 @@ def scene_of(case: str, envmap: Path, spp: int, resolution: int, fit3d: Path | N
         from warp_rbrdf.geometry import load_mesh_file
         from warp_rbrdf.scene import ShapeSpec
 
-        path = data_dir() / OBJECTS[obj]
+        path = require_data_root("bench_lanes") / OBJECTS[obj]
         sc.shapes = [ShapeSpec(type="mesh", material="obj", file=path, transform=mesh_to_world(load_mesh_file(path)[0]))]
     return sc
 
@@ -70,7 +68,7 @@ def _scene_of(case: str, envmap: Path, spp: int, resolution: int, fit3d: Path | 
     from warp_rbrdf.paths import PACKAGE_DATA
     from warp_rbrdf.scene import MaterialSpec
 
-    rgl = data_dir() / "rgl"
+    rgl = require_data_root("bench_lanes") / "rgl"
     if case == "rgl":
         return sphere_scene(rgl / "cc_ibiza_sunset_rgb.bsdf", envmap, spp, resolution=resolution)
     sc = sphere_scene(("lambert", (0.5, 0.5, 0.5)), envmap, spp, resolution=resolution)
@@ -160,7 +158,7 @@ def main(argv=None) -> int:
            "load_start": os.getloadavg(), "resolution": args.resolution, "spp": args.spp, "repeats": args.repeats,
            "lanes": args.lanes, "cases": {}}
     for m in args.maps:
-        envmap = data_dir() / "envmaps" / MAPS[m]
+        envmap = require_data_root("bench_lanes") / "envmaps" / MAPS[m]
         for case in args.cases:
             if case == "rational-3d" and fit3d is None:
                 print(f"{case}: no 3-D fit (give --fit3d); left out", file=sys.stderr)
