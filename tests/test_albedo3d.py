@@ -114,7 +114,7 @@ class Synthetic:
 
 
 FIT = {"grid": (10, 9, 7), "n_random": 400, "n_objective": 1500, "verify": 0, "degrees": (4, 2), "value_factor": "none",
-       "theta_h_edges": [0.15], "tol": 0.01, "time_limit": 600.0}
+       "theta_h_edges": [0.15], "tol": 0.01, "time_limit": 600.0, "proof_rounds": 0, "prove_bound": False}
 TOL = 0.01
 #: the policy's sizes in the default run (its defaults: 9216 points per angle, 100,000 check
 #: pairs, 200,000 spike-check points); ``"default"``: the policy's own (the ``extended`` tests)
@@ -294,9 +294,12 @@ def test_a_view_fixed_miss_is_detected_and_corrected(plain, which):
     detects the miss and brings both within the tolerance, within the data bound."""
     res = plain
     truth = NonReciprocal(copy.deepcopy(res.model))
-    light_only = albedo_policy(truth, copy.deepcopy(res), tol=TOL, fixed=("light",), which=which)
+    # the proved guard is off here: it proves the refits against this truth, which differs from
+    # the data the fit was made of by construction (the view-fixed term), not as a measurement
+    # and its fit do; test_a_refit_whose_proof_leaves_the_limit_is_refused tests the guard
+    light_only = albedo_policy(truth, copy.deepcopy(res), tol=TOL, fixed=("light",), which=which, prove_guard=False)
     assert light_only["within"] and not light_only["refitted"] and light_only["max_error"] < 1e-3
-    rec = albedo_policy(truth, res, tol=TOL, which=which)
+    rec = albedo_policy(truth, res, tol=TOL, which=which, prove_guard=False)
     before = {k: np.array(rec[k]["error_before"]) for k in ("light", "view")}
     assert before["light"].max() < 1e-3 and before["view"].max() > 3 * TOL, (before["light"].max(),
                                                                              before["view"].max())
@@ -330,3 +333,37 @@ def test_policy_on_a_fit_of_rho_cos_theta_i():
 
     assert all(r["valid"] and r["tolerance"] <= r["tolerance_met"] * (1 + 1e-9) for r in res.records)
     assert np.max(verification_ratio(res, res.data.X, res.data.rho)) <= 1.0 + 1e-9
+
+
+def test_a_refit_whose_proof_leaves_the_limit_is_refused(plain, monkeypatch):
+    """The proved guard (``prove_guard``): where the proof of a candidate refit's error between
+    the grid nodes is above the limit (``spike_factor`` times the function's tolerance, or the
+    proof of the function before the policy where that is larger), the refit is refused and
+    recorded in ``spikes`` with ``proved_over_limit``, and the function is kept. Here every
+    candidate's proof is made 10^6 times larger: the view-fixed miss that the policy corrects
+    (:func:`test_a_view_fixed_miss_is_detected_and_corrected`) stays, the functions unchanged."""
+    import dataclasses
+
+    import fit.rational.albedo3d as A
+
+    class Inflated(A.Fit3DProof):
+        def prove(self, k, c, function=None, tolerance=None, **kw):
+            b = super().prove(k, c, function=function, tolerance=tolerance, **kw)
+            seen.setdefault((k, c), 0)
+            seen[(k, c)] += 1
+            return b if seen[(k, c)] == 1 else dataclasses.replace(b, proved=1e6 * max(b.proved, 1.0))
+    seen = {}
+    monkeypatch.setattr(A, "Fit3DProof", Inflated)
+    res = plain
+    before = copy.deepcopy(res.model)
+    truth = NonReciprocal(copy.deepcopy(res.model))
+    rec = albedo_policy(truth, res, tol=TOL)
+    assert seen and all(n >= 2 for n in seen.values())        # the old function once, then candidates
+    proved = [s for s in rec["spikes"] if "proved_over_limit" in s]
+    assert proved and all(s["proved_over_limit"] > 1.0 for s in proved), rec["spikes"]
+    assert not rec["refitted"] and not rec["within"]
+    for p0, p1 in zip(before.pieces, res.model.pieces):
+        for f0, f1 in zip(p0.functions, p1.functions):
+            assert np.array_equal(f0.num_coef, f1.num_coef) and np.array_equal(f0.den_coef, f1.den_coef)
+    rec_off = albedo_policy(truth, copy.deepcopy(plain), tol=TOL, prove_guard=False)
+    assert rec_off["refitted"]                   # without the guard the same candidates are kept

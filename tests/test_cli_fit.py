@@ -187,12 +187,16 @@ def test_brdf_3d_writes_a_version_4_fit_with_progress(fit3d_file):
     model = load(out)
     assert model.n_coefficients == 3 * (20 + 4)                  # degrees (3, 1) in three variables
     assert all(i["valid"] and i["vouched_range"] for i in model.function_info)
-    assert model.fit_info["valid"] and model.fit_info["domain"]["proved"] is False
+    dom, bounds = model.fit_info["domain"], model.fit_info["bound"]       # proved between the grid nodes
+    assert model.fit_info["valid"] and dom["proved_at"] == "grid cells" and len(bounds) == 3
+    assert dom["proved"] == all(b["proved"] <= b["tolerance"] for b in bounds)
     assert model.fit_info["time_limit"] > 0 and model.fit_info["stopped"] is None
     lines = stdout.splitlines()
     assert lines[0].startswith("paper_white_rgb: 3-D (theta_h, theta_d, |phi_d|), ladder from 0.01")
     assert [ln.split()[1] for ln in lines[2:5]] == ["R", "G", "B"] and "(3,1)" in lines[2]
     assert "largest error at 1000 fresh points" in lines[5]
+    assert lines[1].split()[-1] == "proved" and all(ln.rstrip().endswith("%") for ln in lines[2:5])
+    assert f"between the grid nodes proved within {dom['proved_over_stated']:.3g} x the stated bound" in lines[5]
     assert lines[-1].startswith("3-D fit paper_white_rgb_3d: 72 coefficients") and lines[-1].endswith(f"wrote {out}")
     stages = {ln.split(": ")[1] for ln in stderr.splitlines()}
     assert {"reading the file", "sampling the file", "3-D fit", "verification"} <= stages, stderr

@@ -120,9 +120,11 @@ def test_the_safety_ceiling_is_recorded(monkeypatch):
 
 def test_the_file_says_what_is_guaranteed_on_the_whole_domain_and_why_not_more(normal):
     """``fit_info["domain"]`` (issue 25: the guarantee on the whole measured domain "or the reason it
-    cannot be, per material, in the file"): proved at the data points only, with the fit's own
-    fresh-point ratio in the reason; written to the coefficient file and read back (the
-    module's selection, the one the tests above repeat)."""
+    cannot be, per material, in the file"): proved at the data points, with the fit's own
+    fresh-point ratio in the reason, and between the grid nodes by the proof the fit records per
+    piece and channel; written to the coefficient file and read back (the module's selection,
+    the one the tests above repeat). Without a proof's records it says the bound is proved at
+    the data points only."""
     import json
 
     from fit.rational.coefficient_file import load, save
@@ -130,7 +132,11 @@ def test_the_file_says_what_is_guaranteed_on_the_whole_domain_and_why_not_more(n
     res = normal
     fi = res.model.fit_info
     d = fi["domain"]
-    assert d["proved"] is False and d["proved_at"] == "data points"
+    assert d["proved_at"] == "grid cells" and "Between the nodes of the measurement's grid" in d["reason"]
+    assert d["proved"] == all(b["proved"] <= b["tolerance"] for b in fi["bound"])
+    assert len(fi["bound"]) == 3 * (len(res.edges) - 1)
+    bare = fit3d.domain_record({"n_points": 10, "theta_max_deg": 89.0, "verify_points": 40, "verify_max_ratio": 2.0})
+    assert bare["proved"] is False and bare["proved_at"] == "data points"
     assert d["n_points"] == fi["n_points"] and d["fresh_points"] == fi["verify_points"] > 0
     assert d["fresh_max_ratio"] == fi["verify_max_ratio"]
     assert f"{fi['verify_max_ratio']:.3g} x the bound" in d["reason"]

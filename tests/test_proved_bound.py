@@ -8,7 +8,7 @@ import pytest
 
 from fit.rational.function import RationalFunction
 from fit.rational.model import RationalModel, Variable
-from fit.rational.proved_bound import _grid_cells, _multilinear, prove_cells
+from fit.rational.proved_bound import UNIT_3D_GRAZING, _grid_cells, _multilinear, prove_cells
 from lab.analytic import RGLLike, phi_d_lobe
 
 
@@ -153,11 +153,11 @@ def _brute_force_3d(res, brdf, n=100000, seed=11, grazing=False):
 
 
 def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
-    """A small-budget 3-D fit with ``prove_bound``: a bound per piece and channel, never below the
-    largest error at dense random points of the measured cells, recorded in the fit's record
-    (read back from its file) and in ``fit_info["domain"]``; without it nothing is claimed. In the
-    unit with the grazing weight (``grazing=True``) the bound is again above the error at the
-    random points, and at most the bound without it."""
+    """A small-budget 3-D fit with ``prove_bound``: a bound per piece and channel in the unit of the
+    stated tolerance (with the grazing weight), never below the largest error at dense random
+    points of the measured cells, recorded in the fit's record (read back from its file) and in
+    ``fit_info["domain"]``; without it nothing is claimed. In the unit without the grazing weight
+    the bound is again above the error at the random points, and at least the recorded one."""
     from fit.rational.coefficient_file import load, save
     from fit.rational.fit3d import fit_rgl
     from fit.rational.proved_bound import prove_fit3d
@@ -169,21 +169,22 @@ def test_3d_fit_proves_its_bound_between_the_grid_nodes(tmp_path):
                tol=0.05, time_limit=60.0, albedo=False)
     res = fit_rgl(brdf, prove_bound=True, **fit)
     assert len(res.bounds) == 2 * 3 and res.model.fit_info["bound"] == [b.record() for b in res.bounds]
-    observed = _brute_force_3d(res, brdf)
-    for b in res.bounds:
-        assert b.proved is not None, b
-        assert b.verified <= b.proved and observed[(b.piece, b.channel)] <= b.proved, (b, observed)
-        assert b.proved <= 50 * observed[(b.piece, b.channel)] + b.tolerance   # not vacuous
+    observed_w = _brute_force_3d(res, brdf, grazing=True)
+    for b in res.bounds:          # recorded in the unit of the stated tolerance (the grazing weight)
+        assert b.proved is not None and b.unit.startswith(UNIT_3D_GRAZING), b
+        assert b.verified <= b.proved and observed_w[(b.piece, b.channel)] <= b.proved, (b, observed_w)
+        assert b.proved <= 50 * observed_w[(b.piece, b.channel)] + b.tolerance   # not vacuous
     d = res.model.fit_info["domain"]
     assert d["proved_at"] == "grid cells" and d["proved_bound"] == max(b.proved for b in res.bounds)
     assert d["proved"] == all(b.proved <= b.tolerance for b in res.bounds)
+    assert d["proved_over_stated"] == max(b.proved / b.tolerance for b in res.bounds)
     save(res.model, tmp_path / "f.json")
     assert load(tmp_path / "f.json").fit_info["bound"] == res.model.fit_info["bound"]
-    weighted = prove_fit3d(res, brdf, grazing=True)
-    observed_w = _brute_force_3d(res, brdf, grazing=True)
-    for b, s in zip(weighted, res.bounds):
-        assert observed_w[(b.piece, b.channel)] <= b.proved <= s.proved * (1 + 1e-9), (b, observed_w)
-    plain = fit_rgl(brdf, **fit)
+    plain_unit = prove_fit3d(res, brdf)          # without the grazing weight: a smaller unit
+    observed = _brute_force_3d(res, brdf)
+    for b, w in zip(plain_unit, res.bounds):
+        assert observed[(b.piece, b.channel)] <= b.proved and w.proved <= b.proved * (1 + 1e-9), (b, observed)
+    plain = fit_rgl(brdf, prove_bound=False, **fit)
     assert plain.bounds is None and "bound" not in plain.model.fit_info
     assert plain.model.fit_info["domain"]["proved"] is False
 
@@ -267,3 +268,65 @@ def test_status_says_proved_or_verified_only_and_why():
     s = summary([ok, real, gap, none])
     assert s["proved"] is None and len(s["verified_only"]) == 3
     assert [v.split(":")[0] for v in s["verified_only"]] == ["piece 1 R", "piece 2 R", "piece 3 R"]
+
+
+def test_proof_guided_refit_finds_and_removes_errors_between_the_grid_nodes():
+    """``proof_rounds`` (:func:`fit.rational.verify3d.refit_between_nodes`): a fit constrained only
+    at a coarse grid and 20 random points leaves its stated bound by hundreds of times between
+    the grid nodes (proved); the proof-guided refit starts from that proof (its first round's
+    ratio is the fit's), adds the worst points of the cells it finds to the data, refits only the
+    functions outside their bound there, and ends with a proved bound several times lower, every
+    data point (the added ones included) within the stated bound."""
+    from fit.rational.fit3d import fit_rgl, verification_ratio
+
+    brdf = RGLLike(_broad_lobe, "broad_lobe")
+    fit = dict(grid=(5, 5, 3), n_random=20, n_objective=0, verify=0, degrees=(5, 2), theta_h_edges=[0.3],
+               tol=0.05, time_limit=60.0, albedo=False)
+    before = fit_rgl(brdf, proof_rounds=0, **fit)
+    after = fit_rgl(brdf, proof_rounds=2, **fit)
+    d0, d1 = before.model.fit_info["domain"], after.model.fit_info["domain"]
+    assert d0["proved_over_stated"] > 100, d0
+    log = after.model.fit_info["proof_refit"]["log"]
+    assert log[0]["proved_over_stated"] == pytest.approx(d0["proved_over_stated"], rel=1e-9)
+    assert d1["proved_over_stated"] < 0.25 * d0["proved_over_stated"], (d0, d1)
+    added = sum(e["points_added"] for e in log)
+    assert all(e["points_added"] > 0 and e["refitted"] for e in log) and len(after.data.X) == len(before.data.X) + added
+    assert np.max(verification_ratio(after, after.data.X, after.data.rho)) <= 1.0 + 1e-9
+    kept = {f"{k}{'RGB'[c]}" for k in range(2) for c in range(3)} - set(log[0]["refitted"])
+    if kept:            # a function no round refitted is the first fit's, coefficient for coefficient
+        for name in kept - set(log[1]["refitted"]):
+            k, c = int(name[0]), "RGB".index(name[1])
+            f0, f1 = before.model.pieces[k].functions[c], after.model.pieces[k].functions[c]
+            assert np.array_equal(f0.num_coef, f1.num_coef)
+
+
+def test_a_proof_memo_reuses_unchanged_functions_only(monkeypatch):
+    """``Fit3DProof(..., memo=)``: the proof of a function already proved under the same value
+    range and target is reused (no cell is bounded again); a different function in its place, or
+    a request for more kept cells than the stored proof kept, is proved again."""
+    import copy
+
+    import fit.rational.proved_bound as pb
+    from fit.rational.fit3d import fit_rgl
+
+    brdf = RGLLike(_broad_lobe, "broad_lobe")
+    res = fit_rgl(brdf, grid=(5, 5, 3), n_random=20, n_objective=0, verify=0, degrees=(3, 1),
+                  theta_h_edges=[0.3], tol=0.05, time_limit=60.0, albedo=False, proof_rounds=0, prove_bound=False)
+    calls = []
+    real = pb.prove_cells
+
+    def counting(*a, **kw):
+        calls.append(kw.get("piece"))
+        return real(*a, **kw)
+    monkeypatch.setattr(pb, "prove_cells", counting)
+    memo = {}
+    first = pb.prove_fit3d(res, brdf, grazing=True, memo=memo)
+    assert len(calls) == 6
+    again = pb.prove_fit3d(res, brdf, grazing=True, memo=memo)
+    assert len(calls) == 6 and all(a is b for a, b in zip(first, again))
+    other = copy.deepcopy(res.model.pieces[1].functions[0])
+    res.model.pieces[1].functions[0] = other
+    third = pb.prove_fit3d(res, brdf, grazing=True, memo=memo)
+    assert len(calls) == 7 and third[3] is not first[3] and third[0] is first[0]
+    pb.Fit3DProof(res, brdf, grazing=True, memo=memo).prove(0, 0, keep_above=1.0)
+    assert len(calls) == 8

@@ -32,7 +32,10 @@ method"):
   which the evaluation divides by cos theta_i, finite where the RGL data grow as 1 / cos theta_i
   towards the light's horizon; a version-4 file) or ``none`` (rho itself; a version-3 file);
 * ``--grid``, ``--random``, ``--verify``, ``--no-albedo``: the data grid, the random points of
-  each kind, the fresh points of the verification and the directional-albedo policy.
+  each kind, the fresh points of the verification and the directional-albedo policy;
+* ``--proof-rounds``: the refits of the proof-guided refit (default 2; 0: none). Every fit's
+  file records the proof of its error between the grid nodes per piece and channel, in the unit
+  of its stated bound (the table's ``proved`` column).
 
 There is no seed: every random draw of a 3-D fit has a fixed seed, so the same file and flags
 give the same coefficients, bit for bit (docs/fitting.md, "Budgets").
@@ -81,7 +84,7 @@ LAYOUTS = ("select", "pieces", "single")
 FLAGS = {"layout": "--layout", "degrees": "--degrees", "target_rmse": "--target-rmse", "time_limit": "--time-limit",
          "grid": "--grid",
          "n_random": "--random", "verify": "--verify", "no_albedo": "--no-albedo", "objective": "--objective",
-         "select_by": "--select-by", "value_factor": "--value-factor"}
+         "select_by": "--select-by", "value_factor": "--value-factor", "proof_rounds": "--proof-rounds"}
 MAX_GRID = 200            # per dimension of --grid (8 million points at most)
 MAX_POINTS = 1_000_000    # --random (each kind) and --verify
 
@@ -132,6 +135,12 @@ def add_flags(p) -> None:
     g.add_argument("--verify", type=integer(0, MAX_POINTS), default=None, metavar="N",
                    help=f"fresh points the fit is checked at, the worst refitted (default {DEFAULT_VERIFY}; "
                         "0: none)")
+    g.add_argument("--proof-rounds", dest="proof_rounds", type=integer(0, 10), default=None, metavar="N",
+                   help=f"refits guided by the proof of the error between the grid nodes (default "
+                        f"{d.proof_rounds}; 0: none): the cells where the proof finds the fit outside its stated "
+                        "bound (spikes the fresh points miss) give data points, and the functions outside "
+                        "their bound there are fitted again. The file records the proof of the fit it holds "
+                        "per piece and channel. docs/fitting.md, \"The proof-guided refit\"")
     g.add_argument("--objective", choices=OBJECTIVES, default=None,
                    help=f"what the second stage minimises and the layout selection compares (default "
                         f"{d.objective}): relative, the squared relative error of rho over cosine-distributed "
@@ -173,6 +182,7 @@ def settings_from_args(args, wall_limit=None) -> tuple:
                       grid=d.grid if args.grid is None else tuple(args.grid),
                       n_random=d.n_random if args.n_random is None else args.n_random,
                       verify=d.verify if args.verify is None else args.verify,
+                      proof_rounds=d.proof_rounds if getattr(args, "proof_rounds", None) is None else args.proof_rounds,
                       albedo=not args.no_albedo, target_rmse=target,
                       objective=d.objective if args.objective is None else args.objective,
                       select_by=d.select_by if args.select_by is None else args.select_by,
@@ -244,9 +254,21 @@ def run(args, out: Path, deadline) -> int:
     return 1
 
 
+def _proved_line(dom: dict) -> str | None:
+    """The proof's part of the summary line, from ``fit_info["domain"]``."""
+    if dom.get("proved_at") != "grid cells":
+        return None
+    if dom.get("proved_bound") is None:
+        return "between the grid nodes not proved (Q inconclusive on a cell)"
+    return (f"between the grid nodes proved within {dom['proved_over_stated']:.3g} x the stated bound"
+            + (" (within it)" if dom.get("proved") else ""))
+
+
 def _print_table(name: str, res, settings) -> None:
     """The summary of a 3-D fit on stdout: the layout, then per piece and channel its degrees,
-    coefficients, stated bound and RMS error (fractions of the error unit s), stage and Q > 0."""
+    coefficients, stated bound and RMS error (fractions of the error unit s), stage, Q > 0 and
+    the error proved between the grid nodes (same unit; ``none``: Q inconclusive), then the
+    verification, the proof and the albedo on one line."""
     info = res.model.fit_info
     layouts = info.get("variants") or []
     tried = ", ".join(f"{v['variant']}: {v.get('coefficients', '-')} coef, validation RMSE "
@@ -254,21 +276,26 @@ def _print_table(name: str, res, settings) -> None:
                       for v in layouts)
     print(f"{display_text(name)}: 3-D (theta_h, theta_d, |phi_d|), ladder from {settings.tol:g}, "
           f"{res.n_points} data points up to {info.get('theta_max_deg', 0):.4g} deg; layouts {tried}")
+    proved = {(int(b["piece"]), b["channel"]): b["proved"] for b in info.get("bound") or []}
     print(f"{'theta_h deg':14s}{'ch':>3s}{'degrees':>9s}{'coefs':>7s}{'bound':>9s}{'rms':>8s}"
-          f"{'stage':>11s}{'Q>0':>5s}")
+          f"{'stage':>11s}{'Q>0':>5s}" + (f"{'proved':>10s}" if proved else ""))
     pieces = getattr(res.model, "pieces", None) or [res.model]
-    for leaf in pieces:
+    for k, leaf in enumerate(pieces):
         lo, hi = np.degrees(leaf.variables[0].domain)
         for ch, f, r in zip(leaf.outputs, leaf.functions, leaf.function_info):
             deg = r.get("degrees", ["?", "?"])
+            pb = proved.get((k, ch), "-")
             print(f"{f'{lo:.3g}-{hi:.3g}':14s}{display_text(ch):>3s}{f'({deg[0]},{deg[1]})':>9s}"
                   f"{f.n_coefficients:7d}{100 * r['tolerance']:8.2f}%{100 * r['rms_rel_error']:7.2f}%"
-                  f"{r['stage']['kind']:>11s}{'yes' if r['q_certificate']['certified'] else 'NO':>5s}")
+                  f"{r['stage']['kind']:>11s}{'yes' if r['q_certificate']['certified'] else 'NO':>5s}"
+                  + ((f"{'none':>10s}" if pb is None else f"{'-':>10s}" if pb == "-" else f"{100 * pb:9.3g}%")
+                     if proved else ""))
     ratio = info.get("verify_max_ratio")
     alb = info.get("albedo") or {}
     parts = [f"validation RMSE {res.validation_rmse:.4g}" if res.validation_rmse is not None else None,
              (f"largest error at {info.get('verify_points')} fresh points {ratio:.3g} x the bound"
               if ratio is not None else "no verification"),
+             _proved_line(info.get("domain") or {}),
              (f"directional albedo within {100 * alb['tol']:g} %" if alb.get("within") else
               f"directional albedo off by up to {100 * alb['max_error']:.3g} %") if alb else "no albedo policy",
              "time limit reached" if info.get("stopped") == "time" else None]

@@ -20,6 +20,7 @@ import numpy as np
 from ..formats.angles import cosine_directions
 from .ceiling import Ceiling
 from .model import value_factor_weights, vouched_envelope
+from .proved_bound import Fit3DProof
 from .refine import refine
 from .samples3d import grazing_weight, sample_grid
 from .secant import log_intervals, secant_slope, secant_weights
@@ -157,7 +158,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                   rmse_growth: float = DEFAULT_RMSE_GROWTH, total_growth: float = DEFAULT_TOTAL_GROWTH,
                   n_check: int = 100_000,
                   spike_factor: float = DEFAULT_SPIKE_FACTOR, n_spike: int = 200_000,
-                  max_refits: int = DEFAULT_MAX_REFITS, ceiling=None, fixed=FIXED) -> dict:
+                  max_refits: int = DEFAULT_MAX_REFITS, ceiling=None, fixed=FIXED, prove_guard: bool = True) -> dict:
     """Measure and, where it is outside ``tol``, correct the directional albedo (both ways:
     ``fixed``, the kinds of :func:`albedo_quadrature`, light-fixed and view-fixed by default) of a
     :class:`fit.rational.result3d.Fit3D` made by :func:`fit.rational.rgl3d.fit_rgl` (its data in
@@ -165,7 +166,12 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
     the record, also written to ``res.model.fit_info["albedo"]`` and ``res.albedo``. Budgets (counts): the rounds of
     ``weights`` and at most ``max_refits`` channel corrections (a channel's pieces refitted at
     one weight); ``time_limit`` (CPU seconds of the process; None: none) and a caller's ``ceiling``
-    (:class:`fit.rational.ceiling.Ceiling`) are only safety nets (``stopped`` = "time")."""
+    (:class:`fit.rational.ceiling.Ceiling`) are only safety nets (``stopped`` = "time").
+    ``prove_guard`` (default on): a refit of a piece is also refused where the proof of its error
+    between the grid nodes of the measurement (:class:`fit.rational.proved_bound.Fit3DProof`, the
+    unit of the stated tolerance) is above both ``spike_factor`` times the function's tolerance
+    and the proof of the function before the policy: a spike narrower than the sampled guard's
+    fresh points is refused too."""
     t0 = time.perf_counter()
     own = Ceiling(time_limit)
 
@@ -240,6 +246,7 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
         oc = np.asarray(model.values(Xc), np.float64)      # in the functions' unit, as the spike check
         gc = grazing_weight(Xc, float(fi.get("grazing_cos", 0.25)))
         rec["spikes"] = []
+        prover, orig_proved = None, {}
         orig = {(k, c): p.functions[c] for k, p in enumerate(pieces) for c in range(3)}   # before any round
         rmse = rmse0.copy()
         rec.update(rmse_growth=float(rmse_growth), total_growth=float(total_growth), check_pairs=int(n_check),
@@ -316,6 +323,19 @@ def albedo_policy(brdf, res, *, tol: float = DEFAULT_ALBEDO_TOL, n_views: int = 
                         if jump > spike_factor * T:
                             rec["spikes"].append({"piece": k, "channel": "RGB"[c], "weight": float(lam),
                                                   "change_over_T": jump / T})
+                            continue
+                    if prove_guard:      # and none between the grid nodes, proved
+                        if prover is None:
+                            prover = Fit3DProof(res, brdf, grazing=True)
+                        limit = spike_factor * float(r0["tolerance"])
+                        if (k, c) not in orig_proved:
+                            orig_proved[(k, c)] = prover.prove(k, c, function=orig[(k, c)], tolerance=limit).proved
+                        before = orig_proved[(k, c)]
+                        limit = max(limit, before if before is not None else 0.0)
+                        after = prover.prove(k, c, function=f2, tolerance=limit).proved
+                        if after is None or after > limit:
+                            rec["spikes"].append({"piece": k, "channel": "RGB"[c], "weight": float(lam),
+                                                  "proved_over_limit": None if after is None else after / limit})
                             continue
                     fitv = np.maximum(np.exp(f2(U)) - offset, 0.0)
                     e = np.abs(fitv - y) / scale

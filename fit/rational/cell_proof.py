@@ -189,7 +189,8 @@ def _joint_bound(leaf, c: int, enc, t_lo, t_hi, m, s0, s_lo):
 
 def prove_cells(leaf, c: int, lo, hi, corners, scale, tolerance: float, piece: int = 0, unit: str = "",
                 max_rounds: int = DEFAULT_ROUNDS, max_cells: int = DEFAULT_MAX_CELLS, gap: float = 0.05,
-                enclose=None, enclosure: str = "joint", floor=None, weight=None) -> ProvedBound:
+                enclose=None, enclosure: str = "joint", floor=None, weight=None, keep_above: float | None = None,
+                max_kept: int = 4000) -> ProvedBound:
     """The proved bound of channel ``c`` of ``leaf`` against a multilinear interpolant on cells.
 
     ``lo``, ``hi`` (N, n): the cells, boxes in the leaf's transformed coordinates (inside its box);
@@ -201,7 +202,11 @@ def prove_cells(leaf, c: int, lo, hi, corners, scale, tolerance: float, piece: i
     lower bound >= 1 on each box of a factor of the unit that depends on the position only (the
     unit is ``weight`` times the one ``scale`` and ``floor`` describe); ``tolerance``: the target.
     ``enclosure``: one of :data:`ENCLOSURES`. ``enclose`` (tests): replaces the Bernstein
-    enclosure of P/Q, ``enclose(fn, t_lo, t_hi)`` (the ``"ranges"`` enclosure only)."""
+    enclosure of P/Q, ``enclose(fn, t_lo, t_hi)`` (the ``"ranges"`` enclosure only).
+    ``keep_above`` (None: the :data:`WORST_KEPT` worst cells): ``worst_cells`` holds every finished
+    cell whose bound is above ``keep_above`` times the tolerance (at most ``max_kept``, the largest
+    bounds first; at least the :data:`WORST_KEPT` worst), where the proof-guided refit
+    (:func:`fit.rational.verify3d.refit_between_nodes`) looks for the fit's spikes."""
     if enclosure not in ENCLOSURES:
         raise ValueError(f"enclosure must be one of {ENCLOSURES}")
     t0 = time.perf_counter()
@@ -250,7 +255,10 @@ def prove_cells(leaf, c: int, lo, hi, corners, scale, tolerance: float, piece: i
         n_cells += int(done.sum())
         kept = {k: np.concatenate([kept[k], v[done]]) for k, v in
                 (("lo", lo), ("hi", hi), ("corners", corners), ("bound", bound))}
-        top = np.argsort(-kept["bound"])[:WORST_KEPT]
+        n_keep = WORST_KEPT
+        if keep_above is not None:
+            n_keep = min(max(WORST_KEPT, int(np.sum(kept["bound"] > keep_above * tolerance))), max_kept)
+        top = np.argsort(-kept["bound"])[:n_keep]
         kept = {k: v[top] for k, v in kept.items()}
         keep = ~done
         lo, hi, corners = lo[keep], hi[keep], corners[keep]

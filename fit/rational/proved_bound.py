@@ -55,6 +55,7 @@ tolerance, else "verified only" and why.
 """
 from __future__ import annotations
 
+import copy
 import itertools
 
 import numpy as np
@@ -62,6 +63,7 @@ import numpy as np
 from .cell_proof import (DEFAULT_MAX_CELLS, DEFAULT_ROUNDS, ENCLOSURES, EPS, WORST_KEPT,  # noqa: F401
                          ProvedBound, _leaf_output, _multilinear, prove_cells)
 from .model import apply_input_transform, value_factor_weights
+from .result3d import file_value_range
 
 
 UNIT_2D = "|fit - cluster| / max(cluster, abs_floor / tolerance) (relative, floored), nearest-cluster table"
@@ -210,54 +212,101 @@ def grazing_weight_lower(leaf, grazing_cos: float):
     return weight
 
 
-def prove_fit3d(res, brdf, grid=None, grazing: bool = False, **kw) -> list:
+class Fit3DProof:
+    """The proof of :func:`prove_fit3d` one piece and channel at a time: the measurement on its grid
+    (:func:`measurement_grid`) and each piece's cells are made once, :meth:`prove` bounds one
+    function of the fit (or another function in its place: the guard of the albedo policy,
+    :mod:`fit.rational.albedo3d`, proves a candidate refit before it keeps it). Arguments as
+    :func:`prove_fit3d`; ``memo`` (a dict the caller keeps between proofs of the same fit's
+    refits): a function proved before, unchanged and under the same value range, is not proved
+    again. What is proved is the model its coefficient file holds: a copy of the fit
+    with the file's one value range (:func:`fit.rational.result3d.file_value_range`), whose clamp
+    does not hide a spike of a later theta_h piece as that piece's own, lower ``value_max`` does
+    while the fit is made."""
+
+    def __init__(self, res, brdf, grid=None, grazing: bool = False, memo: dict | None = None):
+        from .settings import DEFAULT_CHANNEL_FLOOR, DEFAULT_GRAZING_COS
+        fi = res.model.fit_info
+        model = copy.deepcopy(res.model)
+        file_value_range(model)
+        self.model, self.grazing = model, bool(grazing)
+        self.grazing_cos = float(fi.get("grazing_cos", DEFAULT_GRAZING_COS))
+        tm = float(res.data.theta_max) if res.data is not None else float(np.deg2rad(fi["theta_max_deg"]))
+        grid = tuple(grid or (res.settings.grid if res.settings is not None else fi["grid"]))
+        axes, rho, measured = measurement_grid(brdf, tm, grid)
+        factor = getattr(res.model, "value_factor", "none")
+        if factor != "none":        # the functions give rho / w (step 8): the nodes' values in their unit
+            U = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
+            X = np.stack([U[..., 0] ** 2, U[..., 1], U[..., 2]], axis=-1)
+            rho = rho / value_factor_weights(X, factor)[..., None]
+        self.unit = (UNIT_3D_GRAZING if grazing else UNIT_3D) + (
+            f"; fit and m in the functions' unit, rho / ({factor})" if factor != "none" else "")
+        self.noise = np.asarray(res.noise, np.float64)
+        self.channel_floor = float(fi.get("channel_floor", DEFAULT_CHANNEL_FLOOR))
+        self.tol = {(r["piece"], "RGB".index(r["channel"])): float(r["tolerance"]) for r in res.records}
+        c_lo, c_hi, corners = _grid_cells(axes, rho, measured)
+        self.leaves, self.originals = leaves(model), leaves(res.model)
+        self.cells = [_clip(c_lo, c_hi, corners, _box(leaf)) for leaf in self.leaves]
+        self.memo = memo
+
+    def _scale(self, cr):
+        mins = cr.min(axis=1)                                           # (N, 3)
+        return mins, np.maximum(self.channel_floor * mins.max(axis=1), 0.0)
+
+    def prove(self, k: int, c: int, function=None, tolerance=None, **kw) -> ProvedBound:
+        """:class:`ProvedBound` of piece ``k``, channel ``c`` (``function``: this rational function
+        in place of the fit's; ``tolerance``: the target, default the piece's and channel's stated
+        tolerance). ``kw``: :func:`prove_cells`'s budget."""
+        leaf = self.leaves[k]
+        fn = self.originals[k].functions[c] if function is None else function     # the fit's own object
+        target = self.tol.get((k, c), 0.0) if tolerance is None else float(tolerance)
+        keep = kw.get("keep_above")
+        key = (k, c, self.grazing, leaf.value_min, leaf.value_max, target,
+               tuple(sorted((a, v) for a, v in kw.items() if a != "keep_above")))
+        hit = self.memo.get(key) if self.memo is not None else None
+        if hit is not None and hit[0] is fn and (keep is None or hit[2] == keep):
+            return hit[1]
+        lo, hi, cc = self.cells[k]
+        noise = self.noise
+
+        def scale_c(cr):
+            mins, floor = self._scale(cr)
+            return np.maximum(np.maximum(mins[:, c], noise[c]), floor)
+
+        def s0(cr):
+            return np.maximum(self._scale(cr)[1], noise[c])
+        saved = leaf.functions[c]
+        if function is not None:
+            leaf.functions[c] = function
+        try:
+            b = prove_cells(leaf, c, lo, hi, cc, scale_c, target, piece=k, unit=self.unit, floor=s0,
+                            weight=grazing_weight_lower(leaf, self.grazing_cos) if self.grazing else None, **kw)
+        finally:
+            leaf.functions[c] = saved
+        if self.memo is not None:
+            self.memo[key] = (fn, b, keep)   # holds the function: an identity test, never a reused id
+        return b
+
+
+def prove_fit3d(res, brdf, grid=None, grazing: bool = False, memo: dict | None = None, **kw) -> list:
     """:class:`ProvedBound` per piece and channel of a 3-D fit ``res``
     (:class:`fit.rational.result3d.Fit3D`) against the measurement ``brdf`` on
     :func:`measurement_grid` (``grid``: default the fit's data grid), :data:`UNIT_3D`; the
     target of each is the piece's and channel's stated tolerance. ``grazing``: the unit with the
     fit's grazing weight (:data:`UNIT_3D_GRAZING`, the unit of its stated tolerance;
-    :func:`grazing_weight_lower`). ``kw``: :func:`prove_cells`'s budget."""
-    from .settings import DEFAULT_CHANNEL_FLOOR, DEFAULT_GRAZING_COS
-    fi = res.model.fit_info
-    gc = float(fi.get("grazing_cos", DEFAULT_GRAZING_COS))
-    tm = float(res.data.theta_max) if res.data is not None else float(np.deg2rad(fi["theta_max_deg"]))
-    grid = tuple(grid or (res.settings.grid if res.settings is not None else fi["grid"]))
-    axes, rho, measured = measurement_grid(brdf, tm, grid)
-    factor = getattr(res.model, "value_factor", "none")
-    if factor != "none":        # the functions give rho / w (step 8): the nodes' values in their unit
-        U = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1)
-        X = np.stack([U[..., 0] ** 2, U[..., 1], U[..., 2]], axis=-1)
-        rho = rho / value_factor_weights(X, factor)[..., None]
-    unit_note = f"; fit and m in the functions' unit, rho / ({factor})" if factor != "none" else ""
-    noise = np.asarray(res.noise, np.float64)
-    cf = float(fi.get("channel_floor", DEFAULT_CHANNEL_FLOOR))
-    c_lo, c_hi, corners = _grid_cells(axes, rho, measured)
-    tol = {(r["piece"], "RGB".index(r["channel"])): float(r["tolerance"]) for r in res.records}
-
-    def scale(cr):
-        mins = cr.min(axis=1)                                           # (N, 3)
-        return mins, np.maximum(cf * mins.max(axis=1), 0.0)
-    out = []
-    for k, leaf in enumerate(leaves(res.model)):
-        lo, hi, cc = _clip(c_lo, c_hi, corners, _box(leaf))
-        for c in range(3):
-            def scale_c(cr, c=c):
-                mins, floor = scale(cr)
-                return np.maximum(np.maximum(mins[:, c], noise[c]), floor)
-
-            def s0(cr, c=c):
-                return np.maximum(scale(cr)[1], noise[c])
-            out.append(prove_cells(leaf, c, lo, hi, cc, scale_c, tol.get((k, c), 0.0), piece=k,
-                                   unit=(UNIT_3D_GRAZING if grazing else UNIT_3D) + unit_note, floor=s0,
-                                   weight=grazing_weight_lower(leaf, gc) if grazing else None, **kw))
-    return out
+    :func:`grazing_weight_lower`). ``memo``: as for :class:`Fit3DProof`. ``kw``: :func:`prove_cells`'s
+    budget."""
+    proof = Fit3DProof(res, brdf, grid, grazing, memo)
+    return [proof.prove(k, c, **kw) for k in range(len(proof.leaves)) for c in range(3)]
 
 
-def record_fit3d(res, brdf, **kw) -> list:
-    """:func:`prove_fit3d` of the 3-D fit ``res`` against ``brdf``, kept in ``res.bounds`` and
-    its records in ``res.model.fit_info["bound"]`` (what :func:`fit.rational.result3d.domain_record`
-    then reads)."""
-    res.bounds = prove_fit3d(res, brdf, **kw)
+def record_fit3d(res, brdf, grazing: bool = True, **kw) -> list:
+    """:func:`prove_fit3d` of the 3-D fit ``res`` against ``brdf``, in the unit of its stated
+    tolerance by default (``grazing``, :data:`UNIT_3D_GRAZING`: each record's ``proved`` and
+    ``tolerance`` are in one unit), kept in ``res.bounds`` and its records in
+    ``res.model.fit_info["bound"]`` (what :func:`fit.rational.result3d.domain_record` then
+    reads)."""
+    res.bounds = prove_fit3d(res, brdf, grazing=grazing, **kw)
     res.model.fit_info["bound"] = records(res.bounds)
     return res.bounds
 

@@ -147,6 +147,7 @@ def domain_record(fit_info: dict) -> dict:
     between the nodes of a grid (:data:`fit.rational.proved_bound.UNIT_3D`) is proved on every
     cell of it: ``proved`` is True when every piece's and channel's proved bound is within its
     stated tolerance, ``proved_bound`` the largest (None: Q inconclusive somewhere),
+    ``proved_over_stated`` the largest ratio of a proved bound to its stated tolerance,
     ``proved_fraction`` the smallest fraction of a piece's domain within its tolerance. Without
     those records ``proved`` is False (not proved between the data points)."""
     n = fit_info.get("n_points")
@@ -171,13 +172,16 @@ def domain_record(fit_info: dict) -> dict:
         between = "Between the grid nodes: not proved (Q's Bernstein coefficients inconclusive on a cell)"
     else:
         frac = min(b["proved_fraction"] for b in bounds)
+        over = max(b["proved"] / max(b["tolerance"], 1e-300) for b in bounds)
         between = (f"Between the nodes of the measurement's grid (trilinear): error proved <= {proved_max:.3g} "
                    f"(unit of the bound records), {'within' if proved else 'NOT within'} the stated tolerance "
-                   f"everywhere; within it on at least {100 * frac:.3g} % of each piece")
+                   f"everywhere (at most {over:.3g} x it); within it on at least {100 * frac:.3g} % of each piece")
     rec = {"proved": proved, "proved_at": "grid cells" if bounds else "data points", "n_points": n,
            "theta_max_deg": tm, "fresh_points": m, "fresh_max_ratio": ratio,
            "proved_bound": proved_max if bounds else None,
            "proved_fraction": min((b["proved_fraction"] for b in bounds), default=None),
+           "proved_over_stated": (max(b["proved"] / max(b["tolerance"], 1e-300) for b in bounds)
+                                  if bounds and proved_max is not None else None),
            "reason": (f"bound proved at the {n} data points (theta_i, theta_o <= {tm:.4g} deg) and Q > 0 "
                       f"on every piece; {checked}. {between}")}
     fit_info["domain"] = rec

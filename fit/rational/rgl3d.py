@@ -20,7 +20,7 @@ from .proved_bound import record_fit3d
 from .result3d import FitData3D, Fit3D, domain_record, file_value_range
 from .samples3d import objective_points, sample_rgl
 from .settings import DEFAULT_ALBEDO_REFITS, DEFAULT_ALBEDO_RMSE_GROWTH, DEFAULT_ALBEDO_TOTAL_GROWTH, Fit3DSettings
-from .verify3d import verification_ratio, verify_and_refit
+from .verify3d import refit_between_nodes, verification_ratio, verify_and_refit
 
 
 def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=None, progress=None,
@@ -50,9 +50,13 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     ``wall_limit`` (default None) a wall-clock limit a user chose, recorded as
     ``fit_info["stopped"] = "time"`` when either is passed. ``progress(stage, done, total)``
     (:mod:`fit.progress`): stages ``"sampling the file"``, ``"3-D fit"`` (functions done),
-    ``"verification"`` (rounds), ``"3-D refit"``, ``"albedo policy"``, ``"proving the bound"``.
-    ``prove_bound`` (default off): last, the error between the grid nodes of the measurement is
-    proved per piece and channel (:func:`fit.rational.proved_bound.record_fit3d`: ``bounds``,
+    ``"verification"`` (rounds), ``"3-D refit"``, ``"proof-guided refit"`` (rounds), ``"albedo policy"``,
+    ``"proving the bound"``.
+    Where the proof of the error between the grid nodes finds the fit outside its stated bound
+    (spikes narrower than the fresh points see), at most ``proof_rounds`` refits add the worst
+    points there (:func:`fit.rational.verify3d.refit_between_nodes`; before the albedo policy).
+    ``prove_bound`` (default on): last, the error between the grid nodes of the measurement is
+    proved per piece and channel in the unit of the stated tolerance (:func:`fit.rational.proved_bound.record_fit3d`: ``bounds``,
     ``fit_info["bound"]``, and ``fit_info["domain"]`` says what is proved). ``file_range`` (default
     on): the model returned (and ``model_before_albedo``) holds the value range of its coefficient
     file (:func:`fit.rational.result3d.file_value_range`), so that it evaluates as the saved fit;
@@ -78,6 +82,10 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
                       ceiling=ceiling, progress=progress)
     res.data = FitData3D(X, rho, tm, src, objective, name, progress)
     res = verify_and_refit(brdf, res, s.verify, s.verify_rounds, ceiling=ceiling, refit_above=s.verify_above)
+    memo = {}               # proofs of functions no later step changes are not repeated
+    if s.proof_rounds:
+        res = refit_between_nodes(brdf, res, s.proof_rounds, s.proof_above, ceiling=ceiling, progress=progress,
+                                  memo=memo)
     if s.albedo:
         report(progress, "albedo policy", 0, 1)
         albedo_step(brdf, res, s.albedo_tol, s.albedo_time, s.verify, s.albedo_rmse_growth, ceiling=ceiling,
@@ -89,7 +97,7 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
         file_value_range(res.model_before_albedo)
     if s.prove_bound:       # the error between the grid nodes, proved (fit.rational.proved_bound)
         report(progress, "proving the bound", 0, 1)
-        record_fit3d(res, brdf)
+        record_fit3d(res, brdf, memo=memo)
         report(progress, "proving the bound", 1, 1)
     domain_record(res.model.fit_info)
     res.time_s = time.perf_counter() - t0

@@ -20,7 +20,7 @@ from .proved_bound import record_fit3d
 from .rgl3d import albedo_step, fit_rgl
 from .settings import Fit3DSettings
 from .variables3d import evaluate_directions
-from .verify3d import verify_and_refit
+from .verify3d import refit_between_nodes, verify_and_refit
 
 #: The layouts :func:`fit_rgl_select` tries by default (fit_rgl keyword arguments), in order:
 #: six theta_h pieces (edges 0.05, 0.1, 0.2, 0.4, 0.8 rad: the peak, the lobe's shoulder and three
@@ -68,7 +68,8 @@ TARGET_LADDER = tuple({"theta_h_edges": [], "degrees": d, "verify_rounds": 1, "v
 SELECT_MARGIN = 0.05
 #: Settings of the selection itself (its budgets, verification and albedo policy), not of a
 #: layout's fit: not listed in the layouts' ``"options"`` log.
-_SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above", "albedo",
+_SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above", "proof_rounds",
+                              "proof_above", "albedo",
                               "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
                               "albedo_refits", "max_variants", "target_rmse", "image_check", "select_by"})
 
@@ -139,15 +140,18 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     The budgets are counts (docs/fitting.md, "Budgets"): at most ``max_variants`` layouts are fitted (None: all; later ones
     are logged as skipped, "budget"); the chosen fit is then verified with at most ``verify_rounds``
     refits (:func:`fit.rational.verify3d.verify_and_refit`; a layout's own ``"verify_rounds"`` entry
-    overrides it) and the albedo policy applied last with at most ``albedo_refits`` channel
-    corrections (``albedo``, as in :func:`fit.rational.rgl3d.fit_rgl`). ``time_limit`` (CPU seconds of
+    overrides it), refitted where the proof between the grid nodes finds it outside its bound with
+    at most ``proof_rounds`` refits (:func:`fit.rational.verify3d.refit_between_nodes`), the albedo
+    policy applied with at most ``albedo_refits`` channel corrections (``albedo``, as in
+    :func:`fit.rational.rgl3d.fit_rgl`), and last its error between the grid nodes proved
+    (``prove_bound``, :func:`fit.rational.proved_bound.record_fit3d`). ``time_limit`` (CPU seconds of
     the process; default 600; None: none) is only the safety net of the whole selection, and
     ``wall_limit`` (s; default None) a wall-clock limit a user chose: past ``select_share`` of either
     no further layout is started (logged as skipped, "time"), past it no refit and no albedo
     round; ``fit_info["stopped"] = "time"`` and ``stopped_at`` record it. ``time_s`` is the whole
     selection. ``progress(stage, done, total)`` (:mod:`fit.progress`): each layout's stages as in
-    :func:`fit.rational.rgl3d.fit_rgl`, then the chosen one's ``"verification"`` and ``"albedo
-    policy"``. The model returned holds the value range of its coefficient file
+    :func:`fit.rational.rgl3d.fit_rgl`, then the chosen one's ``"verification"``, ``"proof-guided
+    refit"``, ``"albedo policy"`` and ``"proving the bound"``. The model returned holds the value range of its coefficient file
     (:func:`fit.rational.result3d.file_value_range`): it evaluates as the fit saved and loaded."""
     s = Fit3DSettings.resolve(settings, **params)
     target = s.target_rmse
@@ -177,7 +181,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
             log.append({"variant": k, "options": _plain(opts), "skipped": f"validation RMSE >= {below:g}"})
             continue
         layout = s.clone(**v, verify_rounds=rounds, verify_above=above)
-        res = fit_rgl(brdf, settings=layout.clone(verify=0, albedo=False, prove_bound=False), ceiling=ceiling,
+        res = fit_rgl(brdf, settings=layout.clone(verify=0, albedo=False, prove_bound=False, proof_rounds=0), ceiling=ceiling,
                       progress=progress, file_range=False)
         v_rmse = validation_rmse(brdf, res.model)
         check = image_check(brdf, res.model) if s.select_by == "image" and target is None else None
@@ -200,6 +204,10 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     variant = best.variant
     best = verify_and_refit(brdf, best, s.verify, chosen.verify_rounds, ceiling=ceiling,
                             refit_above=chosen.verify_above, progress=progress)
+    memo = {}               # proofs of functions no later step changes are not repeated
+    if s.proof_rounds:
+        best = refit_between_nodes(brdf, best, s.proof_rounds, s.proof_above, ceiling=ceiling, progress=progress,
+                                   memo=memo)
     best.variant = variant                         # a refit returns a new result
     best.validation_rmse = validation_rmse(brdf, best.model)
     best.validation_score = validation_score(brdf, best.model, s.objective)
@@ -236,7 +244,9 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     file_value_range(best.model)
     file_value_range(best.model_before_albedo)
     if s.prove_bound:       # the chosen fit's error between the grid nodes, proved
-        record_fit3d(best, brdf)
+        report(progress, "proving the bound", 0, 1)
+        record_fit3d(best, brdf, memo=memo)
+        report(progress, "proving the bound", 1, 1)
     domain_record(best.model.fit_info)
     best.settings = chosen
     best.data = best.verify_points = None          # the data and fresh points are not kept

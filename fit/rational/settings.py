@@ -58,6 +58,8 @@ DEFAULT_VALUE_FACTOR = "1/cos_theta_i"  # 3-D functions give rho cos theta_i (st
 DEFAULT_ALBEDO_TOL = 0.05           # directional-albedo tolerance of the policy (fit.rational.albedo3d)
 DEFAULT_ALBEDO_TIME = None          # the albedo step's own CPU-time safety net (s); None: the fit's (time_limit)
 DEFAULT_ALBEDO_REFITS = 27          # channel corrections the albedo policy may try (9 weights x 3 channels)
+DEFAULT_PROOF_ROUNDS = 4            # refits of the proof-guided refit (fit.rational.verify3d.refit_between_nodes)
+DEFAULT_PROOF_ABOVE = 2.0           # ... of the cells and points more than this many times outside the stated bound
 DEFAULT_LADDER_STEPS = 12           # infeasible tolerances at step 1.6 before the ladder squares its step
 DEFAULT_ALBEDO_RMSE_GROWTH = 0.50   # the albedo correction may raise a channel's relative RMSE by this fraction
 DEFAULT_ALBEDO_TOTAL_GROWTH = 0.15  # ... and the fit's (mean over R, G, B) by this one
@@ -220,6 +222,11 @@ class Fit3DSettings(_Settings):
       kind; ``theta_fit_deg``: data up to this incidence (degrees; at least the last measured);
     * ``verify``: fresh points of the verification (0: none); ``verify_rounds``: its refits;
       ``verify_above``: fresh points more than this many times outside the bound are refitted;
+    * ``proof_rounds``: refits of the proof-guided refit after the verification
+      (:func:`fit.rational.verify3d.refit_between_nodes`: the proof of the error between the grid
+      nodes finds the cells where the fit leaves its bound, the worst points in them join the
+      data; 0: none); ``proof_above``: cells and points more than this many times outside the
+      stated bound count;
     * ``n_objective``: second-stage objective points per piece (0: one stage);
     * ``objective``: what the second stage minimises and the layout selection compares, one of
       :data:`fit.rational.samples3d.OBJECTIVES`: ``"relative"`` (squared relative error of rho,
@@ -234,9 +241,9 @@ class Fit3DSettings(_Settings):
       None: none; CPU seconds, as ``time_limit``), ``albedo_rmse_growth``, ``albedo_total_growth`` (fractions),
       ``albedo_refits`` (channel corrections);
     * ``prove_bound``: prove the error between the grid nodes of the measurement, per piece and
-      channel (:func:`fit.rational.proved_bound.prove_fit3d`, recorded in
-      ``fit_info["bound"]`` and ``fit_info["domain"]``); off by default: it costs about as much
-      CPU time as a small-budget fit (docs/fitting.md, "The proved bound");
+      channel, in the unit of the stated tolerance (:func:`fit.rational.proved_bound.record_fit3d`,
+      recorded in ``fit_info["bound"]`` and ``fit_info["domain"]``); on by default (2-6 s of a
+      fit, docs/fitting.md, "The proved bound");
     * ``image_check``: record what the chosen fit looks like against the measurement, the ΔE2000
       of a virtual sphere's images under generic lights (:mod:`fit.rational.image_check`,
       ``fit_info["image_check"]``; about 3 s of a selection);
@@ -269,6 +276,8 @@ class Fit3DSettings(_Settings):
     verify: int = DEFAULT_VERIFY
     verify_rounds: int = 2
     verify_above: float = 1.0
+    proof_rounds: int = DEFAULT_PROOF_ROUNDS
+    proof_above: float = DEFAULT_PROOF_ABOVE
     n_objective: int = DEFAULT_OBJECTIVE
     objective: str = DEFAULT_OBJECTIVE_KIND
     relative_floor: float = DEFAULT_RELATIVE_FLOOR
@@ -278,7 +287,7 @@ class Fit3DSettings(_Settings):
     albedo_rmse_growth: float = DEFAULT_ALBEDO_RMSE_GROWTH
     albedo_total_growth: float = DEFAULT_ALBEDO_TOTAL_GROWTH
     albedo_refits: int = DEFAULT_ALBEDO_REFITS
-    prove_bound: bool = False
+    prove_bound: bool = True
     image_check: bool = True
     select_by: str = "image"
     select_share: float = 0.6
@@ -313,6 +322,8 @@ class Fit3DSettings(_Settings):
             ("verify", nonneg_int(self.verify), "an integer >= 0"),
             ("verify_rounds", nonneg_int(self.verify_rounds), "an integer >= 0"),
             ("verify_above", _number(self.verify_above) and self.verify_above > 0, "a finite number > 0"),
+            ("proof_rounds", nonneg_int(self.proof_rounds), "an integer >= 0"),
+            ("proof_above", _number(self.proof_above) and self.proof_above > 0, "a finite number > 0"),
             ("n_objective", nonneg_int(self.n_objective), "an integer >= 0"),
             ("objective", self.objective in OBJECTIVES, f"one of {OBJECTIVES}"),
             ("relative_floor", _number(self.relative_floor) and self.relative_floor >= 0, "a finite number >= 0"),
