@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import os
 import statistics
 import sys
@@ -26,6 +27,7 @@ from pathlib import Path
 
 from warp_rbrdf.paths import require_data_root
 
+BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 TOL = 0.01          # the command's first tolerance of the 3-D ladder (fit/cli/brdf3d.py TOL_3D)
 
 
@@ -35,8 +37,6 @@ def materials() -> list:
 
 def fit_once(name: str, core: int, out: str) -> dict:
     """In a child process: the default 3-D fit of ``name`` on core ``core``, saved to ``out``."""
-    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[var] = "1"
     os.sched_setaffinity(0, {core})
     from fit.formats.rgl import read_rgl
     from fit.rational.coefficient_file import save
@@ -69,7 +69,14 @@ def run(names, load: bool) -> dict:
     cores = sorted(os.sched_getaffinity(0))
     if load and len(cores) < 2:
         raise SystemExit("--load needs two cores")
-    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(max_workers=2 if load else 1) as ex:
+    # BLAS on one thread in every child: a fresh interpreter (spawn) that reads these before it
+    # imports NumPy; a forked child inherits the parent's NumPy, whose OpenBLAS already chose two
+    # threads (this module's import of warp_rbrdf loads NumPy), and two BLAS threads pinned to
+    # one core took 192 CPU s for a fit that takes 39 s on one thread
+    for var in BLAS_THREADS:
+        os.environ[var] = "1"
+    with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(
+            max_workers=2 if load else 1, mp_context=multiprocessing.get_context("spawn")) as ex:
         for name in names:
             outs = [str(Path(tmp) / f"{name}_{k}.json") for k in range(2 if load else 1)]
             futures = [ex.submit(fit_once, name, cores[k], outs[k]) for k in range(len(outs))]

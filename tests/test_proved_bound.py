@@ -275,8 +275,9 @@ def test_proof_guided_refit_finds_and_removes_errors_between_the_grid_nodes():
     at a coarse grid and 20 random points leaves its stated bound by hundreds of times between
     the grid nodes (proved); the proof-guided refit starts from that proof (its first round's
     ratio is the fit's), adds the worst points of the cells it finds to the data, refits only the
-    functions outside their bound there, and ends with a proved bound several times lower, every
-    data point (the added ones included) within the stated bound."""
+    functions outside their bound there, proves the last refit too, and returns the fit of the
+    lowest proved bound, several times lower, every data point (the added ones included) within
+    the stated bound."""
     from fit.rational.fit3d import fit_rgl, verification_ratio
 
     brdf = RGLLike(_broad_lobe, "broad_lobe")
@@ -286,11 +287,16 @@ def test_proof_guided_refit_finds_and_removes_errors_between_the_grid_nodes():
     after = fit_rgl(brdf, proof_rounds=2, **fit)
     d0, d1 = before.model.fit_info["domain"], after.model.fit_info["domain"]
     assert d0["proved_over_stated"] > 100, d0
-    log = after.model.fit_info["proof_refit"]["log"]
+    rec = after.model.fit_info["proof_refit"]
+    log = rec["log"]                  # two refits, then the pass that proves the last one
+    assert [e["round"] for e in log] == [0, 1, 2] and log[2]["points_added"] == 0
     assert log[0]["proved_over_stated"] == pytest.approx(d0["proved_over_stated"], rel=1e-9)
     assert d1["proved_over_stated"] < 0.25 * d0["proved_over_stated"], (d0, d1)
-    added = sum(e["points_added"] for e in log)
-    assert all(e["points_added"] > 0 and e["refitted"] for e in log) and len(after.data.X) == len(before.data.X) + added
+    kept = log[rec["kept"]]["proved_over_stated"]       # the lowest proved of the three is returned
+    assert kept == min(e["proved_over_stated"] for e in log) == pytest.approx(d1["proved_over_stated"], rel=1e-9)
+    added = sum(e["points_added"] for e in log[:rec["kept"]])
+    assert all(e["points_added"] > 0 and e["refitted"] for e in log[:2])
+    assert len(after.data.X) == len(before.data.X) + added
     assert np.max(verification_ratio(after, after.data.X, after.data.rho)) <= 1.0 + 1e-9
     kept = {f"{k}{'RGB'[c]}" for k in range(2) for c in range(3)} - set(log[0]["refitted"])
     if kept:            # a function no round refitted is the first fit's, coefficient for coefficient

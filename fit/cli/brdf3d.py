@@ -33,7 +33,7 @@ method"):
   towards the light's horizon; a version-4 file) or ``none`` (rho itself; a version-3 file);
 * ``--grid``, ``--random``, ``--verify``, ``--no-albedo``: the data grid, the random points of
   each kind, the fresh points of the verification and the directional-albedo policy;
-* ``--proof-rounds``: the refits of the proof-guided refit (default 2; 0: none). Every fit's
+* ``--proof-rounds``: the refits of the proof-guided refit (default 4; 0: none). Every fit's
   file records the proof of its error between the grid nodes per piece and channel, in the unit
   of its stated bound (the table's ``proved`` column).
 
@@ -137,10 +137,11 @@ def add_flags(p) -> None:
                         "0: none)")
     g.add_argument("--proof-rounds", dest="proof_rounds", type=integer(0, 10), default=None, metavar="N",
                    help=f"refits guided by the proof of the error between the grid nodes (default "
-                        f"{d.proof_rounds}; 0: none): the cells where the proof finds the fit outside its stated "
-                        "bound (spikes the fresh points miss) give data points, and the functions outside "
-                        "their bound there are fitted again. The file records the proof of the fit it holds "
-                        "per piece and channel. docs/fitting.md, \"The proof-guided refit\"")
+                        f"{d.proof_rounds}; 0: none): the cells where the proof finds the fit more than twice "
+                        "outside its stated bound (spikes the fresh points miss) give data points, and the "
+                        "functions outside their bound there are fitted again; the fit of the lowest proved "
+                        "bound is kept. The file records the proof of the fit it holds per piece and channel. "
+                        "docs/fit_accuracy.md, \"The proof-guided refit\"")
     g.add_argument("--objective", choices=OBJECTIVES, default=None,
                    help=f"what the second stage minimises and the layout selection compares (default "
                         f"{d.objective}): relative, the squared relative error of rho over cosine-distributed "

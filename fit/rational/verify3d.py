@@ -146,8 +146,9 @@ def _cell_points(leaf, cells: dict, lattice: int = LATTICE) -> np.ndarray:
 
 def refit_between_nodes(brdf, res, rounds: int = DEFAULT_PROOF_ROUNDS, above: float = DEFAULT_PROOF_ABOVE,
                         max_points: int = 2000, ceiling=None, progress=None, memo: dict | None = None):
-    """Constraint generation from the proof (docs/fitting.md, "The proof-guided refit"): returns
-    the fit after at most ``rounds`` refits (a count). A round proves the error of every piece and
+    """Constraint generation from the proof (docs/fit_accuracy.md, "The proof-guided refit"): returns
+    the fit of the lowest proved bound (over the stated one) among the fit and its at most
+    ``rounds`` refits (a count; a refit can raise the bound elsewhere). A round proves the error of every piece and
     channel between the grid nodes of the measurement in the unit of the stated tolerance
     (:func:`fit.rational.proved_bound.prove_fit3d`, ``grazing=True``), takes every cell whose proved
     bound is above ``above`` times the stated tolerance (the proof halves the cells around a spike
@@ -159,8 +160,9 @@ def refit_between_nodes(brdf, res, rounds: int = DEFAULT_PROOF_ROUNDS, above: fl
     vch_golden_yellow verified at 40,000 fresh points gave 165 1/sr (rho cos theta_i) against the
     measurement's 0.014 between two grid nodes. ``fit_info["proof_refit"]`` records per round the
     largest proved bound over the stated one (None: Q inconclusive), the cells and points found
-    and the functions refitted; the proof of the returned fit is not repeated here (the setting
-    ``prove_bound`` records it). ``ceiling``: the safety net, as for :func:`verify_and_refit`;
+    and the functions refitted, and ``kept``, the round whose fit is returned (the last entry
+    proves the last refit). The setting ``prove_bound`` records the proof of the fit returned
+    after the albedo policy. ``ceiling``: the safety net, as for :func:`verify_and_refit`;
     ``memo``: the proofs of functions a round did not change are reused
     (:class:`fit.rational.proved_bound.Fit3DProof`; a caller's dict carries them on to its own
     proof of the result)."""
@@ -171,22 +173,24 @@ def refit_between_nodes(brdf, res, rounds: int = DEFAULT_PROOF_ROUNDS, above: fl
     if ceiling is None:
         ceiling = Ceiling(None)
     progress = progress if progress is not None else res.data.progress
-    log = []
-    for rnd in range(rounds):
+    log, best = [], (np.inf, res, 0)
+    for rnd in range(rounds + 1):       # the last pass proves the last refit only
         if ceiling.out("proof-guided refit"):
             break
         report(progress, "proof-guided refit", rnd, rounds)
         proof = Fit3DProof(res, brdf, grazing=True, memo=memo)
         bounds = [proof.prove(k, c, keep_above=above) for k in range(len(proof.leaves)) for c in range(3)]
         ratio_proved = [None if b.proved is None else b.proved / max(b.tolerance, 1e-12) for b in bounds]
+        over = np.inf if any(r is None for r in ratio_proved) else max(ratio_proved, default=0.0)
+        if over < best[0]:
+            best = (over, res, rnd)
         lv = leaves(res.model)
         pts = [_cell_points(lv[b.piece], b.worst_cells) for b, r in zip(bounds, ratio_proved)
                if b.worst_cells is not None and len(b.worst_cells["lo"]) and (r is None or r > above)]
-        entry = {"round": rnd, "proved_over_stated": None if any(r is None for r in ratio_proved)
-                 else max(ratio_proved, default=0.0), "cells": int(sum(len(p) for p in pts) // LATTICE ** 3),
-                 "points_added": 0, "refitted": []}
+        entry = {"round": rnd, "proved_over_stated": None if not np.isfinite(over) else float(over),
+                 "cells": int(sum(len(p) for p in pts) // LATTICE ** 3), "points_added": 0, "refitted": []}
         log.append(entry)
-        if not pts:
+        if not pts or rnd == rounds:
             break
         Xc = np.concatenate(pts)
         wi, wo = half_diff_to_directions(Xc[:, 0], 0.0, Xc[:, 1], Xc[:, 2])
@@ -205,9 +209,10 @@ def refit_between_nodes(brdf, res, rounds: int = DEFAULT_PROOF_ROUNDS, above: fl
         entry.update(points_added=int(len(worst)), largest_found=float(ratio[worst[0]]),
                      refitted=[f"{k}{'RGB'[c]}" for k, c in sorted(redo)])
     report(progress, "proof-guided refit", rounds, rounds)
+    res = best[1]                       # a refit can raise the bound elsewhere: the lowest proved
     if res is not first:
         _carry_verification(first, res)
-    res.model.fit_info["proof_refit"] = {"rounds": int(rounds), "above": float(above), "log": log,
+    res.model.fit_info["proof_refit"] = {"rounds": int(rounds), "above": float(above), "log": log, "kept": best[2],
                                          "seconds": time.perf_counter() - t0}
     ceiling.record(res.model.fit_info)
     return res
