@@ -279,6 +279,7 @@ def test_proof_guided_refit_finds_and_removes_errors_between_the_grid_nodes():
     lowest proved bound, several times lower, every data point (the added ones included) within
     the stated bound."""
     from fit.rational.fit3d import fit_rgl, verification_ratio
+    from fit.rational.verify3d import KEEP_WITHIN
 
     brdf = RGLLike(_broad_lobe, "broad_lobe")
     fit = dict(grid=(5, 5, 3), n_random=20, n_objective=0, verify=0, degrees=(5, 2), theta_h_edges=[0.3],
@@ -292,8 +293,10 @@ def test_proof_guided_refit_finds_and_removes_errors_between_the_grid_nodes():
     assert [e["round"] for e in log] == [0, 1, 2] and log[2]["points_added"] == 0
     assert log[0]["proved_over_stated"] == pytest.approx(d0["proved_over_stated"], rel=1e-9)
     assert d1["proved_over_stated"] < 0.25 * d0["proved_over_stated"], (d0, d1)
-    kept = log[rec["kept"]]["proved_over_stated"]       # the lowest proved of the three is returned
-    assert kept == min(e["proved_over_stated"] for e in log) == pytest.approx(d1["proved_over_stated"], rel=1e-9)
+    kept = log[rec["kept"]]["proved_over_stated"]       # the lowest proved of the three (a later one within 5 %)
+    assert kept <= KEEP_WITHIN * min(e["proved_over_stated"] for e in log)
+    assert kept == pytest.approx(d1["proved_over_stated"], rel=1e-9)
+    assert all(e["proved_over_stated"] > KEEP_WITHIN * kept for e in log[rec["kept"] + 1:])
     added = sum(e["points_added"] for e in log[:rec["kept"]])
     assert all(e["points_added"] > 0 and e["refitted"] for e in log[:2])
     assert len(after.data.X) == len(before.data.X) + added
