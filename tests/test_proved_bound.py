@@ -339,3 +339,16 @@ def test_a_proof_memo_reuses_unchanged_functions_only(monkeypatch):
     assert len(calls) == 7 and third[3] is not first[3] and third[0] is first[0]
     pb.Fit3DProof(res, brdf, grazing=True, memo=memo).prove(0, 0, keep_above=1.0)
     assert len(calls) == 8
+
+
+def test_invert_input_transform_is_the_inverse_of_apply():
+    """``invert_input_transform`` undoes ``apply_input_transform`` for every input transform and
+    refuses an unknown one."""
+    from fit.rational.model import INPUT_TRANSFORMS, apply_input_transform, invert_input_transform
+
+    x = np.linspace(0.0, 1.5, 7)
+    for t in INPUT_TRANSFORMS:
+        assert np.allclose(invert_input_transform(apply_input_transform(x, t), t), x, rtol=1e-15, atol=0)
+    assert np.array_equal(invert_input_transform(np.array([0.5]), "sqrt"), [0.25])
+    with pytest.raises(ValueError, match="unknown input transform"):
+        invert_input_transform(x, "log")

@@ -82,6 +82,17 @@ def apply_input_transform(x, transform: str):
     raise ValueError(f"unknown input transform {transform!r}")
 
 
+def invert_input_transform(u, transform: str):
+    """The variable's own value at ``u`` in its transformed coordinate: the inverse of
+    :func:`apply_input_transform`."""
+    u = np.asarray(u, dtype=np.float64)
+    if transform == "identity":
+        return u
+    if transform == "sqrt":
+        return u * u
+    raise ValueError(f"unknown input transform {transform!r}")
+
+
 def apply_value_transform(y, transform: str, offset: float = 0.0):
     """Data value -> fitted quantity (the inverse of step 5 of the evaluation recipe in
     :mod:`fit.rational.coefficient_file`)."""

@@ -62,7 +62,7 @@ import numpy as np
 
 from .cell_proof import (DEFAULT_MAX_CELLS, DEFAULT_ROUNDS, ENCLOSURES, EPS, WORST_KEPT,  # noqa: F401
                          ProvedBound, _leaf_output, _multilinear, prove_cells)
-from .model import apply_input_transform, value_factor_weights
+from .model import apply_input_transform, invert_input_transform, value_factor_weights
 from .result3d import file_value_range
 
 
@@ -199,7 +199,7 @@ def grazing_weight_lower(leaf, grazing_cos: float):
     tf = [v.transform for v in leaf.variables]
 
     def phys(x, v):
-        return x ** 2 if tf[v] == "sqrt" else x
+        return invert_input_transform(x, tf[v])
 
     def weight(lo, hi):
         h0, d0 = phys(lo[:, 0], 0), phys(lo[:, 1], 1)

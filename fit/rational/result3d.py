@@ -165,6 +165,8 @@ def domain_record(fit_info: dict) -> dict:
     bounds = fit_info.get("bound") or []
     proved_vals = [b["proved"] for b in bounds]
     proved_max = None if any(p is None for p in proved_vals) else max(proved_vals, default=None)
+    over = (max(b["proved"] / max(b["tolerance"], 1e-300) for b in bounds)
+            if bounds and proved_max is not None else None)
     proved = bool(bounds) and proved_max is not None and all(b["proved"] <= b["tolerance"] for b in bounds)
     if not bounds:
         between = "No proof between the data points (prove_bound off)"
@@ -172,7 +174,6 @@ def domain_record(fit_info: dict) -> dict:
         between = "Between the grid nodes: not proved (Q's Bernstein coefficients inconclusive on a cell)"
     else:
         frac = min(b["proved_fraction"] for b in bounds)
-        over = max(b["proved"] / max(b["tolerance"], 1e-300) for b in bounds)
         between = (f"Between the nodes of the measurement's grid (trilinear): error proved <= {proved_max:.3g} "
                    f"(unit of the bound records), {'within' if proved else 'NOT within'} the stated tolerance "
                    f"everywhere (at most {over:.3g} x it); within it on at least {100 * frac:.3g} % of each piece")
@@ -180,8 +181,7 @@ def domain_record(fit_info: dict) -> dict:
            "theta_max_deg": tm, "fresh_points": m, "fresh_max_ratio": ratio,
            "proved_bound": proved_max if bounds else None,
            "proved_fraction": min((b["proved_fraction"] for b in bounds), default=None),
-           "proved_over_stated": (max(b["proved"] / max(b["tolerance"], 1e-300) for b in bounds)
-                                  if bounds and proved_max is not None else None),
+           "proved_over_stated": over,
            "reason": (f"bound proved at the {n} data points (theta_i, theta_o <= {tm:.4g} deg) and Q > 0 "
                       f"on every piece; {checked}. {between}")}
     fit_info["domain"] = rec

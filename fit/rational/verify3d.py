@@ -16,7 +16,7 @@ from ..formats.angles import half_diff_to_directions
 from ..progress import report
 from .ceiling import Ceiling
 from .ladder3d import fit_samples
-from .model import value_factor_weights
+from .model import invert_input_transform, value_factor_weights
 from .samples3d import grazing_weight, sample_grid
 from .settings import (DEFAULT_CHANNEL_FLOOR, DEFAULT_GRAZING_COS, DEFAULT_PROOF_ABOVE, DEFAULT_PROOF_ROUNDS,
                        DEFAULT_VERIFY)
@@ -140,12 +140,8 @@ def _cell_points(leaf, cells: dict, lattice: int = LATTICE) -> np.ndarray:
     f = (np.arange(lattice) + 0.5) / lattice
     grid = np.stack(np.meshgrid(*([f] * n), indexing="ij"), axis=-1).reshape(-1, n)
     U = (lo[:, None, :] + grid[None, :, :] * (hi - lo)[:, None, :]).reshape(-1, n)
-    for v, var in enumerate(leaf.variables):      # the inverse of the input transform
-        if var.transform == "sqrt":
-            U[:, v] = U[:, v] ** 2
-        elif var.transform != "identity":
-            raise ValueError(f"unknown input transform {var.transform!r}")
-    return U
+    return np.stack([invert_input_transform(U[:, v], var.transform) for v, var in enumerate(leaf.variables)],
+                    axis=1)
 
 
 def refit_between_nodes(brdf, res, rounds: int = DEFAULT_PROOF_ROUNDS, above: float = DEFAULT_PROOF_ABOVE,
@@ -171,7 +167,7 @@ def refit_between_nodes(brdf, res, rounds: int = DEFAULT_PROOF_ROUNDS, above: fl
     ``memo``: the proofs of functions a round did not change are reused
     (:class:`fit.rational.proved_bound.Fit3DProof`; a caller's dict carries them on to its own
     proof of the result)."""
-    from .proved_bound import Fit3DProof, leaves
+    from .proved_bound import Fit3DProof
     t0 = time.perf_counter()
     first = res
     memo = {} if memo is None else memo
@@ -189,8 +185,7 @@ def refit_between_nodes(brdf, res, rounds: int = DEFAULT_PROOF_ROUNDS, above: fl
         over = np.inf if any(r is None for r in ratio_proved) else max(ratio_proved, default=0.0)
         if over <= KEEP_WITHIN * best[0]:         # a later round (on more data) within 5 % of the
             best = (over, res, rnd)               # best so far replaces it
-        lv = leaves(res.model)
-        pts = [_cell_points(lv[b.piece], b.worst_cells) for b, r in zip(bounds, ratio_proved)
+        pts = [_cell_points(proof.originals[b.piece], b.worst_cells) for b, r in zip(bounds, ratio_proved)
                if b.worst_cells is not None and len(b.worst_cells["lo"]) and (r is None or r > above)]
         entry = {"round": rnd, "proved_over_stated": None if not np.isfinite(over) else float(over),
                  "cells": int(sum(len(p) for p in pts) // LATTICE ** 3), "points_added": 0, "refitted": []}
