@@ -55,8 +55,14 @@ Representations (columns):
 * ``neural``: the published neural BRDF (Sztrajman et al. 2021, 675 weights) relative RMSE as
   published (six materials; not re-measured here).
 
-The render ΔE2000 of the 3-D fits against the ``rgl`` material is a separate step:
-``--render-from RESULTS_JSON`` renders the fits a run saved (docs/fit_accuracy.md).
+``--render``: after the run, each material's table (the ``projected`` material), 2-D fit and
+3-D fit are rendered against the ``rgl`` material under each of ``--render-maps`` (the fidelity
+study's sphere, ``--render-res`` px, ``--render-spp`` samples, all with the ``mis`` sampler and
+the same seeds: paired), the render ΔE2000 mean and p99 of each with the comparison's noise floor
+(:func:`render_errors`; ``render.json`` beside ``results.json``). ``--render-from RESULTS_JSON``
+runs this step alone on an earlier run's saved fits.
+
+    OMP_NUM_THREADS=1 taskset -c 0 python -m benchmarks.bench_fit_accuracy --materials all --render --docs
 
     OMP_NUM_THREADS=1 taskset -c 0 python -m benchmarks.bench_fit_accuracy --docs
     python -m benchmarks.bench_fit_accuracy --materials satin_rosaline --pairs 20000
@@ -277,18 +283,23 @@ def table_evaluator(brdf):
     return evaluate, time.perf_counter() - t0
 
 
-def load_2d(stem: str, fits_dir: Path):
-    """The 2-D 5 % fit of ``stem``: ``fits_dir``'s cached ``rbrdf-fit brdf`` file, else a file
-    of that tolerance shipped in ``warp_rbrdf/data/`` (the studies' order,
+def find_2d(stem: str, fits_dir: Path):
+    """``(model, path)`` of the 2-D 5 % fit of ``stem``: ``fits_dir``'s cached ``rbrdf-fit brdf``
+    file, else a file of that tolerance shipped in ``warp_rbrdf/data/`` (the studies' order,
     :mod:`studies.fits`), else None."""
     from fit.rational.coefficient_file import load
     from studies.fits import shipped_model
 
     p = Path(fits_dir) / f"{stem}_tol0p05_cli.json"
     if p.is_file():
-        return load(p)
-    shipped = shipped_model(stem, 0.05)
-    return shipped[0] if shipped is not None else None
+        return load(p), p
+    return shipped_model(stem, 0.05)
+
+
+def load_2d(stem: str, fits_dir: Path):
+    """The model of :func:`find_2d`, or None."""
+    found = find_2d(stem, fits_dir)
+    return found[0] if found is not None else None
 
 
 def rendered_2d(model, source: Path):
@@ -324,7 +335,7 @@ def fit_3d(brdf, out_dir: Path | None, options: dict):
 #: The fit records of a 3-D row that ``--fits-3d-from`` takes from the earlier run (everything but
 #: the metrics, which are measured again).
 FIT3D_RECORDS = ("coefficients", "fit_s", "bound", "valid", "n_points", "file", "pieces", "options", "variant",
-                 "variants", "verified", "verify_max_ratio", "albedo_policy")
+                 "variants", "verified", "verify_max_ratio", "proved_over_stated", "proved", "albedo_policy")
 
 
 def fits_3d_from(folder: Path, mats) -> tuple:
@@ -380,10 +391,11 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
         ev, secs = table_evaluator(brdf)
         row["table"] = dict(measure(ev, truth, wi, wo, truth_eval, albedo_n, counts), coefficients=90 * 90 * 3,
                             fit_s=secs)
-    m2 = load_2d(f"{name}_rgb", fits_2d)
-    if m2 is not None:
+    found = find_2d(f"{name}_rgb", fits_2d)
+    if found is not None:
+        m2, p2 = found
         row["fit2d"] = dict(measure(rendered_2d(m2, path), truth, wi, wo, truth_eval, albedo_n, counts),
-                            coefficients=int(m2.n_coefficients), fit_s=m2.fit_info.get("time_s"))
+                            coefficients=int(m2.n_coefficients), fit_s=m2.fit_info.get("time_s"), file=str(p2))
     if saved_3d is not None:
         old, model, fpath = saved_3d
         row["fit3d"] = measure(lambda a, b: evaluate_directions(model, a, b), truth, wi, wo, truth_eval,
@@ -404,7 +416,9 @@ def run_material(name: str, data: Path, n_pairs: int, seed: int, fits_2d: Path, 
                         n_points=res.n_points, file=str(fpath) if fpath else None,
                         pieces=len(res.info["edges"]) - 1, options=_jsonable(fit_options),
                         variant=res.info.get("variant"), variants=_jsonable(res.info.get("variants")),
-                        verified=res.info.get("verified"), verify_max_ratio=res.info.get("verify_max_ratio"))
+                        verified=res.info.get("verified"), verify_max_ratio=res.info.get("verify_max_ratio"),
+                        proved_over_stated=(res.model.fit_info.get("domain") or {}).get("proved_over_stated"),
+                        proved=(res.model.fit_info.get("domain") or {}).get("proved"))
     before = res.info.get("model_before_albedo")
     if before is not None and res.info.get("albedo", {}).get("refitted"):
         # the same fit before the albedo policy changed it (fit.rational.albedo3d)
@@ -487,7 +501,10 @@ def markdown(rows: list, meta: dict) -> str:
              "3-D bound: every data point of the fit (≈ 19,000, both directions within 89°) lies within "
              "ρc ± bound·s, s = max(ρc, noise_c, 0.05·max(ρR, ρG, ρB))·max(1, 0.25 / (cosθi cosθo)), "
              "Q > 0 certified on every piece; 'fresh' is the largest error over that bound at 40,000 fresh "
-             "points (≤ 1: verified between the data points; nothing is proved there).")
+             "points (≤ 1: verified between the data points, not proved); 'proved' is the largest error "
+             "proved between the nodes of the measurement's grid (against its trilinear interpolant, every "
+             "piece and channel, fit/rational/proved_bound.py, the fit file's record) over the stated bound "
+             "(≤ 1: the bound holds on the whole measured domain).")
     L.append("")
     L.append("| material | φd-median table | 2-D rational 5 % | 3-D rational (this work) | 3-D bound at every data "
              "point | neural (published, 675) | target met |")
@@ -501,7 +518,10 @@ def markdown(rows: list, meta: dict) -> str:
             f"no ({ratio:.2f}× the neural error{'' if f3['valid'] else ', not valid'})")
         c2 = f" ({f2['coefficients']})" if f2 else ""
         fresh = f3.get("verify_max_ratio")
-        fresh = "" if fresh is None else f" (fresh {fresh:.2f})"
+        proved = f3.get("proved_over_stated")
+        fresh = ", ".join(x for x in ("" if fresh is None else f"fresh {fresh:.2f}",
+                                      "" if proved is None else f"proved {proved:.2f}") if x)
+        fresh = f" ({fresh})" if fresh else ""
         L.append(f"| {r['material']} | {_rmse_cell(t, 3) if t else 'n/a'} | "
                  f"{_rmse_cell(f2, 3) if f2 else 'n/a'}{c2} | "
                  f"{_rmse_cell(f3)} ({f3['coefficients']}) | "
@@ -559,24 +579,49 @@ def comparison_summary(rows: list) -> str:
             + "; ".join(parts) + ".")
 
 
-def render_errors(rows: list, maps, resolution: int, spp: int) -> list:
-    """Render ΔE2000 of each row's 3-D fit file against the ``rgl`` material on the fidelity
-    study's scene (:mod:`studies.fidelity`: unit sphere, hidden environment map), **paired**: both
-    with the ``mis`` sampler and the same seeds, so the difference is the representations' alone;
-    one exposure per material and map from the ``rgl`` render. Rows ``{material, map, de_mean,
-    de_p99, floor_mean}``."""
+#: The representations :func:`render_errors` renders against the ``rgl`` material: row key, label
+RENDERED = (("table", "φd-median table"), ("fit2d", "2-D 5 %"), ("fit3d", "3-D"))
+
+
+def render_spec(key: str, row: dict, bsdf: Path, sampler: str):
+    """The ``MaterialSpec`` of representation ``key`` of ``row`` (:data:`RENDERED`), or None where
+    the row has no file for it: the table as the ``projected`` material (the φd-median projection,
+    ``incident = "view"`` as the chart loads it), the fits as ``rational`` materials from their
+    files."""
+    from warp_rbrdf.scene import MaterialSpec
+
+    if key == "table":
+        if "table" not in row:
+            return None
+        from fit.formats import load_measured
+        from fit.projection.project import project
+
+        return MaterialSpec(name="obj", type="projected", data=project(load_measured(bsdf), statistic="median"),
+                            sampler=sampler)
+    f = (row.get(key) or {}).get("file")
+    return MaterialSpec(name="obj", type="rational", file=Path(f), sampler=sampler) if f else None
+
+
+def render_errors(rows: list, maps, resolution: int, spp: int, keys=tuple(k for k, _ in RENDERED)) -> list:
+    """Render ΔE2000 of each row's representations ``keys`` (:data:`RENDERED`: the φd-median
+    table, the 2-D and the 3-D fit) against the ``rgl`` material on the fidelity study's scene
+    (:mod:`studies.fidelity`: unit sphere, hidden environment map), **paired**: all with the
+    ``mis`` sampler and the same seeds, so the difference is the representations' alone; one
+    exposure per material and map from the ``rgl`` render. Rows ``{material, map, floor_mean,
+    floor_p99, <key>: {de_mean, de_p99}}`` (the noise floor: of the 3-D comparison, else the
+    first rendered)."""
     from studies import common as C
     from studies import fidelity as FI
     from studies import metrics as M
     from lab import mitsuba_reference as MR
-    from warp_rbrdf.scene import MaterialSpec
 
     out, mask = [], None
     for r in rows:
-        f = r["fit3d"].get("file")
-        if not f:
-            continue
         path = FI.rgl_materials()[r["material"]]
+        specs = {k: render_spec(k, r, path, FI.PAIRED_SAMPLER) for k in keys}
+        specs = {k: v for k, v in specs.items() if v is not None}
+        if not specs:
+            continue
         for mapname in maps:
             base = MR.sphere_scene(path, C.data_path(FI.MAPS[mapname]), spp=spp, resolution=resolution,
                                    pattern="stratified", tile_size=16)
@@ -585,25 +630,49 @@ def render_errors(rows: list, maps, resolution: int, spp: int) -> list:
             ref = FI.render_halves(FI._with(base, rgl_spec), spp)
             if mask is None:
                 mask = C.object_mask(base, ref["renderer"]) & MR.sphere_mask(resolution)
-            rat = FI.render_halves(FI._with(base, MaterialSpec(name="obj", type="rational", file=Path(f),
-                                                               sampler=FI.PAIRED_SAMPLER)), spp)
-            c = FI.compare(rat["img"], ref["img"], mask, M.exposure_for(ref["img"], mask),
-                           rat["delta"] - ref["delta"])
-            out.append({"material": r["material"], "map": mapname, "de_mean": c["de_mean"], "de_p99": c["de_p99"],
-                        "floor_mean": c["floor_mean"], "floor_p99": c["floor_p99"]})
-            print(f"render {r['material']} {mapname}: ΔE2000 mean {c['de_mean']:.2f} p99 {c['de_p99']:.2f} "
-                  f"(noise floor {c['floor_mean']:.2f} / {c['floor_p99']:.2f})", flush=True)
+            exposure = M.exposure_for(ref["img"], mask)
+            rec = {"material": r["material"], "map": mapname}
+            for k, spec in specs.items():
+                img = FI.render_halves(FI._with(base, spec), spp)
+                c = FI.compare(img["img"], ref["img"], mask, exposure, img["delta"] - ref["delta"])
+                rec[k] = {"de_mean": c["de_mean"], "de_p99": c["de_p99"]}
+                if k == "fit3d" or "floor_mean" not in rec:
+                    rec.update(floor_mean=c["floor_mean"], floor_p99=c["floor_p99"])
+            out.append(rec)
+            print(f"render {r['material']} {mapname}: " + "; ".join(
+                f"{k} ΔE2000 {rec[k]['de_mean']:.2f} / {rec[k]['de_p99']:.2f}" for k in specs)
+                + f" (noise floor {rec['floor_mean']:.2f} / {rec['floor_p99']:.2f})", flush=True)
     return out
 
 
+def _de_cell(x) -> str:
+    return "n/a" if x is None else f"{x['de_mean']:.2f} / {x['de_p99']:.2f}"
+
+
 def render_markdown(rr: list, meta: dict) -> str:
-    L = [(f"Render ΔE2000 of the 3-D fits against the `rgl` material (fidelity study scene, paired `mis` renders, "
-          f"{meta['resolution']} px, {meta['spp']} spp; target mean ≤ 1.0, p99 ≤ 3):"), "",
-         "| material | map | ΔE2000 mean | p99 | noise floor mean / p99 | target met |", "| --- | --- | --- | --- | --- | --- |"]
+    """The render block: per material and map the ΔE2000 mean / p99 of each representation, the
+    3-D fit's target (mean ≤ 1.0, p99 ≤ 3) and whether it is at least as good as the table (mean
+    and p99 both at most the table's); a count line."""
+    L = [(f"Render ΔE2000 mean / p99 against the `rgl` material (fidelity study scene, paired `mis` renders, "
+          f"{meta['resolution']} px, {meta['spp']} spp, seeds {meta.get('seeds', 'of studies.fidelity')}; the "
+          "noise floor is the 3-D comparison's; target for the 3-D fit: mean ≤ 1.0 and p99 ≤ 3, and at least as "
+          "good as the φd-median table):"), "",
+         "| material | map | noise floor | " + " | ".join(lab for _, lab in RENDERED)
+         + " | 3-D target met | 3-D ≤ table |",
+         "| --- | --- | --- | " + " | ".join("---" for _ in RENDERED) + " | --- | --- |"]
+    met = better = n3 = nt = 0
     for x in rr:
-        ok = "yes" if x["de_mean"] <= 1.0 and x["de_p99"] <= 3.0 else "no"
-        L.append(f"| {x['material']} | {x['map']} | {x['de_mean']:.2f} | {x['de_p99']:.2f} | "
-                 f"{x['floor_mean']:.2f} / {x['floor_p99']:.2f} | {ok} |")
+        f3, t = x.get("fit3d"), x.get("table")
+        ok = None if f3 is None else f3["de_mean"] <= 1.0 and f3["de_p99"] <= 3.0
+        ge = None if f3 is None or t is None else f3["de_mean"] <= t["de_mean"] and f3["de_p99"] <= t["de_p99"]
+        n3 += ok is not None
+        met += bool(ok)
+        nt += ge is not None
+        better += bool(ge)
+        L.append(f"| {x['material']} | {x['map']} | {x['floor_mean']:.2f} / {x['floor_p99']:.2f} | "
+                 + " | ".join(_de_cell(x.get(k)) for k, _ in RENDERED)
+                 + f" | {'n/a' if ok is None else 'yes' if ok else 'no'} | {'n/a' if ge is None else 'yes' if ge else 'no'} |")
+    L += ["", f"3-D target met on {met} of {n3} renders; 3-D at most the table's mean and p99 on {better} of {nt}."]
     return "\n".join(L) + "\n"
 
 
@@ -654,12 +723,16 @@ def main(argv=None) -> int:
     ap.add_argument("--grid", default=None, help="3-D data grid NH,ND,NP (default 28,22,13)")
     ap.add_argument("--random", type=int, default=None, help="3-D random data points of each kind (default 8000)")
     ap.add_argument("--verify", type=int, default=None, help="fresh points each 3-D fit is verified at (default 40000)")
+    ap.add_argument("--render", action="store_true",
+                    help="after the run, render the table, the 2-D and the 3-D fit against the rgl material under "
+                         "each --render-maps (render ΔE2000 mean / p99; render.json beside results.json; --docs "
+                         "writes its own block)")
     ap.add_argument("--render-from", default=None, metavar="RESULTS_JSON",
-                    help="only render the 3-D fits of an earlier run's results.json against the rgl material "
-                         "(render ΔE2000; --docs writes its own block)")
+                    help="only the render step, for the rows of an earlier run's results.json (--materials: some "
+                         "of them)")
     ap.add_argument("--render-maps", nargs="+", default=["studio", "rooitou"])
     ap.add_argument("--render-res", type=int, default=64)
-    ap.add_argument("--render-spp", type=int, default=64)
+    ap.add_argument("--render-spp", type=int, default=1024)
     ap.add_argument("--merge", default=None, metavar="RESULTS_JSON",
                     help="keep the rows of an earlier run's results.json (same --pairs and --seed) for the materials "
                          "not run now; the table says which rows are merged and from which run")
@@ -701,19 +774,16 @@ def _merge_rows(args, mats):
 
 
 def _run(args) -> int:
+    if (args.render or args.render_from is not None) and not (
+            8 <= args.render_res <= 1024 and 2 <= args.render_spp <= 4096 and args.render_spp % 2 == 0):
+        raise BenchError("--render-res 8..1024 and --render-spp an even number 2..4096")
     if args.render_from is not None:
         try:
             rows = json.loads(Path(args.render_from).read_text())["rows"]
-            rows = [r for r in rows if r["material"] in (args.materials or NEURAL)]
+            rows = [r for r in rows if args.materials in (None, ["all"]) or r["material"] in args.materials]
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise BenchError(f"--render-from {args.render_from}: not a results.json of this benchmark ({e})") from None
-        if not (8 <= args.render_res <= 1024 and 2 <= args.render_spp <= 4096 and args.render_spp % 2 == 0):
-            raise BenchError("--render-res 8..1024 and --render-spp an even number 2..4096")
-        rr = render_errors(rows, args.render_maps, args.render_res, args.render_spp)
-        text = render_markdown(rr, {"resolution": args.render_res, "spp": args.render_spp})
-        print(text)
-        if args.docs:
-            write_docs(text, ROOT / "docs" / "fit_accuracy.md", RBEGIN, REND)
+        _render(args, rows, Path(args.render_from).parent)
         return 0
     data = Path(args.data)
     if not (data / "rgl").is_dir():
@@ -828,7 +898,28 @@ def _run(args) -> int:
     print(text)
     if args.docs:
         write_docs(text, ROOT / "docs" / "fit_accuracy.md")
+    if args.render:
+        _render(args, rows, out)
     return 0
+
+
+def _render(args, rows: list, out: Path) -> None:
+    """The render step: :func:`render_errors` of ``rows``, saved as ``out/render.json``, printed,
+    and with ``--docs`` written to docs/fit_accuracy.md's render block."""
+    from fit.outputs import atomic_write
+    from studies import fidelity as FI
+
+    t0 = time.perf_counter()
+    rr = render_errors(rows, args.render_maps, args.render_res, args.render_spp)
+    meta = {"resolution": args.render_res, "spp": args.render_spp, "maps": list(args.render_maps),
+            "seeds": "/".join(str(x) for x in FI.SEEDS), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+            "wall_s": time.perf_counter() - t0}
+    with atomic_write(Path(out) / "render.json") as f:
+        json.dump({"meta": meta, "rows": rr}, f, indent=1)
+    text = render_markdown(rr, meta)
+    print(text)
+    if args.docs:
+        write_docs(text, ROOT / "docs" / "fit_accuracy.md", RBEGIN, REND)
 
 
 if __name__ == "__main__":

@@ -42,13 +42,38 @@ def test_smoke_run_and_bad_input(tmp_path, capsys):
     assert f3["valid"] and f3["coefficients"] == 3 * (20 + 4) and 0 < f3["rel_rmse"] < 1
     assert len(f3["albedo_err"]) == 4 and (out / "paper_white_rgb_3d.json").is_file()
     assert "| paper_white |" in capsys.readouterr().out
+    saved = json.loads((out / "paper_white_rgb_3d.json").read_text())["fit"]["domain"]
+    assert f3["proved_over_stated"] == saved["proved_over_stated"] > 0 and f3["proved"] == saved["proved"]
+    # the render step on the saved fit: the table and the 2-D fit are absent, the 3-D fit rendered
+    assert B.main(["--render-from", str(out / "results.json"), "--render-res", "8", "--render-spp", "4",
+                   "--render-maps", "studio"]) == 0
+    rr = json.loads((out / "render.json").read_text())
+    assert rr["meta"]["spp"] == 4 and [(x["material"], x["map"]) for x in rr["rows"]] == [("paper_white", "studio")]
+    assert set(rr["rows"][0]) >= {"fit3d", "floor_mean"} and "table" not in rr["rows"][0]
+    assert rr["rows"][0]["fit3d"]["de_mean"] >= 0
+    assert "3-D target met on" in capsys.readouterr().out
     for argv, words in ((["--materials", "no_such"], "--materials no_such"), (["--pairs", "5"], "--pairs 5"),
                         (["--degrees", "x"], "--degrees 'x'"),
-                        (["--render-from", str(tmp_path / "none.json")], "--render-from")):
+                        (["--render-from", str(tmp_path / "none.json")], "--render-from"),
+                        (["--render", "--render-spp", "3"], "--render-spp")):
         assert B.main(["--data", str(data), "--out", str(tmp_path / "o2")] + argv) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and words in err
     assert not (tmp_path / "o2" / "results.json").exists()
+
+
+def test_render_block_counts_the_target_and_the_table():
+    """``render_markdown``: a representation without a render is n/a; the 3-D target is mean <= 1
+    and p99 <= 3; "3-D <= table" needs both numbers at most the table's; the count line says so."""
+    rr = [{"material": "a", "map": "studio", "floor_mean": 0.1, "floor_p99": 0.4,
+           "table": {"de_mean": 0.9, "de_p99": 4.0}, "fit3d": {"de_mean": 0.5, "de_p99": 2.0}},
+          {"material": "a", "map": "rooitou", "floor_mean": 0.1, "floor_p99": 0.4,
+           "table": {"de_mean": 0.4, "de_p99": 4.0}, "fit2d": {"de_mean": 2.0, "de_p99": 9.0},
+           "fit3d": {"de_mean": 0.5, "de_p99": 3.5}}]
+    text = B.render_markdown(rr, {"resolution": 64, "spp": 16})
+    assert "| a | studio | 0.10 / 0.40 | 0.90 / 4.00 | n/a | 0.50 / 2.00 | yes | yes |" in text
+    assert "| a | rooitou | 0.10 / 0.40 | 0.40 / 4.00 | 2.00 / 9.00 | 0.50 / 3.50 | no | no |" in text
+    assert "3-D target met on 1 of 2 renders; 3-D at most the table's mean and p99 on 1 of 2." in text
 
 
 def test_merge_keeps_earlier_rows(tmp_path, capsys):

@@ -352,3 +352,62 @@ def test_invert_input_transform_is_the_inverse_of_apply():
     assert np.array_equal(invert_input_transform(np.array([0.5]), "sqrt"), [0.25])
     with pytest.raises(ValueError, match="unknown input transform"):
         invert_input_transform(x, "log")
+
+
+def test_cell_points_cover_the_interior_faces_and_corners_of_each_cell():
+    """The proof-guided refit looks for a spike inside each cell and on its faces, edges and
+    corners (``_cell_points``): a spike at a corner of the measured domain (theta_d = 0,
+    phi_d = 0) is not seen at the interior points. Each cell gets ``2 L^n - 1`` points, all inside
+    it (none on its boundary, which a neighbouring theta_h piece evaluates), one within
+    ``FACE_INSET`` of its side of every corner and at its centre, in the fit's variables (theta_h
+    through the leaf's square-root transform)."""
+    from types import SimpleNamespace
+
+    from fit.rational.verify3d import FACE_INSET, LATTICE, _cell_points
+
+    leaf = SimpleNamespace(variables=[Variable("theta_h", "", "sqrt", (0.0, 1.0)),
+                                      Variable("theta_d", "", "identity", (0.0, 1.5)),
+                                      Variable("phi_d", "", "identity", (0.0, np.pi))])
+    lo = np.array([[0.4, 0.0, 0.0], [0.5, 0.3, 1.0]])
+    hi = np.array([[0.5, 0.01, 0.02], [0.6, 0.5, 2.0]])
+    X = _cell_points(leaf, {"lo": lo, "hi": hi})
+    per = 2 * LATTICE ** 3 - 1
+    assert X.shape == (2 * per, 3)
+    U = np.column_stack([np.sqrt(X[:, 0]), X[:, 1], X[:, 2]]).reshape(2, per, 3)
+    assert np.all(U > lo[:, None, :]) and np.all(U < hi[:, None, :])
+    for k in range(2):
+        frac = (U[k] - lo[k]) / (hi[k] - lo[k])
+        for corner in np.array(np.meshgrid(*([[0.0, 1.0]] * 3), indexing="ij")).reshape(3, -1).T:
+            assert np.min(np.max(np.abs(frac - corner), axis=1)) <= FACE_INSET * (1 + 1e-9)
+        assert np.min(np.max(np.abs(frac - 0.5), axis=1)) < 1e-12
+        assert len(np.unique(np.round(frac, 12), axis=0)) == per
+
+
+def test_restriction_to_sub_boxes_is_the_same_polynomial_in_three_variables():
+    """``cell_enclosure.restrict`` (a batched product per axis): the Bernstein coefficients it
+    gives on each sub-box describe the same polynomial there, in every variable of a 3-D tensor
+    of unequal degrees, within its error bound; ``_elevate`` (Q one degree higher) is
+    ``_times_linear`` with Q at every corner, to the last bit."""
+    from math import comb
+
+    from fit.rational.cell_enclosure import _elevate, _times_linear, restrict
+
+    rng = np.random.default_rng(11)
+    b = rng.standard_normal((4, 3, 6))
+    lo = rng.uniform(0, 0.6, (25, 3))
+    hi = lo + rng.uniform(0.05, 0.4, (25, 3))
+    out, err = restrict(b, 1e-16, lo, hi)
+
+    def bern(coef, u):          # tensor Bernstein polynomial at points u (M, 3) of [0, 1]^3
+        basis = [np.stack([comb(d - 1, k) * u[:, v] ** k * (1 - u[:, v]) ** (d - 1 - k) for k in range(d)], 1)
+                 for v, d in enumerate(coef.shape)]
+        return np.einsum("abc,ma,mb,mc->m", coef, *basis)
+
+    u = rng.random((40, 3))
+    for i in range(len(lo)):
+        assert out[i].shape == b.shape
+        np.testing.assert_allclose(bern(out[i], u), bern(b, lo[i] + u * (hi[i] - lo[i])), rtol=0, atol=1e-12)
+        assert 0 < err[i] < 1e-12
+    Q = rng.standard_normal((7, 4, 3, 6))
+    corners = np.broadcast_to(Q.reshape(7, 1, 1, 1, 4, 3, 6), (7, 2, 2, 2, 4, 3, 6))
+    assert np.array_equal(_elevate(Q, 3), _times_linear(corners, 3))

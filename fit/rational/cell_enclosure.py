@@ -58,20 +58,22 @@ def _restriction(n: int, lo, hi) -> np.ndarray:
 def restrict(b, err, s_lo, s_hi):
     """Tensor Bernstein coefficients ``b`` on [0, 1]^n restricted to each box ``[s_lo, s_hi]``
     (N, n): ``(N, *b.shape)`` and the error bound per box (N,)."""
-    n_vars = b.ndim
-    out = np.broadcast_to(b, (len(s_lo),) + b.shape)
-    e = np.full(len(s_lo), float(err))
-    letters = "abcdefgh"[:n_vars]
+    n_vars, N = b.ndim, len(s_lo)
+    out = np.broadcast_to(b, (N,) + b.shape)
+    e = np.full(N, float(err))
     for v in range(n_vars):
         deg = b.shape[v] - 1
         if deg == 0:
             continue
         A = _restriction(deg, s_lo[:, v], s_hi[:, v])
-        src = "N" + letters
-        dst = "N" + letters.replace(letters[v], "z")
-        out = np.einsum(f"Nz{letters[v]},{src}->{dst}", A, out)
-        # convex weights: |A b - fl(A b)| <= (deg + 2) eps max|b| per level, the weights' own
-        # rounding (2 deg levels of de Casteljau) as much again; doubled for safety
+        # axis v first, the others flattened: one (deg+1, deg+1) @ (deg+1, rest) product per box
+        # (a batched matmul; einsum's loop took 2.5x as long)
+        o = np.ascontiguousarray(np.moveaxis(out, v + 1, 1))
+        shape = o.shape
+        out = np.moveaxis(np.matmul(A, o.reshape(N, deg + 1, -1)).reshape(shape), 1, v + 1)
+        # convex weights: |A b - fl(A b)| <= (deg + 2) eps max|b| per level in any order of the
+        # sum, the weights' own rounding (2 deg levels of de Casteljau) as much again; doubled
+        # for safety
         e = e + 4.0 * (2 * deg + 4) * EPS * np.abs(out).reshape(len(s_lo), -1).max(axis=1) + 2 * e * deg * EPS
     return out, e
 
@@ -88,6 +90,27 @@ def _ratio_range(P, ep, Q, eq):
     hi = np.where(ph >= 0, ph / qls, ph / qh).max(axis=1)
     return (np.where(ok, lo - 4 * EPS * np.abs(lo), -np.inf),
             np.where(ok, hi + 4 * EPS * np.abs(hi), np.inf))
+
+
+def _elevate(Q, n_vars: int):
+    """``Q`` (N, *shape): Bernstein coefficients per box; returns those of the same polynomials
+    one degree higher in every variable (N, *shape + 1): :func:`_times_linear` with every
+    corner's polynomial ``Q`` (the corner basis sums to 1), the same operations on 2^n times
+    fewer numbers, the same results to the last bit."""
+    out = Q
+    for v in range(n_vars):
+        ax = v + 1
+        n = out.shape[ax] - 1
+        k = np.arange(n + 1, dtype=np.float64)
+        shp = [1] * out.ndim
+        shp[ax] = n + 1
+        wl = ((n + 1 - k) / (n + 1)).reshape(shp)
+        wh = ((k + 1) / (n + 1)).reshape(shp)
+        pad = [(0, 0)] * out.ndim
+        pad_l, pad_h = list(pad), list(pad)
+        pad_l[ax], pad_h[ax] = (0, 1), (1, 0)
+        out = np.pad(out * wl, pad_l) + np.pad(out * wh, pad_h)
+    return out
 
 
 def _times_linear(R, n_vars: int):
@@ -165,7 +188,7 @@ class Enclosure:
             Pc = P.reshape((N,) + (1,) * n + P.shape[1:])
             Qc = Q.reshape((N,) + (1,) * n + Q.shape[1:])
             D = _times_linear(Pc - L * Qc, n).reshape(N, -1)
-            Qe = _times_linear(np.broadcast_to(Qc, (N,) + (2,) * n + Q.shape[1:]), n).reshape(N, -1)
+            Qe = _elevate(Q, n).reshape(N, -1)
             lmax = np.abs(L).reshape(N, -1).max(axis=1)
             pmax = np.abs(P).reshape(N, -1).max(axis=1)
             qmax = np.abs(Q).reshape(N, -1).max(axis=1)
