@@ -67,7 +67,7 @@ def restrict(b, err, s_lo, s_hi):
             continue
         A = _restriction(deg, s_lo[:, v], s_hi[:, v])
         # axis v first, the others flattened: one (deg+1, deg+1) @ (deg+1, rest) product per box
-        # (a batched matmul; einsum's loop took 2.5x as long)
+        # (a batched matmul: restrict took 1.6x as long with numpy.einsum, 2,000 boxes of degrees (5, 5, 3))
         o = np.ascontiguousarray(np.moveaxis(out, v + 1, 1))
         shape = o.shape
         out = np.moveaxis(np.matmul(A, o.reshape(N, deg + 1, -1)).reshape(shape), 1, v + 1)
@@ -92,6 +92,22 @@ def _ratio_range(P, ep, Q, eq):
             np.where(ok, hi + 4 * EPS * np.abs(hi), np.inf))
 
 
+def _raise_degree(lo, hi, ax: int):
+    """``B_0^1 lo + B_1^1 hi`` along axis ``ax``: ``lo`` and ``hi`` hold Bernstein coefficients of
+    degree n there, the result those of degree n + 1 (``B_0^1 B_k^n = (n+1-k)/(n+1) B_k^(n+1)``,
+    ``B_1^1 B_k^n = (k+1)/(n+1) B_(k+1)^(n+1)``, convex weights)."""
+    n = lo.shape[ax] - 1
+    k = np.arange(n + 1, dtype=np.float64)
+    shp = [1] * lo.ndim
+    shp[ax] = n + 1
+    wl = ((n + 1 - k) / (n + 1)).reshape(shp)
+    wh = ((k + 1) / (n + 1)).reshape(shp)
+    pad = [(0, 0)] * lo.ndim
+    pad_l, pad_h = list(pad), list(pad)
+    pad_l[ax], pad_h[ax] = (0, 1), (1, 0)
+    return np.pad(lo * wl, pad_l) + np.pad(hi * wh, pad_h)
+
+
 def _elevate(Q, n_vars: int):
     """``Q`` (N, *shape): Bernstein coefficients per box; returns those of the same polynomials
     one degree higher in every variable (N, *shape + 1): :func:`_times_linear` with every
@@ -99,17 +115,7 @@ def _elevate(Q, n_vars: int):
     fewer numbers, the same results to the last bit."""
     out = Q
     for v in range(n_vars):
-        ax = v + 1
-        n = out.shape[ax] - 1
-        k = np.arange(n + 1, dtype=np.float64)
-        shp = [1] * out.ndim
-        shp[ax] = n + 1
-        wl = ((n + 1 - k) / (n + 1)).reshape(shp)
-        wh = ((k + 1) / (n + 1)).reshape(shp)
-        pad = [(0, 0)] * out.ndim
-        pad_l, pad_h = list(pad), list(pad)
-        pad_l[ax], pad_h[ax] = (0, 1), (1, 0)
-        out = np.pad(out * wl, pad_l) + np.pad(out * wh, pad_h)
+        out = _raise_degree(out, out, v + 1)
     return out
 
 
@@ -117,24 +123,12 @@ def _times_linear(R, n_vars: int):
     """``R`` (N, 2, ..., 2, *shape): per corner of the box (one axis of size 2 per variable,
     low / high side) the Bernstein coefficients of a polynomial ``R_c``; returns those of
     ``sum_c B_c R_c`` (N, *shape + 1), ``B_c`` the multilinear basis function of corner c (1 at
-    c, 0 at the other corners): ``B_0^1 B_k^n = (n+1-k)/(n+1) B_k^(n+1)``, ``B_1^1 B_k^n =
-    (k+1)/(n+1) B_(k+1)^(n+1)`` per variable, convex weights."""
+    c, 0 at the other corners), one variable at a time (:func:`_raise_degree`)."""
     out = R
-    for v in range(n_vars):
+    for _ in range(n_vars):
         # variable v's corner axis is axis 1 (those before it are taken out); once it is taken
         # out too, variable v's degree axis is axis n_vars
-        ax = n_vars
-        lo, hi = out[:, 0], out[:, 1]
-        n = lo.shape[ax] - 1
-        k = np.arange(n + 1, dtype=np.float64)
-        shp = [1] * lo.ndim
-        shp[ax] = n + 1
-        wl = ((n + 1 - k) / (n + 1)).reshape(shp)
-        wh = ((k + 1) / (n + 1)).reshape(shp)
-        pad = [(0, 0)] * lo.ndim
-        pad_l, pad_h = list(pad), list(pad)
-        pad_l[ax], pad_h[ax] = (0, 1), (1, 0)
-        out = np.pad(lo * wl, pad_l) + np.pad(hi * wh, pad_h)
+        out = _raise_degree(out[:, 0], out[:, 1], n_vars)
     return out
 
 
