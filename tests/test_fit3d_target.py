@@ -45,6 +45,14 @@ def test_the_first_layout_within_the_target_is_kept_and_the_rest_skipped(untarge
     assert first.variant == 0 and [v.get("skipped") for v in first.variants][1:] == ["target RMSE 10 met"] * 2
 
 
+def test_the_file_records_its_grid_after_a_refit():
+    """A selected fit whose verification refits it (a new model) still records the data grid its
+    proof was made on: a proof read back from the file uses it (without it, the default grid)."""
+    res = fit_rgl_select(Lobe(), variants=LADDER[:1], **dict(FIT, verify=4000))
+    assert res.model.fit_info["verify_refitted"]            # the case: the model was replaced
+    assert res.model.fit_info["grid"] == list(FIT["grid"])
+
+
 def test_default_ladder_and_settings():
     assert [len(v["theta_h_edges"]) for v in TARGET_LADDER] == [0, 0, 0, 0, 0, 5]
     assert TARGET_LADDER[-1] == VARIANTS[0]

@@ -230,6 +230,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
                                validation_rmse=best.validation_rmse, objective=chosen.objective,
                                validation_score=best.validation_score,
                                select_by=s.select_by if target is None else "validation",
+                               grid=list(chosen.grid),     # a refit's new model does not carry it
                                budgets={"max_variants": s.max_variants, "verify_rounds": int(chosen.verify_rounds),
                                         "albedo_refits": int(s.albedo_refits),
                                         "ladder_steps": int(s.ladder_steps)})
