@@ -95,16 +95,24 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     if file_range:          # the model its file holds (one value range), before a proof of it
         file_value_range(res.model)
         file_value_range(res.model_before_albedo)
-    if s.prove_bound:       # the error between the grid nodes, proved (fit.rational.proved_bound)
-        report(progress, "proving the bound", 0, 1)
-        record_fit3d(res, brdf, memo=memo)
-        report(progress, "proving the bound", 1, 1)
-    domain_record(res.model.fit_info)
+    prove_step(brdf, res, s.prove_bound, memo, progress)
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s
     res.model.fit_info["grid"] = list(s.grid)
     res.model.fit_info["theta_measured_deg"] = float(np.degrees(brdf.theta_i_max))
     return res
+
+
+def prove_step(brdf, res, prove: bool, memo: dict, progress=None) -> None:
+    """The last step of a fit: with ``prove`` (the setting ``prove_bound``), its error between the
+    grid nodes proved per piece and channel (:func:`fit.rational.proved_bound.record_fit3d`, the
+    proofs in ``memo`` of functions no step changed since reused), then ``fit_info["domain"]``
+    (:func:`fit.rational.result3d.domain_record`: what is proved and what is only verified)."""
+    if prove:
+        report(progress, "proving the bound", 0, 1)
+        record_fit3d(res, brdf, memo=memo)
+        report(progress, "proving the bound", 1, 1)
+    domain_record(res.model.fit_info)
 
 
 def albedo_step(brdf, res, albedo_tol: float, albedo_time, verify: int,

@@ -15,9 +15,8 @@ from ..formats.angles import cosine_directions
 from ..progress import report
 from .ceiling import Ceiling
 from .image_check import image_check
-from .result3d import Fit3D, domain_record, file_value_range
-from .proved_bound import record_fit3d
-from .rgl3d import albedo_step, fit_rgl
+from .result3d import Fit3D, file_value_range
+from .rgl3d import albedo_step, fit_rgl, prove_step
 from .settings import Fit3DSettings
 from .variables3d import evaluate_directions
 from .verify3d import refit_between_nodes, verify_and_refit
@@ -230,7 +229,6 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
                                validation_rmse=best.validation_rmse, objective=chosen.objective,
                                validation_score=best.validation_score,
                                select_by=s.select_by if target is None else "validation",
-                               grid=list(chosen.grid),     # a refit's new model does not carry it
                                budgets={"max_variants": s.max_variants, "verify_rounds": int(chosen.verify_rounds),
                                         "albedo_refits": int(s.albedo_refits),
                                         "ladder_steps": int(s.ladder_steps)})
@@ -244,11 +242,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     # file written is the same either way)
     file_value_range(best.model)
     file_value_range(best.model_before_albedo)
-    if s.prove_bound:       # the chosen fit's error between the grid nodes, proved
-        report(progress, "proving the bound", 0, 1)
-        record_fit3d(best, brdf, memo=memo)
-        report(progress, "proving the bound", 1, 1)
-    domain_record(best.model.fit_info)
+    prove_step(brdf, best, s.prove_bound, memo, progress)     # the chosen fit's error between the grid nodes
     best.settings = chosen
     best.data = best.verify_points = None          # the data and fresh points are not kept
     return best

@@ -69,6 +69,8 @@ def _refit(res, X, rho, X_new, ratio_new, refit_all: bool, ceiling):
     new = fit_samples(X, rho, settings=res.settings, name=data.name, theta_max=data.theta_max, source=data.source,
                       objective=data.objective, ceiling=ceiling, noise=res.noise, keep=keep, progress=data.progress)
     new.data = replace(data, X=X, rho=rho)
+    if "grid" in res.model.fit_info:     # the data grid the fit was made on (a proof read back uses it)
+        new.model.fit_info["grid"] = list(res.model.fit_info["grid"])
     return new, redo
 
 
