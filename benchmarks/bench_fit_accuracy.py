@@ -604,44 +604,57 @@ def render_spec(key: str, row: dict, bsdf: Path, sampler: str):
 
 def render_errors(rows: list, maps, resolution: int, spp: int, keys=tuple(k for k, _ in RENDERED)) -> list:
     """Render ΔE2000 of each row's representations ``keys`` (:data:`RENDERED`: the φd-median
-    table, the 2-D and the 3-D fit) against the ``rgl`` material on the fidelity study's scene
-    (:mod:`studies.fidelity`: unit sphere, hidden environment map), **paired**: all with the
-    ``mis`` sampler and the same seeds, so the difference is the representations' alone; one
-    exposure per material and map from the ``rgl`` render. Rows ``{material, map, floor_mean,
-    floor_p99, <key>: {de_mean, de_p99}}`` (the noise floor: of the 3-D comparison, else the
-    first rendered)."""
+    table, the 2-D and the 3-D fit) against the ``rgl`` material (:func:`render_against_rgl`).
+    Rows ``{material, map, floor_mean, floor_p99, <key>: {de_mean, de_p99}}`` (the noise floor: of
+    the 3-D comparison, else the first rendered)."""
+    from studies import fidelity as FI
+
+    out = []
+    for r in rows:
+        path = FI.rgl_materials()[r["material"]]
+        specs = {k: render_spec(k, r, path, FI.PAIRED_SAMPLER) for k in keys}
+        specs = {k: v for k, v in specs.items() if v is not None}
+        if specs:
+            out += render_against_rgl(r["material"], path, specs, maps, resolution, spp, floor_key="fit3d")
+    return out
+
+
+def render_against_rgl(material: str, path: Path, specs: dict, maps, resolution: int, spp: int,
+                       floor_key: str | None = None) -> list:
+    """Render ΔE2000 of the materials ``specs`` (``{key: MaterialSpec}``, each named ``"obj"``)
+    against the ``rgl`` material of the file ``path`` on the fidelity study's scene
+    (:mod:`studies.fidelity`: unit sphere, hidden environment map, ``resolution`` px, ``spp``
+    samples), **paired**: all with the ``mis`` sampler and the same seeds, so the difference is
+    the representations' alone; one exposure per map from the ``rgl`` render (rendered once per
+    map). Rows ``{material, map, floor_mean, floor_p99, <key>: {de_mean, de_p99}}``, one per map
+    (the noise floor: of ``floor_key``'s comparison, else the first rendered)."""
     from studies import common as C
     from studies import fidelity as FI
     from studies import metrics as M
     from lab import mitsuba_reference as MR
 
     out, mask = [], None
-    for r in rows:
-        path = FI.rgl_materials()[r["material"]]
-        specs = {k: render_spec(k, r, path, FI.PAIRED_SAMPLER) for k in keys}
-        specs = {k: v for k, v in specs.items() if v is not None}
-        if not specs:
-            continue
-        for mapname in maps:
-            base = MR.sphere_scene(path, C.data_path(FI.MAPS[mapname]), spp=spp, resolution=resolution,
-                                   pattern="stratified", tile_size=16)
-            rgl_spec = base.materials["obj"]
-            rgl_spec.sampler = FI.PAIRED_SAMPLER
-            ref = FI.render_halves(FI._with(base, rgl_spec), spp)
-            if mask is None:
-                mask = C.object_mask(base, ref["renderer"]) & MR.sphere_mask(resolution)
-            exposure = M.exposure_for(ref["img"], mask)
-            rec = {"material": r["material"], "map": mapname}
-            for k, spec in specs.items():
-                img = FI.render_halves(FI._with(base, spec), spp)
-                c = FI.compare(img["img"], ref["img"], mask, exposure, img["delta"] - ref["delta"])
-                rec[k] = {"de_mean": c["de_mean"], "de_p99": c["de_p99"]}
-                if k == "fit3d" or "floor_mean" not in rec:
-                    rec.update(floor_mean=c["floor_mean"], floor_p99=c["floor_p99"])
-            out.append(rec)
-            print(f"render {r['material']} {mapname}: " + "; ".join(
-                f"{k} ΔE2000 {rec[k]['de_mean']:.2f} / {rec[k]['de_p99']:.2f}" for k in specs)
-                + f" (noise floor {rec['floor_mean']:.2f} / {rec['floor_p99']:.2f})", flush=True)
+    for mapname in maps:
+        base = MR.sphere_scene(path, C.data_path(FI.MAPS[mapname]), spp=spp, resolution=resolution,
+                               pattern="stratified", tile_size=16)
+        rgl_spec = base.materials["obj"]
+        rgl_spec.sampler = FI.PAIRED_SAMPLER
+        ref = FI.render_halves(FI._with(base, rgl_spec), spp)
+        if mask is None:
+            mask = C.object_mask(base, ref["renderer"]) & MR.sphere_mask(resolution)
+        exposure = M.exposure_for(ref["img"], mask)
+        rec = {"material": material, "map": mapname}
+        for k, spec in specs.items():
+            spec.sampler = FI.PAIRED_SAMPLER
+            img = FI.render_halves(FI._with(base, spec), spp)
+            c = FI.compare(img["img"], ref["img"], mask, exposure, img["delta"] - ref["delta"])
+            rec[k] = {"de_mean": c["de_mean"], "de_p99": c["de_p99"]}
+            if k == floor_key or "floor_mean" not in rec:
+                rec.update(floor_mean=c["floor_mean"], floor_p99=c["floor_p99"])
+        out.append(rec)
+        print(f"render {material} {mapname}: " + "; ".join(
+            f"{k} ΔE2000 {rec[k]['de_mean']:.2f} / {rec[k]['de_p99']:.2f}" for k in specs)
+            + f" (noise floor {rec['floor_mean']:.2f} / {rec['floor_p99']:.2f})", flush=True)
     return out
 
 

@@ -270,6 +270,72 @@ def test_bench_dial_default_pick_follows_the_selection_rule():
     assert default_pick([row(0, 0.03, 1.5), row(1, 0.05, 1.0), row(2, 0.03, 0.97)]) == 1  # within the margin
 
 
+def test_bench_dial_image_marks():
+    """The dial's image mark: the fewest coefficients of the ladder whose renders meet mean <= 1
+    and p99 <= 3 under every map (the default's own row never counts as a rung)."""
+    from benchmarks.bench_dial import DEFAULT_ROW, image_met, markdown, smallest_image, smallest_meeting
+
+    def row(layout, n, rmse, *des):
+        r = {"layout": layout, "coefficients": n, "rel_rmse": rmse, "median_rel": 0.1, "p95_rel": 0.2, "valid": True}
+        if des:
+            r["render"] = {m: {"de_mean": a, "de_p99": b} for m, (a, b) in zip(("studio", "rooitou"), des)}
+        return r
+
+    rows = [row("a", 72, 0.2, (0.9, 2.0), (1.1, 2.0)),     # misses under rooitou
+            row("b", 135, 0.06, (0.9, 3.5), (0.5, 1.0)),   # misses p99 under studio
+            row("c", 198, 0.04, (0.8, 2.9), (0.9, 3.0)),   # meets both
+            row(DEFAULT_ROW, 420, 0.01, (0.3, 1.0), (0.3, 1.0)),
+            row("d", 1125, 0.03, (0.5, 2.0), (0.4, 2.0))]
+    assert [image_met(r) for r in rows] == [False, False, True, True, True]
+    assert image_met(row("x", 1, 0.1)) is None
+    assert smallest_image(rows) == 2 and smallest_image(rows[3:4]) is None
+    assert smallest_meeting(rows, 0.02) is None and smallest_meeting(rows, 0.05) == 2
+    meta = {"tol_rmse": 0.05, "tols": [0.05], "command": "x", "date": "d", "machine": "m", "load": "l", "pairs": 10,
+            "seed": 0, "complete": True, "render_maps": ["studio", "rooitou"], "render_res": 8, "render_spp": 4}
+    text = markdown({"m": rows}, meta)
+    assert "| c | 198 | 0.0400 |" in text and "0.80 / 2.90 | 0.90 / 3.00 | **S** **I** |" in text
+    assert f"| {DEFAULT_ROW} | 420 |" in text and "1.00 | **D** |" in text
+    assert "The image target is met from 198 coefficients (c); the default (420 coefficients) meets it." in text
+    assert "Image target met by some layout of the ladder on 1 of 1 materials; by the default on 1." in text
+
+
+def test_bench_dial_ladder_flags_fit_the_same_layout():
+    """Each layout's ``flags`` (docs/fit_dial.md: the command that fits it alone) give the command
+    the layout the benchmark fits: the same settings, the objective included."""
+    from benchmarks.bench_dial import LADDER, layout_settings
+    from fit.cli import build_parser
+    from fit.cli.brdf3d import settings_from_args
+    from fit.rational.settings import Fit3DSettings
+
+    parser, default = build_parser(), Fit3DSettings().objective
+    flagged = [e for e in LADDER if e.get("flags")]
+    assert len(flagged) >= 9
+    for e in flagged:
+        args = parser.parse_args(["brdf", "x.bsdf", "--out", "y.json", "--model", "3d", *e["flags"].split()])
+        settings, (layout,) = settings_from_args(args)
+        cli = {"objective": settings.objective, **layout}
+        assert cli == {"objective": default, **layout_settings(e, keep_verify=True)}, e["name"]
+
+
+def test_bench_dial_complete_render_smoke(tmp_path, monkeypatch):
+    """One rung fitted as the command fits it alone, saved, measured and rendered (tiny renders)
+    beside no default row; the table has the render columns."""
+    from benchmarks import bench_dial as D
+
+    data_file("rgl/paper_white_rgb.bsdf")
+    monkeypatch.setattr(D, "LADDER", D.LADDER[:1])
+    out = tmp_path / "dial"
+    assert D.main(["--materials", "paper_white", "--complete", "--render", "--render-res", "8", "--render-spp", "4",
+                   "--render-maps", "studio", "--pairs", "2000", "--no-default", "--out", str(out)]) == 0
+    d = json.loads((out / "results.json").read_text())
+    (r,) = d["results"]["paper_white"]
+    assert r["coefficients"] == 72 and r["valid"] and r["proved_over_stated"] is not None
+    assert (out / "fits" / "paper_white" / "1_piece_3_1.json").is_file() and r["file"].endswith("1_piece_3_1.json")
+    assert set(r["render"]) == {"studio"} and r["render"]["studio"]["de_mean"] > 0
+    assert d["meta"]["complete"] and d["meta"]["render_maps"] == ["studio"]
+    assert D.main(["--render", "--render-spp", "3"]) == 2
+
+
 def test_bench_lanes_smoke(tmp_path):
     """The lanes benchmark's two kernels render the same image (its agreement columns), on tiny
     renders; no timing is read."""
