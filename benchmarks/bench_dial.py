@@ -225,8 +225,9 @@ IMAGE_TARGET = (1.0, 3.0)
 def render_rows(name: str, data: Path, rows: list, maps, resolution: int, spp: int) -> None:
     """Render every row's fit file against the ``rgl`` material of ``name`` under each of
     ``maps`` (:func:`benchmarks.bench_fit_accuracy.render_against_rgl`: paired ``mis`` renders,
-    the fidelity study's sphere) and store ``row["render"] = {map: {de_mean, de_p99}}`` and the
-    noise floor in ``row["render_floor"]``."""
+    the fidelity study's sphere) and store ``row["render"] = {map: {de_mean, de_p99}}`` and, in
+    ``row["render_floor"]``, the noise floor ``[mean, p99]`` per map (of the material's first
+    comparison: one floor per material and map)."""
     from benchmarks.bench_fit_accuracy import render_against_rgl
     from warp_rbrdf.scene import MaterialSpec
 
