@@ -479,7 +479,7 @@ def _load_results(files) -> tuple:
     results = dict(sorted(results.items()))
     meta = dict(metas[0])
     if len(metas) > 1:
-        meta["load"] = f"{len(metas)} runs merged: " + "; ".join(m["load"] for m in metas)
+        meta["load"] = "; ".join(m["load"] for m in metas) + f" ({len(metas)} runs merged)"
         import re
 
         cmds = sorted({re.sub(r"--materials( [a-z0-9_]+)+", "--materials M", m["command"]).replace(" --out", "\0").split("\0")[0]
