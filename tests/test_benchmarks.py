@@ -317,6 +317,20 @@ def test_bench_dial_ladder_flags_fit_the_same_layout():
         assert cli == {"objective": default, **layout_settings(e, keep_verify=True)}, e["name"]
 
 
+def test_bench_dial_docs_are_those_of_the_stored_run():
+    """docs/fit_dial.md and fit_accuracy.md's dial block are what ``--from-json`` writes from the
+    stored run (docs/data/dial_*.json): generated, not edited by hand."""
+    from benchmarks import bench_dial as D
+
+    (stored,) = sorted((D.ROOT / "docs" / "data").glob("dial_*.json"))[-1:]
+    results, meta = D._load_results([stored])
+    text = D.markdown(results, meta)
+    page = (D.ROOT / "docs" / "fit_dial.md").read_text(encoding="utf-8")
+    assert page == D.DIAL_PAGE_HEAD + D.ladder_markdown() + "\n" + text
+    block = (D.ROOT / "docs" / "fit_accuracy.md").read_text(encoding="utf-8").split(D.BEGIN)[1].split(D.END)[0]
+    assert D.summary_markdown(results, meta) in block and block.startswith("\n" + text.split("\n\n", 1)[0])
+
+
 def test_bench_dial_complete_render_smoke(tmp_path, monkeypatch):
     """One rung fitted as the command fits it alone, saved, measured and rendered (tiny renders)
     beside no default row; the table has the render columns."""
