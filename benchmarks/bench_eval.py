@@ -29,7 +29,9 @@ by round (``--repeats`` rounds), and each row is the median over rounds. ``--ren
 times renders of the reference sphere scene (:func:`lab.mitsuba_reference.sphere_scene`,
 ``--envmap``) with each material, one thread, interleaved, in samples per CPU second: every
 material with the ``mis`` sampler (environment + cosine BSDF sample, so only the material's
-evaluation differs), and ``rgl`` also with its own ``mis-rgl`` (the reference scene's).
+evaluation differs), and once more each with its own sampler (:func:`own_sampler`: ``mis-rgl``
+for ``rgl``, the reference scene's; ``mis-rational`` for a fit carrying its inverse CDFs;
+``mis-tabulated`` for the other fits and the tables).
 
     python -m benchmarks.bench_eval [--material satin_rosaline] [--fit3d FILE] [--pairs 1048576]
                                     [--repeats 7] [--render] [--json FILE] [--quick]
@@ -200,10 +202,22 @@ def eval_timings(runs, n_pairs: int, repeats: int, seed: int = 0) -> dict:
             "rows": {row: {"ns": statistics.median(v), "all_ns": v} for row, v in times.items()}}
 
 
+def own_sampler(spec) -> str:
+    """The sampler a material of ``spec`` renders with when the scene names none
+    (:func:`warp_rbrdf.registry.default_strategy`: a rational fit whose file carries its inverse
+    CDFs samples with them, ``mis-rational``; the tables with ``mis-tabulated``)."""
+    import json
+
+    from warp_rbrdf import registry
+
+    cdf = spec.type == "rational" and spec.file is not None and "sampler" in json.loads(Path(spec.file).read_text())
+    return registry.default_strategy(spec.type, cdf=cdf)
+
+
 def render_timings(specs, envmap: str, resolution: int, spp: int, repeats: int) -> dict:
     """Samples per CPU second of the reference sphere scene with each material (one thread,
     interleaved, median of ``repeats``); the rational ones also through the generic function,
-    ``rgl`` also with its own sampler (``mis-rgl``)."""
+    every material also with its own sampler (:func:`own_sampler`; ``rgl``: ``mis-rgl``)."""
     import dataclasses
 
     from lab import mitsuba_reference as MR
@@ -218,6 +232,9 @@ def render_timings(specs, envmap: str, resolution: int, spp: int, repeats: int) 
             variants.append((GENERIC[row], s, generic_renderer))
         if row == "rgl":
             variants.append(("rgl, mis-rgl sampler", dataclasses.replace(s, sampler="mis-rgl"), Renderer))
+        own = own_sampler(s)
+        if row != "rgl" and own != s.sampler:
+            variants.append((f"{row}, {own} sampler", dataclasses.replace(s, sampler=own), Renderer))
         for label, spec, make in variants:
             spec = dataclasses.replace(spec, name="obj")
             sc = dataclasses.replace(base, materials={"obj": spec},
@@ -268,12 +285,14 @@ def markdown(res) -> str:
     if "render" in res:
         rr = res["render"]
         ref = "rgl, mis-rgl sampler"
+        own = next((k for k in rr if k.startswith("projected, ")), "projected")
         lines += ["", "| material (reference sphere scene, 1 thread) | M samples / CPU s | ÷ projected | ÷ rgl "
-                      "| ÷ rgl, mis-rgl sampler |", "| --- | --- | --- | --- | --- |"]
+                      f"| ÷ rgl, mis-rgl sampler | ÷ {own} |", "| --- | --- | --- | --- | --- | --- |"]
         for k, v in rr.items():
             x = v["samples_per_s"]
             lines.append(f"| {k} | {x / 1e6:.3f} | {x / rr['projected']['samples_per_s']:.2f} | "
-                         f"{x / rr['rgl']['samples_per_s']:.2f} | {x / rr[ref]['samples_per_s']:.2f} |")
+                         f"{x / rr['rgl']['samples_per_s']:.2f} | {x / rr[ref]['samples_per_s']:.2f} | "
+                         f"{x / rr[own]['samples_per_s']:.2f} |")
     return "\n".join(lines)
 
 

@@ -35,3 +35,20 @@ def test_stand_in_3d_fit_has_the_fitters_layout():
         assert piece.value_transform == "log"
         for f in piece.functions:
             assert f.num_exponents.sum(axis=1).max() == dn and f.den_exponents.sum(axis=1).max() == dd
+
+
+def test_own_sampler_is_the_renderers_default(tmp_path):
+    """The sampler each material renders with by default: a fit carrying its inverse CDFs samples
+    with them; a fit without them and the tables with ``mis-tabulated``; ``rgl`` with its own."""
+    from warp_rbrdf.paths import PACKAGE_DATA
+    from warp_rbrdf.scene import MaterialSpec
+
+    bare = PACKAGE_DATA / "satin_rosaline_rgb.json"            # the shipped fit carries no sampler
+    assert "sampler" not in json.loads(bare.read_text())
+    carried = tmp_path / "carried.json"
+    carried.write_text(json.dumps(dict(json.loads(bare.read_text()), sampler={})))
+    assert B.own_sampler(MaterialSpec(name="a", type="rational", file=carried)) == "mis-rational"
+    assert B.own_sampler(MaterialSpec(name="a", type="rational", file=bare)) == "mis-tabulated"
+    assert B.own_sampler(MaterialSpec(name="a", type="rational", data=B.synthetic_3d())) == "mis-tabulated"
+    assert B.own_sampler(MaterialSpec(name="a", type="projected", file=tmp_path / "x.npz")) == "mis-tabulated"
+    assert B.own_sampler(MaterialSpec(name="a", type="rgl", file=tmp_path / "x.bsdf")) == "mis-rgl"
