@@ -280,7 +280,6 @@ def markdown(results: dict, meta: dict) -> str:
            + f"; **S**: the fewest coefficients with a relative RMSE within {tol:g}"
            + (f"; **I**: the fewest coefficients whose renders meet ΔE2000 mean ≤ {IMAGE_TARGET[0]:g} and p99 ≤ "
               f"{IMAGE_TARGET[1]:g} under every map" if maps else "") + ".", ""]
-    n_i = n_d = 0
     for m, rows in results.items():
         d, s = _default_index(rows, meta, m), smallest_meeting(rows, tol)
         i_img = smallest_image(rows) if maps else None
@@ -299,9 +298,7 @@ def markdown(results: dict, meta: dict) -> str:
             picks.append(f"{t:g}: " + ("none" if k is None else f"{rows[k]['coefficients']} ({rows[k]['layout']})"))
         out += ["", "Fewest coefficients within a relative RMSE of " + "; ".join(picks) + ".", ""]
         if maps:
-            n_i += i_img is not None
             dm = d is not None and image_met(rows[d])
-            n_d += bool(dm)
             line = ("The image target is met by no layout of the ladder" if i_img is None else
                     f"The image target is met from {rows[i_img]['coefficients']} coefficients ({rows[i_img]['layout']})")
             if d is not None and rows[d].get("render"):
@@ -313,17 +310,38 @@ def markdown(results: dict, meta: dict) -> str:
                     f"{rows[d]['rel_rmse']:.4f}) where {rows[s]['coefficients']} meet {tol:g} "
                     f"({rows[s]['rel_rmse']:.4f}).", ""]
     if maps:
+        n_i, n_d, _ = image_counts(results, meta)
         out += [f"Image target met by some layout of the ladder on {n_i} of {len(results)} materials; by the "
                 f"default on {n_d}.", ""]
     return "\n".join(out).rstrip() + "\n"
 
 
-def _worst(row: dict) -> str:
-    """The row's worst render over the maps: ``mean / p99`` (each the largest over the maps)."""
+def image_counts(results: dict, meta: dict) -> tuple:
+    """``(ladder, default, default at the fewest)``: the materials whose ladder has a layout meeting
+    the image target, those whose default fit meets it, and those whose default meets it with no
+    more coefficients than the ladder's fewest that does."""
+    n_i = n_d = n_fewest = 0
+    for m, rows in results.items():
+        i, d = smallest_image(rows), _default_index(rows, meta, m)
+        dm = d is not None and bool(image_met(rows[d]))
+        n_i += i is not None
+        n_d += dm
+        n_fewest += dm and i is not None and rows[d]["coefficients"] <= rows[i]["coefficients"]
+    return n_i, n_d, n_fewest
+
+
+def worst_map(row: dict) -> tuple | None:
+    """``(mean, p99)`` of the row's renders, each the largest over the maps (None: not rendered)."""
     r = (row or {}).get("render")
     if not r:
-        return "–"
-    return f"{max(v['de_mean'] for v in r.values()):.2f} / {max(v['de_p99'] for v in r.values()):.2f}"
+        return None
+    return max(v["de_mean"] for v in r.values()), max(v["de_p99"] for v in r.values())
+
+
+def _worst(row: dict) -> str:
+    """The row's worst render over the maps as a cell: ``mean / p99``."""
+    w = worst_map(row)
+    return "–" if w is None else f"{w[0]:.2f} / {w[1]:.2f}"
 
 
 def summary_markdown(results: dict, meta: dict) -> str:
@@ -334,18 +352,15 @@ def summary_markdown(results: dict, meta: dict) -> str:
     out = [f"| material | fewest coefficients meeting the image target (layout) | its ΔE mean / p99 (worst map) | "
            f"default: coefficients | default: ΔE mean / p99 (worst map) | default meets it | fewest within RMSE {tol:g} |",
            "| --- | --- | --- | --- | --- | --- | --- |"]
-    n_i = n_d = n_fewest = 0
     for m, rows in results.items():
         i, d, s = smallest_image(rows), _default_index(rows, meta, m), smallest_meeting(rows, tol)
         dm = d is not None and bool(image_met(rows[d]))
-        n_i += i is not None
-        n_d += dm
-        n_fewest += dm and i is not None and rows[d]["coefficients"] <= rows[i]["coefficients"]
         out.append(f"| {m} | " + ("none" if i is None else f"{rows[i]['coefficients']} ({rows[i]['layout']})")
                    + f" | {_worst(rows[i]) if i is not None else '–'} | "
                    + ("–" if d is None else str(rows[d]["coefficients"])) + f" | {_worst(rows[d]) if d is not None else '–'} | "
                    + ("yes" if dm else "no") + " | "
                    + ("none" if s is None else f"{rows[s]['coefficients']} ({rows[s]['layout']})") + " |")
+    n_i, n_d, n_fewest = image_counts(results, meta)
     out += ["", f"The image target (ΔE2000 mean ≤ {IMAGE_TARGET[0]:g} and p99 ≤ {IMAGE_TARGET[1]:g} under every map) is "
             f"met by some layout of the ladder on {n_i} of {len(results)} materials and by the default on {n_d}; "
             f"the default meets it with no more coefficients than the ladder's fewest on {n_fewest}."]
@@ -369,7 +384,8 @@ def envelope(rows: list, value) -> tuple:
 
 
 def _worst_mean(r: dict) -> float:
-    return max(v["de_mean"] for v in r["render"].values()) if r.get("render") else np.inf
+    w = worst_map(r)
+    return np.inf if w is None else w[0]
 
 
 def chart(results: dict, meta: dict, path: Path) -> None:

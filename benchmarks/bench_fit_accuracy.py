@@ -82,6 +82,7 @@ run's)::
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -645,8 +646,7 @@ def render_against_rgl(material: str, path: Path, specs: dict, maps, resolution:
         exposure = M.exposure_for(ref["img"], mask)
         rec = {"material": material, "map": mapname}
         for k, spec in specs.items():
-            spec.sampler = FI.PAIRED_SAMPLER
-            img = FI.render_halves(FI._with(base, spec), spp)
+            img = FI.render_halves(FI._with(base, dataclasses.replace(spec, sampler=FI.PAIRED_SAMPLER)), spp)
             c = FI.compare(img["img"], ref["img"], mask, exposure, img["delta"] - ref["delta"])
             rec[k] = {"de_mean": c["de_mean"], "de_p99": c["de_p99"]}
             if k == floor_key or "floor_mean" not in rec:
