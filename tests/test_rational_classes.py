@@ -317,11 +317,16 @@ def test_inline_exp_is_exp():
     assert ulp.max() <= 1 and np.mean(ulp == 0) > 0.999
     assert np.array_equal(got[~fin & ~np.isnan(ref)], ref[~fin & ~np.isnan(ref)])
     assert np.isnan(got[np.isnan(y)]).all()
-    # the lambda itself in float64: within 2 ulps of NumPy's exp wherever the result is normal
-    x = np.concatenate([np.linspace(-708.0, 709.7, 400_001), np.random.default_rng(3).normal(0, 3, 100_000)])
+    # the lambda itself in float64: within 2 ulps of NumPy's exp on its clamp [-708, 709.4]
+    # (one scale factor 2^k, k in [-1021, 1023]); beyond it the clamp's value, which float32
+    # rounds as it rounds exp: 0 below, inf above
+    x = np.concatenate([np.linspace(-708.0, 709.4, 400_001), np.random.default_rng(3).normal(0, 3, 100_000)])
     e = _exp64(x)
     ref = np.exp(x)
     assert np.max(np.abs(e.view(np.int64) - ref.view(np.int64))) <= 2
+    out = _exp64(np.array([-720.0, -708.5, 709.6, 720.0]))
+    np.testing.assert_allclose(out, np.exp([-708.0, -708.0, 709.4, 709.4]), rtol=1e-15)
+    assert np.array_equal(out.astype(np.float32), np.exp(np.array([-720.0, -708.5, 709.6, 720.0])).astype(np.float32))
 
 
 _EXP64 = []

@@ -16,9 +16,10 @@ reads a table) has numerator 0 and denominator 1.
 Evaluation (:func:`make_dense_pq`, one function per class, cached): the 1-D tables ``T_0 ..
 T_degree`` of the mapped inputs (``t`` in [-1, 1]), then per row of slots sharing ``(a, b)`` the
 sum over ``c`` of ``row * T_c(t_c)``, times ``T_a(t_a) T_b(t_b)``; float64 throughout (sums of
-Chebyshev terms can cancel). The rows go alternately into two accumulators and a row's terms
-are summed as two interleaved halves: shorter chains of dependent multiply-adds (3-6 % of a
-2-D fit's evaluation, ``docs/bench_eval.md``). The function is a native snippet (``wp.func_native``,
+Chebyshev terms can cancel). The rows go in turn into :data:`N_ACCUMULATORS` accumulators and a
+row's terms are summed as two interleaved halves: shorter chains of dependent multiply-adds
+(four accumulators against two: 2-4 % of a 2-D fit's evaluation and 5 % of a 3-D fit's, measured
+side by side in one process; ``docs/bench_eval.md``). The function is a native snippet (``wp.func_native``,
 :func:`dense_source`): straight-line C++ in which a row's four lanes are one Clang vector
 (``ext_vector_type``), so each slot is one load and one fused multiply-add of four lanes. Warp's
 own code for the same sums (unrolled with ``wp.static``) runs twice as long: LLVM's SLP
@@ -40,6 +41,8 @@ from .chebyshev import MAX_DEGREE, N_PACKED_VARS, vec6d
 #: packed form of :mod:`warp_rbrdf.chebyshev` (a class's code grows with its slots)
 MAX_DENSE_SLOTS = 256
 LANES = 4          # (R, G, B, 0) per slot
+#: the row sums go in turn into this many accumulators (shorter chains of dependent adds)
+N_ACCUMULATORS = 4
 
 
 def class_key(n_vars: int, num_degree: int, den_degree: int) -> int:
@@ -165,7 +168,8 @@ def _sum_lines(key: int, vector: bool, declare: bool = True) -> list:
             typ = 'rbrdf_v4d' if lane is None else 'double'
             if declare:
                 out.append(f"{typ} {var} = 0.0;")
-            out.append(f"{typ} {var}_odd = 0.0;")
+            accs = [var] + [f"{var}_{i}" for i in range(1, N_ACCUMULATORS)]
+            out += [f"{typ} {acc} = 0.0;" for acc in accs[1:]]
             j, r = 0, 0
             while j < len(slots):
                 a, b = slots[j][:2]
@@ -175,10 +179,9 @@ def _sum_lines(key: int, vector: bool, declare: bool = True) -> list:
                     terms.append(f"{row} * xc[{slots[j][2]}]")
                     j += 1
                 weight = " * ".join([f"xa[{a}]"] * (nv >= 3) + [f"xb[{b}]"] * (nv >= 2))
-                acc = var if r % 2 == 0 else f"{var}_odd"
-                out.append(f"{acc} += {_pairwise(terms)}" + (f" * ({weight})" if weight else "") + ";")
+                out.append(f"{accs[r % N_ACCUMULATORS]} += {_pairwise(terms)}" + (f" * ({weight})" if weight else "") + ";")
                 r += 1
-            out.append(f"{var} += {var}_odd;")
+            out.append(f"{var} += {' + '.join(accs[1:])};")
         base += len(slots)
     return out
 

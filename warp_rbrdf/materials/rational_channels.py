@@ -6,13 +6,16 @@ channels, the step-7 range; the result rounded to float32. It computes what
 ``max`` / ``clamp``: C ``fmin`` / ``fmax``), with the three channels as lanes of one Clang
 vector (``ext_vector_type``) and ``exp`` inline on the vector (:data:`EXP_SOURCE`): Cody-Waite
 reduction by ln 2, the Taylor polynomial of degree 13 on ``|r| <= ln(2) / 2`` (truncation below
-5e-18 relative) by Estrin's scheme, the scale 2^k in two exact factors (so results down to the
-subnormals and up to the overflow are those of ``exp``; ``tests/test_rational_classes.py``
-measures it against NumPy's), built from k's bits in the rounding sum with integer adds and
-logical shifts (x86-64-v3 has no four-lane double-to-integer conversion and no arithmetic shift
-of 64-bit lanes: both were scalar code, 2-3 % of a 2-D fit's evaluation). Three libm ``exp`` calls and the scalar code around them cost a third of a 2-D fit's
-evaluation (``benchmarks/bench_eval.py``). A CUDA build compiles the same steps per channel with
-``exp``.
+5e-18 relative) by Estrin's scheme, and the scale 2^k as one exact factor built from k's bits in
+the rounding sum with an integer add and a shift (x86-64-v3 has no four-lane double-to-integer
+conversion). The input is clamped to [-708, 709.4], where k stays in [-1021, 1023] and every
+result is a normal double within 2 ulps of ``exp`` (``tests/test_rational_classes.py`` measures
+it against NumPy's); beyond the clamp the result is the clamp's value, which the float32 result
+rounds as it rounds ``exp`` (0 below, inf above). A second scale factor, for the subnormals and
+the top of the double range, would cost 3-4 ns of a 2-D fit's evaluation, and the float32 result
+never shows them (``docs/bench_eval.md``). Three libm ``exp`` calls and the scalar code around
+them cost a third of a 2-D fit's evaluation (``benchmarks/bench_eval.py``). A CUDA build
+compiles the same steps per channel with ``exp``.
 """
 from __future__ import annotations
 
@@ -39,10 +42,11 @@ from .rational_records import (
 #: 1 / k! for k = 0 .. 13, as C++ literals
 _C = [repr(1.0 / math.factorial(k)) for k in range(14)]
 
-#: ``rbrdf_exp(x)``: exp of the four lanes of ``x`` (a C++ lambda; NaN lanes give NaN). The
+#: ``rbrdf_exp(x)``: exp of the four lanes of ``x`` (a C++ lambda; NaN lanes give NaN; the input
+#: clamped to [-708, 709.4], module docstring). The
 #: polynomial by Estrin's scheme (depth four multiply-adds instead of Horner's thirteen)
 EXP_SOURCE = f"""auto rbrdf_exp = [](rbrdf_v4d x) -> rbrdf_v4d {{
-    rbrdf_v4d c = __builtin_elementwise_min(__builtin_elementwise_max(x, (rbrdf_v4d)(-1416.0)), (rbrdf_v4d)(710.0));
+    rbrdf_v4d c = __builtin_elementwise_min(__builtin_elementwise_max(x, (rbrdf_v4d)(-708.0)), (rbrdf_v4d)(709.4));
     const rbrdf_v4d shifter = 6755399441055744.0;          /* 1.5 * 2^52: rounds to an integer */
     rbrdf_v4d ks = c * 1.4426950408889634 + shifter;        /* k's bits: those of the shifter + k */
     rbrdf_v4d k = ks - shifter;
@@ -57,9 +61,7 @@ EXP_SOURCE = f"""auto rbrdf_exp = [](rbrdf_v4d x) -> rbrdf_v4d {{
     rbrdf_v4d q3 = {_C[12]} + {_C[13]} * r;
     rbrdf_v4d e = (q0 + q1 * r4) + (q2 + q3 * r4) * r8;
     rbrdf_v4l ki = (rbrdf_v4l)ks - (rbrdf_v4l)shifter;     /* k as an integer, no conversion */
-    rbrdf_v4l k1 = (rbrdf_v4l)((rbrdf_v4ul)(ki + 4096) >> 1) - 2048;   /* floor(k / 2), logical shift */
-    rbrdf_v4l k2 = ki - k1;
-    e = e * (rbrdf_v4d)((k1 + 1023) << 52) * (rbrdf_v4d)((k2 + 1023) << 52);
+    e = e * (rbrdf_v4d)((ki + 1023) << 52);
     rbrdf_v4l nan = (rbrdf_v4l)(x != x);
     return (rbrdf_v4d)(((rbrdf_v4l)e & ~nan) | ((rbrdf_v4l)x & nan));
 }};
@@ -87,7 +89,6 @@ for (int c = 0; c < 3; ++c) {{
 #: the vector types of :data:`EXP_SOURCE` and :data:`VECTOR_STEPS`
 VECTOR_TYPES = """typedef double rbrdf_v4d __attribute__((ext_vector_type(4)));
 typedef long long rbrdf_v4l __attribute__((ext_vector_type(4)));
-typedef unsigned long long rbrdf_v4ul __attribute__((ext_vector_type(4)));
 """
 
 #: the vector types and the inline ``exp`` the steps use

@@ -59,6 +59,31 @@ ATAN_LITERALS = [repr(float(np.float32(c))) + "f" for c in fastmath.ATAN_COEFFS]
 #: step 8's floor of cos theta_i as a float32 (:data:`.rational_kernel.COS_FLOOR_F32`)
 COS_FLOOR_F32 = float(np.float32(COS_FLOOR))
 
+def atan_poly_source(s: str, p: str) -> str:
+    """C++ statements declaring the float ``p``: the polynomial of
+    :data:`warp_rbrdf.fastmath.ATAN_COEFFS` at ``s`` (``atan(a) = a p`` for ``s = a^2``, ``a`` in
+    [0, 1]) by Estrin's scheme: four dependent multiply-adds where Horner's takes eight, the
+    angles being on the path of every evaluation (:func:`atan_poly_numpy`: the same operations)."""
+    c = ATAN_LITERALS
+    return (f"const float {p}_2 = {s} * {s}, {p}_4 = {p}_2 * {p}_2;\n"
+            f"const float {p}_03 = ({c[0]} + {c[1]} * {s}) + ({c[2]} + {c[3]} * {s}) * {p}_2;\n"
+            f"const float {p}_47 = ({c[4]} + {c[5]} * {s}) + ({c[6]} + {c[7]} * {s}) * {p}_2;\n"
+            f"const float {p} = ({p}_03 + {p}_47 * {p}_4) + {c[8]} * ({p}_4 * {p}_4);\n")
+
+
+def atan_poly_numpy(z: np.ndarray) -> np.ndarray:
+    """:func:`atan_poly_source`'s polynomial in NumPy float32 (the same operations up to fused
+    multiply-adds)."""
+    f = np.float32
+    c = [f(k[:-1]) for k in ATAN_LITERALS]
+    z = np.asarray(z, f)
+    z2 = z * z
+    z4 = z2 * z2
+    p03 = (c[0] + c[1] * z) + (c[2] + c[3] * z) * z2
+    p47 = (c[4] + c[5] * z) + (c[6] + c[7] * z) * z2
+    return ((p03 + p47 * z4) + c[8] * (z4 * z4)).astype(f)
+
+
 #: C++ statements: ``ang`` (``wp::vec3``: theta_h, theta_d, cos theta_h cos theta_d) of ``wi``, ``wo``
 ANGLES_SOURCE = f"""const float sx = wi.c[0] + wo.c[0], sy = wi.c[1] + wo.c[1], sz = wi.c[2] + wo.c[2];
 const float rs2 = sx * sx + sy * sy;
@@ -72,8 +97,7 @@ const float sw = sx * wi.c[0] + sy * wi.c[1] + sz * wi.c[2];
 const float a0 = sqrtf(rs2) / (ls + sz);
 const float a1 = sqrtf(cx * cx + cy * cy + cz * cz) / (ls * li + sw);
 const float s0 = a0 * a0, s1 = a1 * a1;
-float p0 = {ATAN_LITERALS[8]}, p1 = {ATAN_LITERALS[8]};
-""" + "".join(f"p0 = p0 * s0 + {c}; p1 = p1 * s1 + {c};\n" for c in ATAN_LITERALS[7::-1]) + """wp::vec3 ang;
+""" + atan_poly_source("s0", "p0") + atan_poly_source("s1", "p1") + """wp::vec3 ang;
 ang.c[0] = 2.0f * (a0 * p0);
 ang.c[1] = 2.0f * (a1 * p1);
 ang.c[2] = sz * sw / (ls2 * li);
@@ -100,11 +124,7 @@ def angles_2d_numpy(wi, wo) -> np.ndarray:
     sw = (s * wi).sum(-1, dtype=f)
     out = []
     for a in (np.sqrt(rs2) / (ls + s[:, 2]), np.sqrt((c * c).sum(-1, dtype=f)) / (ls * li + sw)):
-        z = a * a
-        p = f(ATAN_LITERALS[8][:-1])
-        for k in ATAN_LITERALS[7::-1]:
-            p = p * z + f(k[:-1])
-        out.append(f(2) * (a * p))
+        out.append(f(2) * (a * atan_poly_numpy(a * a)))
     return np.stack(out + [s[:, 2] * sw / (ls2 * li)], -1).astype(f)
 
 

@@ -38,7 +38,7 @@ import numpy as np
 import warp as wp
 
 from ..chebyshev_dense import Native, class_of_key
-from .rational_flat2d import ANGLES_SOURCE, ATAN_LITERALS, angles_2d_numpy, flat_source
+from .rational_flat2d import ANGLES_SOURCE, angles_2d_numpy, atan_poly_numpy, atan_poly_source, flat_source
 
 #: |phi_d| of :func:`angles_3d` is within this of the float64 angle of the same float32
 #: directions on the tests' pairs (radians; grazing, near-mirror and near-retro pairs included)
@@ -54,8 +54,7 @@ py = fabsf(py);
 const float rho = sqrtf(px * px + py * py);
 const float a2 = rho > 0.0f ? py / (rho + fabsf(px)) : 0.0f;
 const float s2 = a2 * a2;
-float p2 = {ATAN_LITERALS[8]};
-""" + "".join(f"p2 = p2 * s2 + {c};\n" for c in ATAN_LITERALS[7::-1]) + """const float half = 2.0f * (a2 * p2);
+""" + atan_poly_source("s2", "p2") + """const float half = 2.0f * (a2 * p2);
 wp::vec4 ang4(ang.c[0], ang.c[1], px >= 0.0f ? half : 3.14159265358979f - half, ang.c[2]);
 return ang4;
 """
@@ -86,11 +85,7 @@ def angles_3d_numpy(wi, wo) -> np.ndarray:
     rho = np.sqrt(px * px + py * py)
     with np.errstate(invalid="ignore", divide="ignore"):
         a = np.where(rho > 0, py / (rho + np.abs(px)), f(0)).astype(f)
-    z = a * a
-    p = f(ATAN_LITERALS[8][:-1])
-    for k in ATAN_LITERALS[7::-1]:
-        p = p * z + f(k[:-1])
-    half = f(2) * (a * p)
+    half = f(2) * (a * atan_poly_numpy(a * a))
     phi = np.where(px >= 0, half, f(3.14159265358979) - half)
     return np.stack([a2d[:, 0], a2d[:, 1], phi, a2d[:, 2]], -1).astype(f)
 

@@ -68,8 +68,10 @@ def tab_sample_cells(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float),
 
 @wp.func
 def tab_pdf(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: int, off_p: int,
-            n_v: int, n_t: int, n_p: int, theta_v: float, theta_l: float, phi_abs: float) -> float:
-    """Density (1/sr) of tab_sample at (theta_l, |phi_l|); 0 at or below the horizon."""
+            n_v: int, n_t: int, n_p: int, theta_v: float, theta_l: float, sin_l: float,
+            phi_abs: float) -> float:
+    """Density (1/sr) of tab_sample at (theta_l, |phi_l|) (``sin_l``: sin theta_l, known to the
+    caller from the direction); 0 at or below the horizon."""
     if theta_l < 0.0 or theta_l >= wp.HALF_PI:
         return 0.0
     v = tab_row(theta_v, n_v)
@@ -81,7 +83,7 @@ def tab_pdf(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: i
     sp = off_p + (v * n_t + j) * (n_p + 1)
     m_t = pc1d_mass(cdf_t, st, j)
     m_p = pc1d_mass(cdf_p, sp, k)
-    return (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
+    return (m_t / dt) * (0.5 * m_p / dp) / wp.max(sin_l, 1.0e-30)
 
 
 @wp.func
@@ -150,10 +152,12 @@ def pdf(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> float:
         return 0.0
     b = m * N_CDF_INFO
     va = view_frame(wo)
-    tl = fmath.atan2(wp.sqrt(wi[0] * wi[0] + wi[1] * wi[1]), wi[2])
+    rxy = wp.sqrt(wi[0] * wi[0] + wi[1] * wi[1])
+    tl = fmath.atan2(rxy, wi[2])
+    sin_l = rxy / wp.sqrt(rxy * rxy + wi[2] * wi[2])    # sin theta_l of wi, of any length
     return tab_pdf(mats.cdf_t, mats.cdf_p, mats.cdf_info[b + CDF_OFF_T], mats.cdf_info[b + CDF_OFF_P],
                    mats.cdf_info[b + CDF_N_V], mats.cdf_info[b + CDF_N_T], mats.cdf_info[b + CDF_N_P],
-                   va[0], tl, rel_phi_abs(wi, va))
+                   va[0], tl, sin_l, rel_phi_abs(wi, va))
 
 
 def kernel_functions(cdfs):
