@@ -33,8 +33,13 @@ evaluation differs), and once more each with its own sampler (:func:`own_sampler
 for ``rgl``, the reference scene's; ``mis-rational`` for a fit carrying its inverse CDFs;
 ``mis-tabulated`` for the other fits and the tables).
 
+``--all-2d all|a,b``: instead, every 2-D 5 % fit of the chart (the shipped file or the studies'
+cache: :func:`fits_2d`) against its own material's 2-D table, each pair in one scene, with the
+fit's coefficients and degree classes: where the 2-D target (at most the table's cost) holds.
+
     python -m benchmarks.bench_eval [--material satin_rosaline] [--fit3d FILE] [--pairs 1048576]
                                     [--repeats 7] [--render] [--json FILE] [--quick]
+    python -m benchmarks.bench_eval --all-2d all [--pairs 1048576] [--repeats 7] [--json FILE]
 """
 from __future__ import annotations
 
@@ -202,6 +207,76 @@ def eval_timings(runs, n_pairs: int, repeats: int, seed: int = 0) -> dict:
             "rows": {row: {"ns": statistics.median(v), "all_ns": v} for row, v in times.items()}}
 
 
+def fits_2d(materials) -> dict:
+    """``{material: 2-D fit file}``: the chart's 2-D 5 % fit of each shared RGL material that has
+    one (:func:`benchmarks.chart_fits.fit2d` without fitting: the shipped file or the studies'
+    cache; flagged fits included)."""
+    from benchmarks.chart_fits import fit2d
+
+    out = {}
+    for mat in materials:
+        f, _ = fit2d(data_dir() / "rgl" / f"{mat}_rgb.bsdf", allow_fit=False)
+        if f is not None:
+            out[mat] = f
+    return out
+
+
+def fit_size(path) -> tuple:
+    """``(coefficients, degree classes)`` of a 2-D fit file: its numerator and denominator
+    coefficients over every piece and channel, and the sorted (numerator, denominator) total
+    degrees of its pieces (the classes of :mod:`warp_rbrdf.chebyshev_dense`)."""
+    from fit.rational.coefficient_file import load
+
+    m = load(path)
+    n, classes = 0, set()
+    for piece in m.pieces:
+        dn = dd = 0
+        for f in piece.functions:
+            n += len(f.num_coef) + len(f.den_coef)
+            dn = max(dn, int(f.num_exponents.sum(axis=1).max()))
+            dd = max(dd, int(f.den_exponents.sum(axis=1).max()))
+        classes.add((dn, dd))
+    return n, sorted(classes)
+
+
+def all_2d_timings(files: dict, n_pairs: int, repeats: int) -> list:
+    """Per 2-D fit (``{material: file}``): its ns per RGB evaluation against its material's
+    median (theta_h, theta_d) projection, timed in one scene, interleaved (:func:`eval_timings`)."""
+    from fit.formats import load_measured
+    from fit.projection.project import project
+    from warp_rbrdf.renderer import Renderer
+    from warp_rbrdf.scene import MaterialSpec
+
+    rows = []
+    for mat, f in files.items():
+        specs = {"fit": MaterialSpec(name="r2", type="rational", file=Path(f), sampler="mis"),
+                 "table": MaterialSpec(name="proj", type="projected",
+                                       data=project(load_measured(data_dir() / "rgl" / f"{mat}_rgb.bsdf")),
+                                       sampler="mis")}
+        r = Renderer(eval_scene(specs), device="cpu")
+        r.compile()
+        t = eval_timings({row: (r, s.name) for row, s in specs.items()}, n_pairs, repeats)["rows"]
+        n, classes = fit_size(f)
+        rows.append(dict(material=mat, file=str(f), coefficients=n, classes=classes, fit_ns=t["fit"]["ns"],
+                         table_ns=t["table"]["ns"], ratio=t["fit"]["ns"] / t["table"]["ns"]))
+        print(f"{mat}: {rows[-1]['fit_ns']:.1f} ns against the table's {rows[-1]['table_ns']:.1f} "
+              f"({rows[-1]['ratio']:.2f}), {n} coefficients", flush=True)
+    return rows
+
+
+def markdown_2d(rows) -> str:
+    out = ["| material | coefficients | (numerator, denominator) degrees | fit: ns per RGB evaluation | "
+           "2-D table: ns | fit ÷ table |", "| --- | --- | --- | --- | --- | --- |"]
+    for r in sorted(rows, key=lambda r: r["coefficients"]):
+        cls = ", ".join(f"({a}, {b})" for a, b in r["classes"])
+        out.append(f"| {r['material']} | {r['coefficients']} | {cls} | {r['fit_ns']:.1f} | {r['table_ns']:.1f} | "
+                   f"{r['ratio']:.2f} |")
+    met = sum(r["ratio"] <= 1.0 for r in rows)
+    out.append("")
+    out.append(f"At most the table's cost on {met} of {len(rows)} fits.")
+    return "\n".join(out)
+
+
 def own_sampler(spec) -> str:
     """The sampler a material of ``spec`` renders with when the scene names none
     (:func:`warp_rbrdf.registry.default_strategy`: a rational fit whose file carries its inverse
@@ -310,6 +385,9 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--json", default=None, help="write the results here")
     ap.add_argument("--quick", action="store_true", help="a few thousand pairs, two rounds (tests)")
+    ap.add_argument("--all-2d", default=None, metavar="MATERIALS",
+                    help="instead: every 2-D 5 %% fit of the chart ('all' or stems, comma-separated) "
+                         "against its material's 2-D table, ns per RGB evaluation")
     a = ap.parse_args(argv)
     if a.quick:
         a.pairs, a.repeats, a.resolution, a.spp = 4096, 2, 16, 2
@@ -317,6 +395,17 @@ def main(argv=None):
     from warp_rbrdf.runtime import init_warp
 
     init_warp()
+    if a.all_2d is not None:
+        mats = (sorted(p.name[:-len("_rgb.bsdf")] for p in (data_dir() / "rgl").glob("*_rgb.bsdf"))
+                if a.all_2d == "all" else a.all_2d.split(","))
+        rows = all_2d_timings(fits_2d(mats), a.pairs, a.repeats)
+        m = machine()
+        print(f"{m['cpu']}, {m['date']}; {m['uptime']}")
+        print(markdown_2d(rows))
+        if a.json:
+            Path(a.json).write_text(json.dumps(dict(machine=m, pairs=a.pairs, repeats=a.repeats, rows=rows),
+                                               indent=1, default=str))
+        return dict(rows=rows)
     try:
         specs, notes = material_specs(a.material, a.fit2d, a.fit3d, a.quick)
     except BenchError as e:

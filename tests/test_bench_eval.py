@@ -52,3 +52,16 @@ def test_own_sampler_is_the_renderers_default(tmp_path):
     assert B.own_sampler(MaterialSpec(name="a", type="rational", data=B.synthetic_3d())) == "mis-tabulated"
     assert B.own_sampler(MaterialSpec(name="a", type="projected", file=tmp_path / "x.npz")) == "mis-tabulated"
     assert B.own_sampler(MaterialSpec(name="a", type="rgl", file=tmp_path / "x.bsdf")) == "mis-rgl"
+
+
+def test_all_2d_mode(tmp_path, capsys):
+    """``--all-2d``: every 2-D fit found (here the shipped paper_white) against its material's
+    table, the fit's size from its file."""
+    data_file("rgl/paper_white_rgb.bsdf")
+    out = tmp_path / "all2d.json"
+    res = B.main(["--all-2d", "paper_white", "--quick", "--json", str(out)])
+    (row,) = res["rows"]
+    assert row["material"] == "paper_white" and row["fit_ns"] > 0 and row["table_ns"] > 0
+    assert row["coefficients"] == 160 and row["classes"] == [(4, 3), (4, 4)]
+    assert json.loads(out.read_text())["rows"][0]["ratio"] == pytest.approx(row["ratio"])
+    assert "| paper_white | 160 | (4, 3), (4, 4) |" in capsys.readouterr().out

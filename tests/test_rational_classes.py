@@ -150,9 +150,10 @@ def test_classes_of_fits_and_the_packed_fallback():
 
 
 def test_flat_records():
-    """The shipped 2-D fits and single boxes get a flat record (after the domain record) holding
-    each piece's ints and a copy of its header; nested pieces, phi_d and pieces without a class
-    do not; the tree the flat record points to is the same fit's (the generic walk skips to it)."""
+    """The shipped 2-D fits, single boxes and 2-D fits of one split of splits (at most
+    FLAT_MAX_PIECES boxes) get a flat record (after the domain record) holding each box's ints and
+    a copy of its header; deeper nesting, phi_d splits and pieces without a class do not; the
+    tree the flat record points to is the same fit's (the generic walk skips to it)."""
     R = rational_records
     satin = load_coefficients(PACKAGE_DATA / "satin_rosaline_rgb.json")
     ints, floats, _ = rational.pack_model(satin, True, 79.0)
@@ -160,8 +161,11 @@ def test_flat_records():
     n = int(ints[R.DOMAIN_CHILD])
     k, fo = int(ints[n + R.FLAT_K]), int(ints[n + R.FLAT_FLOATS])
     assert k == 2 and ints[n + R.FLAT_VAR] == R.SUPPORTED_VARIABLES["theta_d"]
-    np.testing.assert_array_equal(floats[fo:fo + R.FF_HEADS], [np.cos(np.radians(79.0)), np.radians(79.0),
+    np.testing.assert_array_equal(floats[fo:fo + R.FF_INNER], [np.cos(np.radians(79.0)), np.radians(79.0),
                                                                satin.edges[1], np.inf, np.inf])
+    # no second level: every inner edge +inf, the outer piece j is box j
+    assert np.all(floats[fo + R.FF_INNER:fo + R.FF_BASES] == np.inf)
+    np.testing.assert_array_equal(floats[fo + R.FF_BASES:fo + R.FF_HEADS], [0.0, 1.0, 0.0, 0.0, 0.0])
     tree = int(ints[n + R.FLAT_TREE])
     assert ints[tree] == rational.NODE_SPLIT
     for j in range(k):
@@ -175,8 +179,31 @@ def test_flat_records():
     assert [m & R.CH_TABLE for m in got[4:7]] == [0, 0, R.CH_TABLE]      # the flagged blue of the band
     plain = rational.pack_model(random_model("log", 2))[0]
     assert plain[0] == rational_records.NODE_FLAT2D and plain[rational_records.FLAT_K] == 1
-    for model in (piecewise_model("log"), model_3d(), _packed_fallback_model()):
+    for model in (model_3d(), _packed_fallback_model()):
         assert not _is_flat(rational.pack_model(model)[0])
+    # three theta_d pieces, the first split in theta_h: four boxes, the second level recorded
+    nested = piecewise_model("log")
+    ints, floats, _ = rational.pack_model(nested)
+    assert ints[0] == R.NODE_FLAT2D and ints[R.FLAT_K] == 4 and ints[R.FLAT_VAR] == R.SUPPORTED_VARIABLES["theta_d"]
+    fo = int(ints[R.FLAT_FLOATS])
+    inner = floats[fo + R.FF_INNER:fo + R.FF_BASES].reshape(R.FLAT_MAX_PIECES, R.FLAT_MAX_PIECES - 1)
+    np.testing.assert_array_equal(inner[0], [nested.pieces[0].edges[1], np.inf, np.inf])
+    assert np.all(inner[1:] == np.inf)
+    np.testing.assert_array_equal(floats[fo + R.FF_BASES:fo + R.FF_HEADS], [0.0, 2.0, 3.0, 0.0, 1.0 + R.SUPPORTED_VARIABLES["theta_h"]])
+    boxes = [*nested.pieces[0].pieces, *nested.pieces[1:]]
+    for j, box in enumerate(boxes):
+        head = fo + R.FF_HEADS + R.N_FH * j
+        np.testing.assert_array_equal(floats[head + R.FH_VARS:head + R.FH_VARS + 2], box.variables[0].domain)
+    # a split of splits in two variables, or three levels: the walk
+    mixed = piecewise_model("log")
+    e = [mixed.edges[1], 0.7, mixed.edges[2]]
+    mixed.pieces[1] = M.PiecewiseRationalModel(
+        name="other", variables=mixed.pieces[1].variables, split_variable="theta_d", edges=e,
+        pieces=[random_model("log", seed=20 + j, theta_d_range=(e[j], e[j + 1]), value_max=8.0) for j in range(2)])
+    assert not _is_flat(rational.pack_model(mixed)[0])
+    deep = piecewise_model("log")
+    deep.pieces[0].pieces[0] = piecewise_model("log")
+    assert not _is_flat(rational.pack_model(deep)[0])
     assert _is_flat(rational.pack_model(_flat_theta_h_model())[0]) == 1
     # 3-D fits of theta_h pieces (the 3-D fitter's layout) and single boxes, with or without the
     # value factor: a 3-D flat record, its edges padded to FLAT3_MAX_PIECES - 1

@@ -1,5 +1,6 @@
 """The evaluation of a 2-D rational fit held by a flat record (:mod:`.rational_records`: at most
-:data:`~.rational_records.FLAT_MAX_PIECES` boxes of (theta_h, theta_d), each of a degree class)
+:data:`~.rational_records.FLAT_MAX_PIECES` boxes of (theta_h, theta_d) in one split or in one
+split of splits, each of a degree class)
 as one native function per set of classes (:func:`make_flat2d`): the recipe of
 :mod:`.rational_kernel` without a walk, without ``atan2`` and without ``phi_d``.
 
@@ -8,12 +9,15 @@ as one native function per set of classes (:func:`make_flat2d`): the recipe of
   the angle between ``wi`` and the half vector, as :func:`.frame.half_diff` defines it for
   directions of any length; ``s x wi`` has no cancellation where ``wo`` is near ``-wi``), both in
   [0, 1] above the horizon, so each angle is ``2 atan(a)`` of :func:`warp_rbrdf.fastmath.atan2`'s
-  polynomial on [0, 1], without its octant steps, a normalized half vector, a rotation into its
+  polynomial on [0, 1] (by Estrin's scheme, :func:`atan_poly_source`), without its octant steps, a normalized half vector, a rotation into its
   frame or a branch; float32, within :data:`ANGLE_ATOL` of :func:`.frame.half_diff`'s values
   (``tests/test_rational_classes.py``). The measured-domain test's product ``cos theta_h cos
   theta_d`` is ``s_z (s . wi) / (|s|^2 |wi|)``.
-* **The piece**: ``k = #{inner edges < x}`` by compare-and-add over the padded edges, no branch;
-  the piece's header, ints and dense rows are read from the flat record's one run.
+* **The piece**: the outer piece ``k1 = #{edges < x}`` by compare-and-add over the padded edges,
+  then the box ``k = first box of k1 + #{its inner edges < x2}`` in the inner split variable
+  (a nested fit, e.g. the fitter's theta_h split of the first theta_d piece; +inf edges where a
+  piece is one box), no branch; the box's header, ints and dense rows are read from the flat
+  record's one run.
 * **Steps 1-7** as :mod:`.rational_kernel` (clamp, sqrt, map, the class's sums of
   :func:`warp_rbrdf.chebyshev_dense.dense_block`, the vector steps of
   :data:`.rational_channels.VECTOR_STEPS`), the measured-domain move only near its edge
@@ -38,9 +42,12 @@ from .. import fastmath
 from ..chebyshev_dense import Native, class_of_key, dense_block, dense_block_scalar
 from .rational_channels import SCALAR_STEPS, VECTOR_PRELUDE, VECTOR_STEPS
 from .rational_records import (
+    FF_BASES,
     FF_COS_CUT,
     FF_CUT,
     FF_EDGES,
+    FF_INNER,
+    FF_VAR2,
     FH_BOX,
     FH_VARS,
     FLAT_KINDS,
@@ -163,6 +170,13 @@ double p0 = 0.0, p1 = 0.0, p2 = 0.0, q0 = 0.0, q1 = 0.0, q2 = 0.0;
     _, max_pieces, heads = FLAT_KINDS[n_vars]
     cos_prod = n_vars                      # the index of cos theta_h cos theta_d in ang
     pick = " + ".join(f"(x > F[{FF_EDGES + j}])" for j in range(max_pieces - 1))
+    if n_vars == 2:     # the outer piece, then, in a nested fit, the box in it (FF_INNER, FF_BASES)
+        inner = " + ".join(f"(x2 > E2[{j}])" for j in range(max_pieces - 1))
+        pick = (f"{pick};\nint k = k1;\nconst double nest = F[{FF_VAR2}];\n"
+                f"if (nest != 0.0) {{   /* a predictable branch: one fit, one way */\n"
+                f"    const double x2 = nest > 1.5 ? td : th;\n"
+                f"    const double* E2 = F + {FF_INNER} + {max_pieces - 1} * k1;\n"
+                f"    k = (int)F[{FF_BASES} + k1] + {inner};\n}}")
     if n_vars == 2:
         inputs = f"""double xh = th, xd = td;
 if (flags & {LEAF_CLAMP}) {{
@@ -204,7 +218,7 @@ if ((double)ang.c[{cos_prod}] < F[{FF_COS_CUT}] + {margin!r}) {{
     td = (double)(float)wp::min(td, lim);
 }}
 const double x = var ? td : th;
-const int k = {pick};
+const int {"k1" if n_vars == 2 else "k"} = {pick};
 const double* hd = F + {heads} + {N_FH} * k;
 const int* P = I + {FLAT_NI} * k;
 const int flags = P[0];

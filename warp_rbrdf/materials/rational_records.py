@@ -55,7 +55,15 @@ FLAT_TREE, FLAT_FLOATS, FLAT_K, FLAT_VAR, FLAT_PIECES = 1, 2, 3, 4, 8    # flat 
 FLAT_NI = 8                   # ints per piece: flags, sqrt bits, class, dense offset, modes (3)
 FLAT_MAX_PIECES = 4           # pieces of a 2-D flat record
 FLAT3_MAX_PIECES = 8          # pieces of a 3-D flat record (the 3-D fitter's theta_h pieces: 6)
-FF_COS_CUT, FF_CUT, FF_EDGES, FF_HEADS = 0, 1, 2, 2 + FLAT_MAX_PIECES - 1   # flat record (floats)
+FF_COS_CUT, FF_CUT, FF_EDGES = 0, 1, 2         # flat record (floats): the domain, the outer edges
+# 2-D flat record (floats), after its outer edges: per outer piece its inner edges (the second
+# level of a nested fit, padded with +inf), per outer piece the index of its first box, whether
+# and in which variable the fit is nested (0: one level, the outer piece is the box; 1 + the
+# inner split variable, 0 theta_h, 1 theta_d), then the headers
+FF_INNER = FF_EDGES + FLAT_MAX_PIECES - 1
+FF_BASES = FF_INNER + FLAT_MAX_PIECES * (FLAT_MAX_PIECES - 1)
+FF_VAR2 = FF_BASES + FLAT_MAX_PIECES
+FF_HEADS = FF_VAR2 + 1                        # the first header of a 2-D flat record
 FF3_HEADS = 2 + FLAT3_MAX_PIECES - 1          # the first header of a 3-D flat record
 #: the flat record's kind, most pieces and first header's float, by number of variables
 FLAT_KINDS = {2: (NODE_FLAT2D, FLAT_MAX_PIECES, FF_HEADS), 3: (NODE_FLAT3D, FLAT3_MAX_PIECES, FF3_HEADS)}
@@ -111,16 +119,31 @@ _FLAT_VARIABLES = {2: ["theta_h", "theta_d"], 3: ["theta_h", "theta_d", "phi_d"]
 
 
 def _flat_layout(model, table, leaf_flags):
-    """``(number of variables, split variable, inner edges, leaves)`` of a fit a flat record can
-    hold (module docstring), else None. A 2-D fit with a value factor has none (its function
-    has no step 8)."""
+    """``(number of variables, split variable, its inner edges, leaves, nested)`` of a fit a flat
+    record can hold (module docstring), else None; ``leaves``: the boxes in the order of the
+    tree; ``nested`` (2-D only; None for a fit of one level): ``(inner split variable, per outer
+    piece its inner edges, per outer piece the index of its first box)`` of a fit whose outer
+    pieces are boxes or one more split of boxes, all in the same variable. A 2-D fit with a
+    value factor has none (its function has no step 8)."""
     pieces = getattr(model, "pieces", None)
-    leaves = [model] if pieces is None else list(pieces)
-    names = [v.name for v in leaves[0].variables]
+    outer = [model] if pieces is None else list(pieces)
+    first = outer[0] if getattr(outer[0], "pieces", None) is None else outer[0].pieces[0]
+    names = [v.name for v in first.variables]
     nv = next((k for k, v in _FLAT_VARIABLES.items() if v == names), None)
     if nv is None or (nv == 2 and leaf_flags):
         return None
-    if (pieces is not None and model.split_variable not in ("theta_h", "theta_d")) or len(leaves) > FLAT_KINDS[nv][1]:
+    if pieces is not None and model.split_variable not in ("theta_h", "theta_d"):
+        return None
+    inner_vars = {p.split_variable for p in outer if getattr(p, "pieces", None) is not None}
+    if inner_vars and (nv != 2 or len(inner_vars) > 1 or not inner_vars <= {"theta_h", "theta_d"}):
+        return None
+    leaves, inner_edges, bases = [], [], []
+    for p in outer:
+        bases.append(len(leaves))
+        sub = getattr(p, "pieces", None)
+        inner_edges.append([] if sub is None else list(p.edges[1:-1]))
+        leaves += [p] if sub is None else list(sub)
+    if len(leaves) > FLAT_KINDS[nv][1]:
         return None
     for leaf in leaves:
         if getattr(leaf, "pieces", None) is not None or [v.name for v in leaf.variables] != names:
@@ -128,7 +151,10 @@ def _flat_layout(model, table, leaf_flags):
         if _leaf_class(leaf, table) is None:
             return None
     var = 0 if pieces is None else SUPPORTED_VARIABLES[model.split_variable]
-    return nv, var, ([] if pieces is None else list(model.edges[1:-1])), leaves
+    nested = None
+    if inner_vars:
+        nested = (SUPPORTED_VARIABLES[inner_vars.pop()], inner_edges, bases)
+    return nv, var, ([] if pieces is None else list(model.edges[1:-1])), leaves, nested
 
 
 def _pack_flat(fd, model, table, domain, leaf_flags) -> int:
@@ -138,14 +164,26 @@ def _pack_flat(fd, model, table, domain, leaf_flags) -> int:
     layout = _flat_layout(model, table, leaf_flags)
     if layout is None:
         return _pack_node(fd, model, table, leaf_flags)
-    nv, var, edges, leaves = layout
+    nv, var, edges, leaves, nested = layout
     kind, max_pieces, _ = FLAT_KINDS[nv]
     k = len(leaves)
     n = fd.add_ints([kind, 0, 0, k, var, 0, 0, 0] + [0] * (FLAT_NI * k))
     tree = _pack_node(fd, model, table, leaf_flags)
     fd.ints[n + FLAT_TREE] = tree
-    nodes = [tree] if k == 1 else [fd.ints[tree + SPLIT_CHILDREN + j] for j in range(k)]
+    outer = [tree] if len(edges) == 0 and fd.ints[tree] != NODE_SPLIT else \
+        [fd.ints[tree + SPLIT_CHILDREN + j] for j in range(len(edges) + 1)]
+    nodes = []
+    for node in outer:      # a box, or one more split of boxes (nested)
+        nodes += ([fd.ints[node + SPLIT_CHILDREN + j] for j in range(fd.ints[node + SPLIT_N])]
+                  if fd.ints[node] == NODE_SPLIT else [node])
+    assert len(nodes) == k
     floats = [*domain, *edges, *[np.inf] * (max_pieces - 1 - len(edges))]
+    if nv == 2:             # the second level: none (every outer piece one box) or nested
+        nest, inner, bases = ((1 + nested[0], nested[1], nested[2]) if nested is not None
+                              else (0, [[]] * (len(edges) + 1), range(len(edges) + 1)))
+        pad = max_pieces - len(inner)
+        floats += [e for row in [*inner, *[[]] * pad] for e in [*row, *[np.inf] * (max_pieces - 1 - len(row))]]
+        floats += [*[float(b) for b in bases], *[0.0] * pad, float(nest)]
     for j, leaf in enumerate(nodes):
         li = fd.ints
         codes = li[leaf + LEAF_VARS:leaf + LEAF_VARS + nv]
