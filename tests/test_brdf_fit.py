@@ -183,6 +183,46 @@ def test_sharp_clipped_peak_needs_the_theta_h_split():
         assert np.all((f >= d.lower) & (f <= d.upper))
 
 
+@pytest.mark.slow
+def test_glossy_felt_needs_the_rest_split():
+    """acrylic_felt_pink: no core meets 5 % with the peak split alone (blue's (12, 6) function of
+    theta_h 5-90 holds 95.7 % of its clusters); with the rest split at the midpoint of sqrt theta_h
+    (34.4 deg) the 60 deg core is guaranteed with three theta_h pieces, fewer coefficients than
+    the flagged best effort, and the renderer reads it from a flat record (four boxes)."""
+    from fit.formats import load_measured
+    from warp_rbrdf.materials import rational, rational_records
+
+    b = load_measured(data_file("rgl/acrylic_felt_pink_rgb.bsdf"))
+    without = fit_brdf(b, tol=0.05, split_rest=False, prove_bound=False)
+    assert not without.valid
+    fit = fit_brdf(b, tol=0.05, prove_bound=False)
+    assert fit.valid and fit.core_theta_d_deg == 60.0 and fit.n_coefficients < without.n_coefficients
+    assert [pc.theta_h_range_deg for pc in fit.core_pieces] == [(0.0, 5.0), (5.0, pytest.approx(34.3566, abs=1e-3)),
+                                                                (pytest.approx(34.3566, abs=1e-3), 90.0)]
+    assert fit.model.fit_info["theta_h_splits_deg"] == [5.0, pytest.approx(34.3566, abs=1e-3)]
+    assert "split at theta_h = 5, 34.4 deg" in fit.summary()
+    p = project_for_fit(b)
+    for c in range(3):
+        d = channel_data(p, c, 0.05, "tol", theta_d_range_deg=(0.0, 60.0))
+        f = fit.model(d.X)[:, c]
+        assert np.all((f >= d.lower) & (f <= d.upper))
+    ints = rational.pack_model(fit.model)[0]
+    assert ints[0] == rational_records.NODE_FLAT2D and ints[rational_records.FLAT_K] == 4
+
+
+def test_theta_h_layouts_tried_in_turn():
+    """One piece, the peak and the rest, then the rest split at its midpoint in the fit's own
+    variable (sqrt: the square roots' midpoint; identity: the angles')."""
+    from fit.rational.brdf_fit import theta_h_splits
+
+    assert theta_h_splits(None, True, "sqrt") == [(0.0, 90.0)]
+    assert theta_h_splits(5.0, False, "sqrt") == [(0.0, 90.0), (0.0, 5.0, 90.0)]
+    *_, rest = theta_h_splits(5.0, True, "sqrt")
+    assert rest[:2] == (0.0, 5.0) and rest[3] == 90.0
+    assert np.sqrt(rest[2]) == pytest.approx(0.5 * (np.sqrt(5.0) + np.sqrt(90.0)), rel=1e-12)
+    assert theta_h_splits(10.0, True, "identity")[-1] == (0.0, 10.0, 50.0, 90.0)
+
+
 def test_output_bounded_where_no_cluster_constrains_it(lobe_fit, lobe_file):
     """Q > 0 rules out poles; the upper clamp (twice the largest cluster) bounds the rest, also
     in the theta_h + theta_d > 90 deg corner that has no data."""

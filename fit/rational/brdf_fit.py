@@ -24,7 +24,10 @@ Domain and grazing policy (stored in the coefficient file's ``domain_policy`` an
   cc_iris_purple_gem's band before this clamp).
 * If no core is met with one function per channel, the cores are tried again split at
   ``theta_h = 5 deg`` into a specular-peak piece and the rest (cc_iris_purple_gem's red
-  highlight drops from 0.95 to exactly 0 within 3.5 deg; no single (12, 6) function follows it).
+  highlight drops from 0.95 to exactly 0 within 3.5 deg; no single (12, 6) function follows it),
+  and, if none is met that way either, with the rest split once more at the midpoint of its
+  transformed range (sqrt: theta_h = 34.4 deg): three theta_h pieces (:func:`theta_h_splits`).
+  The attempts stop at the first core met, so a fit met with fewer pieces is the same fit.
 * Outside the box the inputs are clamped onto it (``"outside": "clamp"``): at grazing theta_d
   the function returns its value at 78.5 deg instead of growing without bound.
 * Intervals: ``"tol"`` (default of the core and of the band): ``y +- max(tol y, abs_floor)``;
@@ -163,8 +166,9 @@ class BRDFFit:
         core = self.pieces[0]
         if self.valid:
             status = f"proved within its intervals at every cluster of theta_d <= {core.theta_d_range_deg[1]:g} deg"
-            if tuple(core.theta_h_range_deg) != (0.0, 90.0):
-                status += f" (split at theta_h = {core.theta_h_range_deg[1]:g} deg)"
+            splits = [pc.theta_h_range_deg[1] for pc in self.core_pieces[:-1]]
+            if splits:
+                status += f" (split at theta_h = {', '.join(f'{x:.3g}' for x in splits)} deg)"
         else:
             status = "NOT within its intervals at every cluster (best fit found, flagged infeasible)"
         band = self.band_pieces
@@ -184,6 +188,21 @@ class BRDFFit:
 
 
 CORE_CANDIDATES_DEG = (60.0, 50.0, 40.0)
+
+
+def theta_h_splits(peak_split_deg, split_rest: bool, transform: str) -> list:
+    """The theta_h edges (degrees) of the core's layouts :func:`fit_brdf` tries in turn: one
+    piece; with ``peak_split_deg``, the peak and the rest; with ``split_rest`` too, the rest
+    split at the midpoint of its range in the ``transform`` (``"sqrt"``: the square roots'
+    midpoint, so the pieces are even in the fit's own variable)."""
+    out = [(0.0, 90.0)]
+    if peak_split_deg:
+        a = float(peak_split_deg)
+        out.append((0.0, a, 90.0))
+        if split_rest:
+            mid = (0.5 * (np.sqrt(a) + np.sqrt(90.0))) ** 2 if transform == "sqrt" else 0.5 * (a + 90.0)
+            out.append((0.0, a, float(mid), 90.0))
+    return out
 PRECHECK_ROUNDS = 6
 
 
@@ -240,20 +259,16 @@ def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None 
         cores = CORE_CANDIDATES_DEG
     else:
         cores = (float(core_theta_d_deg),)
-    attempts = [(core, None) for core in cores]
-    if peak_split_deg:
-        attempts += [(core, float(peak_split_deg)) for core in cores]
-    for k, (core, split) in enumerate(attempts):
+    attempts = [(core, edges) for edges in theta_h_splits(peak_split_deg, s.split_rest, theta_h_transform)
+                for core in cores]
+    for k, (core, edges) in enumerate(attempts):
         last = k == len(attempts) - 1
-        if split is None:
-            core_fits = [_fit_piece(p, (0.0, core), intervals, stop_on_infeasible=not last, **kw)]
-        else:
-            core_fits = []
-            for th in ((0.0, split), (split, 90.0)):
-                core_fits.append(_fit_piece(p, (0.0, core), intervals, stop_on_infeasible=not last,
-                                            theta_h_range_deg=th, **kw))
-                if not core_fits[-1].valid and not last:
-                    break
+        core_fits = []
+        for th in zip(edges[:-1], edges[1:]):
+            core_fits.append(_fit_piece(p, (0.0, core), intervals, stop_on_infeasible=not last,
+                                        theta_h_range_deg=th, **kw))
+            if not core_fits[-1].valid and not last:
+                break
         if all(pc.valid for pc in core_fits):
             break
     pieces = list(core_fits)

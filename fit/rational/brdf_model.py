@@ -83,8 +83,10 @@ def brdf_model(p, name, pieces, kw, intervals, band_intervals, total, source_fil
                       "max_rel_error": max(i["max_rel_error"] for i in grp_infos)})
     core_pcs, band = split_core(pieces)
     core_ok = all(pc.valid for pc in core_pcs)
-    split_txt = (f", split at theta_h = {pieces[0].theta_h_range_deg[1]:g} deg into a peak piece and the rest"
-                 if pieces[0].theta_h_range_deg != (0.0, 90.0) else "")
+    splits = [pc.theta_h_range_deg[1] for pc in core_pcs[:-1]]
+    split_txt = ("" if not splits else f", split at theta_h = {splits[0]:g} deg into a peak piece and the rest"
+                 if len(splits) == 1 else
+                 f", split at theta_h = {', '.join(f'{x:.4g}' for x in splits)} deg into a peak piece and {len(splits)} more")
     policy = {
         "outside": "clamp", "below_horizon": "zero", "theta_d_max_deg": THETA_D_MAX_DEG,
         "guaranteed_theta_d_max_deg": core if core_ok else None,
@@ -109,8 +111,8 @@ def brdf_model(p, name, pieces, kw, intervals, band_intervals, total, source_fil
                 "fitter": "fit.fitter.IntervalRationalFitter (LP, HiGHS, constraint generation)",
                 "max_degree": kw["max_degree"], "max_den_degree": kw["max_den_degree"],
                 "core_theta_d_deg": core,
-                "theta_h_split_deg": (pieces[0].theta_h_range_deg[1]
-                                      if pieces[0].theta_h_range_deg != (0.0, 90.0) else None),
+                "theta_h_split_deg": splits[0] if splits else None,
+                "theta_h_splits_deg": splits,
                 "feasible": [all(bool(pc.results[c].feasible) for pc in core_pcs) for c in range(3)],
                 "valid": [all(bool(pc.results[c].valid) for pc in core_pcs) for c in range(3)]}
     source = {"file": source_file or (p.source.split("/")[-1] if p.source else ""), "sha256": p.source_sha256}

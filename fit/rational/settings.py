@@ -134,6 +134,9 @@ class BRDFFitSettings(_Settings):
     * ``band_partial``: ``(fraction, factor)`` of the band's second try (None: none);
     * ``peak_split_deg``: theta_h (degrees) of the specular-peak split tried when no core is met
       (None: never);
+    * ``split_rest``: when no core is met with the peak split either, also split the rest
+      (theta_h from ``peak_split_deg`` to 90) at the midpoint of its ``theta_h_transform`` range
+      (bool);
     * ``theta_h_transform`` (``"sqrt"`` | ``"identity"``), ``value_transform`` (``"log"`` |
       ``"linear"``);
     * ``max_degree``, ``max_den_degree``: the largest numerator and denominator total degrees;
@@ -147,6 +150,7 @@ class BRDFFitSettings(_Settings):
     band_intervals: str = "tol"
     band_partial: tuple | None = (0.5, 2.0)
     peak_split_deg: float | None = 5.0
+    split_rest: bool = True
     theta_h_transform: str = "sqrt"
     value_transform: str = "log"
     max_degree: int = 12
@@ -176,6 +180,7 @@ class BRDFFitSettings(_Settings):
             ("peak_split_deg", self.peak_split_deg is None or (_number(self.peak_split_deg)
                                                                and 0.0 <= self.peak_split_deg < 90.0),
              "None or in [0, 90) deg"),
+            ("split_rest", isinstance(self.split_rest, bool), "True or False"),
             ("theta_h_transform", self.theta_h_transform in THETA_H_TRANSFORMS, f"one of {THETA_H_TRANSFORMS}"),
             ("value_transform", self.value_transform in VALUE_TRANSFORMS, f"one of {VALUE_TRANSFORMS}"),
             ("spread_k", _number(self.spread_k) and self.spread_k >= 0.0, "a finite number >= 0"),
