@@ -9,8 +9,8 @@ as one native function per set of classes (:func:`make_flat2d`): the recipe of
   the angle between ``wi`` and the half vector, as :func:`.frame.half_diff` defines it for
   directions of any length; ``s x wi`` has no cancellation where ``wo`` is near ``-wi``), both in
   [0, 1] above the horizon, so each angle is ``2 atan(a)`` of :func:`warp_rbrdf.fastmath.atan2`'s
-  polynomial on [0, 1] (by Estrin's scheme, :func:`atan_poly_source`), without its octant steps, a normalized half vector, a rotation into its
-  frame or a branch; float32, within :data:`ANGLE_ATOL` of :func:`.frame.half_diff`'s values
+  polynomial on [0, 1] (by Estrin's scheme, :func:`atan_poly_source`), without its octant
+  steps, a normalized half vector, a rotation into its frame or a branch; float32, within :data:`ANGLE_ATOL` of :func:`.frame.half_diff`'s values
   (``tests/test_rational_classes.py``). The measured-domain test's product ``cos theta_h cos
   theta_d`` is ``s_z (s . wi) / (|s|^2 |wi|)``.
 * **The piece**: the outer piece ``k1 = #{edges < x}`` by compare-and-add over the padded edges,

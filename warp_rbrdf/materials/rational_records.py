@@ -11,15 +11,17 @@ Records, offsets relative to the material's own starts, the root at int 0:
   edges, the K children's int offsets;
 * a **flat record** (after the domain record, or at the root without one) of a fit whose pieces
   are boxes in one split of theta_h or theta_d (or one box), each of a degree class: at most
-  :data:`FLAT_MAX_PIECES` boxes of (theta_h, theta_d) without a value factor (kind
+  :data:`FLAT_MAX_PIECES` boxes of (theta_h, theta_d) without a value factor, in one split or
+  in one split whose pieces are boxes or splits of boxes in one more variable (kind
   :data:`NODE_FLAT2D`, read by :mod:`.rational_flat2d`), or at most :data:`FLAT3_MAX_PIECES`
   boxes of (theta_h, theta_d, phi_d) (kind :data:`NODE_FLAT3D`, read by :mod:`.rational_flat3d`):
   kind, the int offset of the fit's tree (the records below, which the flat record repeats),
-  the float offset of its floats, the number of pieces K, the split variable, then per piece
+  the float offset of its floats, the number of boxes K, the split variable, then per box
   :data:`FLAT_NI` ints (flags, the inputs' sqrt bits, class, the float offset of its dense
   rows, the three channel modes); its floats: ``(cos c, c)`` of the domain record (``(-2, 0)``
-  without one), the K - 1 inner edges padded with +inf to the kind's maximum minus one, then
-  per piece a copy of its leaf header (:data:`N_FH` floats, from :data:`FLAT_KINDS`' offset): one
+  without one), the split's inner edges padded with +inf to the kind's maximum minus one, (2-D
+  only, :data:`FF_INNER` to :data:`FF_HEADS`) per outer piece its own inner edges, per outer
+  piece its first box, and the nesting variable, then per box a copy of its leaf header (:data:`N_FH` floats, from :data:`FLAT_KINDS`' offset): one
   contiguous run per fit that is read without a walk;
 * a **leaf record** per single-box piece: kind, variables, flags, the float offset of its
   header, three variable codes (source angle | transform << 2), the int and row offsets of its
