@@ -186,14 +186,15 @@ def test_sharp_clipped_peak_needs_the_theta_h_split():
 @pytest.mark.slow
 def test_glossy_felt_needs_the_rest_split():
     """acrylic_felt_pink: no core meets 5 % with the peak split alone (blue's (12, 6) function of
-    theta_h 5-90 holds 95.7 % of its clusters); with the rest split at the midpoint of sqrt theta_h
-    (34.4 deg) the 60 deg core is guaranteed with three theta_h pieces, fewer coefficients than
-    the flagged best effort, and the renderer reads it from a flat record (four boxes)."""
+    theta_h 5-90 holds 95.7 % of its clusters); with that piece split at the midpoint of sqrt
+    theta_h (34.4 deg) the 60 deg core is guaranteed with three theta_h pieces, fewer
+    coefficients than the flagged best effort, and the renderer reads it from a flat record
+    (four boxes)."""
     from fit.formats import load_measured
     from warp_rbrdf.materials import rational, rational_records
 
     b = load_measured(data_file("rgl/acrylic_felt_pink_rgb.bsdf"))
-    without = fit_brdf(b, tol=0.05, split_rest=False, prove_bound=False)
+    without = fit_brdf(b, tol=0.05, max_theta_h_pieces=2, prove_bound=False)
     assert not without.valid
     fit = fit_brdf(b, tol=0.05, prove_bound=False)
     assert fit.valid and fit.core_theta_d_deg == 60.0 and fit.n_coefficients < without.n_coefficients
@@ -211,16 +212,24 @@ def test_glossy_felt_needs_the_rest_split():
 
 
 def test_theta_h_layouts_tried_in_turn():
-    """One piece, the peak and the rest, then the rest split at its midpoint in the fit's own
-    variable (sqrt: the square roots' midpoint; identity: the angles')."""
-    from fit.rational.brdf_fit import theta_h_splits
+    """One piece, the peak and the rest, then the pieces that miss split at their midpoints in
+    the fit's own variable (sqrt: the square roots' midpoint; identity: the angles'), in order
+    while there is room, and nothing to split when every piece is met or the layout is full."""
+    from types import SimpleNamespace as NS
 
-    assert theta_h_splits(None, True, "sqrt") == [(0.0, 90.0)]
-    assert theta_h_splits(5.0, False, "sqrt") == [(0.0, 90.0), (0.0, 5.0, 90.0)]
-    *_, rest = theta_h_splits(5.0, True, "sqrt")
-    assert rest[:2] == (0.0, 5.0) and rest[3] == 90.0
-    assert np.sqrt(rest[2]) == pytest.approx(0.5 * (np.sqrt(5.0) + np.sqrt(90.0)), rel=1e-12)
-    assert theta_h_splits(10.0, True, "identity")[-1] == (0.0, 10.0, 50.0, 90.0)
+    from fit.rational.brdf_fit import bisect_failing, theta_h_midpoint, theta_h_splits
+
+    assert theta_h_splits(None) == [(0.0, 90.0)]
+    assert theta_h_splits(5.0) == [(0.0, 90.0), (0.0, 5.0, 90.0)]
+    assert np.sqrt(theta_h_midpoint(5.0, 90.0, "sqrt")) == pytest.approx(0.5 * (np.sqrt(5.0) + np.sqrt(90.0)))
+    assert theta_h_midpoint(10.0, 90.0, "identity") == 50.0
+    ok, bad = NS(valid=True), NS(valid=False)
+    mid = theta_h_midpoint(5.0, 90.0, "sqrt")
+    assert bisect_failing((0.0, 5.0, 90.0), [ok, bad], "sqrt", 6) == (0.0, 5.0, mid, 90.0)
+    assert bisect_failing((0.0, 5.0, 90.0), [bad, bad], "sqrt", 6) == pytest.approx((0.0, 1.25, 5.0, mid, 90.0))
+    assert bisect_failing((0.0, 5.0, 90.0), [bad, bad], "sqrt", 3) == pytest.approx((0.0, 1.25, 5.0, 90.0))
+    assert bisect_failing((0.0, 5.0, 90.0), [ok, ok], "sqrt", 6) is None
+    assert bisect_failing((0.0, 5.0, 90.0), [bad, bad], "sqrt", 2) is None
 
 
 def test_output_bounded_where_no_cluster_constrains_it(lobe_fit, lobe_file):

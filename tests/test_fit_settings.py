@@ -30,7 +30,7 @@ INVALID = {
     BRDFFitSettings: [("tol", 0.0), ("tol", float("nan")), ("max_degree", 2.5), ("max_degree", -1),
                       ("max_den_degree", 99), ("intervals", "spread"), ("band_intervals", None),
                       ("core_theta_d_deg", 1.0), ("core_theta_d_deg", "all"), ("band_partial", (2.0, 1.0)),
-                      ("peak_split_deg", 95.0), ("split_rest", "yes"), ("theta_h_transform", "cube"),
+                      ("peak_split_deg", 95.0), ("max_theta_h_pieces", 1), ("max_theta_h_pieces", 2.5), ("theta_h_transform", "cube"),
                       ("value_transform", "exp"),
                       ("floor_frac", -1.0), ("spread_k", float("inf"))],
     Fit3DSettings: [("tol", -1.0), ("degrees", (7,)), ("degrees", (7, "3")), ("theta_h_edges", [-0.1]),

@@ -25,9 +25,11 @@ Domain and grazing policy (stored in the coefficient file's ``domain_policy`` an
 * If no core is met with one function per channel, the cores are tried again split at
   ``theta_h = 5 deg`` into a specular-peak piece and the rest (cc_iris_purple_gem's red
   highlight drops from 0.95 to exactly 0 within 3.5 deg; no single (12, 6) function follows it),
-  and, if none is met that way either, with the rest split once more at the midpoint of its
-  transformed range (sqrt: theta_h = 34.4 deg): three theta_h pieces (:func:`theta_h_splits`).
-  The attempts stop at the first core met, so a fit met with fewer pieces is the same fit.
+  and, if none is met that way either, the theta_h pieces that miss their intervals on the last
+  core are split at their midpoints in the fit's variable (sqrt: the rest at 34.4 deg, the peak
+  at 1.25 deg) and the cores tried again, round after round, up to ``max_theta_h_pieces``
+  pieces (:func:`bisect_failing`). The attempts stop at the first core met, so a fit met with
+  fewer pieces is the same fit.
 * Outside the box the inputs are clamped onto it (``"outside": "clamp"``): at grazing theta_d
   the function returns its value at 78.5 deg instead of growing without bound.
 * Intervals: ``"tol"`` (default of the core and of the band): ``y +- max(tol y, abs_floor)``;
@@ -190,19 +192,34 @@ class BRDFFit:
 CORE_CANDIDATES_DEG = (60.0, 50.0, 40.0)
 
 
-def theta_h_splits(peak_split_deg, split_rest: bool, transform: str) -> list:
-    """The theta_h edges (degrees) of the core's layouts :func:`fit_brdf` tries in turn: one
-    piece; with ``peak_split_deg``, the peak and the rest; with ``split_rest`` too, the rest
-    split at the midpoint of its range in the ``transform`` (``"sqrt"``: the square roots'
-    midpoint, so the pieces are even in the fit's own variable)."""
-    out = [(0.0, 90.0)]
-    if peak_split_deg:
-        a = float(peak_split_deg)
-        out.append((0.0, a, 90.0))
-        if split_rest:
-            mid = (0.5 * (np.sqrt(a) + np.sqrt(90.0))) ** 2 if transform == "sqrt" else 0.5 * (a + 90.0)
-            out.append((0.0, a, float(mid), 90.0))
-    return out
+def theta_h_splits(peak_split_deg) -> list:
+    """The theta_h edges (degrees) of the core's fixed layouts :func:`fit_brdf` tries in turn:
+    one piece, and with ``peak_split_deg`` the peak and the rest."""
+    return [(0.0, 90.0)] + ([(0.0, float(peak_split_deg), 90.0)] if peak_split_deg else [])
+
+
+def theta_h_midpoint(a: float, b: float, transform: str) -> float:
+    """The midpoint of ``[a, b]`` (degrees) in the fit's own theta_h variable (``"sqrt"``: the
+    square roots' midpoint; ``"identity"``: the angles')."""
+    return float((0.5 * (np.sqrt(a) + np.sqrt(b))) ** 2 if transform == "sqrt" else 0.5 * (a + b))
+
+
+def bisect_failing(edges, core_fits, transform: str, max_pieces: int):
+    """The next theta_h layout of the refinement: ``edges`` with every piece of ``core_fits``
+    (the layout's pieces, all fitted) that misses its intervals split at its midpoint
+    (:func:`theta_h_midpoint`), in order while the layout has fewer than ``max_pieces``; None
+    when no piece can be split."""
+    failing = [i for i, pc in enumerate(core_fits) if not pc.valid]
+    room = max_pieces - (len(edges) - 1)
+    if not failing or room <= 0:
+        return None
+    mids = {i: theta_h_midpoint(edges[i], edges[i + 1], transform) for i in failing[:room]}
+    out = []
+    for i in range(len(edges) - 1):
+        out.append(edges[i])
+        if i in mids:
+            out.append(mids[i])
+    return tuple(out + [edges[-1]])
 PRECHECK_ROUNDS = 6
 
 
@@ -259,18 +276,36 @@ def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None 
         cores = CORE_CANDIDATES_DEG
     else:
         cores = (float(core_theta_d_deg),)
-    attempts = [(core, edges) for edges in theta_h_splits(peak_split_deg, s.split_rest, theta_h_transform)
-                for core in cores]
-    for k, (core, edges) in enumerate(attempts):
-        last = k == len(attempts) - 1
-        core_fits = []
+    def attempt(core, edges, full):
+        """The core's pieces of one theta_h layout; ``full``: every piece fitted to the end (a
+        best effort where it fails), else the first failing piece stops the attempt."""
+        fits = []
         for th in zip(edges[:-1], edges[1:]):
-            core_fits.append(_fit_piece(p, (0.0, core), intervals, stop_on_infeasible=not last,
-                                        theta_h_range_deg=th, **kw))
-            if not core_fits[-1].valid and not last:
+            fits.append(_fit_piece(p, (0.0, core), intervals, stop_on_infeasible=not full,
+                                   theta_h_range_deg=th, **kw))
+            if not fits[-1].valid and not full:
                 break
-        if all(pc.valid for pc in core_fits):
+        return fits
+
+    layouts = theta_h_splits(peak_split_deg)
+    met = False
+    for li, edges in enumerate(layouts):          # the fixed layouts, each core in turn
+        for ci, core in enumerate(cores):
+            core_fits = attempt(core, edges, li == len(layouts) - 1 and ci == len(cores) - 1)
+            if all(pc.valid for pc in core_fits):
+                met = True
+                break
+        if met:
             break
+    while not met and peak_split_deg:             # then the failing theta_h pieces bisected
+        edges = bisect_failing(edges, core_fits, theta_h_transform, s.max_theta_h_pieces)
+        if edges is None:
+            break
+        for ci, core in enumerate(cores):
+            core_fits = attempt(core, edges, ci == len(cores) - 1)
+            if all(pc.valid for pc in core_fits):
+                met = True
+                break
     pieces = list(core_fits)
     if core < THETA_D_MAX_DEG:
         band = (core, THETA_D_MAX_DEG)

@@ -134,9 +134,9 @@ class BRDFFitSettings(_Settings):
     * ``band_partial``: ``(fraction, factor)`` of the band's second try (None: none);
     * ``peak_split_deg``: theta_h (degrees) of the specular-peak split tried when no core is met
       (None: never);
-    * ``split_rest``: when no core is met with the peak split either, also split the rest
-      (theta_h from ``peak_split_deg`` to 90) at the midpoint of its ``theta_h_transform`` range
-      (bool);
+    * ``max_theta_h_pieces``: when no core is met with the peak split either, the theta_h pieces
+      that miss are split at their midpoints, round after round, up to this many pieces (an
+      integer; 2: no split beyond the peak's);
     * ``theta_h_transform`` (``"sqrt"`` | ``"identity"``), ``value_transform`` (``"log"`` |
       ``"linear"``);
     * ``max_degree``, ``max_den_degree``: the largest numerator and denominator total degrees;
@@ -150,7 +150,7 @@ class BRDFFitSettings(_Settings):
     band_intervals: str = "tol"
     band_partial: tuple | None = (0.5, 2.0)
     peak_split_deg: float | None = 5.0
-    split_rest: bool = True
+    max_theta_h_pieces: int = 6
     theta_h_transform: str = "sqrt"
     value_transform: str = "log"
     max_degree: int = 12
@@ -180,7 +180,8 @@ class BRDFFitSettings(_Settings):
             ("peak_split_deg", self.peak_split_deg is None or (_number(self.peak_split_deg)
                                                                and 0.0 <= self.peak_split_deg < 90.0),
              "None or in [0, 90) deg"),
-            ("split_rest", isinstance(self.split_rest, bool), "True or False"),
+            ("max_theta_h_pieces", _integer(self.max_theta_h_pieces) and 2 <= self.max_theta_h_pieces <= 16,
+             "an integer in [2, 16]"),
             ("theta_h_transform", self.theta_h_transform in THETA_H_TRANSFORMS, f"one of {THETA_H_TRANSFORMS}"),
             ("value_transform", self.value_transform in VALUE_TRANSFORMS, f"one of {VALUE_TRANSFORMS}"),
             ("spread_k", _number(self.spread_k) and self.spread_k >= 0.0, "a finite number >= 0"),
