@@ -162,10 +162,10 @@ def test_flat_records():
     k, fo = int(ints[n + R.FLAT_K]), int(ints[n + R.FLAT_FLOATS])
     assert k == 2 and ints[n + R.FLAT_VAR] == R.SUPPORTED_VARIABLES["theta_d"]
     np.testing.assert_array_equal(floats[fo:fo + R.FF_INNER], [np.cos(np.radians(79.0)), np.radians(79.0),
-                                                               satin.edges[1], np.inf, np.inf])
+                                                               satin.edges[1], *[np.inf] * (R.FLAT_MAX_OUTER - 2)])
     # no second level: every inner edge +inf, the outer piece j is box j
     assert np.all(floats[fo + R.FF_INNER:fo + R.FF_BASES] == np.inf)
-    np.testing.assert_array_equal(floats[fo + R.FF_BASES:fo + R.FF_HEADS], [0.0, 1.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(floats[fo + R.FF_BASES:fo + R.FF_HEADS], [0.0, 1.0, *[0.0] * (R.FLAT_MAX_OUTER - 1)])
     tree = int(ints[n + R.FLAT_TREE])
     assert ints[tree] == rational.NODE_SPLIT
     for j in range(k):
@@ -186,14 +186,17 @@ def test_flat_records():
     ints, floats, _ = rational.pack_model(nested)
     assert ints[0] == R.NODE_FLAT2D and ints[R.FLAT_K] == 4 and ints[R.FLAT_VAR] == R.SUPPORTED_VARIABLES["theta_d"]
     fo = int(ints[R.FLAT_FLOATS])
-    inner = floats[fo + R.FF_INNER:fo + R.FF_BASES].reshape(R.FLAT_MAX_PIECES, R.FLAT_MAX_PIECES - 1)
-    np.testing.assert_array_equal(inner[0], [nested.pieces[0].edges[1], np.inf, np.inf])
+    inner = floats[fo + R.FF_INNER:fo + R.FF_BASES].reshape(R.FLAT_MAX_OUTER, R.FLAT_MAX_PIECES - 1)
+    np.testing.assert_array_equal(inner[0], [nested.pieces[0].edges[1], *[np.inf] * (R.FLAT_MAX_PIECES - 2)])
     assert np.all(inner[1:] == np.inf)
-    np.testing.assert_array_equal(floats[fo + R.FF_BASES:fo + R.FF_HEADS], [0.0, 2.0, 3.0, 0.0, 1.0 + R.SUPPORTED_VARIABLES["theta_h"]])
+    np.testing.assert_array_equal(floats[fo + R.FF_BASES:fo + R.FF_HEADS],
+                                  [0.0, 2.0, 3.0, *[0.0] * (R.FLAT_MAX_OUTER - 3), 1.0 + R.SUPPORTED_VARIABLES["theta_h"]])
     boxes = [*nested.pieces[0].pieces, *nested.pieces[1:]]
     for j, box in enumerate(boxes):
         head = fo + R.FF_HEADS + R.N_FH * j
         np.testing.assert_array_equal(floats[head + R.FH_VARS:head + R.FH_VARS + 2], box.variables[0].domain)
+    six = rational.pack_model(_six_boxes_model())[0]
+    assert six[0] == R.NODE_FLAT2D and six[R.FLAT_K] == R.FLAT_MAX_PIECES == 6
     # a split of splits in two variables, or three levels: the walk
     mixed = piecewise_model("log")
     e = [mixed.edges[1], 0.7, mixed.edges[2]]
@@ -503,8 +506,30 @@ def _cases():
                   "single3d": spec("single3d", data=single_3d(value_factor="none")),
                   "single3d_cos": spec("single3d_cos", data=single_3d()),
                   "packed": spec("packed", data=_packed_fallback_model()),
-                  "flat_h": spec("flat_h", data=_flat_theta_h_model())})
+                  "flat_h": spec("flat_h", data=_flat_theta_h_model()),
+                  "six_boxes": spec("six_boxes", data=_six_boxes_model())})
     return specs
+
+
+def _six_boxes_model():
+    """Two theta_d pieces, the first split in five theta_h pieces (the fitter's refinement of the
+    peak and the rest): six boxes, a 2-D flat record's most."""
+    e = np.radians([0.0, 60.0, 80.0])
+    h = np.radians([0.0, 1.25, 5.0, 20.0, 40.0, 90.0])
+    sub = []
+    for j in range(len(h) - 1):
+        m = random_model("log", seed=30 + j, theta_d_range=(e[0], e[1]), value_max=8.0)
+        m.variables[0] = M.Variable("theta_h", "rad", "sqrt", (h[j], h[j + 1]))
+        for f in m.functions:
+            f.domain[0] = m.variables[0].rf_domain
+        sub.append(m)
+    core = M.PiecewiseRationalModel(name="core", variables=[M.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                                                            M.Variable("theta_d", "rad", "identity", (e[0], e[1]))],
+                                    split_variable="theta_h", edges=list(h), pieces=sub)
+    band = random_model("log", seed=40, theta_d_range=(e[1], e[2]), value_max=8.0)
+    return M.PiecewiseRationalModel(name="six", variables=[M.Variable("theta_h", "rad", "sqrt", (0.0, np.pi / 2)),
+                                                           M.Variable("theta_d", "rad", "identity", (e[0], e[-1]))],
+                                    split_variable="theta_d", edges=list(e), pieces=[core, band])
 
 
 def _flat_theta_h_model():

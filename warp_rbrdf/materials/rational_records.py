@@ -19,9 +19,10 @@ Records, offsets relative to the material's own starts, the root at int 0:
   the float offset of its floats, the number of boxes K, the split variable, then per box
   :data:`FLAT_NI` ints (flags, the inputs' sqrt bits, class, the float offset of its dense
   rows, the three channel modes); its floats: ``(cos c, c)`` of the domain record (``(-2, 0)``
-  without one), the split's inner edges padded with +inf to the kind's maximum minus one, (2-D
-  only, :data:`FF_INNER` to :data:`FF_HEADS`) per outer piece its own inner edges, per outer
-  piece its first box, and the nesting variable, then per box a copy of its leaf header (:data:`N_FH` floats, from :data:`FLAT_KINDS`' offset): one
+  without one), the split's inner edges padded with +inf to the kind's maximum minus one (2-D:
+  :data:`FLAT_MAX_OUTER` minus one), (2-D only, :data:`FF_INNER` to :data:`FF_HEADS`) per outer
+  piece its own inner edges (padded to :data:`FLAT_MAX_PIECES` minus one), per outer piece its
+  first box, and the nesting variable, then per box a copy of its leaf header (:data:`N_FH` floats, from :data:`FLAT_KINDS`' offset): one
   contiguous run per fit that is read without a walk;
 * a **leaf record** per single-box piece: kind, variables, flags, the float offset of its
   header, three variable codes (source angle | transform << 2), the int and row offsets of its
@@ -55,16 +56,17 @@ SUPPORTED_VARIABLES = {"theta_h": 0, "theta_d": 1, "phi_d": 2}
 NODE_LEAF, NODE_SPLIT, NODE_DOMAIN, NODE_FLAT2D, NODE_FLAT3D = 0, 1, 2, 3, 4
 FLAT_TREE, FLAT_FLOATS, FLAT_K, FLAT_VAR, FLAT_PIECES = 1, 2, 3, 4, 8    # flat record (ints)
 FLAT_NI = 8                   # ints per piece: flags, sqrt bits, class, dense offset, modes (3)
-FLAT_MAX_PIECES = 4           # pieces of a 2-D flat record
+FLAT_MAX_PIECES = 6           # boxes of a 2-D flat record
+FLAT_MAX_OUTER = 4            # pieces of a 2-D flat record's outer split (each one box or a split of boxes)
 FLAT3_MAX_PIECES = 8          # pieces of a 3-D flat record (the 3-D fitter's theta_h pieces: 6)
 FF_COS_CUT, FF_CUT, FF_EDGES = 0, 1, 2         # flat record (floats): the domain, the outer edges
 # 2-D flat record (floats), after its outer edges: per outer piece its inner edges (the second
 # level of a nested fit, padded with +inf), per outer piece the index of its first box, whether
 # and in which variable the fit is nested (0: one level, the outer piece is the box; 1 + the
 # inner split variable, 0 theta_h, 1 theta_d), then the headers
-FF_INNER = FF_EDGES + FLAT_MAX_PIECES - 1
-FF_BASES = FF_INNER + FLAT_MAX_PIECES * (FLAT_MAX_PIECES - 1)
-FF_VAR2 = FF_BASES + FLAT_MAX_PIECES
+FF_INNER = FF_EDGES + FLAT_MAX_OUTER - 1
+FF_BASES = FF_INNER + FLAT_MAX_OUTER * (FLAT_MAX_PIECES - 1)
+FF_VAR2 = FF_BASES + FLAT_MAX_OUTER
 FF_HEADS = FF_VAR2 + 1                        # the first header of a 2-D flat record
 FF3_HEADS = 2 + FLAT3_MAX_PIECES - 1          # the first header of a 3-D flat record
 #: the flat record's kind, most pieces and first header's float, by number of variables
@@ -145,7 +147,7 @@ def _flat_layout(model, table, leaf_flags):
         sub = getattr(p, "pieces", None)
         inner_edges.append([] if sub is None else list(p.edges[1:-1]))
         leaves += [p] if sub is None else list(sub)
-    if len(leaves) > FLAT_KINDS[nv][1]:
+    if len(leaves) > FLAT_KINDS[nv][1] or (nv == 2 and len(outer) > FLAT_MAX_OUTER):
         return None
     for leaf in leaves:
         if getattr(leaf, "pieces", None) is not None or [v.name for v in leaf.variables] != names:
@@ -179,11 +181,12 @@ def _pack_flat(fd, model, table, domain, leaf_flags) -> int:
         nodes += ([fd.ints[node + SPLIT_CHILDREN + j] for j in range(fd.ints[node + SPLIT_N])]
                   if fd.ints[node] == NODE_SPLIT else [node])
     assert len(nodes) == k
-    floats = [*domain, *edges, *[np.inf] * (max_pieces - 1 - len(edges))]
+    max_outer = FLAT_MAX_OUTER if nv == 2 else max_pieces
+    floats = [*domain, *edges, *[np.inf] * (max_outer - 1 - len(edges))]
     if nv == 2:             # the second level: none (every outer piece one box) or nested
         nest, inner, bases = ((1 + nested[0], nested[1], nested[2]) if nested is not None
                               else (0, [[]] * (len(edges) + 1), range(len(edges) + 1)))
-        pad = max_pieces - len(inner)
+        pad = max_outer - len(inner)
         floats += [e for row in [*inner, *[[]] * pad] for e in [*row, *[np.inf] * (max_pieces - 1 - len(row))]]
         floats += [*[float(b) for b in bases], *[0.0] * pad, float(nest)]
     for j, leaf in enumerate(nodes):
