@@ -239,7 +239,9 @@ def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None 
     fewer than ``fraction`` of their above-horizon samples after the grazing cut-off only held
     within ``factor`` (see :func:`channel_data`; None: never). ``peak_split_deg``: if no core
     is met with one function per channel, the cores are tried again split at
-        ``theta_h = peak_split_deg`` into a specular-peak piece and the rest (None: never).
+    ``theta_h = peak_split_deg`` into a specular-peak piece and the rest (None: never), then
+    with the pieces that miss split at their midpoints, up to ``max_theta_h_pieces`` theta_h
+    pieces (:func:`bisect_failing`).
 
     ``progress(stage, done, total)`` (:mod:`fit.progress`): stage ``"projecting"`` (0 then 1
     of 1), then per piece tried ``"fitting theta_d A-B ..."`` with the channels fitted so far
