@@ -258,7 +258,7 @@ def test_brdf_2d_flagged_fit_carries_what_the_renderer_shows(tmp_path, monkeypat
     src = glossy_merl(tmp_path / "glossy.binary")
     out = tmp_path / "fits" / "glossy.json"
     assert main(["brdf", str(src), "--out", str(out), "--tol", "0.01", "--max-degree", "2", "--max-den-degree", "1",
-                 "--core-theta-d", "78.5", "--allow-infeasible", "--no-progress",
+                 "--max-theta-h-pieces", "2", "--core-theta-d", "78.5", "--allow-infeasible", "--no-progress",
                  "--sampler-time-limit", "1"]) == 0
     capsys.readouterr()
     model = load(out)

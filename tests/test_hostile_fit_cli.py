@@ -81,6 +81,7 @@ FLAG_CASES = [
     ("max-degree-float", "traceback", BRDF, ["--max-degree", "2.5"], "--max-degree"),
     ("max-den-degree-negative", "traceback", BRDF, ["--max-den-degree", "-3"], "--max-den-degree"),
     ("max-den-degree-1e9", "memory", BRDF, ["--max-den-degree", "1000000000"], "--max-den-degree"),
+    ("max-theta-h-pieces-99", "memory", BRDF, ["--max-theta-h-pieces", "99"], "--max-theta-h-pieces"),
     ("floor-frac-negative", "silent", BRDF, ["--floor-frac", "-1"], "--floor-frac"),
     ("floor-frac-nan", "unclear", BRDF, ["--floor-frac", "nan"], "--floor-frac"),
     ("floor-frac-huge", "silent", BRDF, ["--floor-frac", "1e9"], "--floor-frac"),

@@ -62,7 +62,7 @@ MODELS = ("auto", "2d", "3d")
 #: The flags of the 2-D fit (argparse destinations), refused with ``--model 3d``.
 FLAGS_2D = {"intervals": "--intervals", "core_theta_d": "--core-theta-d", "band_intervals": "--band-intervals",
             "theta_h": "--theta-h", "value": "--value", "floor_frac": "--floor-frac", "max_degree": "--max-degree",
-            "max_den_degree": "--max-den-degree"}
+            "max_den_degree": "--max-den-degree", "max_theta_h_pieces": "--max-theta-h-pieces"}
 
 
 def chosen_model(args) -> str:
@@ -136,7 +136,8 @@ def settings_from_args(args) -> BRDFFitSettings:
     given = {k: getattr(args, a) for k, a in (
         ("tol", "tol"), ("intervals", "intervals"), ("core_theta_d_deg", "core_theta_d"),
         ("band_intervals", "band_intervals"), ("theta_h_transform", "theta_h"), ("value_transform", "value"),
-        ("max_degree", "max_degree"), ("max_den_degree", "max_den_degree"), ("floor_frac", "floor_frac"))
+        ("max_degree", "max_degree"), ("max_den_degree", "max_den_degree"), ("floor_frac", "floor_frac"),
+        ("max_theta_h_pieces", "max_theta_h_pieces"))
         if getattr(args, a, None) is not None}
     return BRDFFitSettings(**given)
 
@@ -199,6 +200,10 @@ def register(subparsers) -> None:
                    help=f"largest numerator total degree, 0-{MAX_FIT_DEGREE} (default {d.max_degree})")
     g.add_argument("--max-den-degree", type=integer(0, MAX_FIT_DEN_DEGREE), default=None,
                    help=f"largest denominator total degree, 0-{MAX_FIT_DEN_DEGREE} (default {d.max_den_degree})")
+    g.add_argument("--max-theta-h-pieces", dest="max_theta_h_pieces", type=integer(2, 16), default=None,
+                   help="when no core is met with the specular-peak split, the theta_h pieces that miss are "
+                        "split at their midpoints (in the --theta-h variable), round after round, up to this "
+                        f"many pieces, 2-16 (default {d.max_theta_h_pieces}; 2: no split beyond the peak's)")
     g.add_argument("--allow-infeasible", action="store_true",
                    help="write the file and exit 0 even when no fit meets the tolerance (the file is "
                         "flagged and carries the projected table the renderer shows there); without it such "
