@@ -46,6 +46,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import time
 from datetime import date
@@ -241,10 +242,8 @@ def render_rows(name: str, data: Path, rows: list, maps, resolution: int, spp: i
 
 def image_met(row: dict, target=IMAGE_TARGET) -> bool | None:
     """Whether ``row``'s renders meet the image target under every map (None: not rendered)."""
-    r = row.get("render")
-    if not r:
-        return None
-    return all(v["de_mean"] <= target[0] and v["de_p99"] <= target[1] for v in r.values())
+    w = worst_map(row)
+    return None if w is None else (w[0] <= target[0] and w[1] <= target[1])
 
 
 def smallest_image(rows: list, target=IMAGE_TARGET) -> int | None:
@@ -496,8 +495,6 @@ def _load_results(files) -> tuple:
     meta = dict(metas[0])
     if len(metas) > 1:
         meta["load"] = "; ".join(m["load"] for m in metas) + f" ({len(metas)} runs merged)"
-        import re
-
         cmds = sorted({re.sub(r"--materials( [a-z0-9_]+)+", "--materials M", m["command"]).replace(" --out", "\0").split("\0")[0]
                        for m in metas})
         meta["command"] = " and ".join(f"`{c}`" for c in cmds)[1:-1]

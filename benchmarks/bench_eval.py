@@ -222,21 +222,17 @@ def fits_2d(materials) -> dict:
 
 
 def fit_size(path) -> tuple:
-    """``(coefficients, degree classes)`` of a 2-D fit file: its numerator and denominator
-    coefficients over every piece and channel, and the sorted (numerator, denominator) total
-    degrees of its pieces (the classes of :mod:`warp_rbrdf.chebyshev_dense`)."""
+    """``(coefficients, degree classes)`` of a 2-D fit file: its coefficient count and the sorted
+    (numerator, denominator) total degrees of its top-level pieces
+    (:func:`warp_rbrdf.chebyshev_dense.group_degree`, the classes' degrees)."""
     from fit.rational.coefficient_file import load
+    from warp_rbrdf.chebyshev_dense import group_degree
 
     m = load(path)
-    n, classes = 0, set()
-    for piece in m.pieces:
-        dn = dd = 0
-        for f in piece.functions:
-            n += len(f.num_coef) + len(f.den_coef)
-            dn = max(dn, int(f.num_exponents.sum(axis=1).max()))
-            dd = max(dd, int(f.den_exponents.sum(axis=1).max()))
-        classes.add((dn, dd))
-    return n, sorted(classes)
+    classes = {(group_degree([(f.num_exponents, f.num_coef) for f in p.functions]),
+                group_degree([(f.den_exponents, f.den_coef) for f in p.functions]))
+               for p in (getattr(m, "pieces", None) or [m])}
+    return m.n_coefficients, sorted(classes)
 
 
 def all_2d_timings(files: dict, n_pairs: int, repeats: int) -> list:

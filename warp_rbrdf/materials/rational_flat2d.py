@@ -51,7 +51,6 @@ from .rational_records import (
     FH_BOX,
     FH_VARS,
     FLAT_KINDS,
-    FLAT_MAX_OUTER,
     FLAT_NI,
     LEAF_CLAMP,
     LEAF_INV_COS,
@@ -168,9 +167,8 @@ double p0 = 0.0, p1 = 0.0, p2 = 0.0, q0 = 0.0, q1 = 0.0, q2 = 0.0;
 """
         steps = ("wp::vec_t<6, double> pq;\npq.c[0] = p0; pq.c[1] = p1; pq.c[2] = p2; "
                  "pq.c[3] = q0; pq.c[4] = q1; pq.c[5] = q2;\n" + SCALAR_STEPS)
-    _, max_pieces, heads = FLAT_KINDS[n_vars]
+    _, max_pieces, max_outer, heads = FLAT_KINDS[n_vars]
     cos_prod = n_vars                      # the index of cos theta_h cos theta_d in ang
-    max_outer = FLAT_MAX_OUTER if n_vars == 2 else max_pieces
     pick = " + ".join(f"(x > F[{FF_EDGES + j}])" for j in range(max_outer - 1))
     if n_vars == 2:     # the outer piece, then, in a nested fit, the box in it (FF_INNER, FF_BASES)
         inner = " + ".join(f"(x2 > E2[{j}])" for j in range(max_pieces - 1))

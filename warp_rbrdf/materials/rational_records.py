@@ -69,8 +69,9 @@ FF_BASES = FF_INNER + FLAT_MAX_OUTER * (FLAT_MAX_PIECES - 1)
 FF_VAR2 = FF_BASES + FLAT_MAX_OUTER
 FF_HEADS = FF_VAR2 + 1                        # the first header of a 2-D flat record
 FF3_HEADS = 2 + FLAT3_MAX_PIECES - 1          # the first header of a 3-D flat record
-#: the flat record's kind, most pieces and first header's float, by number of variables
-FLAT_KINDS = {2: (NODE_FLAT2D, FLAT_MAX_PIECES, FF_HEADS), 3: (NODE_FLAT3D, FLAT3_MAX_PIECES, FF3_HEADS)}
+#: the flat record's kind, most boxes, most outer pieces and first header's float, by number of variables
+FLAT_KINDS = {2: (NODE_FLAT2D, FLAT_MAX_PIECES, FLAT_MAX_OUTER, FF_HEADS),
+              3: (NODE_FLAT3D, FLAT3_MAX_PIECES, FLAT3_MAX_PIECES, FF3_HEADS)}
 DOMAIN_FLOATS, DOMAIN_CHILD = 1, 2                       # domain record (ints)
 SPLIT_VAR, SPLIT_N, SPLIT_EDGES, SPLIT_CHILDREN = 1, 2, 3, 4   # split record (ints)
 # leaf record (ints)
@@ -147,7 +148,7 @@ def _flat_layout(model, table, leaf_flags):
         sub = getattr(p, "pieces", None)
         inner_edges.append([] if sub is None else list(p.edges[1:-1]))
         leaves += [p] if sub is None else list(sub)
-    if len(leaves) > FLAT_KINDS[nv][1] or (nv == 2 and len(outer) > FLAT_MAX_OUTER):
+    if len(leaves) > FLAT_KINDS[nv][1] or len(outer) > FLAT_KINDS[nv][2]:
         return None
     for leaf in leaves:
         if getattr(leaf, "pieces", None) is not None or [v.name for v in leaf.variables] != names:
@@ -169,7 +170,7 @@ def _pack_flat(fd, model, table, domain, leaf_flags) -> int:
     if layout is None:
         return _pack_node(fd, model, table, leaf_flags)
     nv, var, edges, leaves, nested = layout
-    kind, max_pieces, _ = FLAT_KINDS[nv]
+    kind, max_pieces, max_outer, _ = FLAT_KINDS[nv]
     k = len(leaves)
     n = fd.add_ints([kind, 0, 0, k, var, 0, 0, 0] + [0] * (FLAT_NI * k))
     tree = _pack_node(fd, model, table, leaf_flags)
@@ -181,7 +182,6 @@ def _pack_flat(fd, model, table, domain, leaf_flags) -> int:
         nodes += ([fd.ints[node + SPLIT_CHILDREN + j] for j in range(fd.ints[node + SPLIT_N])]
                   if fd.ints[node] == NODE_SPLIT else [node])
     assert len(nodes) == k
-    max_outer = FLAT_MAX_OUTER if nv == 2 else max_pieces
     floats = [*domain, *edges, *[np.inf] * (max_outer - 1 - len(edges))]
     if nv == 2:             # the second level: none (every outer piece one box) or nested
         nest, inner, bases = ((1 + nested[0], nested[1], nested[2]) if nested is not None
