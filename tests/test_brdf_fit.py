@@ -211,6 +211,29 @@ def test_glossy_felt_needs_the_rest_split():
     assert ints[0] == rational_records.NODE_FLAT2D and ints[rational_records.FLAT_K] == 4
 
 
+def test_refinement_splits_the_missing_pieces(tmp_path):
+    """fit_brdf itself on a synthetic glossy MERL lobe at 1 % with degrees at most (2, 1) over the
+    whole box: the peak split alone misses; the refinement splits the rest until the core is
+    guaranteed, every cluster inside its interval, the pieces even in sqrt theta_h."""
+    from hostile import glossy_merl
+
+    from fit.formats import load_measured
+    from fit.rational.brdf_fit import theta_h_midpoint
+
+    b = load_measured(glossy_merl(tmp_path / "glossy.binary"))
+    kw = dict(tol=0.01, max_degree=2, max_den_degree=1, core_theta_d_deg=78.5, prove_bound=False)
+    assert not fit_brdf(b, max_theta_h_pieces=2, **kw).valid
+    fit = fit_brdf(b, **kw)
+    edges = [pc.theta_h_range_deg[0] for pc in fit.core_pieces] + [90.0]
+    assert fit.valid and edges[:2] == [0.0, 5.0] and 3 < len(edges) - 1 <= 6
+    assert edges[-2] == pytest.approx(theta_h_midpoint(5.0, 90.0, "sqrt"))
+    p = project_for_fit(b)
+    for c in range(3):
+        d = channel_data(p, c, 0.01, "tol", theta_d_range_deg=(0.0, 78.5))
+        f = fit.model(d.X)[:, c]
+        assert np.all((f >= d.lower) & (f <= d.upper))
+
+
 def test_theta_h_layouts_tried_in_turn():
     """One piece, the peak and the rest, then the pieces that miss split at their midpoints in
     the fit's own variable (sqrt: the square roots' midpoint; identity: the angles'), in order
