@@ -8,7 +8,8 @@ sample, power heuristic. Mitsuba renders the ``.bsdf`` file with its ``measured`
 its ``multijitter`` sampler (``--variant``: ``llvm_ad_rgb`` when a libLLVM is found, else
 ``scalar_rgb``); we render it through the public renderer API (``Renderer``) with each
 ``--ours KIND:SAMPLER`` (default ``rgl:mis-rgl``: the file evaluated exactly, its own
-importance sampling in MIS, Mitsuba's estimator) and our ``stratified`` (correlated
+importance sampling in MIS, Mitsuba's estimator but for the environment sample's MIS
+compensation, ``--mis-compensation``, 0 to turn it off) and our ``stratified`` (correlated
 multi-jitter) pattern; the best of them per case is compared.
 
 Error. Both renderers are unbiased estimators of their own converged image, so the RMSE of an
@@ -88,6 +89,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from warp_rbrdf.scene.specs import IntegratorSpec
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs" / "bench_vs_mitsuba.md"
@@ -342,7 +345,8 @@ class Ours:
     """Our renderer on the reference scene with material kind ``kind`` from the ``.bsdf`` file
     and strategy ``sampler`` (through the public API: Scene -> Renderer -> render)."""
 
-    def __init__(self, config: str, path: Path, envmap: Path, resolution: int, threads: int):
+    def __init__(self, config: str, path: Path, envmap: Path, resolution: int, threads: int,
+                 mis_compensation: float | None = None):
         from lab import mitsuba_reference as MR
         from warp_rbrdf.renderer import Renderer
         from warp_rbrdf.scene import MaterialSpec
@@ -356,6 +360,10 @@ class Ours:
                                                 incident="view")}
             sc.integrator = copy.copy(sc.integrator)
             sc.integrator.sampler = sampler
+        if mis_compensation is not None:
+            sc = copy.copy(sc)
+            sc.integrator = copy.copy(sc.integrator)
+            sc.integrator.mis_compensation = float(mis_compensation)
         self.threads = threads
         t0 = time.perf_counter()
         self.r = Renderer(sc, device="cpu")
@@ -482,7 +490,7 @@ def climb(renderers: list, ladder: list[int], target: float, rule: ExtendRule, m
 
 
 def run_case(material: str, path: Path, map_name: str, envmap: Path, a, mask, log) -> dict:
-    ours = [Ours(c, path, envmap, a.resolution, a.threads) for c in a.ours]
+    ours = [Ours(c, path, envmap, a.resolution, a.threads, a.mis_compensation) for c in a.ours]
     mit = Mitsuba(path, envmap, a.resolution, a.spp[0])
     renderers = ours + [mit]
     rungs, last_images, extension = climb(renderers, list(a.spp), a.target, a.extend_rule, mask, log)
@@ -679,6 +687,17 @@ def _method_extension(a: dict) -> str:
     return rule + "\n\n" + unc
 
 
+def _compensation_text(a: dict) -> str:
+    """How our environment sample differs from Mitsuba's, for the Method paragraph."""
+    f = a.get("mis_compensation", 0.0)
+    if not f:
+        return ("; the environment sampled by its full luminance, as Mitsuba's `envmap` does: the "
+                "same estimator")
+    return (f"; our environment sample is MIS-compensated (`integrator.mis_compensation` = {f:g}: "
+            f"it samples the map's luminance less {f:g} of its mean, docs/sampling.md), Mitsuba's "
+            "`envmap` samples the full luminance: the variance columns compare the two estimators")
+
+
 def report(res: dict) -> str:
     """The Markdown report (docs/bench_vs_mitsuba.md)."""
     cases, s, m = res["cases"], res["summary"], res["machine"]
@@ -702,7 +721,7 @@ def report(res: dict) -> str:
          f"sample, power heuristic), {a['resolution']}×{a['resolution']} px. Mitsuba: `measured` plugin, "
          f"`{MITSUBA_SAMPLER}` sampler. Ours (`warp_rbrdf.Renderer`, `{OUR_PATTERN}` pattern = correlated "
          f"multi-jitter): {', '.join('`' + c + '`' for c in a['ours'])} (material kind : sampler; the "
-         "best per case is compared)."), "",
+         "best per case is compared)" + _compensation_text(a) + "."), "",
          ("Each renderer against **its own converged image**: the RMSE of one N-spp render is estimated "
          "from two independent N-spp renders X1, X2 (seeds differ) as sqrt(mean((X1 − X2)²) / 2) over "
          f"the {res['mask_pixels']} pixels fully inside the sphere's silhouette and the 3 channels, "
@@ -855,6 +874,9 @@ def main(argv=None):
     ap.add_argument("--target", type=float, default=0.01, help="relative RMSE target (default 0.01)")
     ap.add_argument("--ours", nargs="+", default=["rgl:mis-rgl"],
                     help="our configurations KIND:SAMPLER (kinds rgl, measured, projected)")
+    ap.add_argument("--mis-compensation", type=float, default=IntegratorSpec.mis_compensation,
+                    help="our integrator.mis_compensation (default %(default)g; 0: the environment "
+                         "sampled by its full luminance, as Mitsuba's envmap does)")
     ap.add_argument("--variant", default="auto", help="Mitsuba variant: auto (llvm_ad_rgb if a libLLVM is "
                                                       "found, else scalar_rgb) or a variant name")
     ap.add_argument("--threads", type=int, default=os.cpu_count() or 1, help="threads of both renderers")
@@ -898,6 +920,8 @@ def main(argv=None):
             ap.error(f"{flag} {v}: expected a positive number")
     if min(a.spp) < 1:
         ap.error(f"--spp {min(a.spp)}: expected positive sample counts")
+    if not 0.0 <= a.mis_compensation <= 1.0:
+        ap.error(f"--mis-compensation {a.mis_compensation}: expected a number in [0, 1]")
     a.extend_rule = ExtendRule(enabled=not a.no_extend, max_rel_rmse=a.extend_rmse, max_mse_se=a.extend_se,
                                max_spp=a.extend_max_spp, budget_s=a.extend_budget, max_pairs=a.extend_pairs)
     sel = [m for m in CHECK_MATERIALS if m in a.materials] or a.materials[:1]
@@ -947,6 +971,7 @@ def main(argv=None):
            "machine": info, "mask_pixels": int(mask.sum()),
            "args": {"materials": a.materials, "maps": a.maps, "resolution": a.resolution, "spp": a.spp,
                     "target": a.target, "ours": a.ours, "threads": a.threads, "check_spp": a.check_spp,
+                    "mis_compensation": a.mis_compensation,
                     "check_materials": a.check_materials, "extend": dataclasses.asdict(a.extend_rule)},
            "cases": cases, "summary": summarize(cases)}
     s = res["summary"]

@@ -395,7 +395,8 @@ def sphere_scene(material, envmap, spp: int, resolution: int = 256, seed: int = 
     (identity rotation) and direct lighting (``max_depth = 1``). An RGL material is the ``rgl``
     type (the file evaluated exactly, ``incident`` = the tensors' incident direction, default
     the reference's "view") with the ``mis-rgl`` sampler (environment sample + the format's own
-    BSDF sample, power heuristic: Mitsuba's estimator); ``("lambert", albedo)`` is the
+    BSDF sample, power heuristic: Mitsuba's estimator, but for the environment sample's MIS
+    compensation, ``integrator.mis_compensation``, docs/sampling.md); ``("lambert", albedo)`` is the
     ``lambert`` type with ``mis`` (environment + cosine sample). ``pattern`` defaults to
     independent samples as Mitsuba's sampler (so the per-pixel variance estimates the error of
     the mean). The material is named ``"obj"``."""

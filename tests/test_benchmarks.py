@@ -12,7 +12,7 @@ from conftest import data_file, require_mitsuba
 
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
-BENCHMARKS = ("bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
+BENCHMARKS = ("bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_mis_compensation", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba", "bench_mesh_vs_mitsuba")
 
 
@@ -172,6 +172,22 @@ def test_bench_vs_mitsuba_smoke(tmp_path):
         assert 0.8 < chk[label]["ratio"] < 1.25, (label, chk[label])   # estimate == error vs reference
         assert abs(chk[label]["mean_z"]) < 5, (label, chk[label])       # same converged mean
     assert res["summary"]["cases"] == 1 and np.isfinite(res["summary"]["median_rate_ratio"])
+
+
+def test_bench_mis_compensation_smoke(tmp_path):
+    """A tiny run: the compensated rows are compensated, the reference is not, and the table
+    reads the same from the JSON it writes."""
+    from benchmarks import bench_mis_compensation as B
+
+    data_file("envmaps/studio_small_03_1k.hdr")
+    out = tmp_path / "r.json"
+    assert B.main(["--quick", "--materials", "lambert", "--maps", "studio", "--fractions", "0.5",
+                   "--json", str(out)]) == 0
+    res = json.loads(out.read_text())
+    row = res["cases"][0]["spp"]["4"]
+    assert row["0.5"]["compensated"] and not row["0.0"]["compensated"]
+    assert all(np.isfinite(v["rel_rmse"]) and v["rel_rmse"] > 0 for v in row.values())
+    assert "| lambert | studio | 4 |" in B.markdown(res)
 
 
 def test_bench_env_sampling_smoke(capsys):

@@ -88,6 +88,7 @@ def _scene_promises(sc) -> None:
         assert _finite_within(v, limits.MAX_COORDINATE)
     assert 0 < c.fov < 180
     assert 0 <= sc.integrator.ray_epsilon <= limits.MAX_RAY_EPSILON
+    assert 0 <= sc.integrator.mis_compensation <= 1
     for m in sc.materials.values():
         assert _finite_within(m.albedo, limits.MAX_ALBEDO) and min(m.albedo) >= 0
     for s in sc.shapes:

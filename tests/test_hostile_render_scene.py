@@ -133,6 +133,8 @@ SCENE_CASES = [
     ("ray-epsilon-negative", "silent", integ("ray_epsilon", "-1"), "integrator.ray_epsilon"),
     ("ray-epsilon-inf", "silent", integ("ray_epsilon", "inf"), "integrator.ray_epsilon"),
     ("ray-epsilon-huge", "silent", integ("ray_epsilon", "1e30"), "integrator.ray_epsilon"),
+    ("mis-compensation-above-one", "traceback", integ("mis_compensation", "2"), "integrator.mis_compensation"),
+    ("mis-compensation-nan", "traceback", integ("mis_compensation", "nan"), "integrator.mis_compensation"),
     ("sampler-unknown", "silent", integ("sampler", '"bogus"'), "integrator.sampler"),
     ("pattern-unknown", "silent", integ("pattern", '"sobol9"'), "integrator.pattern"),
     ("hide-env-int", "silent", integ("hide_environment", "1"), "integrator.hide_environment"),

@@ -21,7 +21,7 @@ from .defaults import default_scene
 from .errors import RenderError, SceneError
 from .limits import check_render_size
 from .lights.directional import make_directional_struct
-from .lights.env_distribution import build_env_distribution
+from .lights.env_distribution import build_env_distribution, compensated_distribution
 from .lights.env_file import environment_image
 from .lights.env_map import make_env_struct
 from .materials.build import build_material_data
@@ -80,6 +80,18 @@ class Renderer:
         self.kernel_source = None   # "shipped", "cache" or "compiled" (shipped_kernels.load_module)
         self._kernels = self._all_kernels = None
 
+    @property
+    def mis_compensated(self) -> bool:
+        """Whether the environment is sampled with its MIS-compensated distribution
+        (:func:`~warp_rbrdf.lights.env_distribution.compensated_distribution`, the fraction
+        ``integrator.mis_compensation``): when that is > 0 and every material that samples the
+        environment combines the sample with a BSDF sample by MIS. One material with the
+        ``light`` sampler (the environment sample alone) keeps the full distribution for the
+        whole scene: the kernel holds one."""
+        combine = np.asarray(self.material_data.combine)
+        return (self.scene.integrator.mis_compensation > 0 and bool(np.any(combine == registry.COMBINE_MIS))
+                and not np.any(combine == registry.COMBINE_LIGHT))
+
     # ------------------------------------------------------------------------------------------
     def _build(self):
         dev, sc = self.device, self.scene
@@ -103,11 +115,15 @@ class Renderer:
         self.camera = camera.make_camera_struct(sc.camera)
         env_spec = sc.environment
         self.env_data = None
+        self.env_sampling = None
         if env_spec is not None:
             with one_step(self.progress, "environment map"):
                 img = environment_image(env_spec, sc.path, f"lights[{sc.lights.index(env_spec)}]")
                 self.env_data = build_env_distribution(img, env_spec.rotation)
-        self.env = make_env_struct(self.env_data, dev)
+                self.env_sampling = self.env_data
+                if self.mis_compensated:
+                    self.env_sampling = compensated_distribution(self.env_data, sc.integrator.mis_compensation)
+        self.env = make_env_struct(self.env_sampling, dev)
         dirs, irr = [], []
         o = np.asarray(sc.camera.origin, float)
         t = np.asarray(sc.camera.target, float)

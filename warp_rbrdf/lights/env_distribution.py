@@ -13,6 +13,16 @@ bilinear luminance times the *exact* sin(pi v) Jacobian of the lat-long map, so 
 uniform (1/4pi) and a one-texel sun is sampled along its bilinear footprint, not by a constant
 per cell. ``Z`` is a sum of closed-form patch integrals (float64).
 
+**MIS compensation** (:func:`compensated_distribution`; Karlík et al., "MIS compensation:
+optimizing sampling techniques in multiple importance sampling", ACM TOG 38(6), 2019). Where the
+environment sample is combined with a BSDF sample by MIS, the BSDF sample already covers the
+dim, smooth part of the map; the environment sample does better spending its samples on what
+stands out. The compensated distribution samples ``max(lum - c, 0)`` with ``c`` a fraction of
+the map's mean luminance over the sphere (``pi Z / 2``), through the same lookup, hierarchy and
+inversion. It is unbiased under MIS for the reason a black region of any map is: where its pdf
+is 0 the BSDF sample's MIS weight is 1, and every BSDF sampler of the renderer covers its BSDF's
+support. It is never used for the environment sample alone (sampler ``light``).
+
 A patch is reached by a **hierarchical (quadtree) warp** over the patch masses (as Mitsuba 3's
 ``Hierarchical2D``, which its ``envmap`` uses): each level sends the uniforms to one of four
 children and rescales them, so nearby uniforms reach nearby patches and stratified samples stay
@@ -116,6 +126,30 @@ def build_env_distribution(image: np.ndarray, rotation=None) -> EnvData:
         raise ValueError("environment map holds non-finite values")
     norm = total if total > 0 else 1.0
     return EnvData(image=img32, rotation=rot, lum=lum, total=total, mip=mip_levels(patch / norm))
+
+
+def mean_luminance(env: EnvData) -> float:
+    """The mean of the looked-up luminance over the sphere (solid-angle weighted):
+    ``Z 2 pi^2 / (4 pi) = pi Z / 2``."""
+    return 0.5 * np.pi * env.total
+
+
+def compensated_distribution(env: EnvData, fraction: float) -> EnvData:
+    """The MIS-compensated distribution of ``env`` (module docstring): the texel luminances
+    ``max(lum - fraction * mean_luminance(env), 0)`` with their own ``Z`` and hierarchy, the same
+    image and rotation (the radiance is unchanged; only the sampling density and its pdf
+    change). ``fraction`` in [0, 1]; 0, a black map, or a map the compensation would leave with
+    less than 10^-3 of its mass (e.g. a constant map at ``fraction`` = 1) return ``env`` itself."""
+    if not 0.0 <= fraction <= 1.0:
+        raise ValueError(f"MIS compensation must be in [0, 1], got {fraction}")
+    if fraction == 0.0 or env.total <= 0.0:
+        return env
+    lum = np.maximum(env.lum - fraction * mean_luminance(env), 0.0)
+    patch = patch_masses(lum)
+    total = float(patch.sum())
+    if not total > 1e-3 * env.total:
+        return env
+    return EnvData(image=env.image, rotation=env.rotation, lum=lum, total=total, mip=mip_levels(patch / total))
 
 
 def env_pdf_numpy(env: EnvData, d: np.ndarray) -> np.ndarray:

@@ -26,6 +26,8 @@ Scene file format (TOML). Every table and key is optional unless marked required
   hide_environment = false  camera rays that miss all shapes return 0 instead of the environment
   tile_size = 32            image tiles (pixels per side) launched from the thread pool
   ray_epsilon = 0           shadow/bounce ray offset; 0 = automatic (1e-5 x scene size)
+  mis_compensation = 0.25   under MIS, the environment is sampled by its luminance less this
+                            fraction of its mean (0 = off; never for the `light` sampler)
 
 """
 

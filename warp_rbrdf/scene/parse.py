@@ -111,6 +111,7 @@ def scene_from_dict(data: dict, file="<scene>", base_dir: Path | None = None) ->
         hide_environment=it.boolean("hide_environment", di.hide_environment),
         tile_size=it.number("tile_size", di.tile_size, 1, 4096, integer=True),
         ray_epsilon=it.number("ray_epsilon", di.ray_epsilon, 0.0, limits.MAX_RAY_EPSILON),
+        mis_compensation=it.number("mis_compensation", di.mis_compensation, 0.0, 1.0),
     )
     it.finish()
     problem = limits.check_render_size(*sc.camera.resolution, sc.integrator.spp)

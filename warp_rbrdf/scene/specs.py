@@ -45,6 +45,10 @@ class IntegratorSpec:
     hide_environment: bool = False
     tile_size: int = 32
     ray_epsilon: float = 0.0
+    #: fraction of the environment's mean luminance taken off its sampling density where the
+    #: environment sample is combined with a BSDF sample by MIS (0: off; the Renderer's
+    #: ``mis_compensated``); chosen in docs/sampling.md
+    mis_compensation: float = 0.25
 
 
 @dataclass
