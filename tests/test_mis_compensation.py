@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 
 from conftest import data_file
-from lab.mitsuba_reference import sphere_mask, sphere_scene
 from lab import testing as T
+from lab.mitsuba_reference import sphere_mask, sphere_scene
+from warp_rbrdf.errors import SceneError
 from warp_rbrdf.lights.env_distribution import (build_env_distribution, compensated_distribution,
                                                 env_pdf_numpy, mean_luminance)
 from warp_rbrdf.lights.env_file import constant_image
 from warp_rbrdf.lights.env_map import make_env_struct
 from warp_rbrdf.lights.latlong import luminance_of
 from warp_rbrdf.renderer import Renderer
-from warp_rbrdf.errors import SceneError
 from warp_rbrdf.scene import load_scene
 
 from test_warp_envmap import patch_quadrature, spot_map
@@ -23,7 +23,8 @@ from test_warp_envmap import patch_quadrature, spot_map
 
 def test_mean_luminance_of_a_constant_map():
     env = build_env_distribution(constant_image((0.2, 0.5, 0.1)))
-    np.testing.assert_allclose(mean_luminance(env), float(luminance_of(np.array([0.2, 0.5, 0.1], np.float32))), rtol=1e-6)
+    expected = float(luminance_of(np.array([0.2, 0.5, 0.1], np.float32)))
+    np.testing.assert_allclose(mean_luminance(env), expected, rtol=1e-6)
 
 
 def test_compensated_distribution_samples_the_luminance_less_the_fraction_of_its_mean():
