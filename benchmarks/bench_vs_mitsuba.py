@@ -50,7 +50,7 @@ ours: also no per-pixel bias against Mitsuba), and the image means must agree wi
 standard errors.
 
     python -m benchmarks.bench_vs_mitsuba [--quick] [--materials a b] [--maps studio rooitou]
-        [--resolution 256] [--spp 4 16 64] [--ours rgl:mis-rgl measured:mis-tabulated]
+        [--resolution 256] [--spp 4 16 64 256] [--ours rgl:mis-rgl measured:mis-tabulated]
         [--variant auto|llvm_ad_rgb|scalar_rgb] [--threads N] [--check 2] [--check-spp 1024]
         [--json results/bench_vs_mitsuba.json] [--docs] [--no-extend] [--extend-max-spp 1024]
         [--extend-budget 480] [--extend-rmse 0.25] [--extend-se 0.1] [--extend-pairs 8]
@@ -59,11 +59,14 @@ standard errors.
 ``--docs`` writes docs/bench_vs_mitsuba.md (generated; edits there are overwritten).
 The full benchmark is the one command ``python -m benchmarks.bench_vs_mitsuba --docs
 --json results/bench_vs_mitsuba.json``: every ``.bsdf`` of ``$RBRDF_DATA/rgl`` (20) under both maps,
-256 px, spp 4 16 64, the check on 2 materials at 1024 spp: the 36 cases that need no extension
-take a few seconds each, the check about 20 s a material and map; ``--resolution 128`` takes
-about a quarter of that. The extension adds, per heavy-tailed case, a 256- and a 1024-spp rung and then up to 7 seed pairs at
+256 px, spp 4 16 64 256, the check on 2 materials at 1024 spp: the 36 cases that need no
+extension take 15-20 s each, the check about 20 s a material and map; ``--resolution 128``
+takes about a quarter of that. The 256-spp rung is in the default ladder because a ratio
+extrapolated from 64 spp was off by up to 20 % against a ladder to 1 % itself on six cases
+(docs/rendering.md, 2026-11-28), and for the MIS-compensated estimator always low, by 6-20 %:
+stratification keeps paying past 64 spp, by an amount that depends on the estimator. The extension adds, per heavy-tailed case, a 1024-spp rung and then up to 7 seed pairs at
 1024 spp (16 and 7 s a render, ours / Mitsuba, on the 2-core Zen 5 machine at load 1-2): the
-whole run took 33 min there (2026-11-28, 1,989 s); expect 4 such cases (ilm_solo_m_68 and
+whole run took 42 min there (2026-11-28, 2,508 s); expect 4 such cases (ilm_solo_m_68 and
 chm_mint under both maps). They stay untrusted at 1024 spp with 8 pairs: the standard error of
 log MSE is 0.12-0.14 under studio (the threshold 0.1) and the relative RMSE 0.38-0.66 under
 rooitou, where it barely falls from 64 to 1024 spp (Mitsuba, ilm_solo_m_68: 0.72, 0.94, 0.66),
@@ -870,7 +873,7 @@ def main(argv=None):
     ap.add_argument("--materials", nargs="+", help="RGL file stems (default: every .bsdf in $RBRDF_DATA/rgl)")
     ap.add_argument("--maps", nargs="+", choices=sorted(MAPS), help="default: studio rooitou")
     ap.add_argument("--resolution", type=int, help="image side in pixels (default 256)")
-    ap.add_argument("--spp", type=int, nargs="+", help="the spp ladder (default 4 16 64)")
+    ap.add_argument("--spp", type=int, nargs="+", help="the spp ladder (default 4 16 64 256)")
     ap.add_argument("--target", type=float, default=0.01, help="relative RMSE target (default 0.01)")
     ap.add_argument("--ours", nargs="+", default=["rgl:mis-rgl"],
                     help="our configurations KIND:SAMPLER (kinds rgl, measured, projected)")
@@ -911,7 +914,7 @@ def main(argv=None):
                                   sorted(p.stem for p in (data / "rgl").glob("*.bsdf")))
     a.maps = a.maps or (["studio"] if a.quick else ["studio", "rooitou"])
     a.resolution = a.resolution or (64 if a.quick else 256)
-    a.spp = sorted(a.spp or ([4, 16] if a.quick else [4, 16, 64]))
+    a.spp = sorted(a.spp or ([4, 16] if a.quick else [4, 16, 64, 256]))
     a.check = (1 if a.quick else 2) if a.check is None else a.check
     a.check_spp = a.check_spp or (256 if a.quick else 1024)
     for flag, v in (("--extend-max-spp", a.extend_max_spp), ("--extend-budget", a.extend_budget),
