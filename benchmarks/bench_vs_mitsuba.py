@@ -363,9 +363,7 @@ class Ours:
                                                 incident="view")}
             sc.integrator = copy.copy(sc.integrator)
             sc.integrator.sampler = sampler
-        if mis_compensation is not None:
-            sc = copy.copy(sc)
-            sc.integrator = copy.copy(sc.integrator)
+        if mis_compensation is not None:     # sc.integrator is this scene's own (sphere_scene builds it)
             sc.integrator.mis_compensation = float(mis_compensation)
         self.threads = threads
         t0 = time.perf_counter()

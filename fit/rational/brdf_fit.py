@@ -289,25 +289,25 @@ def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None 
                 break
         return fits
 
-    layouts = theta_h_splits(peak_split_deg)
-    met = False
-    for li, edges in enumerate(layouts):          # the fixed layouts, each core in turn
+    def first_core(edges, full_last):
+        """``(core, its pieces, met)`` of the first core met with the theta_h layout ``edges``,
+        else of the last core tried (fitted to the end where ``full_last``)."""
         for ci, core in enumerate(cores):
-            core_fits = attempt(core, edges, li == len(layouts) - 1 and ci == len(cores) - 1)
-            if all(pc.valid for pc in core_fits):
-                met = True
-                break
+            fits = attempt(core, edges, full_last and ci == len(cores) - 1)
+            if all(pc.valid for pc in fits):
+                return core, fits, True
+        return core, fits, False
+
+    layouts = theta_h_splits(peak_split_deg)
+    for li, edges in enumerate(layouts):          # the fixed layouts, each core in turn
+        core, core_fits, met = first_core(edges, li == len(layouts) - 1)
         if met:
             break
     while not met and peak_split_deg:             # then the failing theta_h pieces bisected
         edges = bisect_failing(edges, core_fits, theta_h_transform, s.max_theta_h_pieces)
         if edges is None:
             break
-        for ci, core in enumerate(cores):
-            core_fits = attempt(core, edges, ci == len(cores) - 1)
-            if all(pc.valid for pc in core_fits):
-                met = True
-                break
+        core, core_fits, met = first_core(edges, True)
     pieces = list(core_fits)
     if core < THETA_D_MAX_DEG:
         band = (core, THETA_D_MAX_DEG)

@@ -119,13 +119,19 @@ def build_env_distribution(image: np.ndarray, rotation=None) -> EnvData:
     if not np.all(np.isfinite(lum)):
         raise ValueError("environment map holds non-finite values")
     rot = np.eye(3) if rotation is None else np.asarray(rotation, float)
-    img32 = np.ascontiguousarray(image, np.float32)
+    env = _distribution(np.ascontiguousarray(image, np.float32), rot, lum)
+    if not np.isfinite(env.total):
+        raise ValueError("environment map holds non-finite values")
+    return env
+
+
+def _distribution(image: np.ndarray, rotation: np.ndarray, lum: np.ndarray) -> EnvData:
+    """The distribution sampling the texel luminances ``lum`` (H, W) of ``image``: its patch
+    masses' sum ``Z`` and their normalised hierarchy."""
     patch = patch_masses(lum)
     total = float(patch.sum())
-    if not np.isfinite(total):
-        raise ValueError("environment map holds non-finite values")
-    norm = total if total > 0 else 1.0
-    return EnvData(image=img32, rotation=rot, lum=lum, total=total, mip=mip_levels(patch / norm))
+    return EnvData(image=image, rotation=rotation, lum=lum, total=total,
+                   mip=mip_levels(patch / (total if 0 < total < np.inf else 1.0)))
 
 
 def mean_luminance(env: EnvData) -> float:
@@ -144,12 +150,8 @@ def compensated_distribution(env: EnvData, fraction: float) -> EnvData:
         raise ValueError(f"MIS compensation must be in [0, 1], got {fraction}")
     if fraction == 0.0 or env.total <= 0.0:
         return env
-    lum = np.maximum(env.lum - fraction * mean_luminance(env), 0.0)
-    patch = patch_masses(lum)
-    total = float(patch.sum())
-    if not total > 1e-3 * env.total:
-        return env
-    return EnvData(image=env.image, rotation=env.rotation, lum=lum, total=total, mip=mip_levels(patch / total))
+    c = _distribution(env.image, env.rotation, np.maximum(env.lum - fraction * mean_luminance(env), 0.0))
+    return c if c.total > 1e-3 * env.total else env
 
 
 def env_pdf_numpy(env: EnvData, d: np.ndarray) -> np.ndarray:
