@@ -112,14 +112,13 @@ class Fit3D:
 def file_value_range(model) -> None:
     """Give every piece of a piecewise 3-D ``model`` the value range its coefficient file holds,
     in place: a file has one ``value`` record for the whole model (the first piece's ``min`` and
-    ``max``, :mod:`fit.rational.coefficient_writer`), which every piece reads back, while
-    :func:`fit.rational.ladder3d.fit_samples` gives each theta_h piece its own ``value_max`` (2 x
-    the largest of its data + 1) for the fit, the verification and the albedo policy. Without it
-    the model a fit returns clamps its later pieces lower than the same fit saved and loaded (on
-    chm_mint a relative difference of 0.9 where a later piece exceeds its own ceiling, between or
-    beyond the data points): the entry points call
-    it last, so that the fit they return is the fit its file holds. A one-piece model is left
-    as it is (the offset and the transform are the same in every piece by construction)."""
+    ``max``, :mod:`fit.rational.coefficient_writer`), which every piece reads back.
+    :func:`fit.rational.ladder3d.fit_samples` already gives every piece that one range (the
+    largest piece's ``value_max``, 2 x its largest datum + 1), so that the verification, the
+    selection, the albedo policy and the image check measure the fit its file holds; the entry
+    points call this last as well, for a model whose pieces were given ranges of their own (it is
+    then the fit saved and loaded). A one-piece model is left as it is (the offset and the
+    transform are the same in every piece by construction)."""
     pieces = getattr(model, "pieces", None)
     if not pieces:
         return
