@@ -12,7 +12,7 @@ from conftest import data_file, require_mitsuba
 
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
-BENCHMARKS = ("bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_mis_compensation", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
+BENCHMARKS = ("bench_albedo_pole", "bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_mis_compensation", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba", "bench_mesh_vs_mitsuba")
 
 
@@ -379,3 +379,35 @@ def test_bench_lanes_smoke(tmp_path):
     for r in cases.values():
         assert r["image_mean_rel_diff"] < 1e-5 and r["speedup"] > 0
 
+
+
+# --------------------------------------------------------------------------------------------
+# bench_albedo_pole: a normal-incidence slice that depends on the light's azimuth is measured as such
+
+
+def test_bench_albedo_pole_measures_an_anisotropic_normal_slice():
+    from benchmarks import bench_albedo_pole as B
+
+    class Slice:
+        """rho = 0.3 / pi (1 + 0.5 cos 2 dphi), dphi the light's azimuth less the view's (the
+        tensors' incidence; atan2(0, 0) = 0 at the normal, as the RGL evaluation reads it)."""
+        incident = "view"
+
+        def __init__(self, amplitude):
+            self.amplitude = amplitude
+
+        def evaluate(self, wi, wo):
+            d = np.arctan2(wi[..., 1], wi[..., 0]) - np.arctan2(wo[..., 1], wo[..., 0])
+            v = 0.3 / np.pi * (1.0 + self.amplitude * np.cos(2.0 * d))
+            return np.repeat(v[..., None], 3, axis=-1)
+
+    aniso = B.measure(Slice(0.5), None, n=64 ** 2)
+    assert aniso["fixed"] == "view" and aniso["slice_spread"] == pytest.approx(3.0, rel=1e-6)
+    # in the plane of incidence cos 2 dphi = 1: 1.5x the whole azimuth's mean of 1
+    np.testing.assert_allclose(aniso["truth_in_plane"], 1.5 * np.array(aniso["truth_normal"]), rtol=1e-6)
+    assert aniso["in_plane_vs_truth"] == pytest.approx(0.5, rel=1e-6)
+    np.testing.assert_allclose(aniso["truth_normal"], 0.3, rtol=1e-3)     # the albedo of 0.3 / pi
+    iso = B.measure(Slice(0.0), None, n=64 ** 2)
+    assert iso["slice_spread"] == pytest.approx(1.0) and iso["in_plane_vs_truth"] < 1e-9
+    text = B.markdown({"aniso": aniso, "iso": iso}, {"fits": "x", "date": "d", "points": 4096})
+    assert "| aniso | 3.00 | 50.0 % | n/a | n/a |" in text and "| iso | 1.00 | 0.0 % |" in text
