@@ -7,7 +7,13 @@ and given the albedo policy like the command's fits, with ``tol`` 0.01 as the co
 
 * ``p4``: four θh pieces (edges 0.05, 0.1, 0.2 rad; (4, 2), (5, 2), (5, 2), (4, 2); 666
   coefficients), the default before the six pieces;
-* ``p6``: the six pieces of today's default (``fit.rational.fit3d.VARIANTS[0]``; 1,125);
+* ``p6``: six θh pieces (edges 0.05, 0.1, 0.2, 0.4, 0.8 rad; (4, 2) then (5, 2); 1,125
+  coefficients), the default before the seven pieces;
+* ``p7``: the seven pieces of today's default (``fit.rational.fit3d.VARIANTS[0]``: ``p6`` with the
+  last piece split at 1.15 rad; 1,323);
+* ``p7peak``, ``p7mid``, ``p8``: ``p6`` with one more edge at 0.025 rad (the peak split; (4, 2) for
+  both halves; 1,260), at 0.6 rad (1,323), and at both 0.6 and 1.15 rad (1,521): the other splits
+  screened against ``p7`` (docs/fit_accuracy.md, "Seven pieces");
 * ``single``: one piece of degrees (7, 3) (420; ``VARIANTS[1]``);
 * ``m9``: nine pieces with a geometric ladder of edges from 0.004 rad (for near-mirror lobes;
   1,530 coefficients).
@@ -26,10 +32,10 @@ seed 11; the truth is the chart's cache (``--chart-out``, made there when missin
 ``--truth-spp`` spp). The render error holds the noise of ``--spp`` spp too: the ``rgl`` row
 (the exact material at the same spp) is that floor.
 
-    python -m benchmarks.bench_layouts --layouts p4 p6 --objectives rho_cos_cos relative
+    python -m benchmarks.bench_layouts --layouts p6 p7 --objectives rho_cos_cos relative
     python -m benchmarks.bench_layouts --materials chm_mint --layouts m9 --spp 256
-    python -m benchmarks.bench_layouts --layouts p6 --set grazing_cos=0.1
-    python -m benchmarks.bench_layouts --layouts p6 --objectives rho_cos_cos relative --fit-dir chart=results/chart/fits --image-check
+    python -m benchmarks.bench_layouts --layouts p7 --set grazing_cos=0.1
+    python -m benchmarks.bench_layouts --layouts p7 --objectives rho_cos_cos relative --fit-dir chart=results/chart/fits --image-check
 
 Outputs: ``<out>/layouts.json`` (every fit's record and every render's errors) and
 ``<out>/layouts.md`` (one table: ΔE2000 mean / p99 per case and column, and per column the
@@ -50,7 +56,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUTS = {
     "p4": {"theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(4, 2), (5, 2), (5, 2), (4, 2)]},
-    "p6": None,        # fit.rational.fit3d.VARIANTS[0]
+    "p6": {"theta_h_edges": [0.05, 0.1, 0.2, 0.4, 0.8], "piece_degrees": [(4, 2)] + [(5, 2)] * 5},
+    "p7": None,        # fit.rational.fit3d.VARIANTS[0]
+    "p7peak": {"theta_h_edges": [0.025, 0.05, 0.1, 0.2, 0.4, 0.8], "piece_degrees": [(4, 2)] * 2 + [(5, 2)] * 5},
+    "p7mid": {"theta_h_edges": [0.05, 0.1, 0.2, 0.4, 0.6, 0.8], "piece_degrees": [(4, 2)] + [(5, 2)] * 6},
+    "p8": {"theta_h_edges": [0.05, 0.1, 0.2, 0.4, 0.6, 0.8, 1.15], "piece_degrees": [(4, 2)] + [(5, 2)] * 7},
     "single": None,    # fit.rational.fit3d.VARIANTS[1] without its gate
     "m9": {"theta_h_edges": [0.004, 0.008, 0.016, 0.032, 0.064, 0.128, 0.256, 0.512],
            "piece_degrees": [(4, 2)] * 4 + [(5, 2)] * 5},
@@ -65,7 +75,7 @@ def layout(name: str) -> dict:
     """The :func:`fit_rgl_select` layout (one dict of settings) called ``name``."""
     from fit.rational.fit3d import VARIANTS
 
-    if name == "p6":
+    if name == "p7":
         return dict(VARIANTS[0])
     if name == "single":
         return {k: v for k, v in VARIANTS[1].items() if k != "if_rmse_below"}
@@ -124,7 +134,7 @@ def parse(argv):
     ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_layouts", description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--materials", nargs="+", default=None, help="RGL file stems without _rgb (default: every shared file)")
-    ap.add_argument("--layouts", nargs="+", choices=tuple(LAYOUTS), default=["p4", "p6"])
+    ap.add_argument("--layouts", nargs="+", choices=tuple(LAYOUTS), default=["p6", "p7"])
     ap.add_argument("--objectives", nargs="+", choices=OBJECTIVES, default=["rho_cos_cos"])
     ap.add_argument("--set", nargs="+", default=None, metavar="NAME=VALUE",
                     help="further numeric Fit3DSettings values of every fit (e.g. grazing_cos=0.1), part of "

@@ -54,7 +54,7 @@ def test_the_file_records_its_grid_after_a_refit():
 
 
 def test_default_ladder_and_settings():
-    assert [len(v["theta_h_edges"]) for v in TARGET_LADDER] == [0, 0, 0, 0, 0, 5]
+    assert [len(v["theta_h_edges"]) for v in TARGET_LADDER] == [0, 0, 0, 0, 0, 6]
     assert TARGET_LADDER[-1] == VARIANTS[0]
     assert Fit3DSettings().target_rmse is None
     for bad in (0.0, -0.1, float("nan")):

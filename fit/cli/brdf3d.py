@@ -11,13 +11,13 @@ method"):
 * ``--tol``: the first tolerance of the ladder (default :data:`TOL_3D`, the benchmark's); the
   bound the file states is the one met;
 * ``--layout``: ``select`` (default: the three layouts of :data:`fit.rational.fit3d.VARIANTS`
-  fitted, the six pieces with ``--objective``, then one piece and the six pieces with the relative
+  fitted, the seven pieces with ``--objective``, then one piece and the seven pieces with the relative
   objective, the two relative ones only below a validation RMSE of 0.065; the best by
-  ``--select-by`` kept), ``pieces`` (six theta_h pieces, 1,125 coefficients) or ``single`` (one
+  ``--select-by`` kept), ``pieces`` (seven theta_h pieces, 1,323 coefficients) or ``single`` (one
   piece of ``--degrees``, default (7, 3): 420 coefficients, with ``--objective``);
 * ``--target-rmse R``: the coefficient count as the dial: the layouts of
-  :data:`fit.rational.select3d.TARGET_LADDER` (one piece of 72 to 420 coefficients, then the six
-  pieces' 1,125) fitted cheapest first, the first whose validation RMSE is within ``R`` kept (none:
+  :data:`fit.rational.select3d.TARGET_LADDER` (one piece of 72 to 420 coefficients, then the seven
+  pieces' 1,323) fitted cheapest first, the first whose validation RMSE is within ``R`` kept (none:
   the lowest); only with ``--layout select``;
 * ``--time-limit S`` (default: none; 0: none): a wall-clock limit the user chooses, one
   :class:`fit.progress.Deadline` from the start of the command (reading the file included);
@@ -108,16 +108,16 @@ def add_flags(p) -> None:
     d = Fit3DSettings()
     g = p.add_argument_group("3-D fit (--model 3d; auto for an RGL .bsdf)")
     g.add_argument("--layout", choices=LAYOUTS, default=None,
-                   help="select (default): six theta_h pieces (1,125 coefficients) and, below a validation "
-                        "RMSE of 0.065, one piece of degrees (7, 3) (420) and the six pieces again, both fitted "
-                        "to the relative objective, the best by --select-by kept; pieces: the six pieces only; "
+                   help="select (default): seven theta_h pieces (1,323 coefficients) and, below a validation "
+                        "RMSE of 0.065, one piece of degrees (7, 3) (420) and the seven pieces again, both fitted "
+                        "to the relative objective, the best by --select-by kept; pieces: the seven pieces only; "
                         "single: one piece of --degrees only (both with --objective)")
     g.add_argument("--degrees", type=integers(2, 0, MAX_FIT_DEGREE, "NUM,DEN"), default=None, metavar="NUM,DEN",
                    help="total degrees of numerator and denominator of --layout single (default "
                         f"{','.join(map(str, VARIANTS[1]['degrees']))}; fewer coefficients, larger error)")
     g.add_argument("--target-rmse", dest="target_rmse", type=number(1e-6, 10.0), default=None, metavar="R",
                    help="the coefficient count as the dial: one piece of degrees (3,1), (4,2), (5,2), (6,3), "
-                        "(7,3) (72 to 420 coefficients), then the six pieces (1,125), fitted cheapest first; the "
+                        "(7,3) (72 to 420 coefficients), then the seven pieces (1,323), fitted cheapest first; the "
                         "first whose validation RMSE (relative RMSE of rho cos cos at 20,000 held-out pairs) is "
                         "within R is kept, else the lowest. Fits up to six layouts where the default fits three")
     g.add_argument("--time-limit", dest="time_limit", type=number(0.0, MAX_TIME_LIMIT_S), default=None, metavar="S",

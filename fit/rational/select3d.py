@@ -21,41 +21,43 @@ from .settings import Fit3DSettings
 from .variables3d import evaluate_directions
 from .verify3d import refit_between_nodes, verify_and_refit
 
+#: The theta_h edges (radians) of the pieced layouts: the peak (0.05), the lobe's shoulder (0.1)
+#: and, on a doubling ladder, the off-specular body (0.2, 0.4, 0.8), whose values span three decades
+#: on the glossy films; the last piece, 0.8 rad to the light's horizon, split once more near its
+#: geometric middle (1.15 rad, 66 deg), where light and view are both far from the normal and on
+#: the same side: the grazing light of the maps' suns at the terminator. With that edge the
+#: selection renders the image target on more of the chart's cases (docs/fit_accuracy.md,
+#: "Seven pieces").
+PIECE_EDGES = (0.05, 0.1, 0.2, 0.4, 0.8, 1.15)
+#: Degrees (numerator, denominator) of the pieces: (4, 2) for the peak, (5, 2) for the others;
+#: 3 x (45 + 6 x 66) = 1,323 coefficients.
+PIECE_DEGREES = ((4, 2),) + ((5, 2),) * len(PIECE_EDGES)
 #: The layouts :func:`fit_rgl_select` tries by default (fit_rgl keyword arguments), in order:
-#: six theta_h pieces (edges 0.05, 0.1, 0.2, 0.4, 0.8 rad: the peak, the lobe's shoulder and three
-#: for the off-specular body, whose values span three decades on the glossy films; degrees (4, 2)
-#: then (5, 2); 3 x (45 + 5 x 66) = 1,125 coefficients), then one piece of degrees (7, 3) (420)
-#: and the six pieces again, both fitted to the ``"relative"`` objective. With the default
+#: the seven theta_h pieces of :data:`PIECE_EDGES`, then one piece of degrees (7, 3) (420) and the
+#: seven pieces again, both fitted to the ``"relative"`` objective. With the default
 #: ``select_by="image"`` a later one replaces the one kept so far when its image check
 #: (:func:`image_score`) is lower by :data:`SELECT_MARGIN`.
 #: ``"if_rmse_below"`` (not a fit_rgl argument): the layout is tried only when the best validation
-#: RMSE so far is below it, which spares the materials the six pieces fit worst a fit they would
-#: not keep (of the 20 RGL files: the near-mirror chm_mint, 0.26, and cc_iris_purple_gem, 0.077).
+#: RMSE so far is below it, which spares the materials the pieces fit worst a fit they would
+#: not keep (of the 20 RGL files: the near-mirror chm_mint and ilm_solo_m_68, cc_iris_purple_gem).
 #: ``"verify_rounds"``, ``"verify_above"``: the layout's own verification budget when it is chosen
 #: (docs/fitting.md, "Budgets": one refit, for spikes only).
-#: Every layout fits what the setting ``value_factor`` says, rho cos theta_i by default; measured
-#: with fits of rho itself (docs/fit_accuracy.md, "Pieces for what users see" and "Where the p99
-#: misses come from"): the six pieces alone meet ΔE2000 mean <= 1 on 36 of the chart's 40 renders but p99 <= 3
-#: on 8: the worst pixels are the terminator under the maps' suns, lit by light beyond 80 deg of
-#: the normal where the RGL data grow as 1 / cos(theta_i) and the six pieces render 0.69 of the
-#: measurement (median). The one relative piece follows that light on the felts, papers and
-#: paints (acrylic_felt_pink rooitou p99 11.0 -> 4.3, colodur_azure_4e 7.8 -> 1.6) and is worse
-#: on the films and satins; the six relative pieces sit between them (the matte films and the
-#: cardboard: ilm_l3_37_matte rooitou 5.2 -> 2.1). The image check, its sun carrying most of the
-#: light as the maps' suns do, tells them apart (docs/fit_accuracy.md, "A check with a sun").
-#: Fitting rho cos theta_i, finite where rho grows as 1 / cos(theta_i), the selection among the
-#: same layouts renders p99 <= 3 on 29 of the 40 cases against 19 (docs/fit_accuracy.md, "The
-#: light's cosine").
+#: Every layout fits what the setting ``value_factor`` says, rho cos theta_i by default, finite
+#: where the measured rho grows as 1 / cos(theta_i) towards the light's horizon. The one relative
+#: piece follows the grazing light on the felts, papers and paints and is worse on the films and
+#: satins; the relative pieces sit between them (the matte films and the cardboard). The image
+#: check, its sun carrying most of the light as the maps' suns do, tells them apart
+#: (docs/fit_accuracy.md, "Choosing by the image check", "A check with a sun", "The light's cosine").
 VARIANTS = (
-    {"theta_h_edges": [0.05, 0.1, 0.2, 0.4, 0.8], "piece_degrees": [(4, 2), (5, 2), (5, 2), (5, 2), (5, 2), (5, 2)]},
+    {"theta_h_edges": list(PIECE_EDGES), "piece_degrees": list(PIECE_DEGREES)},
     {"theta_h_edges": [], "degrees": (7, 3), "objective": "relative", "if_rmse_below": 0.065, "verify_rounds": 1,
      "verify_above": 4.0},
-    {"theta_h_edges": [0.05, 0.1, 0.2, 0.4, 0.8], "piece_degrees": [(4, 2), (5, 2), (5, 2), (5, 2), (5, 2), (5, 2)],
-     "objective": "relative", "if_rmse_below": 0.065},
+    {"theta_h_edges": list(PIECE_EDGES), "piece_degrees": list(PIECE_DEGREES), "objective": "relative",
+     "if_rmse_below": 0.065},
 )
 #: The layouts a selection with ``target_rmse`` (the coefficient count as the dial) tries, cheapest
 #: first: one piece of degrees (3, 1), (4, 2), (5, 2), (6, 3), (7, 3) (72, 135, 198, 312, 420
-#: coefficients), then the six theta_h pieces (1,125). The first whose validation RMSE is within the
+#: coefficients), then the seven theta_h pieces (1,323). The first whose validation RMSE is within the
 #: target is kept: the fewest coefficients of the ladder that meet it (docs/fit_accuracy.md, "The
 #: coefficient count as a dial", measured these rungs on three materials).
 TARGET_LADDER = tuple({"theta_h_edges": [], "degrees": d, "verify_rounds": 1, "verify_above": 4.0}
