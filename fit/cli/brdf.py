@@ -12,14 +12,13 @@ per-channel summary table. ``--model`` picks the fit:
 Why ``3d`` where it exists (docs/fitting.md, "Which model"): the product renders measured
 materials, so the default is the fit closest to the measurement where the time and the
 coefficients stay moderate. On the 20 RGL materials of docs/fit_accuracy.md the 3-D fit's
-relative RMSE (rho cos cos over cosine-distributed pairs) is 1.7-4.3x lower than the 2-D fit's
-at 5 % (median 3.0x, 17 materials with a 2-D fit), below the phi_d-median table that bounds every
-2-D fit on 18 of 20 (on the other two the difference is within its bootstrap interval); its
-directional albedo is within 5 % both ways at 0/30/60/75 deg on 10 of them; its renders reach
-ΔE2000 mean <= 1 against the measurement on 36 of 40 cases and p99 <= 3 on 29
-(docs/fit_accuracy.md, "The light's cosine"); it has 1,125 coefficients (six theta_h pieces; 420
-where one piece is better; 2-D: 160-835, median 358) and takes 13-50 s on one core (median 28 s,
-two fits at once on the two cores, benchmarks/bench_fit_time.py;
+relative RMSE (rho cos cos over cosine-distributed pairs) is 1.8-5.1x lower than the 2-D fit's
+at 5 % (median 2.9x), below the phi_d-median table that bounds every 2-D fit on 19 of 20 (on
+chm_mint the difference is within its bootstrap interval); its directional albedo is within 5 %
+both ways at 0/30/60/75 deg on 11 of them; its renders reach ΔE2000 mean <= 1 against the
+measurement on 36 of 40 cases and mean <= 1 with p99 <= 3 on 31 (docs/fit_accuracy.md); it has
+1,323 coefficients (seven theta_h pieces; 2-D: 160-835, median 358) and takes 19-47 s on one
+core (median 35 s; two fits at once on the two cores, benchmarks/bench_fit_time.py;
 2-D: 3-31 s, median 9 s). A MERL table is reciprocal and folded over phi_d; the 3-D fit is made from an
 RGL file's own evaluation (with its light and view roles), so ``--model 3d`` refuses a
 ``.binary`` file in one line.
@@ -153,8 +152,8 @@ def register(subparsers) -> None:
                     "an rbrdf-rational JSON file (see fit.rational.coefficient_file). --model 3d (the default "
                     "for an RGL .bsdf file): rational functions of (theta_h, theta_d, |phi_d|) fitted to the "
                     "file's own evaluation, the tolerance the outcome (version 4: functions of rho cos theta_i; "
-                    "1,125 or 420 coefficients, "
-                    "13-50 s on one core): the most accurate form, its relative RMSE 1.7-4.3x (median 3.0x) "
+                    "1,323 coefficients, "
+                    "19-47 s on one core): the most accurate form, its relative RMSE 1.8-5.1x (median 2.9x) "
                     "below the 2-D fit's at 5 % on the 20 RGL materials of docs/fit_accuracy.md. --model 2d "
                     "(the default for a "
                     "MERL .binary file, which is reciprocal and has no 3-D fit): project onto (theta_h, "
