@@ -39,7 +39,8 @@ PIECE_DEGREES = ((4, 2),) + ((5, 2),) * len(PIECE_EDGES)
 #: (:func:`image_score`) is lower by :data:`SELECT_MARGIN`.
 #: ``"if_rmse_below"`` (not a fit_rgl argument): the layout is tried only when the best validation
 #: RMSE so far is below it, which spares the materials the pieces fit worst a fit they would
-#: not keep (of the 20 RGL files: the near-mirror chm_mint and ilm_solo_m_68, cc_iris_purple_gem).
+#: not keep (of the 20 RGL files with seven pieces: the near-mirror chm_mint, 0.249, and
+#: ilm_solo_m_68, 0.067, cc_iris_purple_gem, 0.071, and cm_toxic_green, 0.06505).
 #: ``"verify_rounds"``, ``"verify_above"``: the layout's own verification budget when it is chosen
 #: (docs/fitting.md, "Budgets": one refit, for spikes only).
 #: Every layout fits what the setting ``value_factor`` says, rho cos theta_i by default, finite
