@@ -149,14 +149,11 @@ def markdown(rows: dict, meta: dict) -> str:
 
 
 def write_docs(text: str, path: Path = DOCS) -> None:
-    from fit.outputs import atomic_write
+    """Replace the block between :data:`BEGIN` and :data:`END` of ``path``
+    (:func:`benchmarks.bench_fit_accuracy.write_docs`, which writes the page's other blocks)."""
+    from benchmarks.bench_fit_accuracy import write_docs as write_block
 
-    s = path.read_text()
-    i, j = s.find(BEGIN), s.find(END)
-    if i < 0 or j < i:
-        raise BenchError(f"{path}: no {BEGIN} ... {END} markers")
-    with atomic_write(path) as f:
-        f.write(s[:i + len(BEGIN)] + "\n" + text + "\n" + s[j:])
+    write_block(text + "\n", path, BEGIN, END)
 
 
 def main(argv=None) -> int:

@@ -1,7 +1,7 @@
 """What a 3-D fit is made of and what it records: :class:`Fit3D` (the result, everything a fit
 finds in its attributes), :class:`FitData3D` (what a refit of it needs), :data:`INTERVALS` (the
 interval policy, written into every record), :func:`file_value_range` (the value range a coefficient
-file holds, given to the model a fit returns) and :func:`domain_record` (the coefficient file's
+file holds, given to the model the proof reads) and :func:`domain_record` (the coefficient file's
 statement of what is proved on the whole measured domain). The method is in
 docs/fitting.md ("The 3-D method").
 """
@@ -113,12 +113,11 @@ def file_value_range(model) -> None:
     """Give every piece of a piecewise 3-D ``model`` the value range its coefficient file holds,
     in place: a file has one ``value`` record for the whole model (the first piece's ``min`` and
     ``max``, :mod:`fit.rational.coefficient_writer`), which every piece reads back.
-    :func:`fit.rational.ladder3d.fit_samples` already gives every piece that one range (the
-    largest piece's ``value_max``, 2 x its largest datum + 1), so that the verification, the
-    selection, the albedo policy and the image check measure the fit its file holds; the entry
-    points call this last as well, for a model whose pieces were given ranges of their own (it is
-    then the fit saved and loaded). A one-piece model is left as it is (the offset and the
-    transform are the same in every piece by construction)."""
+    :func:`fit.rational.ladder3d.fit_samples` makes its pieces with that one range already; the
+    proof (:class:`fit.rational.proved_bound.Fit3DProof`) applies it to the copy it proves, so
+    that a model whose pieces were given ranges of their own is proved as its file would hold
+    it. A one-piece model is left as it is (the offset and the transform are the same in every
+    piece by construction)."""
     pieces = getattr(model, "pieces", None)
     if not pieces:
         return

@@ -17,14 +17,14 @@ from .albedo3d import albedo_policy
 from .ceiling import Ceiling
 from .ladder3d import fit_samples
 from .proved_bound import record_fit3d
-from .result3d import FitData3D, Fit3D, domain_record, file_value_range
+from .result3d import FitData3D, Fit3D, domain_record
 from .samples3d import objective_points, sample_rgl
 from .settings import DEFAULT_ALBEDO_REFITS, DEFAULT_ALBEDO_RMSE_GROWTH, DEFAULT_ALBEDO_TOTAL_GROWTH, Fit3DSettings
 from .verify3d import refit_between_nodes, verification_ratio, verify_and_refit
 
 
 def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=None, progress=None,
-            file_range: bool = True, **params) -> Fit3D:
+            **params) -> Fit3D:
     """:func:`fit.rational.ladder3d.fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by
     :func:`fit.rational.samples3d.sample_rgl` (the sampling time counts in ``time_s``) with
     ``settings`` (:class:`fit.rational.settings.Fit3DSettings`, default its defaults; each of its
@@ -57,11 +57,9 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
     points there (:func:`fit.rational.verify3d.refit_between_nodes`; before the albedo policy).
     ``prove_bound`` (default on): last, the error between the grid nodes of the measurement is
     proved per piece and channel in the unit of the stated tolerance (:func:`fit.rational.proved_bound.record_fit3d`: ``bounds``,
-    ``fit_info["bound"]``, and ``fit_info["domain"]`` says what is proved). ``file_range`` (default
-    on): the model returned (and ``model_before_albedo``) holds the value range of its coefficient
-    file (:func:`fit.rational.result3d.file_value_range`), so that it evaluates as the saved fit;
-    off only for the layouts of :func:`fit.rational.select3d.fit_rgl_select`, which range the one
-    it keeps itself."""
+    ``fit_info["bound"]``, and ``fit_info["domain"]`` says what is proved). Every step measures
+    the model its coefficient file holds: :func:`~fit.rational.ladder3d.fit_samples` gives every
+    piece the file's one value range."""
     s = Fit3DSettings.resolve(settings, **params)
     t0 = time.perf_counter()
     if ceiling is None:
@@ -92,9 +90,6 @@ def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=N
                      refits=s.albedo_refits, total_growth=s.albedo_total_growth)
         report(progress, "albedo policy", 1, 1)
     ceiling.record(res.model.fit_info)
-    if file_range:          # the model its file holds (one value range), before a proof of it
-        file_value_range(res.model)
-        file_value_range(res.model_before_albedo)
     prove_step(brdf, res, s.prove_bound, memo, progress)
     res.time_s = time.perf_counter() - t0
     res.model.fit_info["time_s"] = res.time_s

@@ -15,7 +15,7 @@ from ..formats.angles import cosine_directions
 from ..progress import report
 from .ceiling import Ceiling
 from .image_check import image_check
-from .result3d import Fit3D, file_value_range
+from .result3d import Fit3D
 from .rgl3d import albedo_step, fit_rgl, prove_step
 from .settings import Fit3DSettings
 from .variables3d import evaluate_directions
@@ -154,7 +154,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     selection. ``progress(stage, done, total)`` (:mod:`fit.progress`): each layout's stages as in
     :func:`fit.rational.rgl3d.fit_rgl`, then the chosen one's ``"verification"``, ``"proof-guided
     refit"``, ``"albedo policy"`` and ``"proving the bound"``. The model returned holds the value range of its coefficient file
-    (:func:`fit.rational.result3d.file_value_range`): it evaluates as the fit saved and loaded."""
+    (:func:`fit.rational.ladder3d.fit_samples` gives it to every piece): it evaluates as the fit saved and loaded."""
     s = Fit3DSettings.resolve(settings, **params)
     target = s.target_rmse
     if variants is None:
@@ -184,7 +184,7 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
             continue
         layout = s.clone(**v, verify_rounds=rounds, verify_above=above)
         res = fit_rgl(brdf, settings=layout.clone(verify=0, albedo=False, prove_bound=False, proof_rounds=0), ceiling=ceiling,
-                      progress=progress, file_range=False)
+                      progress=progress)
         v_rmse = validation_rmse(brdf, res.model)
         check = image_check(brdf, res.model) if s.select_by == "image" and target is None else None
         score = (image_score(check) if check is not None else v_rmse if s.objective == "rho_cos_cos"
@@ -240,11 +240,6 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
         best.model.fit_info["image_check"] = dict(checked[1]) if unchanged and checked[1] is not None \
             else image_check(brdf, best.model)
     ceiling.record(best.model.fit_info)
-    # the model its file holds (fit.rational.result3d.file_value_range): one value range for every
-    # piece, as the file is read back; the steps above measured the fit with each piece's own (the
-    # file written is the same either way)
-    file_value_range(best.model)
-    file_value_range(best.model_before_albedo)
     prove_step(brdf, best, s.prove_bound, memo, progress)     # the chosen fit's error between the grid nodes
     best.settings = chosen
     best.data = best.verify_points = None          # the data and fresh points are not kept
