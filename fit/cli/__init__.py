@@ -24,6 +24,7 @@ import sys
 import warnings
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ..errors import RbrdfError
 from ..progress import CLIProgress
@@ -73,7 +74,8 @@ def main(argv=None) -> int:
     try:
         # NumPy and matplotlib warnings are not messages to the user: what matters is checked
         # and reported in one line
-        with warnings.catch_warnings(), np.errstate(all="ignore"):
+        # one BLAS thread (fit/blas_threads.py: a fit's outcome must not depend on the thread count)
+        with warnings.catch_warnings(), np.errstate(all="ignore"), threadpool_limits(limits=1, user_api="blas"):
             warnings.simplefilter("ignore")
             try:
                 status = int(args.func(args) or 0)

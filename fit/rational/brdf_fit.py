@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..blas_threads import one_blas_thread
 from ..formats.colour import LUMINANCE
 from ..progress import report
 from .brdf_data import ChannelData, channel_data, project_for_fit, white_sky_albedo
@@ -223,6 +224,7 @@ def bisect_failing(edges, core_fits, transform: str, max_pieces: int):
 PRECHECK_ROUNDS = 6
 
 
+@one_blas_thread
 def fit_brdf(brdf, settings: BRDFFitSettings | None = None, *, name: str | None = None, progress=None,
              source_file: str = "", prove_bound: bool = True, **params) -> BRDFFit:
     """Fit R, G, B of a measured (or already projected) BRDF over theta_h x theta_d with

@@ -17,12 +17,14 @@ from .albedo3d import albedo_policy
 from .ceiling import Ceiling
 from .ladder3d import fit_samples
 from .proved_bound import record_fit3d
+from ..blas_threads import one_blas_thread
 from .result3d import FitData3D, Fit3D, domain_record
 from .samples3d import objective_points, sample_rgl
 from .settings import DEFAULT_ALBEDO_REFITS, DEFAULT_ALBEDO_RMSE_GROWTH, DEFAULT_ALBEDO_TOTAL_GROWTH, Fit3DSettings
 from .verify3d import refit_between_nodes, verification_ratio, verify_and_refit
 
 
+@one_blas_thread
 def fit_rgl(brdf, *, settings: Fit3DSettings | None = None, name=None, ceiling=None, progress=None,
             **params) -> Fit3D:
     """:func:`fit.rational.ladder3d.fit_samples` of an :class:`fit.formats.rgl.RGLBRDF` sampled by

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from ..blas_threads import one_blas_thread
 from ..formats.angles import cosine_directions
 from ..progress import report
 from .ceiling import Ceiling
@@ -121,6 +122,7 @@ def validation_score(brdf, model, objective: str) -> float:
     return validation_rmse(brdf, model)
 
 
+@one_blas_thread
 def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None, progress=None,
                    **params) -> Fit3D:
     """Fit every layout of ``variants`` (each a dict of settings that replace those of ``settings``,

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..blas_threads import one_blas_thread
 from ..formats.measured import file_sha256
 from ..progress import Deadline
 from .cdf_fit import FORMAT, SAMPLER, VERSION, CDFFit
@@ -63,6 +64,7 @@ def table_only(evaluate, table_params: dict | None = None, reason: str = "table 
                   source=source or {"file": "", "sha256": ""})
 
 
+@one_blas_thread
 def fit_cdf(evaluate, name: str = "", table: CDFTable | None = None, table_params: dict | None = None,
             theta_kw: dict | None = None, phi_kw: dict | None = None, refinements: int = 1,
             log=None, source: dict | None = None, monotone: bool = True,
