@@ -3,11 +3,11 @@ Warp functions it inlines.
 
     python -m benchmarks.profile_render [--material cc_ibiza_sunset_rgb] [--envmap rooitou_park_1k]
                                         [--spp 256] [--resolution 128] [--json FILE] [--lines]
-                                        [--fit FIT.json]
+                                        [--fit FIT.json] [--sampler NAME]
 
 How: the reference sphere scene of :mod:`lab.mitsuba_reference` (the scene of
 ``benchmarks/bench_vs_mitsuba.py``), its material the ``rgl`` one of ``--material`` or the
-``rational`` fit of ``--fit`` (a coefficient file, with its default sampler), is rendered on one
+``rational`` fit of ``--fit`` (a coefficient file, with its default sampler; ``--sampler``: another), is rendered on one
 thread under Linux ``perf record``. Its
 render kernel is compiled in a private Warp cache with the same flags as always plus DWARF line
 tables (``-debug-info-kind=line-tables-only``: the same machine code, the object is
@@ -207,7 +207,13 @@ def _child(a) -> None:
     if a.fit:
         from warp_rbrdf.scene import MaterialSpec
 
-        scene.materials["obj"] = MaterialSpec(name="obj", type="rational", file=Path(a.fit))
+        from benchmarks.bench_eval import own_sampler
+
+        spec = MaterialSpec(name="obj", type="rational", file=Path(a.fit))
+        spec.sampler = a.sampler or own_sampler(spec)    # mis-rational where the file carries its inverse CDFs
+        scene.materials["obj"] = spec
+    elif a.sampler:
+        scene.materials["obj"].sampler = a.sampler
     r = Renderer(scene, device="cpu")
     r.render(spp=4, threads=1)
     r.render(spp=a.spp, threads=1)
@@ -239,7 +245,8 @@ def profile(a) -> dict:
         cmd = ["perf", "record", "-F", str(a.frequency), "-o", str(data), "--",
                sys.executable, "-m", "benchmarks.profile_render", "--child",
                "--material", a.material, "--envmap", a.envmap, "--spp", str(a.spp),
-               "--resolution", str(a.resolution)] + (["--fit", str(Path(a.fit).resolve())] if a.fit else [])
+               "--resolution", str(a.resolution)] + (["--fit", str(Path(a.fit).resolve())] if a.fit else []) \
+        + (["--sampler", a.sampler] if a.sampler else [])
         p = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, check=False)
         if p.returncode != 0:
             tail = p.stderr.strip().splitlines()[-1:] or [""]
@@ -273,7 +280,7 @@ def profile(a) -> dict:
             cpps = sorted((tmp / "cache").rglob("*render_tile*.cpp"))
             if cpps:
                 by_line = attribute_lines(inside, innermost_cpp_lines(a2l), cpps[-1].read_text().splitlines())
-    return {"material": Path(a.fit).name if a.fit else a.material, "envmap": a.envmap, "spp": a.spp, "resolution": a.resolution,
+    return {"material": Path(a.fit).name if a.fit else a.material, "sampler": a.sampler, "envmap": a.envmap, "spp": a.spp, "resolution": a.resolution,
                 "samples": total, "kernel_samples": sum(inside.values()), "aligned_share": share,
                 "libm_samples": sum(libm.values()), "libm": dict(libm.most_common()),
                 "inclusive": dict(inc.most_common()), "exclusive": dict(exc.most_common()),
@@ -285,7 +292,7 @@ def report(res: dict, top: int = 25) -> str:
     libm functions it calls; start-up and compilation are left out)."""
     tot = res["kernel_samples"] + res["libm_samples"]
     pct = lambda n: f"{100.0 * n / max(tot, 1):5.1f} %"
-    out = [(f"{res['material']} under {res['envmap']}, {res['resolution']} px, {res['spp']} spp, 1 thread: "
+    out = [(f"{res['material']}{' (' + res['sampler'] + ')' if res.get('sampler') else ''} under {res['envmap']}, {res['resolution']} px, {res['spp']} spp, 1 thread: "
            f"{tot} samples in the render kernel and the libm functions it calls (of {res['samples']} in "
            f"the process: start-up and compilation are the rest); load address found for "
            f"{100 * res['aligned_share']:.1f} % of the kernel's samples"), "",
@@ -311,6 +318,9 @@ def main(argv=None) -> int:
     ap.add_argument("--material", default="cc_ibiza_sunset_rgb", help="RGL file name under $RBRDF_DATA/rgl")
     ap.add_argument("--envmap", default="rooitou_park_1k", help="map name under $RBRDF_DATA/envmaps")
     ap.add_argument("--fit", default=None, help="a rational coefficient file: profile it instead of --material")
+    ap.add_argument("--sampler", default=None,
+                    help="the sampler (strategy) to render with (default: the material's own: mis-rgl for --material, "
+                         "mis-rational for a --fit that carries its inverse CDFs)")
     ap.add_argument("--spp", type=int, default=256)
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--frequency", type=int, default=4000, help="perf sampling frequency (Hz)")
