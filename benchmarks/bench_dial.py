@@ -2,7 +2,7 @@
 its coefficients.
 
 For each material, every layout of a ladder (:data:`LADDER`: one theta_h piece of growing
-degrees, fitted to the default and to the relative objective, then four and six pieces,
+degrees, fitted to the default and to the relative objective, then four and seven pieces,
 including the three layouts the default selection tries, :data:`fit.rational.fit3d.VARIANTS`)
 is fitted and measured at held-out pairs: the benchmark's metric
 (:mod:`benchmarks.bench_fit_accuracy`: ``--pairs`` cosine-distributed direction pairs, seed
@@ -66,8 +66,8 @@ LADDER = (
     {"name": "1 piece (6,3)", "theta_h_edges": [], "degrees": (6, 3), "flags": "--layout single --degrees 6,3"},
     {"name": "1 piece (7,3) [select-1]", "variant": 1, "flags": "--layout single --objective relative"},
     {"name": "4 pieces (3,1)", "theta_h_edges": [0.05, 0.1, 0.2], "piece_degrees": [(3, 1)] * 4},
-    {"name": "6 pieces (4,2)/(5,2) [select-0]", "variant": 0, "flags": "--layout pieces"},
-    {"name": "6 pieces, relative [select-2]", "variant": 2, "flags": "--layout pieces --objective relative"},
+    {"name": "7 pieces (4,2)/(5,2) [select-0]", "variant": 0, "flags": "--layout pieces"},
+    {"name": "7 pieces, relative [select-2]", "variant": 2, "flags": "--layout pieces --objective relative"},
     {"name": "1 piece (5,2), relative", "theta_h_edges": [], "degrees": (5, 2), "objective": "relative",
      "flags": "--layout single --degrees 5,2 --objective relative"},
     {"name": "1 piece (6,3), relative", "theta_h_edges": [], "degrees": (6, 3), "objective": "relative",
@@ -88,7 +88,7 @@ def layout_settings(entry: dict, keep_verify: bool = False) -> dict:
 
     if "variant" in entry:
         v = dict(VARIANTS[entry["variant"]])
-        for k in ("if_rmse_below",) + (() if keep_verify else ("verify_rounds", "verify_above")):
+        for k in ("if_rmse_below", "check_unverified") + (() if keep_verify else ("verify_rounds", "verify_above")):
             v.pop(k, None)
         return v
     v = {k: v for k, v in entry.items() if k not in ("name", "flags")}
@@ -479,14 +479,16 @@ def default_fit_file(name: str, data: Path) -> Path | None:
 def _load_results(files) -> tuple:
     """``(results, meta)`` merged from earlier results.json files (materials in order; a
     material's rows of several files joined, a later file's row of a layout replacing an
-    earlier one's; the first file's meta, with the loads of all)."""
+    earlier one's; rows of a layout no longer in :data:`LADDER`, e.g. one measured before the
+    selection's layouts changed, dropped; the first file's meta, with the loads of all)."""
+    known = {step["name"] for step in LADDER} | {DEFAULT_ROW}
     results, metas = {}, []
     for f in files:
         try:
             d = json.loads(Path(f).read_text())
             for m, rows in d["results"].items():        # a material's rows of several runs: merged
                 have = {r["layout"]: r for r in results.get(m, [])}
-                have.update({r["layout"]: r for r in rows})
+                have.update({r["layout"]: r for r in rows if r["layout"] in known})
                 results[m] = sorted(have.values(), key=lambda r: (r["coefficients"], r["layout"]))
             metas.append(d["meta"])
         except (OSError, ValueError, KeyError) as e:

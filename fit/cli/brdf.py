@@ -16,9 +16,10 @@ relative RMSE (rho cos cos over cosine-distributed pairs) is 1.8-5.1x lower than
 at 5 % (median 2.9x), below the phi_d-median table that bounds every 2-D fit on 19 of 20 (on
 chm_mint the difference is within its bootstrap interval); its directional albedo is within 5 %
 both ways at 0/30/60/75 deg on 11 of them; its renders reach ΔE2000 mean <= 1 against the
-measurement on 36 of 40 cases and mean <= 1 with p99 <= 3 on 31 (docs/fit_accuracy.md); it has
-1,323 coefficients (seven theta_h pieces; 2-D: 160-835, median 358) and takes 19-47 s on one
-core (median 35 s; two fits at once on the two cores, benchmarks/bench_fit_time.py;
+measurement on 36 of 40 cases and mean <= 1 with p99 <= 3 on 33 (docs/fit_accuracy.md); it has
+1,323 coefficients (seven theta_h pieces; 420 where one piece looks better; 2-D: 160-835, median
+358) and takes 19-51 s on one core (median 40 s; two fits at once on the two cores,
+benchmarks/bench_fit_time.py;
 2-D: 3-31 s, median 9 s). A MERL table is reciprocal and folded over phi_d; the 3-D fit is made from an
 RGL file's own evaluation (with its light and view roles), so ``--model 3d`` refuses a
 ``.binary`` file in one line.
@@ -153,7 +154,7 @@ def register(subparsers) -> None:
                     "for an RGL .bsdf file): rational functions of (theta_h, theta_d, |phi_d|) fitted to the "
                     "file's own evaluation, the tolerance the outcome (version 4: functions of rho cos theta_i; "
                     "1,323 coefficients, "
-                    "19-47 s on one core): the most accurate form, its relative RMSE 1.8-5.1x (median 2.9x) "
+                    "19-51 s on one core): the most accurate form, its relative RMSE 1.8-5.1x (median 2.9x) "
                     "below the 2-D fit's at 5 % on the 20 RGL materials of docs/fit_accuracy.md. --model 2d "
                     "(the default for a "
                     "MERL .binary file, which is reciprocal and has no 3-D fit): project onto (theta_h, "
