@@ -194,6 +194,7 @@ def settings_from_args(args, wall_limit=None) -> tuple:
         return s, (VARIANTS[0],)
     single = dict(VARIANTS[1])
     single.pop("if_rmse_below")               # the only layout: always fitted
+    single.pop("check_unverified")            # and checked as it is written, verified
     single.pop("objective", None)             # the command's --objective
     if args.degrees is not None:
         single["degrees"] = tuple(args.degrees)

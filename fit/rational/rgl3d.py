@@ -11,13 +11,13 @@ import time
 
 import numpy as np
 
+from ..blas_threads import one_blas_thread
 from ..formats.angles import half_diff_to_directions
 from ..progress import report
 from .albedo3d import albedo_policy
 from .ceiling import Ceiling
 from .ladder3d import fit_samples
 from .proved_bound import record_fit3d
-from ..blas_threads import one_blas_thread
 from .result3d import FitData3D, Fit3D, domain_record
 from .samples3d import objective_points, sample_rgl
 from .settings import DEFAULT_ALBEDO_REFITS, DEFAULT_ALBEDO_RMSE_GROWTH, DEFAULT_ALBEDO_TOTAL_GROWTH, Fit3DSettings

@@ -136,8 +136,8 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     :func:`fit.rational.rgl3d.fit_rgl` and return the one with the lowest score: with the setting
     ``select_by="image"`` (the default) :func:`image_score` of each layout's image check (logged in
     its ``variants`` entry as ``image_check``), made once the layout is verified (its
-    ``verify_rounds`` refits, below: they move what the check sees), with ``"validation"`` its :func:`validation_score`
-    of the setting ``objective`` (a later layout must be
+    ``verify_rounds`` refits, below: they move what the check sees), with ``"validation"`` its
+    :func:`validation_score` of the setting ``objective`` (a later layout must be
     :data:`SELECT_MARGIN` lower to replace an earlier one; a layout with ``"if_rmse_below"`` is tried
     only when the chosen one's :func:`validation_rmse` is below that RMSE); ``variants`` logs what
     each achieved (coefficients, stated bound, validation RMSE and score, seconds), ``variant`` is
@@ -151,8 +151,8 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     are logged as skipped, "budget"); every layout (``select_by="image"``) or the chosen one
     (``"validation"``, ``target_rmse``) is verified with at most ``verify_rounds`` refits
     (:func:`fit.rational.verify3d.verify_and_refit`; a layout's own ``"verify_rounds"`` entry
-    overrides it); the chosen fit is then refitted where the proof between the grid nodes finds it outside its bound with
-    at most ``proof_rounds`` refits (:func:`fit.rational.verify3d.refit_between_nodes`), the albedo
+    overrides it); the chosen fit is then refitted where the proof between the grid nodes finds it
+    outside its bound with at most ``proof_rounds`` refits (:func:`fit.rational.verify3d.refit_between_nodes`), the albedo
     policy applied with at most ``albedo_refits`` channel corrections (``albedo``, as in
     :func:`fit.rational.rgl3d.fit_rgl`), and last its error between the grid nodes proved
     (``prove_bound``, :func:`fit.rational.proved_bound.record_fit3d`). ``time_limit`` (CPU seconds of
@@ -162,7 +162,8 @@ def fit_rgl_select(brdf, variants=None, *, settings: Fit3DSettings | None = None
     round; ``fit_info["stopped"] = "time"`` and ``stopped_at`` record it. ``time_s`` is the whole
     selection. ``progress(stage, done, total)`` (:mod:`fit.progress`): each layout's stages as in
     :func:`fit.rational.rgl3d.fit_rgl` and its ``"verification"`` (the chosen one's, by
-    validation), then the chosen one's ``"proof-guided refit"``, ``"albedo policy"`` and ``"proving the bound"``. The model returned holds the value range of its coefficient file
+    validation), then the chosen one's ``"proof-guided refit"``, ``"albedo policy"`` and
+    ``"proving the bound"``. The model returned holds the value range of its coefficient file
     (:func:`fit.rational.ladder3d.fit_samples` gives it to every piece): it evaluates as the fit saved and loaded."""
     s = Fit3DSettings.resolve(settings, **params)
     target = s.target_rmse
