@@ -84,11 +84,11 @@ def layout_settings(entry: dict, keep_verify: bool = False) -> dict:
     """The ``fit_rgl`` settings of a :data:`LADDER` entry (a selection variant: its own, without
     the selection's keys; ``keep_verify``: with the variant's own verification rounds, for a
     layout fitted by the selection alone)."""
-    from fit.rational.fit3d import VARIANTS
+    from fit.rational.select3d import SELECTION_KEYS, VARIANTS
 
     if "variant" in entry:
         v = dict(VARIANTS[entry["variant"]])
-        for k in ("if_rmse_below", "check_unverified") + (() if keep_verify else ("verify_rounds", "verify_above")):
+        for k in SELECTION_KEYS + (() if keep_verify else ("verify_rounds", "verify_above")):
             v.pop(k, None)
         return v
     v = {k: v for k, v in entry.items() if k not in ("name", "flags")}

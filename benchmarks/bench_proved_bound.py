@@ -128,8 +128,8 @@ def todays_layouts() -> list:
     """The layouts a 3-D fit with the fitter's defaults tries (:data:`fit.rational.select3d.VARIANTS`),
     as its ``fit_info["variants"][i]["options"]`` records them (without the selection's own
     settings)."""
-    from fit.rational.select3d import _SELECT_SETTINGS, VARIANTS
-    return [_plain({k: v for k, v in d.items() if k != "if_rmse_below" and k not in _SELECT_SETTINGS})
+    from fit.rational.select3d import _SELECT_SETTINGS, SELECTION_KEYS, VARIANTS
+    return [_plain({k: v for k, v in d.items() if k not in SELECTION_KEYS and k not in _SELECT_SETTINGS})
             for d in VARIANTS]
 
 

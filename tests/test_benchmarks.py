@@ -380,7 +380,6 @@ def test_bench_lanes_smoke(tmp_path):
         assert r["image_mean_rel_diff"] < 1e-5 and r["speedup"] > 0
 
 
-
 # --------------------------------------------------------------------------------------------
 # bench_albedo_pole: a normal-incidence slice that depends on the light's azimuth is measured as such
 

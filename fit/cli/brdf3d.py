@@ -65,6 +65,7 @@ from ..rational.fit3d import (
     DEFAULT_TIME_LIMIT,
     DEFAULT_VERIFY,
     OBJECTIVES,
+    SELECTION_KEYS,
     TARGET_LADDER,
     VARIANTS,
     Fit3DSettings,
@@ -192,9 +193,7 @@ def settings_from_args(args, wall_limit=None) -> tuple:
         return s, (VARIANTS if target is None else TARGET_LADDER)
     if layout == "pieces":
         return s, (VARIANTS[0],)
-    single = dict(VARIANTS[1])
-    single.pop("if_rmse_below")               # the only layout: always fitted
-    single.pop("check_unverified")            # and checked as it is written, verified
+    single = {k: v for k, v in VARIANTS[1].items() if k not in SELECTION_KEYS}   # the only layout: always fitted
     single.pop("objective", None)             # the command's --objective
     if args.degrees is not None:
         single["degrees"] = tuple(args.degrees)

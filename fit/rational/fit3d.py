@@ -36,7 +36,7 @@ from .samples3d import (
     sample_grid,
     sample_rgl,
 )
-from .select3d import SELECT_MARGIN, TARGET_LADDER, VARIANTS, fit_rgl_select, validation_rmse
+from .select3d import SELECT_MARGIN, SELECTION_KEYS, TARGET_LADDER, VARIANTS, fit_rgl_select, validation_rmse
 from .settings import (
     DEFAULT_ALBEDO_REFITS,
     DEFAULT_ALBEDO_RMSE_GROWTH,
@@ -59,7 +59,7 @@ __all__ = [
     "DEFAULT_ALBEDO_TOTAL_GROWTH", "DEFAULT_CHANNEL_FLOOR", "DEFAULT_DEGREES", "DEFAULT_GRAZING_COS",
     "DEFAULT_GRID", "DEFAULT_LADDER_STEPS", "DEFAULT_NOISE_FRAC", "DEFAULT_OBJECTIVE", "DEFAULT_RANDOM",
     "DEFAULT_RELAX", "DEFAULT_THETA_FIT_DEG", "DEFAULT_TIME_LIMIT", "DEFAULT_VERIFY", "INTERVALS", "OBJECTIVES",
-    "SELECT_MARGIN",
+    "SELECT_MARGIN", "SELECTION_KEYS",
     "TARGET_LADDER", "VARIANTS", "Ceiling", "Fit3D", "Fit3DSettings", "FitData3D", "domain_record", "fit_rgl", "fit_rgl_select",
     "fit_samples", "grazing_weight", "noise_levels", "objective_points", "sample_grid", "sample_rgl",
     "validation_rmse", "verification_ratio", "verify_and_refit",

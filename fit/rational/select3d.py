@@ -66,6 +66,9 @@ VARIANTS = (
 #: coefficients), then the seven theta_h pieces (1,323). The first whose validation RMSE is within the
 #: target is kept: the fewest coefficients of the ladder that meet it (docs/fit_accuracy.md, "The
 #: coefficient count as a dial", measured these rungs on three materials).
+#: The keys of a :data:`VARIANTS` layout that say how the selection treats it, not how it is
+#: fitted (not ``fit_rgl`` arguments): a layout fitted alone drops them.
+SELECTION_KEYS = ("if_rmse_below", "check_unverified")
 TARGET_LADDER = tuple({"theta_h_edges": [], "degrees": d, "verify_rounds": 1, "verify_above": 4.0}
                       for d in ((3, 1), (4, 2), (5, 2), (6, 3), (7, 3))) + (VARIANTS[0],)
 #: A later layout replaces the one chosen so far only when its validation RMSE is lower by this
@@ -76,7 +79,7 @@ SELECT_MARGIN = 0.05
 #: Settings of the selection itself (its budgets, verification and albedo policy), not of a
 #: layout's fit: not listed in the layouts' ``"options"`` log.
 _SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above",
-                              "check_unverified", "proof_rounds",
+                              "proof_rounds",
                               "proof_above", "albedo",
                               "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
                               "albedo_refits", "max_variants", "target_rmse", "image_check", "select_by"})
