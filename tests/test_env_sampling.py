@@ -330,6 +330,36 @@ def test_row_fraction_solver():
     assert np.all((t >= 0) & (t <= 1))
 
 
+@functools.lru_cache(maxsize=1)
+def _half_sincos_kernel():
+    from warp_rbrdf.lights.env_sampling import _half_sincos
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def k(h: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.vec2d)):
+        i = wp.tid()
+        out[i] = _half_sincos(h[i])
+
+    return k
+
+
+def test_half_angle_sincos_is_float64_exact():
+    """The row solver's sine and cosine of b t / 2: the series below SERIES_MAX_HALF_ANGLE
+    within 2 ulp of float64 sin and cos (the first omitted term is under half an ulp), libm
+    above it; a wrong or float32 factor in the series fails (1/6 rounded to float32: 2.8e6 ulp)."""
+    from warp_rbrdf.lights.env_sampling import SERIES_MAX_HALF_ANGLE
+
+    h = np.concatenate([np.linspace(0.0, SERIES_MAX_HALF_ANGLE, 20_001),
+                        np.random.default_rng(3).uniform(0.0, 1e-3, 5_000),
+                        np.linspace(SERIES_MAX_HALF_ANGLE, 1.6, 101)])
+    out = wp.zeros(len(h), dtype=wp.vec2d, device="cpu")
+    wp.launch(_half_sincos_kernel(), len(h), inputs=[wp.array(h, dtype=wp.float64, device="cpu"), out],
+              device="cpu")
+    sc = out.numpy()
+    ulp_s = np.abs(sc[:, 0] - np.sin(h)) / np.spacing(np.maximum(np.sin(h), 1e-300))
+    ulp_c = np.abs(sc[:, 1] - np.cos(h)) / np.spacing(np.cos(h))
+    assert ulp_s.max() <= 2.0 and ulp_c.max() <= 2.0
+
+
 def test_black_map_cannot_be_sampled():
     env = build(np.zeros((8, 16, 3), np.float32))
     assert env.total == 0 and struct(env).can_sample == 0

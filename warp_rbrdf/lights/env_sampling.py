@@ -4,8 +4,9 @@ reference: :mod:`warp_rbrdf.lights.env_distribution`).
 
 Inside patch (j, c) the row fraction ``t`` has density ``((1 - t) A0 + t A1) sin(a + b t)``:
 Newton on the cubic CDF of the chord of sin, then bracketed Newton on the exact CDF (usually one
-step); given ``t`` the column fraction is linear and is inverted in closed form
-(:func:`linear_inverse`)."""
+step; its sine and cosine of the half angle b t / 2 < 0.25 by their series, inlined, where
+libm's float64 ``sincos`` is a call: :func:`_half_sincos`); given ``t`` the column fraction is
+linear and is inverted in closed form (:func:`linear_inverse`)."""
 from __future__ import annotations
 
 import warp as wp
@@ -27,20 +28,64 @@ def linear_inverse(g0: wp.float64, g1: wp.float64, y: wp.float64) -> wp.float64:
     return wp.clamp(s, zero, one)
 
 
+#: half-angle h = b t / 2 below which :func:`_half_sincos` sums its series (b = pi / (H - 1) <= 0.5:
+#: maps of 8 rows or more); larger ones call libm
+SERIES_MAX_HALF_ANGLE = 0.25
+#: the series' factors 1 / (k (k + 1)) as float64 constants (``wp.float64(1.0 / 3.0)`` in a Warp
+#: function would divide in float32)
+_F2 = wp.constant(wp.float64(1.0 / 2.0))
+_F6 = wp.constant(wp.float64(1.0 / 6.0))
+_F12 = wp.constant(wp.float64(1.0 / 12.0))
+_F20 = wp.constant(wp.float64(1.0 / 20.0))
+_F30 = wp.constant(wp.float64(1.0 / 30.0))
+_F42 = wp.constant(wp.float64(1.0 / 42.0))
+_F56 = wp.constant(wp.float64(1.0 / 56.0))
+_F72 = wp.constant(wp.float64(1.0 / 72.0))
+_F90 = wp.constant(wp.float64(1.0 / 90.0))
+_F110 = wp.constant(wp.float64(1.0 / 110.0))
+_F132 = wp.constant(wp.float64(1.0 / 132.0))
+_THIRD = wp.constant(wp.float64(1.0 / 3.0))
+
+
+@wp.func
+def _half_sincos(h: wp.float64) -> wp.vec2d:
+    """(sin h, cos h) in float64. For 0 <= h <= :data:`SERIES_MAX_HALF_ANGLE` their Taylor series
+    to h^11 and h^12 (Horner in h^2; the first omitted terms are below h^13 / 13! = 2.4e-18 and
+    h^14 / 14! = 4e-20 there, under half an ulp of the values), inlined where libm's
+    ``sincos`` is a call; else ``wp.sin`` and ``wp.cos``."""
+    one = wp.float64(1.0)
+    if h > wp.float64(SERIES_MAX_HALF_ANGLE):
+        return wp.vec2d(wp.sin(h), wp.cos(h))
+    z = h * h
+    s = one - z * _F110
+    s = one - z * _F72 * s
+    s = one - z * _F42 * s
+    s = one - z * _F20 * s
+    s = one - z * _F6 * s
+    c = one - z * _F132
+    c = one - z * _F90 * c
+    c = one - z * _F56 * c
+    c = one - z * _F30 * c
+    c = one - z * _F12 * c
+    c = one - z * _F2 * c
+    return wp.vec2d(h * s, c)
+
+
 @wp.func
 def _row_cdf_density(A0: wp.float64, dA: wp.float64, sa: wp.float64, ca: wp.float64, b: wp.float64,
-                     t: wp.float64) -> wp.vec2d:
-    """(F(t), F'(t)) for F(t) = integral_0^t (A0 + dA s) sin(a + b s) ds, sa = sin a, ca = cos a:
-    two float64 trig calls (the forms of :func:`~.env_distribution.sin_integrals`)."""
+                     inv_b: wp.float64, t: wp.float64) -> wp.vec2d:
+    """(F(t), F'(t)) for F(t) = integral_0^t (A0 + dA s) sin(a + b s) ds, sa = sin a, ca = cos a,
+    inv_b = 1 / b: the sine and cosine of b t / 2 by :func:`_half_sincos` (the forms of
+    :func:`~.env_distribution.sin_integrals`)."""
     two = wp.float64(2.0)
-    h = wp.float64(0.5) * b * t
-    sh = wp.sin(h)
-    ch = wp.cos(h)
+    sc = _half_sincos(wp.float64(0.5) * b * t)
+    sh = sc[0]
+    ch = sc[1]
     s2 = two * sh * sh                    # 1 - cos(b t)
     sbt = two * sh * ch                   # sin(b t)
     cbt = wp.float64(1.0) - s2
-    i0 = (ca * s2 + sa * sbt) / b         # cos a - cos(a + b t)  over b
-    i1 = ((ca * sbt - sa * s2) / b - t * (ca * cbt - sa * sbt)) / b
+    i0 = (ca * s2 + sa * sbt) * inv_b     # cos a - cos(a + b t)  over b
+    i1 = ((ca * sbt - sa * s2) * inv_b - t * (ca * cbt - sa * sbt)) * inv_b
     return wp.vec2d(A0 * i0 + dA * i1, (A0 + dA * t) * (sa * cbt + ca * sbt))
 
 
@@ -49,13 +94,15 @@ def solve_row_fraction(A0: wp.float64, A1: wp.float64, env: EnvMap, j: int, y: w
     """t in [0, 1] with F(t) = y F(1), F(t) = integral_0^t ((1 - s) A0 + s A1) sin(a + b s) ds on
     row interval ``j`` (``env.row_trig[j]`` = sin a, cos a, sin(a + b), I0(1), I1(1)): Newton on
     the cubic CDF of the density with sin replaced by its chord (no trig; the chord is within
-    b^2/8 = 5e-6 of sin for a 512-row map; t within 1e-6), then bracketed Newton on the exact F
-    (usually one step) -- the root of :func:`~.env_distribution.solve_row_fraction_numpy`."""
+    b^2/8 = 5e-6 of sin for a 512-row map; t within 1e-6; it stops once a step is below 1e-9),
+    then bracketed Newton on the exact F (usually one step) -- the root of
+    :func:`~.env_distribution.solve_row_fraction_numpy`."""
     zero = wp.float64(0.0)
     one = wp.float64(1.0)
     half = wp.float64(0.5)
-    third = wp.float64(1.0 / 3.0)
+    third = _THIRD
     b = wp.float64(3.141592653589793) / wp.float64(env.height - 1)
+    inv_b = one / b
     sa = env.row_trig[j, 0]
     ca = env.row_trig[j, 1]
     dA = A1 - A0
@@ -71,12 +118,16 @@ def solve_row_fraction(A0: wp.float64, A1: wp.float64, env: EnvMap, j: int, y: w
         q = t * (c1 + t * (c2 + t * c3)) - qt
         dq = c1 + t * (wp.float64(2.0) * c2 + t * wp.float64(3.0) * c3)
         if dq > zero:
-            t = wp.clamp(t - q / dq, zero, one)
+            nt = wp.clamp(t - q / dq, zero, one)
+            step = wp.abs(nt - t)
+            t = nt
+            if step < wp.float64(1.0e-9):
+                break
     # 2. the exact F, bracketed
     lo = zero
     hi = one
     for _ in range(NEWTON_ITERATIONS):
-        fd = _row_cdf_density(A0, dA, sa, ca, b, t)
+        fd = _row_cdf_density(A0, dA, sa, ca, b, inv_b, t)
         f = fd[0] - target
         if f > zero:
             hi = t
