@@ -32,8 +32,9 @@ coefficient files (``warp_rbrdf/data``); their CDF files are fitted once into th
 
 ``--isa-levels``: instead, samples/s of the default scene (256x256, 16 spp) and of the RGL
 reference sphere (satin_purple under studio_small_03, 128x128, 64 spp) with the render kernel
-compiled with ``-march=native`` (Warp's default), ``-target-cpu x86-64-v3`` (the shipped level,
-``warp_rbrdf.shipped_kernels.PORTABLE_CPU_FLAGS``) and ``x86-64-v2``; one process, 2 threads,
+compiled with ``-march=native`` (Warp's default), ``-target-cpu`` each level of
+``warp_rbrdf.shipped_kernels.ISA_LEVELS`` this CPU runs (x86-64-v4, x86-64-v3: the shipped
+objects) and ``x86-64-v2``; one process, 2 threads,
 interleaved (the order reversed every other repeat), medians of ``--repeats`` (default 5), and the largest pixel difference to native.
 
     python -m benchmarks.bench_startup [--quick | --default-only | --isa-levels] [--repeats 3]
@@ -226,22 +227,33 @@ def isa_levels(repeats: int) -> dict:
     from warp_rbrdf import Renderer
     from warp_rbrdf.defaults import default_scene
     from warp_rbrdf.runtime import init_warp
-    from warp_rbrdf.shipped_kernels import PORTABLE_CPU_FLAGS
+    from warp_rbrdf.shipped_kernels import ISA_LEVELS, cpu_supports_isa, portable_cpu_flags
 
-    wp = init_warp()
-    tail = PORTABLE_CPU_FLAGS.split(" ", 2)[2]
-    variants = {"native": f"-march=native {tail}", "x86-64-v3": PORTABLE_CPU_FLAGS,
+    init_warp()
+    tail = portable_cpu_flags().split(" ", 2)[2]
+    variants = {"native": f"-march=native {tail}",
+                **{lv: portable_cpu_flags(lv) for lv in ISA_LEVELS if cpu_supports_isa(lv)},
                 "x86-64-v2": f"-target-cpu x86-64-v2 {tail}"}
     scenes = {"default": (default_scene, 16),
               "rgl sphere": (lambda: reference_scene("satin_purple_rgb", "studio_small_03_1k", 128, 64), 64)}
+    from warp_rbrdf import integrator
+
     rs = {}
-    for sn, (make, _) in scenes.items():
-        for vn, flags in variants.items():
-            r = Renderer(make(), device="cpu")
-            wp.set_module_options({"cpu_compiler_flags": flags}, module=r.kernels.render_tile.module)
-            r.compile()
-            r.render(spp=1, threads=2)
-            rs[sn, vn] = r
+    own = integrator.render_module_options
+    try:
+        for sn, (make, _) in scenes.items():
+            for vn, flags in variants.items():
+                # the kernels take their options when they are made (module_options): each
+                # variant's Renderer is made with its flags
+                integrator.render_module_options = lambda f=flags: {**own(), "cpu_compiler_flags": f}
+                r = Renderer(make(), device="cpu")
+                if r.kernels.render_tile.module.options.get("cpu_compiler_flags") != flags:
+                    raise RuntimeError(f"{vn}: the render kernel was not made with its flags")
+                r.compile()
+                r.render(spp=1, threads=2)
+                rs[sn, vn] = r
+    finally:
+        integrator.render_module_options = own
     rates, imgs = {k: [] for k in rs}, {}
     for i in range(repeats):
         order = list(rs.items())

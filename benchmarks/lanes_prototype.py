@@ -5,7 +5,7 @@ Results and conclusion: docs/cpu_lanes.md.
     python -m benchmarks.lanes_prototype [--quick] [--material cc_ibiza_sunset_rgb]
         [--envmap studio_small_03_1k] [--resolution 128] [--spp 64] [--repeats 5]
         [--lanes 1 4 8 16] [--kinds lanes loop hybrid gather slp] [--no-guided]
-        [--threads 1 2] [--breakdown VARIANT ...] [--remarks VARIANT] [--json FILE]
+        [--threads 1 2] [--breakdown VARIANT ...] [--remarks VARIANT] [--wavefront] [--json FILE]
 
 The scene is the reference sphere of ``benchmarks/bench_vs_mitsuba.py`` (unit sphere, camera at
 z = 4, 30 deg vertical field of view, hidden map, direct light): per camera sample one
@@ -22,7 +22,10 @@ Variants:
   the scalar kernel's branches kept around each lane's shading; ``gather K=k``: loops, LLVM
   allowed to emit gathers (``+fast-gather``);
 * ``unguided`` / ``guided``: one sample per iteration, the same shading with branches, the
-  binary searches over every interval / started from guide tables (:mod:`benchmarks.lanes_guides`).
+  binary searches over every interval / started from guide tables (:mod:`benchmarks.lanes_guides`);
+* ``wavefront``: the scalar kernel's sample cut into breadth-first stages, a kernel per stage
+  over every sample of a tile, the state between them in arrays
+  (:mod:`benchmarks.lanes_wavefront`; ``--wavefront``).
 
 Each variant renders the same image (same seed) through 16-px tiles launched from a thread pool
 (``--threads``, as the renderer's ``launch_tiles``); the timings are interleaved (every repeat
@@ -34,10 +37,11 @@ float rounding); instruction counts of the compiled object (:mod:`benchmarks.lan
 ``--breakdown``: those variants also stopped after the setup and after the environment sample
 (ns per sample per stage). ``--remarks``: LLVM's loop-vectorizer remarks for one variant, by
 Warp source line. Every kernel has the render kernels' module options
-(:func:`warp_rbrdf.shipped_kernels.render_module_options`: ``-target-cpu x86-64-v3``).
+(:func:`warp_rbrdf.shipped_kernels.render_module_options`: ``-target-cpu`` of the CPU's ISA
+level, x86-64-v4 with AVX-512, else x86-64-v3; ``--target-cpu`` picks another).
 
-``--quick``: 32 px, 16 spp, ``loop K=4``, ``hybrid K=4`` and the guide variants, 1 thread, 1
-repeat (the smoke test). Needs ``$RBRDF_DATA`` (``rgl/<material>.bsdf``, ``envmaps/<map>.hdr``)
+``--quick``: 32 px, 16 spp, ``loop K=4``, ``hybrid K=4``, the guide variants and ``wavefront``,
+1 thread, 1 repeat (the smoke test). Needs ``$RBRDF_DATA`` (``rgl/<material>.bsdf``, ``envmaps/<map>.hdr``)
 and, for the instruction counts, ``objdump``.
 """
 from __future__ import annotations
@@ -46,6 +50,7 @@ import argparse
 import json
 import os
 import platform
+import re
 import shlex
 import statistics
 import sys
@@ -151,26 +156,30 @@ KINDS = {
 DEFAULT_KINDS = ("lanes", "loop", "hybrid", "gather")
 
 
-def variant_names(lanes, kinds, guided: bool = False) -> list[str]:
+def variant_names(lanes, kinds, guided: bool = False, wavefront: bool = False) -> list[str]:
     return (["scalar"] + [f"{kind} K={k}" for kind in kinds for k in lanes if kind == "lanes" or k > 1]
-            + (["unguided", "guided"] if guided else []))
+            + (["unguided", "guided"] if guided else []) + (["wavefront"] if wavefront else []))
 
 
 def build(name: str, stages: int = 3, extra_flags: str = "", target_cpu: str | None = None):
     """The kernel of variant ``name`` with the render kernels' module options (``stages``:
     the cost breakdown's early stop, :func:`benchmarks.lanes_kernels.make_scalar_kernel`;
     ``extra_flags`` appended to the compiler flags; ``target_cpu``: LLVM's CPU in place of the
-    shipped ISA level, e.g. ``x86-64-v4`` for AVX-512)."""
+    render kernels' ISA level on this CPU, e.g. ``x86-64-v3`` or ``x86-64-v4``)."""
     from benchmarks import lanes_kernels as LK
-    from warp_rbrdf.shipped_kernels import ISA_LEVEL, render_module_options
+    from warp_rbrdf.shipped_kernels import render_module_options
 
     opts = render_module_options()
     opts["cpu_compiler_flags"] = opts.get("cpu_compiler_flags", "") + extra_flags
     if target_cpu:
-        base = opts["cpu_compiler_flags"].replace(f"-target-cpu {ISA_LEVEL}", "")
+        base = re.sub(r"-target-cpu \S+\s*", "", opts["cpu_compiler_flags"])
         opts["cpu_compiler_flags"] = f"-target-cpu {target_cpu} {base}".strip()
     if name == "scalar":
         return LK.make_scalar_kernel(opts, stages)
+    if name == "wavefront":
+        from benchmarks.lanes_wavefront import WavefrontRenderer
+
+        return WavefrontRenderer(opts, TILE)
     if name in ("guided", "unguided"):
         from benchmarks.lanes_guides import make_guided_kernel
 
@@ -193,6 +202,9 @@ def render(kernel, first_arg, env, view, threads: int, extra=()) -> np.ndarray:
     tiles = [(x, y, min(TILE, res - x), min(TILE, res - y)) for y in range(0, res, TILE) for x in range(0, res, TILE)]
 
     def one(t):
+        if hasattr(kernel, "launch"):     # a variant of several kernels (wavefront)
+            kernel.launch(first_arg, env, view, t[0], t[1], t[2], t[3], out)
+            return
         wp.launch(kernel, dim=t[2] * t[3], inputs=[first_arg, env, view, t[0], t[1], t[2]],
                   outputs=[out, *extra])
 
@@ -252,9 +264,9 @@ def run(a) -> dict:
 
     def args(name):
         """A variant's launch arguments: ((tables, map, view), arguments after the image)."""
-        return ({"scalar": mats}.get(name, tb), env, view), (guides,) if name.endswith("guided") else ()
+        return ({"scalar": mats, "wavefront": mats}.get(name, tb), env, view), (guides,) if name.endswith("guided") else ()
 
-    names = variant_names(a.lanes, a.kinds, not a.no_guided)
+    names = variant_names(a.lanes, a.kinds, not a.no_guided, a.wavefront)
     # (variant, stages): the full kernels, and the early stops of the breakdown
     jobs = [(n, 3) for n in names] + [(n, st) for n in (a.breakdown or []) for st in (1, 2)]
     kernels, compile_s, ref = {}, {}, None
@@ -290,18 +302,24 @@ def run(a) -> dict:
         base = {th: n / statistics.median(wall[("scalar", 3), th]) for th in a.threads}
         row = {"variant": name, "samples_per_s": rate, "ratio": {th: rate[th] / base[th] for th in a.threads},
                "agreement": agreement(images[job], ref), "compile_s": compile_s[job],
-               "counts": instruction_counts(object_file(kernels[job]))}
+               "counts": {} if name == "wavefront" else instruction_counts(object_file(kernels[job]))}
         if cpu[job]:
             row["cpu_samples_per_s"] = n / statistics.median(cpu[job])
             row["cpu_ratio"] = statistics.median(cpu[("scalar", 3)]) / statistics.median(cpu[job])
         rows.append(row)
     breakdown = {name: [statistics.median(cpu[name, st]) / n * 1e9 for st in (1, 2, 3)]
                  for name in (a.breakdown or []) if cpu[name, 1]}
+    wf = kernels.get(("wavefront", 3))
+    if wf is not None:   # its stages' share: CPU ns per camera sample, over every render it made
+        renders = 1 + a.repeats * len(a.threads)
+        breakdown_wf = {k: v / (renders * n) * 1e9 for k, v in wf.stage_seconds.items()}
+    else:
+        breakdown_wf = {}
     return {"machine": machine(), "load": [load_before, os.getloadavg()],
             "command": "python -m benchmarks.lanes_prototype " + shlex.join(a.argv or []),
             "settings": {"material": a.material, "envmap": a.envmap, "resolution": a.resolution, "spp": a.spp,
                          "repeats": a.repeats, "threads": a.threads, "target_cpu": a.target_cpu},
-            "rows": rows, "breakdown_ns": breakdown,
+            "rows": rows, "breakdown_ns": breakdown, "wavefront_stage_ns": breakdown_wf,
             "image_mean": float(ref.mean())}
 
 
@@ -323,6 +341,10 @@ def table(res: dict) -> str:
                     str(c.get("gathers", "-")), str(c.get("scalar_ss", "-")),
                     f"{g['mean_rel']:.1e} / {g['max_rel']:.1e}"])
         lines.append("| " + " | ".join(cells) + " |")
+    if res.get("wavefront_stage_ns"):
+        w = res["wavefront_stage_ns"]
+        lines += ["", "wavefront stages, CPU ns per camera sample (launching threads, every render): "
+                  + ", ".join(f"{k} {v:.0f}" for k, v in w.items()) + f"; total {sum(w.values()):.0f}"]
     if res["breakdown_ns"]:
         lines += ["", "| variant | camera, hit, frame (ns/sample) | + environment sample | + BSDF sample (all) |",
                   "|---|---|---|---|"]
@@ -369,14 +391,16 @@ def main(argv=None) -> int:
     p.add_argument("--remarks", metavar="VARIANT",
                    help="compile VARIANT (e.g. 'loop K=8') with the loop vectorizer's remarks, print them, exit")
     p.add_argument("--target-cpu", dest="target_cpu", default=None, metavar="CPU",
-                   help="LLVM target CPU of every variant in place of the render kernels' x86-64-v3 "
-                        "(e.g. x86-64-v4 or znver4: AVX-512; the machine must run it)")
+                   help="LLVM target CPU of every variant in place of the render kernels' ISA level on "
+                        "this CPU (e.g. x86-64-v3, or x86-64-v4 or znver4: AVX-512; the machine must run it)")
+    p.add_argument("--wavefront", action="store_true",
+                   help="also the wavefront variant: the scalar kernel's stages as kernels over a tile's samples")
     p.add_argument("--json", type=Path)
     a = p.parse_args(argv)
     a.argv = list(sys.argv[1:] if argv is None else argv)
     if a.quick:
         a.resolution, a.spp, a.lanes, a.threads, a.repeats = 32, 16, [4], [1], 1
-        a.kinds, a.breakdown, a.no_guided = ["loop", "hybrid"], [], False
+        a.kinds, a.breakdown, a.no_guided, a.wavefront = ["loop", "hybrid"], [], False, True
     if a.remarks:
         return print_remarks(a)
     res = run(a)

@@ -12,7 +12,7 @@ from conftest import data_file, require_mitsuba
 
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
-BENCHMARKS = ("bench_albedo_pole", "bench_convert", "bench_cuda", "bench_dial", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_mis_compensation", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
+BENCHMARKS = ("bench_albedo_pole", "bench_convert", "bench_cuda", "bench_dial", "bench_env_sample_cost", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_mis_compensation", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba", "bench_mesh_vs_mitsuba")
 
 
@@ -188,6 +188,25 @@ def test_bench_mis_compensation_smoke(tmp_path):
     assert row["0.5"]["compensated"] and not row["0.0"]["compensated"]
     assert all(np.isfinite(v["rel_rmse"]) and v["rel_rmse"] > 0 for v in row.values())
     assert "| lambert | studio | 4 |" in B.markdown(res)
+
+
+def test_bench_env_sample_cost_smoke(tmp_path):
+    """A tiny run: every stage has a time, the stages add up (each kernel does the one before
+    and more), and the float32 descent reaches the float64 one's block for nearly every sample."""
+    from benchmarks import bench_env_sample_cost as B
+
+    data_file("envmaps/studio_small_03_1k.hdr")
+    out = tmp_path / "cost.json"
+    assert B.main(["--maps", "studio", "--samples", "4096", "--repeats", "1", "--json", str(out)]) == 0
+    cases = json.loads(out.read_text())["cases"]
+    assert set(cases) == {"studio/random", "studio/sorted"}
+    for r in cases.values():
+        ns = r["ns_per_sample"]
+        assert set(ns) == {"descent", "+ select", "+ invert", "descent, float32"} and min(ns.values()) > 0
+        assert r["float32_same_block"] > 0.99
+    with pytest.raises(SystemExit) as e:
+        B.main(["--samples", "0"])
+    assert e.value.code == 2
 
 
 def test_bench_env_sampling_smoke(capsys):

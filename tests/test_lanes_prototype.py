@@ -1,6 +1,6 @@
 """The K-lane prototype of the render kernel (``benchmarks/lanes_prototype.py``): its
-environment distribution and instruction counting, and a ``--quick`` run whose lane variants
-render the scalar kernel's image from the same random numbers. Its timings are never tested."""
+environment distribution and instruction counting, and a ``--quick`` run whose lane and
+wavefront variants render the scalar kernel's image from the same random numbers. Its timings are never tested."""
 from __future__ import annotations
 
 import json
@@ -66,8 +66,10 @@ def test_quick_run_renders_the_scalar_image(tmp_path):
     assert B.main(["--quick", "--json", str(out)]) == 0
     res = json.loads(out.read_text())
     rows = {r["variant"]: r for r in res["rows"]}
-    assert set(rows) == {"scalar", "loop K=4", "hybrid K=4", "unguided", "guided"}
+    assert set(rows) == {"scalar", "loop K=4", "hybrid K=4", "unguided", "guided", "wavefront"}
     assert res["image_mean"] > 0
+    assert set(res["wavefront_stage_ns"]) == {"camera", "env", "bsdf", "gather"}
+    assert all(v > 0 for v in res["wavefront_stage_ns"].values())
     for r in rows.values():
         assert r["agreement"]["mean_rel"] < 1e-5, r
         assert abs(r["agreement"]["image_mean_ratio"] - 1) < 1e-5, r

@@ -1,8 +1,9 @@
 """Shipped ahead-of-time render kernels (warp_rbrdf.shipped_kernels, written by
 tools.ship_kernels through Warp's AOT API): the README main job's kernel loads from the shipped
-set with an empty kernel cache without a compile (nothing copied into the cache) and renders
-what a compiled kernel renders; the set is current; a damaged, mismatched or unsupported binary
-is never used (a load failure falls back to compiling)."""
+set with an empty kernel cache without a compile (nothing copied into the cache), for the CPU's
+ISA level and for a level capped by ``$RBRDF_CPU_ISA``, and renders what a compiled kernel
+renders; the set is current; a damaged, mismatched or unsupported binary is never used (a load
+failure falls back to compiling)."""
 from __future__ import annotations
 
 import json
@@ -35,13 +36,16 @@ m = r.kernels.render_tile.module
 ex = m.execs[(None, 1)]
 np.save(sys.argv[1], img)
 cache = Path(os.environ["WARP_CACHE_PATH"])
-print(json.dumps({"source": r.kernel_source, "binary": ex.binary_path,
+print(json.dumps({"source": r.kernel_source, "binary": ex.binary_path, "flags": m.options.get("cpu_compiler_flags"),
                   "files": sorted(p.name for p in cache.rglob("*") if p.is_file())}))
 """
 
 
-def _fresh_render(tmp_path, name, shipped_root=None):
+def _fresh_render(tmp_path, name, shipped_root=None, isa_cap=None):
     env = dict(os.environ, PYTHONPATH=str(ROOT), WARP_CACHE_PATH=str(tmp_path / f"cache_{name}"))
+    env.pop(sk.ISA_ENV, None)
+    if isa_cap is not None:
+        env[sk.ISA_ENV] = isa_cap
     if shipped_root is not None:
         env[sk.ENV] = str(shipped_root)
     else:
@@ -95,16 +99,24 @@ def test_fresh_cache_loads_shipped_kernel_and_matches_a_compile(tmp_path, monkey
         pytest.skip(f"this CPU lacks {sk.ISA_LEVEL}: the shipped kernels are not used here")
     info, img = _fresh_render(tmp_path, "shipped")
     assert info["source"] == "shipped", info
+    assert info["flags"] == sk.portable_cpu_flags(sk.isa_level()), info
     # no code generation happened (Warp writes the module's .cpp source only when it compiles)
     # and nothing was copied: the object loads in place from the shipped set
     assert not any(f.endswith((".cpp", ".o", ".meta")) for f in info["files"]), info["files"]
     assert Path(info["binary"]).is_relative_to(sk.PACKAGE_DATA / "kernels"), info["binary"]
 
+    # capped at the portable level: the shipped x86-64-v3 object, in place
+    info3, img3 = _fresh_render(tmp_path, "shipped_v3", isa_cap=sk.ISA_LEVEL)
+    assert info3["source"] == "shipped" and info3["flags"] == sk.PORTABLE_CPU_FLAGS, info3
+    assert Path(info3["binary"]).is_relative_to(sk.PACKAGE_DATA / "kernels"), info3["binary"]
+    assert img3.shape == img.shape and np.isfinite(img3).all()
+    assert abs(float(img3.mean()) / float(img.mean()) - 1.0) < 1e-5   # the same estimator, other code
+
     # the same shipped object, damaged, with a manifest that vouches for it: Warp fails to
     # load it, the copied files are removed and the kernel compiles as without a shipped set
     root, pdir, manifest = _shipped_copy(tmp_path)
-    (entry,) = manifest["modules"].values()
-    (ident,) = manifest["modules"]
+    ident = Path(info["binary"]).parent.name
+    entry = manifest["modules"][ident]
     obj = next(n for n in entry["files"] if n.endswith(".o"))
     (pdir / ident / obj).write_bytes(b"not an object file" * 100)
     entry["files"][obj] = sk.sha256(pdir / ident / obj)
@@ -123,9 +135,9 @@ def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, de
         pytest.skip(f"this CPU lacks {sk.ISA_LEVEL}")
     root, pdir, manifest = _shipped_copy(tmp_path)
     monkeypatch.setenv(sk.ENV, str(root))
-    assert sk.find_shipped(module, device) == (pdir / next(iter(manifest["modules"])), "ok")
+    ident = module.get_module_identifier()
+    assert sk.find_shipped(module, device) == (pdir / ident, "ok")
 
-    (ident,) = manifest["modules"]
     obj = next(n for n in manifest["modules"][ident]["files"] if n.endswith(".o"))
     good = (pdir / ident / obj).read_bytes()
     (pdir / ident / obj).write_bytes(good[:-1] + bytes([good[-1] ^ 1]))
@@ -152,8 +164,14 @@ def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, de
     (pdir / sk.MANIFEST).write_text(json.dumps(bad))
     assert sk.find_shipped(module, device) == (None, "not-shipped")
 
+    bad = json.loads(json.dumps(manifest))
+    bad["modules"][ident]["isa"] = "x86-64-v9"          # a level the loader does not know
+    (pdir / sk.MANIFEST).write_text(json.dumps(bad))
+    assert sk.find_shipped(module, device) == (None, "cpu-lacks-isa")
+
     (pdir / sk.MANIFEST).write_text(json.dumps(manifest))
-    monkeypatch.setattr(sk, "ISA_FEATURES", sk.ISA_FEATURES | {"no-such-cpu-feature"})
+    level = manifest["modules"][ident]["isa"]
+    monkeypatch.setitem(sk.ISA_LEVELS, level, sk.ISA_LEVELS[level] | {"no-such-cpu-feature"})
     assert sk.find_shipped(module, device) == (None, "cpu-lacks-isa")
 
     monkeypatch.setenv(sk.ENV, "")
@@ -162,28 +180,55 @@ def test_damaged_or_mismatched_shipped_set_is_not_used(tmp_path, monkeypatch, de
 
 def test_render_kernels_use_portable_flags(default_module, monkeypatch):
     module, _ = default_module
-    expected = sk.PORTABLE_CPU_FLAGS if sk.cpu_supports_isa() else None
+    level = sk.isa_level()
+    expected = sk.portable_cpu_flags(level) if level else None
     assert module.options["cpu_compiler_flags"] == expected
     # the AOT API builds and loads the module default variant: the one a CPU launch uses
     assert module.options["block_dim"] == sk.CPU_BLOCK_DIM == 1
-    assert "-march=native" not in sk.PORTABLE_CPU_FLAGS.split()
-    # a CPU without the shipped ISA level keeps Warp's -march=native (never an x86-64-v3 object)
-    monkeypatch.setattr(sk, "ISA_FEATURES", sk.ISA_FEATURES | {"no-such-cpu-feature"})
+    for lv in sk.ISA_LEVELS:
+        flags = sk.portable_cpu_flags(lv).split()
+        assert "-march=native" not in flags and flags[:2] == ["-target-cpu", lv]
+    # a CPU without the portable ISA level keeps Warp's -march=native (never an x86-64-v3 object)
+    monkeypatch.setattr(sk, "cpu_flags", lambda: sk.ISA_FEATURES - {"avx2"})
     assert sk.render_module_options() == {"block_dim": 1}
+    monkeypatch.setattr(sk, "cpu_flags", lambda: sk.ISA_LEVELS["x86-64-v4"])
+    assert sk.render_module_options()["cpu_compiler_flags"] == sk.portable_cpu_flags("x86-64-v4")
+
+
+def test_isa_level_cap(monkeypatch):
+    """``$RBRDF_CPU_ISA`` caps the level (never above what the CPU has), asks for Warp's
+    -march=native, or is a one-line error naming the variable."""
+    from warp_rbrdf.errors import RenderError
+
+    monkeypatch.setattr(sk, "cpu_flags", lambda: sk.ISA_LEVELS["x86-64-v4"] | {"sse"})
+    for cap, level in (("", "x86-64-v4"), ("x86-64-v4", "x86-64-v4"), (" x86-64-v3 ", "x86-64-v3"), ("native", None)):
+        monkeypatch.setenv(sk.ISA_ENV, cap)
+        assert sk.isa_level() == level, cap
+    monkeypatch.setattr(sk, "cpu_flags", lambda: sk.ISA_FEATURES)
+    monkeypatch.setenv(sk.ISA_ENV, "x86-64-v4")
+    assert sk.isa_level() == "x86-64-v3"          # a cap above the CPU: the CPU's level
+    monkeypatch.setenv(sk.ISA_ENV, "avx512")
+    with pytest.raises(RenderError, match=r"^RBRDF_CPU_ISA: expected one of x86-64-v4, x86-64-v3 or native, got 'avx512'$"):
+        sk.isa_level()
 
 
 def test_isa_level_is_read_from_cpuinfo(tmp_path, monkeypatch):
-    """The x86-64-v3 check reads the CPU's flags (``/proc/cpuinfo``): one flag missing, or no
-    such file, means Warp's -march=native and no shipped object."""
+    """The level check reads the CPU's flags (``/proc/cpuinfo``): all of x86-64-v4's, x86-64-v4;
+    one AVX-512 flag missing, x86-64-v3; one x86-64-v3 flag missing, or no such file, Warp's
+    -march=native and no shipped object."""
     f = tmp_path / "cpuinfo"
     monkeypatch.setattr(sk, "CPUINFO", f)
+    monkeypatch.delenv(sk.ISA_ENV, raising=False)
+    v4 = sk.ISA_LEVELS["x86-64-v4"]
     try:
-        for flags, ok in ((sk.ISA_FEATURES - {"avx2"}, False), (sk.ISA_FEATURES | {"sse"}, True), (None, False)):
+        for flags, ok, level in ((sk.ISA_FEATURES - {"avx2"}, False, None), (sk.ISA_FEATURES | {"sse"}, True, "x86-64-v3"),
+                                 (v4 - {"avx512vl"}, True, "x86-64-v3"), (v4, True, "x86-64-v4"), (None, False, None)):
             if flags is None:
                 f.unlink()
             else:
                 f.write_text("processor\t: 0\nflags\t\t: " + " ".join(sorted(flags)) + "\n\nprocessor\t: 1\n")
             sk.cpu_flags.cache_clear()
             assert sk.cpu_supports_isa() is ok, flags
+            assert sk.isa_level() == level, flags
     finally:
         sk.cpu_flags.cache_clear()

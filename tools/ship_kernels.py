@@ -1,14 +1,16 @@
 """Regenerate (or check) the ahead-of-time render kernels that ``warp_rbrdf`` ships.
 
-Compiles the README main job's render module (``rbrdf render``, embedded default scene) with
-Warp's public ``wp.compile_aot_module`` into a temporary folder and writes its object and
-metadata, with a ``manifest.json`` (Warp version, platform, ISA level, per module: Warp's full
-module hash, the CPU flags and the SHA-256 of every file), into
+Compiles the README main job's render module (``rbrdf render``, embedded default scene) for
+every ISA level of :data:`warp_rbrdf.shipped_kernels.ISA_LEVELS` (x86-64-v4 and x86-64-v3: one
+object each; a CPU loads the one of its level) with Warp's public ``wp.compile_aot_module``
+into a temporary folder and writes their objects and metadata, with a ``manifest.json`` (Warp
+version, platform, per module: its ISA level, Warp's full module hash, the CPU flags and the
+SHA-256 of every file), into
 ``warp_rbrdf/data/kernels/<warp version>/<platform>/`` (replacing that folder).
 :mod:`warp_rbrdf.shipped_kernels` loads them.
 
 Run after any change to the integrator, materials, techniques or lights the default scene uses,
-or for a new Warp version (about 7 s of CPU)::
+or for a new Warp version (about 15 s of CPU; compiling needs no CPU of the level)::
 
     python -m tools.ship_kernels          # rebuild this Warp version's set
     python -m tools.ship_kernels --check  # exit 1 if the set is not current
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import sys
 import tempfile
@@ -28,14 +31,32 @@ from warp_rbrdf.paths import PACKAGE_DATA
 COMMAND = "python -m tools.ship_kernels"
 
 
-def default_job_modules():
+def default_job_modules(level: str | None = None):
     """The Warp modules the README main job (``rbrdf render``, embedded default scene) loads on the
     CPU, whatever ``$RBRDF_DEVICE`` says (a CUDA renderer builds another kernel: one sample per
-    thread, no lanes)."""
+    thread, no lanes), compiled for ISA ``level`` (default: this CPU's, :func:`sk.isa_level`)."""
     from warp_rbrdf.defaults import default_scene
     from warp_rbrdf.renderer import Renderer
 
-    return [Renderer(default_scene(), device="cpu").kernels.render_tile.module]
+    if level is None:
+        return [Renderer(default_scene(), device="cpu").kernels.render_tile.module]
+    # the kernels' flags are those of sk.isa_level(): built as on a CPU of exactly that level,
+    # with no cap (compiling for a level needs no CPU that runs it)
+    saved_flags, saved_cap = sk.cpu_flags, os.environ.pop(sk.ISA_ENV, None)
+    sk.cpu_flags = lambda: sk.ISA_LEVELS[level]
+    try:
+        modules = [Renderer(default_scene(), device="cpu").kernels.render_tile.module]
+    finally:
+        sk.cpu_flags = saved_flags
+        if saved_cap is not None:
+            os.environ[sk.ISA_ENV] = saved_cap
+    assert all(m.options.get("cpu_compiler_flags") == sk.portable_cpu_flags(level) for m in modules)
+    return modules
+
+
+def _shippable_levels() -> list[str]:
+    """The levels whose objects ship, best first (:data:`sk.ISA_LEVELS`)."""
+    return list(sk.ISA_LEVELS)
 
 
 def check() -> list[str]:
@@ -47,10 +68,11 @@ def check() -> list[str]:
     init_warp()
     device = wp.get_device("cpu")
     problems = []
-    for m in default_job_modules():
-        src, why = sk.find_shipped(m, device)
-        if src is None and why != "cpu-lacks-isa":
-            problems.append(f"{m.get_module_identifier()}: {why}")
+    for level in _shippable_levels():
+        for m in default_job_modules(level):
+            src, why = sk.find_shipped(m, device)
+            if src is None and why != "cpu-lacks-isa":   # a level this CPU lacks: checked up to running it
+                problems.append(f"{level}: {m.get_module_identifier()}: {why}")
     return problems
 
 
@@ -63,16 +85,13 @@ def regenerate(root: Path | None = None) -> Path:
     from warp_rbrdf.runtime import init_warp
 
     init_warp()
-    if not sk.cpu_supports_isa():
-        raise SystemExit(f"this CPU lacks {sk.ISA_LEVEL}: its render kernels use -march=native and "
-                         f"cannot ship; regenerate on an {sk.ISA_LEVEL} machine")
     device = wp.get_device("cpu")
     root = Path(root) if root is not None else PACKAGE_DATA / "kernels"
     pdir = sk.platform_dir(wp, root)
     with tempfile.TemporaryDirectory(prefix="rbrdf-aot-") as tmp:
         build, staged = Path(tmp) / "build", Path(tmp) / "staged"
         modules = {}
-        for m in default_job_modules():
+        for level, m in ((lv, m) for lv in _shippable_levels() for m in default_job_modules(lv)):
             ident = m.get_module_identifier()
             (obj,) = wp.compile_aot_module(m, device=device, module_dir=build / ident)
             # the object and Warp's metadata next to it (not the generated C++ source)
@@ -81,10 +100,10 @@ def regenerate(root: Path | None = None) -> Path:
             for f in (Path(obj), *sorted((build / ident).glob("*.meta"))):
                 shutil.copyfile(f, staged / ident / f.name)
                 files[f.name] = sk.sha256(staged / ident / f.name)
-            modules[ident] = {"hash": sk.module_hash(m), "files": files,
+            modules[ident] = {"hash": sk.module_hash(m), "files": files, "isa": level,
                               "flags": m.options.get("cpu_compiler_flags")}
-        manifest = {"warp": wp.config.version, "platform": sk.platform_tag(), "isa": sk.ISA_LEVEL,
-                    "modules": modules, "regenerate": COMMAND}
+        manifest = {"warp": wp.config.version, "platform": sk.platform_tag(), "modules": modules,
+                    "regenerate": COMMAND}
         (staged / sk.MANIFEST).write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
         if pdir.exists():
             shutil.rmtree(pdir)

@@ -26,10 +26,11 @@ The integrator only calls the material and technique interfaces: :func:`make_ker
 the scene's material evaluations and techniques as Warp functions and builds, with closures and
 ``wp.static`` dispatch, kernels that contain exactly those (a scene compiles only what it uses).
 Each kernel is its own Warp module (``module="unique"``), hashed by its code: the same
-configuration loads from Warp's kernel cache in milliseconds. Every kernel is compiled for a fixed
-ISA level (``shipped_kernels.render_module_options``: ``-target-cpu x86-64-v3``, not
-``-march=native``), so its module hash does not depend on the build machine and the default
-scene's render kernel can ship compiled (:mod:`warp_rbrdf.shipped_kernels`).
+configuration loads from Warp's kernel cache in milliseconds. Every kernel is compiled for an
+ISA level chosen from the CPU's features (``shipped_kernels.render_module_options``:
+``-target-cpu x86-64-v4`` with AVX-512, else ``x86-64-v3``; not ``-march=native``), so its
+module hash does not depend on the build machine and the default scene's render kernel can ship
+compiled, one object per level (:mod:`warp_rbrdf.shipped_kernels`).
 """
 from __future__ import annotations
 

@@ -18,15 +18,20 @@ kernel cache or compiles, as Warp always does. Never a wrong binary:
   equals ``module.get_module_hash()``; the LLVM version and target triple are part of the
   object's file name as Warp names it, so another toolchain finds no object and compiles;
 - the shipped files' SHA-256 match the manifest (a damaged file is not loaded);
-- the CPU supports the ISA level the objects were built for (:data:`ISA_LEVEL`: every flag of
-  :data:`ISA_FEATURES` in ``/proc/cpuinfo``), else an illegal instruction could kill the process;
+- the CPU supports the ISA level the object was built for (its manifest entry's ``isa``: every
+  flag of :data:`ISA_LEVELS` for it in ``/proc/cpuinfo``), else an illegal instruction could
+  kill the process;
 - if Warp fails to load the shipped object, the module compiles.
 
-The render kernels are compiled with :data:`PORTABLE_CPU_FLAGS` (Warp's default flags with
-``-target-cpu x86-64-v3`` for ``-march=native``; the samples/s cost is measured in
-docs/architecture.md), so the module hash, and thus the shipped object, does not depend on the
-build machine's CPU; a CPU without x86-64-v3 (or a system without ``/proc/cpuinfo``) keeps
-Warp's ``-march=native`` (and compiles). Their module default ``block_dim`` is 1, the variant a
+The render kernels are compiled for an **ISA level** chosen at run time (:func:`isa_level`): the
+best of :data:`ISA_LEVELS` whose every feature the CPU has, ``x86-64-v4`` (AVX-512) or
+``x86-64-v3`` (AVX2, FMA), with Warp's default flags but ``-target-cpu <level>`` for
+``-march=native`` (:func:`portable_cpu_flags`), so the module hash, and thus the shipped
+object, depends on the level and not on the build machine's CPU; one object per level ships.
+``RBRDF_CPU_ISA`` caps the level (``x86-64-v3``: the same code, so the same images, on every
+x86-64-v3 machine) or asks for ``native``. A CPU without x86-64-v3 (or a system without
+``/proc/cpuinfo``) keeps Warp's ``-march=native`` (and compiles). What the level buys is
+measured in docs/architecture.md. Their module default ``block_dim`` is 1, the variant a
 CPU launch without ``block_dim`` uses (Warp's documented launch default: 1 on the CPU, 256 on
 CUDA): the AOT API compiles and loads the module default variant, and CUDA launches keep 256.
 
@@ -45,7 +50,7 @@ from pathlib import Path
 
 from .paths import PACKAGE_DATA
 
-#: The instruction-set level of the shipped objects and of every render kernel's code.
+#: The portable ISA level: every x86-64-v3 CPU runs its code (the shipped set's floor).
 ISA_LEVEL = "x86-64-v3"
 #: ``/proc/cpuinfo`` flags that x86-64-v3 requires (LLVM's names: sahf = lahf_lm, sse3 = pni,
 #: bmi = bmi1, lzcnt = abm).
@@ -53,11 +58,28 @@ ISA_FEATURES = frozenset({
     "cx16", "lahf_lm", "popcnt", "pni", "sse4_1", "sse4_2", "ssse3",                  # v2
     "avx", "avx2", "bmi1", "bmi2", "f16c", "fma", "abm", "movbe", "xsave",            # v3
 })
-#: Warp 1.19's default CPU flags (``warp.config.cpu_compiler_flags``) with a fixed ISA level in
-#: place of ``-march=native`` (the flags go to Clang's ``cc1``, which takes ``-target-cpu``).
-PORTABLE_CPU_FLAGS = (f"-target-cpu {ISA_LEVEL} -mllvm=-inline-threshold=9000 "
-                      "-mllvm=-inline-cold-callsite-threshold=3000 -mllvm=-slp-recursion-max-depth=4 "
-                      "-ffp-contract=fast")
+#: The ISA levels of the render kernels' code, best first, with the ``/proc/cpuinfo`` flags
+#: each requires: x86-64-v4 adds AVX-512 F, BW, CD, DQ and VL to x86-64-v3.
+ISA_LEVELS = {
+    "x86-64-v4": ISA_FEATURES | {"avx512f", "avx512bw", "avx512cd", "avx512dq", "avx512vl"},
+    ISA_LEVEL: ISA_FEATURES,
+}
+#: Environment variable capping the level (a name of :data:`ISA_LEVELS`, or ``native``).
+ISA_ENV = "RBRDF_CPU_ISA"
+#: Warp 1.19's default CPU flags (``warp.config.cpu_compiler_flags``) after ``-target-cpu
+#: <level>`` in place of ``-march=native`` (the flags go to Clang's ``cc1``, which takes
+#: ``-target-cpu``).
+_FLAGS_TAIL = ("-mllvm=-inline-threshold=9000 -mllvm=-inline-cold-callsite-threshold=3000 "
+               "-mllvm=-slp-recursion-max-depth=4 -ffp-contract=fast")
+
+
+def portable_cpu_flags(level: str = ISA_LEVEL) -> str:
+    """The render kernels' CPU flags for ISA ``level`` (a name of :data:`ISA_LEVELS`)."""
+    return f"-target-cpu {level} {_FLAGS_TAIL}"
+
+
+#: The flags of the portable level (:data:`ISA_LEVEL`).
+PORTABLE_CPU_FLAGS = portable_cpu_flags(ISA_LEVEL)
 #: The render kernels' module default block_dim: a CPU launch's (see the module docstring).
 CPU_BLOCK_DIM = 1
 #: The block_dim Warp launches with on CUDA when none is given (its documented default).
@@ -69,10 +91,10 @@ CPUINFO = Path("/proc/cpuinfo")
 
 def render_module_options() -> dict:
     """Module options of every render kernel (``@wp.kernel(module_options=...)``): block_dim
-    :data:`CPU_BLOCK_DIM`, and the portable flags on a CPU with every :data:`ISA_LEVEL` feature,
-    else none (Warp's ``-march=native``: an x86-64-v3 object would stop such a CPU with an
-    illegal instruction)."""
-    flags = {"cpu_compiler_flags": PORTABLE_CPU_FLAGS} if cpu_supports_isa() else {}
+    :data:`CPU_BLOCK_DIM`, and the flags of :func:`isa_level` (none where it is None: Warp's
+    ``-march=native``; an x86-64-v3 object would stop such a CPU with an illegal instruction)."""
+    level = isa_level()
+    flags = {"cpu_compiler_flags": portable_cpu_flags(level)} if level else {}
     return {"block_dim": CPU_BLOCK_DIM, **flags}
 
 
@@ -114,9 +136,28 @@ def cpu_flags() -> frozenset:
     return frozenset()
 
 
-def cpu_supports_isa() -> bool:
-    """True when the host CPU has every feature of :data:`ISA_LEVEL` (:data:`ISA_FEATURES`)."""
-    return ISA_FEATURES <= cpu_flags()
+def cpu_supports_isa(level: str = ISA_LEVEL) -> bool:
+    """True when the host CPU has every feature of ISA ``level`` (:data:`ISA_LEVELS`)."""
+    return ISA_LEVELS[level] <= cpu_flags()
+
+
+def isa_level() -> str | None:
+    """The ISA level of the render kernels' code on this CPU: the first of :data:`ISA_LEVELS`
+    whose every feature the CPU has and that ``$RBRDF_CPU_ISA`` (:data:`ISA_ENV`) admits (a
+    level: at most that one; ``native``: none); None: Warp's ``-march=native``. A value of
+    ``$RBRDF_CPU_ISA`` that names no level raises :class:`~warp_rbrdf.errors.RenderError`."""
+    cap = os.environ.get(ISA_ENV, "").strip()
+    names = list(ISA_LEVELS)
+    if cap and cap != "native" and cap not in ISA_LEVELS:
+        from .errors import RenderError
+
+        raise RenderError(f"{ISA_ENV}: expected one of {', '.join(names)} or native, got {cap!r}")
+    if cap == "native":
+        return None
+    for level in names[names.index(cap) if cap else 0:]:
+        if cpu_supports_isa(level):
+            return level
+    return None
 
 
 def module_hash(module) -> str:
@@ -155,7 +196,8 @@ def find_shipped(module, device) -> tuple[Path | None, str]:
                 return None, "checksum-mismatch"
         except OSError:
             return None, "missing-file"
-    if not cpu_supports_isa():
+    level = entry.get("isa", manifest.get("isa"))
+    if level not in ISA_LEVELS or not cpu_supports_isa(level):
         return None, "cpu-lacks-isa"
     return src, "ok"
 
