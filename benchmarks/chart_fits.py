@@ -109,7 +109,25 @@ def fit2d(bsdf: Path, time_limit_s: float | None = None, allow_fit: bool = True,
                                    **({} if ok else {"error": msg})}
 
 
-if __name__ == "__main__":   # make the fits of the given files ahead of a run
-    for f in sys.argv[1:]:
+def main(argv=None) -> int:
+    """Make the 2-D and 3-D fits of the given files ahead of a chart run (cached as above)."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.chart_fits",
+                                 description="Make the chart's 2-D and 3-D fits of the given RGL files ahead of a run "
+                                             "(cached: see benchmarks/chart_fits.py).")
+    ap.add_argument("files", nargs="+", type=Path, metavar="FILE.bsdf")
+    ap.add_argument("--model", choices=("2d", "3d", "both"), default="both")
+    a = ap.parse_args(argv)
+    for f in a.files:
+        if not f.is_file():
+            ap.error(f"{f}: no such file")
+    for f in a.files:
         for kind, fn in (("2d", fit2d), ("3d", fit3d)):
-            print(kind, f, fn(Path(f), log=lambda s: print(s, file=sys.stderr, flush=True)), flush=True)
+            if a.model in (kind, "both"):
+                print(kind, f, fn(f, log=lambda s: print(s, file=sys.stderr, flush=True)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -12,7 +12,7 @@ from conftest import data_file, require_mitsuba
 
 pytestmark = pytest.mark.lab  # tests lab code only (the `lab` marker of pyproject.toml)
 
-BENCHMARKS = ("bench_albedo_pole", "bench_convert", "bench_cuda", "bench_dial", "bench_env_sample_cost", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_mis_compensation", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
+BENCHMARKS = ("bench_albedo_pole", "bench_convert", "bench_cuda", "bench_dial", "chart_fits", "bench_env_sample_cost", "bench_env_sampling", "bench_error_sources", "bench_eval", "bench_fit", "bench_fit_accuracy", "bench_fit_time", "bench_lanes", "bench_layouts", "bench_mis_compensation", "bench_numpy_eval", "bench_projection", "bench_proved_bound", "bench_rational_domain", "bench_render", "bench_rgl", "bench_sampler_setup", "bench_samplers",
               "bench_spectral", "bench_startup", "bench_vs_mitsuba", "bench_mesh_vs_mitsuba")
 
 

@@ -1,5 +1,6 @@
 """The device a render runs on when none is named: ``$RBRDF_DEVICE``, else the CPU; a bad value
-is one error naming the variable (``rbrdf render``: one line, exit status 2)."""
+is one error naming the variable (``rbrdf render``: one line, exit status 2); so is a bad
+``$RBRDF_CPU_ISA``."""
 from __future__ import annotations
 
 import pytest
@@ -32,4 +33,17 @@ def test_cli_reports_a_bad_variable_in_one_line(monkeypatch, tmp_path, capsys):
     assert main(["render", "--spp", "1", "--resolution", "8", "8", "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "RBRDF_DEVICE" in err[0] and "tpu" in err[0], err
+    assert not out.exists()
+
+
+def test_cli_reports_a_bad_isa_cap_in_one_line(monkeypatch, tmp_path, capsys):
+    """``$RBRDF_CPU_ISA`` (the render kernels' ISA level cap) naming no level: one line naming
+    the variable, exit status 2, nothing written."""
+    from warp_rbrdf.cli import main
+
+    monkeypatch.setenv("RBRDF_CPU_ISA", "avx9000")
+    out = tmp_path / "x.exr"
+    assert main(["render", "--spp", "1", "--resolution", "8", "8", "--out", str(out), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "RBRDF_CPU_ISA" in err[0] and "avx9000" in err[0], err
     assert not out.exists()
