@@ -84,30 +84,30 @@ def make_kernels():
             x = x + 1
         return x, y, rx[1], ry[1]
 
-    @wp.kernel(module="unique", enable_backward=False, module_options=opts)
-    def descent(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec3d)):
-        i = wp.tid()
-        sy = wp.min(wp.float64(xi[i][0]), wp.float64(0.9999999999999999))
-        sx = wp.min(wp.float64(xi[i][1]), wp.float64(0.9999999999999999))
+    @wp.func
+    def descend64(env: EnvMap, u: wp.vec2):
+        """The renderer's descent (:func:`~.env_sampling.sample_patch_point` up to its last
+        level): the level-1 block (x, y) and the rescaled uniforms (sx, sy)."""
+        sy = wp.min(wp.float64(u[0]), wp.float64(0.9999999999999999))
+        sx = wp.min(wp.float64(u[1]), wp.float64(0.9999999999999999))
         x = int(0)
         y = int(0)
         level = env.levels - 2
         while level >= 1:
             x, y, sx, sy = E.descend_level(env, level, x, y, sx, sy)
             level = level - 1
+        return x, y, sx, sy
+
+    @wp.kernel(module="unique", enable_backward=False, module_options=opts)
+    def descent(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec3d)):
+        i = wp.tid()
+        x, y, sx, sy = descend64(env, xi[i])
         out[i] = wp.vec3d(wp.float64(x), wp.float64(y), sx + sy)
 
     @wp.kernel(module="unique", enable_backward=False, module_options=opts)
     def select(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec3d)):
         i = wp.tid()
-        sy = wp.min(wp.float64(xi[i][0]), wp.float64(0.9999999999999999))
-        sx = wp.min(wp.float64(xi[i][1]), wp.float64(0.9999999999999999))
-        x = int(0)
-        y = int(0)
-        level = env.levels - 2
-        while level >= 1:
-            x, y, sx, sy = E.descend_level(env, level, x, y, sx, sy)
-            level = level - 1
+        x, y, sx, sy = descend64(env, xi[i])
         j, c, px, py = E.patch_select(env, x, y, sx, sy)
         out[i] = wp.vec3d(wp.float64(j), wp.float64(c), px + py)
 

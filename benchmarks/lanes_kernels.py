@@ -63,6 +63,46 @@ WARP_EPS = 5.9604645e-8
 
 # --------------------------------------------------------------------------------------------
 # today's scalar kernel
+@wp.func
+def scalar_env_light(mats: Materials, env: Env, n: wp.vec3, wo: wp.vec3, key: wp.uint32, L: wp.vec3) -> wp.vec3:
+    """``L`` plus the environment sample's contribution, one sample at a time (the scalar
+    kernel's: the distribution module's 2-D warp, f_r and the BSDF pdf there, a shadow ray,
+    power-heuristic MIS); ``n`` the normal, ``wo`` the local view."""
+    org = origin(n)
+    x, y, pdf_uv = pc2d_sample(env.marg, 0, env.cond, 0, env.h, env.w, uniform(key, 2), uniform(key, 3))
+    dl = env_direction(x, y)
+    wl = wp.vec3(dl[0], dl[1], dl[2])
+    pl = solid_angle_pdf(pdf_uv, dl[3])
+    if pl > 0.0 and wp.dot(wl, n) > 0.0:
+        wi = to_local(n, wl)
+        if wi[2] > 0.0:
+            f, pb, _has = T.eval_pdf(mats, 0, wi, wo)
+            if wp.max(f[0], wp.max(f[1], f[2])) > 0.0:
+                if escapes(org, wl):
+                    L = L + wp.cw_mul(f, env_lookup(env, x, y)) * (wi[2] * power(pl, pb) / pl)
+    return L
+
+
+@wp.func
+def scalar_bsdf_light(mats: Materials, env: Env, n: wp.vec3, wo: wp.vec3, key: wp.uint32, L: wp.vec3) -> wp.vec3:
+    """``L`` plus the BSDF sample's contribution, one sample at a time (the production
+    ``sample_f``, an escape ray, the map's radiance and pdf, power-heuristic MIS)."""
+    org = origin(n)
+    bs, fb, _hf = T.sample_f(mats, 0, wo, wp.vec2(uniform(key, 4), uniform(key, 5)))
+    wi = wp.vec3(bs[0], bs[1], bs[2])
+    wb = bs[3]
+    if wb > 0.0 and wi[2] > 0.0:
+        wiw = tangent(n) * wi[0] + bitangent(n) * wi[1] + n * wi[2]
+        if wp.dot(wiw, n) > 0.0:
+            thr = fb * (wi[2] * wb)
+            if wp.max(thr[0], wp.max(thr[1], thr[2])) > 0.0:
+                if escapes(org, wiw):
+                    uvs = env_uv(wiw)
+                    pe = solid_angle_pdf(pc2d_pdf(env.marg, 0, env.cond, 0, env.h, env.w, uvs[0], uvs[1]), uvs[2])
+                    L = L + wp.cw_mul(thr, env_lookup(env, uvs[0], uvs[1])) * power(1.0 / wb, pe)
+    return L
+
+
 def make_scalar_kernel(options: dict, stages: int = 3):
     """One sample per loop iteration, the production functions (module ``options``). ``stages``
     < 3 stops a sample early for the cost breakdown: 1 after the camera ray, hit and frame, 2
@@ -77,34 +117,10 @@ def make_scalar_kernel(options: dict, stages: int = 3):
         wo = to_local(n, wo_w)
         if wp.static(stages < 2):
             return wo
-        org = origin(n)
-        x, y, pdf_uv = pc2d_sample(env.marg, 0, env.cond, 0, env.h, env.w, uniform(key, 2), uniform(key, 3))
-        dl = env_direction(x, y)
-        wl = wp.vec3(dl[0], dl[1], dl[2])
-        pl = solid_angle_pdf(pdf_uv, dl[3])
-        if pl > 0.0 and wp.dot(wl, n) > 0.0:
-            wi = to_local(n, wl)
-            if wi[2] > 0.0:
-                f, pb, _has = T.eval_pdf(mats, 0, wi, wo)
-                if wp.max(f[0], wp.max(f[1], f[2])) > 0.0:
-                    if escapes(org, wl):
-                        L = L + wp.cw_mul(f, env_lookup(env, x, y)) * (wi[2] * power(pl, pb) / pl)
+        L = scalar_env_light(mats, env, n, wo, key, L)
         if wp.static(stages < 3):
             return L
-        bs, fb, _hf = T.sample_f(mats, 0, wo, wp.vec2(uniform(key, 4), uniform(key, 5)))
-        wi = wp.vec3(bs[0], bs[1], bs[2])
-        wb = bs[3]
-        if wb > 0.0 and wi[2] > 0.0:
-            wiw = tangent(n) * wi[0] + bitangent(n) * wi[1] + n * wi[2]
-            if wp.dot(wiw, n) > 0.0:
-                thr = fb * (wi[2] * wb)
-                if wp.max(thr[0], wp.max(thr[1], thr[2])) > 0.0:
-                    if escapes(org, wiw):
-                        uvs = env_uv(wiw)
-                        pe = solid_angle_pdf(pc2d_pdf(env.marg, 0, env.cond, 0, env.h, env.w, uvs[0], uvs[1]),
-                                             uvs[2])
-                        L = L + wp.cw_mul(thr, env_lookup(env, uvs[0], uvs[1])) * power(1.0 / wb, pe)
-        return L
+        return scalar_bsdf_light(mats, env, n, wo, key, L)
 
     @wp.kernel(module="unique", enable_backward=False, module_options=options)
     def render_scalar(mats: Materials, env: Env, view: View, x0: int, y0: int, tile_w: int,

@@ -282,6 +282,7 @@ def run(a) -> dict:
             ref = img
     load_before = os.getloadavg()
     wall = {(j, t): [] for j in jobs for t in a.threads}
+    stage_cpu = {}
     cpu = {j: [] for j in jobs}
     images = {}
     for rep in range(a.repeats):
@@ -289,10 +290,13 @@ def run(a) -> dict:
         for job in order:
             for th in (a.threads if job[1] == 3 else [1]):
                 first, extra = args(job[0])
+                stages_before = dict(getattr(kernels[job], "stage_seconds", {}))
                 img, w, c = timed_render(kernels[job], *first, th, extra)
                 wall[job, th].append(w)
                 if th == 1:
                     cpu[job].append(c)
+                    for k, v in getattr(kernels[job], "stage_seconds", {}).items():   # the wavefront's stages
+                        stage_cpu[k] = stage_cpu.get(k, 0.0) + v - stages_before[k]
                 images[job] = img
     n = a.resolution ** 2 * a.spp
     rows = []
@@ -309,12 +313,8 @@ def run(a) -> dict:
         rows.append(row)
     breakdown = {name: [statistics.median(cpu[name, st]) / n * 1e9 for st in (1, 2, 3)]
                  for name in (a.breakdown or []) if cpu[name, 1]}
-    wf = kernels.get(("wavefront", 3))
-    if wf is not None:   # its stages' share: CPU ns per camera sample, over every render it made
-        renders = 1 + a.repeats * len(a.threads)
-        breakdown_wf = {k: v / (renders * n) * 1e9 for k, v in wf.stage_seconds.items()}
-    else:
-        breakdown_wf = {}
+    # the wavefront's stages: CPU ns per camera sample of its one-thread renders
+    breakdown_wf = {k: v / (a.repeats * n) * 1e9 for k, v in stage_cpu.items()}
     return {"machine": machine(), "load": [load_before, os.getloadavg()],
             "command": "python -m benchmarks.lanes_prototype " + shlex.join(a.argv or []),
             "settings": {"material": a.material, "envmap": a.envmap, "resolution": a.resolution, "spp": a.spp,
@@ -343,7 +343,7 @@ def table(res: dict) -> str:
         lines.append("| " + " | ".join(cells) + " |")
     if res.get("wavefront_stage_ns"):
         w = res["wavefront_stage_ns"]
-        lines += ["", "wavefront stages, CPU ns per camera sample (launching threads, every render): "
+        lines += ["", "wavefront stages, CPU ns per camera sample (one thread): "
                   + ", ".join(f"{k} {v:.0f}" for k, v in w.items()) + f"; total {sum(w.values()):.0f}"]
     if res["breakdown_ns"]:
         lines += ["", "| variant | camera, hit, frame (ns/sample) | + environment sample | + BSDF sample (all) |",

@@ -1,6 +1,7 @@
 """The ``wavefront`` variant of the K-lane prototype (:mod:`benchmarks.lanes_prototype`): the
-scalar kernel's camera sample (:func:`benchmarks.lanes_kernels.make_scalar_kernel`, the same
-production functions in the same order) cut into breadth-first stages, one Warp kernel per
+scalar kernel's camera sample (:func:`benchmarks.lanes_kernels.make_scalar_kernel`: its
+:func:`~benchmarks.lanes_kernels.scalar_env_light` and
+:func:`~benchmarks.lanes_kernels.scalar_bsdf_light`, in the same order) cut into breadth-first stages, one Warp kernel per
 stage over every camera sample of a tile, the state between stages in arrays:
 
 1. ``camera``: ray, hit, frame: per sample the normal, the local view and the hit flag;
@@ -25,27 +26,10 @@ import time
 
 import warp as wp
 
-from warp_rbrdf.distribution import pc2d_pdf, pc2d_sample
 from warp_rbrdf.materials.data import Materials
 
-from .lanes_scene import (
-    Env,
-    View,
-    bitangent,
-    camera_hit,
-    env_direction,
-    env_lookup,
-    env_uv,
-    escapes,
-    origin,
-    power,
-    sample_key,
-    solid_angle_pdf,
-    tangent,
-    to_local,
-    uniform,
-)
-from .lanes_shading import T
+from .lanes_kernels import scalar_bsdf_light, scalar_env_light
+from .lanes_scene import Env, View, camera_hit, sample_key, to_local
 
 
 def make_stage_kernels(options: dict):
@@ -78,20 +62,7 @@ def make_stage_kernels(options: dict):
         if hit[tid] != 0:
             p = tid // view.spp
             key = sample_key(view, (y0 + p // tile_w) * view.res + x0 + p % tile_w, tid % view.spp)
-            n = normal[tid]
-            wo = wo_local[tid]
-            org = origin(n)
-            x, y, pdf_uv = pc2d_sample(env.marg, 0, env.cond, 0, env.h, env.w, uniform(key, 2), uniform(key, 3))
-            dl = env_direction(x, y)
-            wl = wp.vec3(dl[0], dl[1], dl[2])
-            pl = solid_angle_pdf(pdf_uv, dl[3])
-            if pl > 0.0 and wp.dot(wl, n) > 0.0:
-                wi = to_local(n, wl)
-                if wi[2] > 0.0:
-                    f, pb, _has = T.eval_pdf(mats, 0, wi, wo)
-                    if wp.max(f[0], wp.max(f[1], f[2])) > 0.0:
-                        if escapes(org, wl):
-                            L = L + wp.cw_mul(f, env_lookup(env, x, y)) * (wi[2] * power(pl, pb) / pl)
+            L = scalar_env_light(mats, env, normal[tid], wo_local[tid], key, L)
         radiance[tid] = L
 
     @wp.kernel(module="unique", enable_backward=False, module_options=options)
@@ -103,24 +74,7 @@ def make_stage_kernels(options: dict):
             return
         p = tid // view.spp
         key = sample_key(view, (y0 + p // tile_w) * view.res + x0 + p % tile_w, tid % view.spp)
-        n = normal[tid]
-        wo = wo_local[tid]
-        org = origin(n)
-        L = radiance[tid]
-        bs, fb, _hf = T.sample_f(mats, 0, wo, wp.vec2(uniform(key, 4), uniform(key, 5)))
-        wi = wp.vec3(bs[0], bs[1], bs[2])
-        wb = bs[3]
-        if wb > 0.0 and wi[2] > 0.0:
-            wiw = tangent(n) * wi[0] + bitangent(n) * wi[1] + n * wi[2]
-            if wp.dot(wiw, n) > 0.0:
-                thr = fb * (wi[2] * wb)
-                if wp.max(thr[0], wp.max(thr[1], thr[2])) > 0.0:
-                    if escapes(org, wiw):
-                        uvs = env_uv(wiw)
-                        pe = solid_angle_pdf(pc2d_pdf(env.marg, 0, env.cond, 0, env.h, env.w, uvs[0], uvs[1]),
-                                             uvs[2])
-                        L = L + wp.cw_mul(thr, env_lookup(env, uvs[0], uvs[1])) * power(1.0 / wb, pe)
-                        radiance[tid] = L
+        radiance[tid] = scalar_bsdf_light(mats, env, normal[tid], wo_local[tid], key, radiance[tid])
 
     @wp.kernel(module="unique", enable_backward=False, module_options=options)
     def gather(view: View, x0: int, y0: int, tile_w: int, radiance: wp.array(dtype=wp.vec3),
