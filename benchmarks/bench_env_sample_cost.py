@@ -10,8 +10,8 @@ in turn round by round, median of ``--repeats``; uniforms independent (``random`
 their first coordinate (``sorted``: neighbouring threads draw neighbouring rows, as a pixel's
 stratified samples do):
 
-* ``descent``: the hierarchical warp to a level-1 block (:func:`~.env_sampling.descend_level`
-  per level, float64 uniforms, the pyramid's float32 masses);
+* ``descent``: the hierarchical warp to a level-1 block (:func:`~.env_sampling.descend`:
+  :func:`~.env_sampling.descend_level` per level, float64 uniforms, the pyramid's float32 masses);
 * ``+ select``: and the last level's choice among four patches (:func:`~.env_sampling.patch_select`);
 * ``+ invert``: the whole sample point (:func:`~.env_sampling.sample_patch_point`: the inversion
   inside the patch, float64);
@@ -84,30 +84,16 @@ def make_kernels():
             x = x + 1
         return x, y, rx[1], ry[1]
 
-    @wp.func
-    def descend64(env: EnvMap, u: wp.vec2):
-        """The renderer's descent (:func:`~.env_sampling.sample_patch_point` up to its last
-        level): the level-1 block (x, y) and the rescaled uniforms (sx, sy)."""
-        sy = wp.min(wp.float64(u[0]), wp.float64(0.9999999999999999))
-        sx = wp.min(wp.float64(u[1]), wp.float64(0.9999999999999999))
-        x = int(0)
-        y = int(0)
-        level = env.levels - 2
-        while level >= 1:
-            x, y, sx, sy = E.descend_level(env, level, x, y, sx, sy)
-            level = level - 1
-        return x, y, sx, sy
-
     @wp.kernel(module="unique", enable_backward=False, module_options=opts)
     def descent(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec3d)):
         i = wp.tid()
-        x, y, sx, sy = descend64(env, xi[i])
+        x, y, sx, sy = E.descend(env, xi[i])
         out[i] = wp.vec3d(wp.float64(x), wp.float64(y), sx + sy)
 
     @wp.kernel(module="unique", enable_backward=False, module_options=opts)
     def select(env: EnvMap, xi: wp.array(dtype=wp.vec2), out: wp.array(dtype=wp.vec3d)):
         i = wp.tid()
-        x, y, sx, sy = descend64(env, xi[i])
+        x, y, sx, sy = E.descend(env, xi[i])
         j, c, px, py = E.patch_select(env, x, y, sx, sy)
         out[i] = wp.vec3d(wp.float64(j), wp.float64(c), px + py)
 

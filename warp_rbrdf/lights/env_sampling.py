@@ -251,11 +251,10 @@ def patch_point(env: EnvMap, x: int, y: int, sx: wp.float64, sy: wp.float64) -> 
 
 
 @wp.func
-def sample_patch_point(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
-    """(u, v, lum) of the sample of uniforms ``xi`` (``xi[0]`` drives v, ``xi[1]`` u), float64:
-    its map coordinates and the bilinear luminance there (the lookup's own taps: the patch's
-    four texels with weights from the fractions ``t``, ``s``), so the pdf needs no second
-    lookup. :mod:`.env_lanes` steps the descent of K samples together."""
+def descend(env: EnvMap, xi: wp.vec2):
+    """The hierarchical warp of the uniforms ``xi`` (``xi[0]`` drives v, ``xi[1]`` u) down to
+    level 1: ``(x, y, sx, sy)``, the level-1 block and the uniforms rescaled inside it
+    (float64), for :func:`patch_point`."""
     sy = wp.min(wp.float64(xi[0]), wp.float64(0.9999999999999999))
     sx = wp.min(wp.float64(xi[1]), wp.float64(0.9999999999999999))
     x = int(0)
@@ -264,6 +263,17 @@ def sample_patch_point(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
     while level >= 1:
         x, y, sx, sy = descend_level(env, level, x, y, sx, sy)
         level = level - 1
+    return x, y, sx, sy
+
+
+@wp.func
+def sample_patch_point(env: EnvMap, xi: wp.vec2) -> wp.vec3d:
+    """(u, v, lum) of the sample of uniforms ``xi`` (``xi[0]`` drives v, ``xi[1]`` u), float64:
+    its map coordinates and the bilinear luminance there (the lookup's own taps: the patch's
+    four texels with weights from the fractions ``t``, ``s``), so the pdf needs no second
+    lookup: :func:`descend`, then :func:`patch_point`. :mod:`.env_lanes` steps the descent of
+    K samples together."""
+    x, y, sx, sy = descend(env, xi)
     return patch_point(env, x, y, sx, sy)
 
 
