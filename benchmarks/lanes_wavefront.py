@@ -1,8 +1,9 @@
 """The ``wavefront`` variant of the K-lane prototype (:mod:`benchmarks.lanes_prototype`): the
 scalar kernel's camera sample (:func:`benchmarks.lanes_kernels.make_scalar_kernel`: its
 :func:`~benchmarks.lanes_kernels.scalar_env_light` and
-:func:`~benchmarks.lanes_kernels.scalar_bsdf_light`, in the same order) cut into breadth-first stages, one Warp kernel per
-stage over every camera sample of a tile, the state between stages in arrays:
+:func:`~benchmarks.lanes_kernels.scalar_bsdf_light`, in the same order) cut into breadth-first
+stages, one Warp kernel per stage over every camera sample of a tile, the state between stages
+in arrays:
 
 1. ``camera``: ray, hit, frame: per sample the normal, the local view and the hit flag;
 2. ``env``: the environment sample (2-D warp, f_r and the BSDF pdf there, shadow ray, MIS):

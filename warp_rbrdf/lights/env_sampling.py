@@ -31,8 +31,8 @@ def linear_inverse(g0: wp.float64, g1: wp.float64, y: wp.float64) -> wp.float64:
 #: half-angle h = b t / 2 below which :func:`_half_sincos` sums its series (b = pi / (H - 1) <= 0.5:
 #: maps of 8 rows or more); larger ones call libm
 SERIES_MAX_HALF_ANGLE = 0.25
-#: the series' factors 1 / (k (k + 1)) as float64 constants (``wp.float64(1.0 / 3.0)`` in a Warp
-#: function would divide in float32)
+#: the series' factors 1 / n and the cubic's 1/3 as float64 constants (``wp.float64(1.0 / 3.0)``
+#: in a Warp function divides in float32)
 _F2 = wp.constant(wp.float64(1.0 / 2.0))
 _F6 = wp.constant(wp.float64(1.0 / 6.0))
 _F12 = wp.constant(wp.float64(1.0 / 12.0))
