@@ -68,4 +68,5 @@ def test_cli_cuda_unavailable_is_clear(tmp_path, capsys, monkeypatch):
 
 def test_help(capsys):
     assert main(["render", "--help"]) == 0
-    assert "--spp" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "--spp" in out and "RBRDF_DEVICE" in out and "RBRDF_CPU_ISA" in out

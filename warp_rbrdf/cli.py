@@ -45,7 +45,10 @@ def _registry_help() -> str:
     """The material types and samplers a scene can name (from :mod:`warp_rbrdf.registry`)."""
     return ("material types: " + ", ".join(registry.MATERIAL_NAMES) + "\n"
             "samplers (per material, [materials.NAME] sampler): " + ", ".join(registry.STRATEGY_NAMES)
-            + "\n'rbrdf scene-format' explains every key.")
+            + "\n'rbrdf scene-format' explains every key.\n"
+            "environment: RBRDF_DEVICE (the device when --device is not given); RBRDF_CPU_ISA (the CPU "
+            "kernels' instruction set, by default x86-64-v4 with AVX-512, else x86-64-v3: x86-64-v3 "
+            "gives the same images on every machine, native compiles for this CPU).")
 
 
 def device_name(text: str) -> str:
