@@ -54,11 +54,6 @@ def default_job_modules(level: str | None = None):
     return modules
 
 
-def _shippable_levels() -> list[str]:
-    """The levels whose objects ship, best first (:data:`sk.ISA_LEVELS`)."""
-    return list(sk.ISA_LEVELS)
-
-
 def check() -> list[str]:
     """Problems with this Warp version's shipped set for the default job (empty: current)."""
     import warp as wp
@@ -68,7 +63,7 @@ def check() -> list[str]:
     init_warp()
     device = wp.get_device("cpu")
     problems = []
-    for level in _shippable_levels():
+    for level in sk.ISA_LEVELS:          # every level ships, best first
         for m in default_job_modules(level):
             src, why = sk.find_shipped(m, device)
             if src is None and why != "cpu-lacks-isa":   # a level this CPU lacks: checked up to running it
@@ -91,7 +86,7 @@ def regenerate(root: Path | None = None) -> Path:
     with tempfile.TemporaryDirectory(prefix="rbrdf-aot-") as tmp:
         build, staged = Path(tmp) / "build", Path(tmp) / "staged"
         modules = {}
-        for level, m in ((lv, m) for lv in _shippable_levels() for m in default_job_modules(lv)):
+        for level, m in ((lv, m) for lv in sk.ISA_LEVELS for m in default_job_modules(lv)):
             ident = m.get_module_identifier()
             (obj,) = wp.compile_aot_module(m, device=device, module_dir=build / ident)
             # the object and Warp's metadata next to it (not the generated C++ source)

@@ -48,6 +48,7 @@ import platform
 import sys
 from pathlib import Path
 
+from .errors import RenderError
 from .paths import PACKAGE_DATA
 
 #: The portable ISA level: every x86-64-v3 CPU runs its code (the shipped set's floor).
@@ -149,8 +150,6 @@ def isa_level() -> str | None:
     cap = os.environ.get(ISA_ENV, "").strip()
     names = list(ISA_LEVELS)
     if cap and cap != "native" and cap not in ISA_LEVELS:
-        from .errors import RenderError
-
         raise RenderError(f"{ISA_ENV}: expected one of {', '.join(names)} or native, got {cap!r}")
     if cap == "native":
         return None

@@ -79,10 +79,9 @@ SELECT_MARGIN = 0.05
 #: Settings of the selection itself (its budgets, verification and albedo policy), not of a
 #: layout's fit: not listed in the layouts' ``"options"`` log.
 _SELECT_SETTINGS = frozenset({"time_limit", "wall_limit", "select_share", "verify", "verify_rounds", "verify_above",
-                              "proof_rounds",
-                              "proof_above", "albedo",
-                              "albedo_tol", "albedo_time", "albedo_rmse_growth", "albedo_total_growth",
-                              "albedo_refits", "max_variants", "target_rmse", "image_check", "select_by"})
+                              "proof_rounds", "proof_above", "albedo", "albedo_tol", "albedo_time",
+                              "albedo_rmse_growth", "albedo_total_growth", "albedo_refits", "max_variants",
+                              "target_rmse", "image_check", "select_by"})
 
 
 def validation_rmse(brdf, model, n: int = 20000, seed: int = 12345) -> float:
