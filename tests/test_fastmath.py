@@ -71,3 +71,64 @@ def test_kernel_sincos_within_stated_error_and_equal_to_numpy_reference():
     sn, cs = fastmath.sincos_numpy(x)
     np.testing.assert_allclose(got[:, 0], sn, rtol=0, atol=1.2e-7)
     np.testing.assert_allclose(got[:, 1], cs, rtol=0, atol=1.2e-7)
+
+
+@wp.kernel
+def _minmax_kernel(a: wp.array(dtype=float), b: wp.array(dtype=float), a64: wp.array(dtype=wp.float64),
+                   b64: wp.array(dtype=wp.float64), out: wp.array2d(dtype=float), out64: wp.array2d(dtype=wp.float64),
+                   outi: wp.array2d(dtype=int)):
+    i = wp.tid()
+    out[i, 0] = fastmath.fmin(a[i], b[i])
+    out[i, 1] = fastmath.fmax(a[i], b[i])
+    out[i, 2] = fastmath.clamp(a[i], b[i], b[i] + 1.0)
+    out[i, 3] = wp.min(a[i], b[i])
+    out[i, 4] = wp.max(a[i], b[i])
+    out[i, 5] = wp.clamp(a[i], b[i], b[i] + 1.0)
+    out64[i, 0] = fastmath.fmin(a64[i], b64[i])
+    out64[i, 1] = fastmath.fmax(a64[i], b64[i])
+    out64[i, 2] = fastmath.clamp(a64[i], b64[i], b64[i] + wp.float64(1.0))
+    outi[i, 0] = fastmath.fmin(i - 3, 2)
+    outi[i, 1] = fastmath.fmax(i - 3, 2)
+    outi[i, 2] = fastmath.clamp(i - 3, -1, 2)
+
+
+def test_min_max_clamp_equal_warps_on_numbers_and_follow_the_stated_nan_rule():
+    """fmin / fmax / clamp give Warp's wp.min / wp.max / wp.clamp for every pair of distinct
+    numbers (float32, float64; ints as Warp's), the second operand for equal ones, and the
+    module docstring's NaN rule: a NaN first operand gives the second, a NaN x clamps to lo."""
+    rng = np.random.default_rng(3)
+    n = 20_000
+    a = rng.normal(size=n).astype(np.float32)
+    b = rng.normal(size=n).astype(np.float32)
+    b[:50] = a[:50]                                    # ties
+    a[50:60], b[50:60] = -0.0, 0.0                     # signed zeros
+    a[60:70] = np.nan                                  # NaN first operand
+    dev = "cpu"
+    out = wp.zeros((n, 6), dtype=float, device=dev)
+    out64 = wp.zeros((n, 3), dtype=wp.float64, device=dev)
+    outi = wp.zeros((n, 3), dtype=int, device=dev)
+    wp.launch(_minmax_kernel, dim=n, inputs=[wp.array(a, device=dev), wp.array(b, device=dev),
+                                             wp.array(a.astype(np.float64), dtype=wp.float64, device=dev),
+                                             wp.array(b.astype(np.float64), dtype=wp.float64, device=dev),
+                                             out, out64, outi], device=dev)
+    o, o64, oi = out.numpy(), out64.numpy(), outi.numpy()
+    num = slice(0, 50), slice(70, n)                   # numbers (ties, then distinct pairs)
+    for s in num:
+        np.testing.assert_array_equal(o[s, :3], o[s, 3:])             # Warp's values
+        np.testing.assert_array_equal(o[s, 0], np.minimum(a[s], b[s]))
+        np.testing.assert_array_equal(o[s, 1], np.maximum(a[s], b[s]))
+        np.testing.assert_array_equal(o[s, 2], np.clip(a[s], b[s], b[s] + np.float32(1)))
+        a64, b64 = a[s].astype(np.float64), b[s].astype(np.float64)
+        np.testing.assert_array_equal(o64[s], np.stack([np.minimum(a64, b64), np.maximum(a64, b64),
+                                                        np.clip(a64, b64, b64 + 1.0)], -1))
+    zeros = slice(50, 60)                              # -0 against +0: the second operand, +0
+    assert np.all(np.signbit(o[zeros, 0]) == False) and np.all(np.signbit(o[zeros, 1]) == False)  # noqa: E712
+    nan = slice(60, 70)                                # NaN first: the second operand; clamp: lo
+    np.testing.assert_array_equal(o[nan, 0], b[nan])
+    np.testing.assert_array_equal(o[nan, 1], b[nan])
+    np.testing.assert_array_equal(o[nan, 2], b[nan])
+    np.testing.assert_array_equal(o64[nan, 2], b[nan].astype(np.float64))
+    k = np.arange(n) - 3
+    np.testing.assert_array_equal(oi[:, 0], np.minimum(k, 2))
+    np.testing.assert_array_equal(oi[:, 1], np.maximum(k, 2))
+    np.testing.assert_array_equal(oi[:, 2], np.clip(k, -1, 2))

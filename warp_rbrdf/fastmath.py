@@ -1,5 +1,6 @@
-"""Inline replacements for libm functions the render kernels call per sample:
-:func:`atan2` and :func:`sincos`.
+"""Inline replacements for libm functions the render kernels call per sample
+(:func:`atan2`, :func:`sincos`) and for Warp's float ``min`` / ``max`` / ``clamp``
+(:func:`fmin`, :func:`fmax`, :func:`clamp`).
 
 ``wp.atan2`` compiles to a call of libm's ``atan2f``: 8 % of a shaded sample's time on the
 reference sphere with an ``rgl`` material (``python -m benchmarks.profile_render``; each sample
@@ -19,6 +20,19 @@ the rgl sampler's micro-normal (a call clobbers every vector register, so the ca
 around it): Cody-Waite reduction by pi/2 and the Cephes minimax polynomials, within 2.4e-7 of
 the exact values for |x| <= 1000 (``tests/test_fastmath.py``).
 :func:`atan2_numpy` is the same arithmetic in NumPy float32 (tests).
+
+:func:`fmin`, :func:`fmax` and :func:`clamp` (float32, float64 and int overloads) replace
+``wp.min``, ``wp.max`` and ``wp.clamp`` in the kernels. Warp 1.19's float versions follow C's
+``fmin`` / ``fmax`` (a NaN operand is "missing"): on the CPU each is two compares and two
+selects, ``(a <= b) ? a : ((b == b) ? b : a)``, on the path of every clamp of a search, a warp
+and a lookup. Here each is one select, ``a < b ? a : b`` (``a > b ? a : b``), one ``minss`` /
+``maxss``: the same value for every pair of numbers but two signed zeros (the second operand,
+where Warp's gives the first) and a NaN in the second operand (NaN, where Warp's gives the
+first); a NaN in the first operand gives the second, as Warp's does, so ``fmax(x, 0.0)`` maps a
+NaN to 0. ``clamp(x, lo, hi)`` is ``fmin(fmax(x, lo), hi)``: ``lo`` for a NaN ``x``, as Warp's.
+The native snippets of the rational evaluation use the same selects
+(:data:`warp_rbrdf.materials.rational_flat2d.MINMAX_SOURCE`). What it buys is measured in
+``docs/cpu_lanes.md`` (the rational fits' renders, not ``rgl``'s).
 """
 from __future__ import annotations
 
@@ -124,3 +138,52 @@ def sincos_numpy(x) -> tuple[np.ndarray, np.ndarray]:
     sn = np.select([q == 0, q == 1, q == 2], [sr, cr, -sr], -cr)
     cs = np.select([q == 0, q == 1, q == 2], [cr, -sr, -cr], sr)
     return sn.astype(np.float32), cs.astype(np.float32)
+
+
+# --- min / max / clamp --------------------------------------------------------------------------
+@wp.func
+def fmin(a: wp.float32, b: wp.float32) -> wp.float32:
+    """``a < b ? a : b`` (one ``minss``; module docstring)."""
+    return wp.where(a < b, a, b)
+
+
+@wp.func
+def fmin(a: wp.float64, b: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
+    return wp.where(a < b, a, b)
+
+
+@wp.func
+def fmin(a: int, b: int) -> int:  # noqa: F811 - a Warp overload
+    return wp.min(a, b)
+
+
+@wp.func
+def fmax(a: wp.float32, b: wp.float32) -> wp.float32:
+    """``a > b ? a : b`` (one ``maxss``; module docstring)."""
+    return wp.where(a > b, a, b)
+
+
+@wp.func
+def fmax(a: wp.float64, b: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
+    return wp.where(a > b, a, b)
+
+
+@wp.func
+def fmax(a: int, b: int) -> int:  # noqa: F811 - a Warp overload
+    return wp.max(a, b)
+
+
+@wp.func
+def clamp(x: wp.float32, lo: wp.float32, hi: wp.float32) -> wp.float32:
+    """``fmin(fmax(x, lo), hi)``: ``lo`` for a NaN ``x`` (module docstring)."""
+    return fmin(fmax(x, lo), hi)
+
+
+@wp.func
+def clamp(x: wp.float64, lo: wp.float64, hi: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
+    return fmin(fmax(x, lo), hi)
+
+
+@wp.func
+def clamp(x: int, lo: int, hi: int) -> int:  # noqa: F811 - a Warp overload
+    return wp.clamp(x, lo, hi)

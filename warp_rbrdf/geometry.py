@@ -42,6 +42,7 @@ import warp as wp
 from fit.errors import BRDFFileError, display_path
 from fit.inputs import check_regular_file
 
+from . import fastmath as fmath
 from . import limits, mesh_checks, transforms
 from .errors import SceneError
 from .scene import Scene, ShapeSpec
@@ -388,7 +389,7 @@ def ray_sphere(o: wp.vec3, d: wp.vec3, s: wp.vec4):
         return 0.0, 0.0
     t0 = c / q
     t1 = q / a
-    return wp.min(t0, t1), wp.max(t0, t1)
+    return fmath.fmin(t0, t1), fmath.fmax(t0, t1)
 
 
 def make_tracer(has_mesh: bool, has_spheres: bool):

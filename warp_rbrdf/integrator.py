@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import warp as wp
 
 from . import camera as C
+from . import fastmath as fmath
 from . import geometry as G
 from . import sample_patterns as P
 from . import lanes as L
@@ -87,7 +88,7 @@ def onb_bitangent(n: wp.vec3) -> wp.vec3:
 
 @wp.func
 def max3(v: wp.vec3) -> float:
-    return wp.max(v[0], wp.max(v[1], v[2]))
+    return fmath.fmax(v[0], fmath.fmax(v[1], v[2]))
 
 
 @G.inline_func
@@ -365,7 +366,7 @@ def make_kernels(kinds, techniques, has_mesh: bool = True, has_spheres: bool = T
             ns, T, B, wo = shading_frame(d, ng, ns)
             comb = mats.combine[m]
             tech = mats.technique[m]
-            org = p + ng * (eps * (1.0 + wp.max(wp.abs(p[0]), wp.max(wp.abs(p[1]), wp.abs(p[2])))))
+            org = p + ng * (eps * (1.0 + fmath.fmax(wp.abs(p[0]), fmath.fmax(wp.abs(p[1]), wp.abs(p[2])))))
 
             # One loop over every directional light (delta: always one shadow ray each), one
             # environment sample, then the BSDF sample; each calls the material's evaluation and

@@ -34,6 +34,8 @@ import inspect
 import numpy as np
 import warp as wp
 
+from . import fastmath as fmath
+
 PATTERN_STRATIFIED = 0
 PATTERN_INDEPENDENT = 1
 PATTERN_SOBOL = 2
@@ -167,7 +169,7 @@ def cmj_2d(s: int, n_samples: int, p: wp.uint32) -> wp.vec2:
     means are then up to 4.5 % too bright under a small bright sun.) For ``n_samples = m * n``
     both are the same permutation."""
     N = wp.uint32(n_samples)
-    m = wp.uint32(wp.max(1, int(wp.floor(wp.sqrt(float(n_samples))))))
+    m = wp.uint32(fmath.fmax(1, int(wp.floor(wp.sqrt(float(n_samples))))))
     n = (N + m - wp.uint32(1)) // m
     si = cmj_permute(wp.uint32(s), m * n, p * wp.uint32(0x51633E2D))
     sx = cmj_permute(si % m, m, p * _KA511E9B3)
@@ -178,7 +180,7 @@ def cmj_2d(s: int, n_samples: int, p: wp.uint32) -> wp.vec2:
     fn = float(n)
     x = (float(si % m) + (float(sy) + jx) / fn) / fm
     y = (float(si // m) + (float(sx) + jy) / fm) / fn
-    return wp.vec2(wp.min(x, ONE_MINUS_EPS), wp.min(y, ONE_MINUS_EPS))
+    return wp.vec2(fmath.fmin(x, ONE_MINUS_EPS), fmath.fmin(y, ONE_MINUS_EPS))
 
 
 # --- Owen-scrambled Sobol (Burley 2020, "Practical Hash-based Owen Scrambling") --------------
@@ -231,7 +233,7 @@ def sobol_2d(s: int, p: wp.uint32) -> wp.vec2:
     i = owen_scramble(wp.uint32(s), hash_u32(p ^ wp.uint32(0x68BC21EB)))
     x = owen_scramble(reverse_bits(i), hash_u32(p ^ wp.uint32(0x02E5BE93)))
     y = owen_scramble(sobol_dim1(i), hash_u32(p ^ wp.uint32(0x2F4F7B1B)))
-    return wp.vec2(wp.min(u32_to_unit(x), ONE_MINUS_EPS), wp.min(u32_to_unit(y), ONE_MINUS_EPS))
+    return wp.vec2(fmath.fmin(u32_to_unit(x), ONE_MINUS_EPS), fmath.fmin(u32_to_unit(y), ONE_MINUS_EPS))
 
 
 @_noinline

@@ -20,6 +20,7 @@ import functools
 
 import warp as wp
 
+from .. import fastmath as fmath
 from .warp_2d import MARGINAL2D_EPS, _lerp_at, _stride, marginal2d_finish, marginal2d_row_setup
 
 
@@ -100,8 +101,8 @@ def make_marginal2d_sample_lanes(K: int):
         mb = vi()
         i = int(0)
         while i < K:
-            sx[i] = wp.clamp(sx_in[i], MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
-            sy[i] = wp.clamp(sy_in[i], MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
+            sx[i] = fmath.clamp(sx_in[i], MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
+            sy[i] = fmath.clamp(sy_in[i], MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
             mb[i] = marg + t0[i] * ny
             i += 1
         row = search_lanes(vals, mb, 0, mstride, w1, vf(), ny, sy)

@@ -25,6 +25,8 @@ from typing import Any
 
 import warp as wp
 
+from .. import fastmath as fmath
+
 
 @wp.func
 def find_interval(cdf: wp.array(dtype=Any), off: int, size: int, x: Any) -> int:
@@ -38,7 +40,7 @@ def find_interval(cdf: wp.array(dtype=Any), off: int, size: int, x: Any) -> int:
             lo = mid + 1
         else:
             hi = mid
-    return wp.max(wp.min(lo - 1, size - 2), 0)
+    return fmath.fmax(fmath.fmin(lo - 1, size - 2), 0)
 
 
 @wp.func
@@ -52,7 +54,7 @@ def find_interval_row(cdf: wp.array2d(dtype=Any), row: int, size: int, x: Any) -
             lo = mid + 1
         else:
             hi = mid
-    return wp.max(wp.min(lo - 1, size - 2), 0)
+    return fmath.fmax(fmath.fmin(lo - 1, size - 2), 0)
 
 
 @wp.func
@@ -80,14 +82,14 @@ def pc1d_in_cell(cdf: wp.array(dtype=Any), off: int, i: int, u: Any):
     m = cdf[off + i + 1] - c0
     frac = type(u)(0.5)
     if m > type(u)(0.0):
-        frac = wp.clamp((u - c0) / m, type(u)(0.0), type(u)(1.0))
+        frac = fmath.clamp((u - c0) / m, type(u)(0.0), type(u)(1.0))
     return frac, m
 
 
 @wp.func
 def pc1d_cell(x: Any, n: int) -> int:
     """The cell of ``n`` on [0, 1] that holds ``x`` (clamped)."""
-    return wp.clamp(int(wp.floor(x * type(x)(n))), 0, n - 1)
+    return fmath.clamp(int(wp.floor(x * type(x)(n))), 0, n - 1)
 
 
 @wp.func
@@ -101,7 +103,7 @@ def pc1d_pdf(cdf: wp.array(dtype=Any), off: int, n: int, x: Any):
 @wp.func
 def pc1d_invert(cdf: wp.array(dtype=Any), off: int, n: int, x: Any):
     """The ``u`` that :func:`pc1d_sample` maps to ``x`` in [0, 1] (the CDF at ``x``)."""
-    xc = wp.clamp(x, type(x)(0.0), type(x)(1.0))
+    xc = fmath.clamp(x, type(x)(0.0), type(x)(1.0))
     i = pc1d_cell(xc, n)
     return cdf[off + i] + (xc * type(x)(n) - type(x)(i)) * pc1d_mass(cdf, off, i)
 
@@ -111,11 +113,11 @@ def linear_fraction(a: float, b: float, y: float) -> float:
     """Fraction ``t`` in [0, 1] of a unit cell whose density goes linearly from ``a`` to ``b``
     where its integral from 0 reaches ``y``: the root of ``a t + (b - a) t^2 / 2 = y`` without
     cancellation, ``2 y / (a + sqrt(a^2 + 2 y (b - a)))`` (0 where the cell has no density)."""
-    den = a + wp.sqrt(wp.max(a * a + 2.0 * y * (b - a), 0.0))
+    den = a + wp.sqrt(fmath.fmax(a * a + 2.0 * y * (b - a), 0.0))
     t = float(0.0)
     if den > 0.0:
         t = 2.0 * y / den
-    return wp.clamp(t, 0.0, 1.0)
+    return fmath.clamp(t, 0.0, 1.0)
 
 
 @wp.func
@@ -134,8 +136,8 @@ def pl1d_sample(cdf: wp.array(dtype=float), pdf: wp.array(dtype=float), off: int
 @wp.func
 def _pl1d_at(x: float, n: int) -> wp.vec2:
     """(node interval, position inside it) of ``x`` clamped to [0, 1]; the interval as a float."""
-    s = wp.clamp(x, 0.0, 1.0) * float(n - 1)
-    i = wp.min(int(s), n - 2)
+    s = fmath.clamp(x, 0.0, 1.0) * float(n - 1)
+    i = fmath.fmin(int(s), n - 2)
     return wp.vec2(float(i), s - float(i))
 
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import warp as wp
 
+from .. import fastmath as fmath
 from .warp_1d import pc1d_cell, pc1d_invert, pc1d_mass, pc1d_pdf, pc1d_sample
 
 # ---------------------------------------------------------------------------- piecewise constant
@@ -53,7 +54,7 @@ def pc2d_pdf(marg: wp.array(dtype=Any), moff: int, cond: wp.array(dtype=Any), co
 def pc2d_invert(marg: wp.array(dtype=Any), moff: int, cond: wp.array(dtype=Any), coff: int, ny: int,
                 nx: int, x: Any, y: Any):
     """``(ux, uy)``: the uniforms :func:`pc2d_sample` maps to (x, y)."""
-    yc = wp.clamp(y, type(y)(0.0), type(y)(1.0))
+    yc = fmath.clamp(y, type(y)(0.0), type(y)(1.0))
     ux = pc1d_invert(cond, coff + pc1d_cell(yc, ny) * (nx + 1), nx, x)
     return ux, pc1d_invert(marg, moff, ny, yc)
 
@@ -68,7 +69,7 @@ MARGINAL2D_EPS = wp.constant(5.9604645e-8)
 @wp.func
 def _node(u: float, n: int) -> int:
     """The cell in [0, n - 2] of ``n`` nodes on [0, 1] that holds ``u`` (clamped)."""
-    return wp.min(int(wp.max(u * float(n - 1), 0.0)), n - 2)
+    return fmath.fmin(int(fmath.fmax(u * float(n - 1), 0.0)), n - 2)
 
 
 @wp.func
@@ -124,7 +125,7 @@ def format_fraction(a: float, b: float, y: float) -> float:
     where ``|a - b| < 1e-4 (a + b)``, else ``(a - sqrt(a^2 - 2 y (a - b))) / (a - b)``."""
     if wp.abs(a - b) < 1.0e-4 * (a + b):
         return 2.0 * y / (a + b)
-    return (a - wp.sqrt(wp.max(a * a - 2.0 * y * (a - b), 0.0))) / (a - b)
+    return (a - wp.sqrt(fmath.fmax(a * a - 2.0 * y * (a - b), 0.0))) / (a - b)
 
 
 @wp.func
@@ -217,8 +218,8 @@ def marginal2d_sample(vals: wp.array(dtype=float), data: int, cond: int, marg: i
     marginal CDF, the fraction inside it by the linear density of the row totals, then the
     column by the conditional CDF interpolated between the row's two node rows (fractions by
     :func:`format_fraction`). :mod:`.lanes` draws K samples at once with the same steps."""
-    sx = wp.clamp(sx_in, MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
-    sy = wp.clamp(sy_in, MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
+    sx = fmath.clamp(sx_in, MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
+    sy = fmath.clamp(sy_in, MARGINAL2D_EPS, 1.0 - MARGINAL2D_EPS)
     plane = ny * nx
     stride = _stride(plane, n_slices)
     mstride = _stride(ny, n_slices)

@@ -14,6 +14,7 @@ import functools
 
 import warp as wp
 
+from .. import fastmath as fmath
 from ..distribution.lanes import lane_types
 from .env_map import EnvMap
 from .env_sampling import descend_level, patch_invert, patch_select, point_sample
@@ -51,8 +52,8 @@ def make_env_sample_lanes(K: int):
         sy = vd()
         i = int(0)
         while i < K:
-            sy[i] = wp.min(wp.float64(xi0[i]), wp.float64(0.9999999999999999))
-            sx[i] = wp.min(wp.float64(xi1[i]), wp.float64(0.9999999999999999))
+            sy[i] = fmath.fmin(wp.float64(xi0[i]), wp.float64(0.9999999999999999))
+            sx[i] = fmath.fmin(wp.float64(xi1[i]), wp.float64(0.9999999999999999))
             i += 1
         level = env.levels - 2
         while level >= 1:

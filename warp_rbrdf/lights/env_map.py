@@ -110,7 +110,7 @@ def bilinear_taps(env: EnvMap, u: float, v: float) -> BilinearTaps:
     W = env.width
     H = env.height
     x = u * float(W) - 0.5
-    y = wp.clamp(v * float(H - 1), 0.0, float(H - 1))
+    y = fmath.clamp(v * float(H - 1), 0.0, float(H - 1))
     xf = wp.floor(x)
     t = BilinearTaps()
     t.fx = x - xf
@@ -121,13 +121,13 @@ def bilinear_taps(env: EnvMap, u: float, v: float) -> BilinearTaps:
         x0 = x0 + W
     if x0 >= W:
         x0 = x0 - W
-    x0 = wp.clamp(x0, 0, W - 1)
+    x0 = fmath.clamp(x0, 0, W - 1)
     t.x0 = x0
     t.x1 = next_column(x0, W)
     yf = wp.floor(y)
     t.fy = y - yf
-    t.y0 = wp.clamp(int(yf), 0, H - 1)
-    t.y1 = wp.min(t.y0 + 1, H - 1)
+    t.y0 = fmath.clamp(int(yf), 0, H - 1)
+    t.y1 = fmath.fmin(t.y0 + 1, H - 1)
     return t
 
 

@@ -25,7 +25,7 @@ def linear_inverse(g0: wp.float64, g1: wp.float64, y: wp.float64) -> wp.float64:
     s = y
     if den > zero:
         s = y * (g0 + g1) / den
-    return wp.clamp(s, zero, one)
+    return fmath.clamp(s, zero, one)
 
 
 #: half-angle h = b t / 2 below which :func:`_half_sincos` sums its series (b = pi / (H - 1) <= 0.5:
@@ -118,7 +118,7 @@ def solve_row_fraction(A0: wp.float64, A1: wp.float64, env: EnvMap, j: int, y: w
         q = t * (c1 + t * (c2 + t * c3)) - qt
         dq = c1 + t * (wp.float64(2.0) * c2 + t * wp.float64(3.0) * c3)
         if dq > zero:
-            nt = wp.clamp(t - q / dq, zero, one)
+            nt = fmath.clamp(t - q / dq, zero, one)
             step = wp.abs(nt - t)
             t = nt
             if step < wp.float64(1.0e-9):
@@ -142,14 +142,14 @@ def solve_row_fraction(A0: wp.float64, A1: wp.float64, env: EnvMap, j: int, y: w
         t = nt
         if step < wp.float64(1.0e-6):   # Newton: the error left is ~ step^2 (about 1e-12)
             break
-    return wp.clamp(t, zero, one)
+    return fmath.clamp(t, zero, one)
 
 
 @wp.func
 def _split(s: wp.float64, m0: wp.float64, m1: wp.float64) -> wp.vec2d:
     """Hierarchical step: (branch 0 or 1, s rescaled to [0, 1] inside it) for masses m0, m1."""
     zero = wp.float64(0.0)
-    s = wp.clamp(s, zero, wp.float64(1.0)) * (m0 + m1)
+    s = fmath.clamp(s, zero, wp.float64(1.0)) * (m0 + m1)
     if (s > m0 or m0 <= zero) and m1 > zero:
         return wp.vec2d(wp.float64(1.0), (s - m0) / m1)
     if m0 > zero:
@@ -255,8 +255,8 @@ def descend(env: EnvMap, xi: wp.vec2):
     """The hierarchical warp of the uniforms ``xi`` (``xi[0]`` drives v, ``xi[1]`` u) down to
     level 1: ``(x, y, sx, sy)``, the level-1 block and the uniforms rescaled inside it
     (float64), for :func:`patch_point`."""
-    sy = wp.min(wp.float64(xi[0]), wp.float64(0.9999999999999999))
-    sx = wp.min(wp.float64(xi[1]), wp.float64(0.9999999999999999))
+    sy = fmath.fmin(wp.float64(xi[0]), wp.float64(0.9999999999999999))
+    sx = fmath.fmin(wp.float64(xi[1]), wp.float64(0.9999999999999999))
     x = int(0)
     y = int(0)
     level = env.levels - 2

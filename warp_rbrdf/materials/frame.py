@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import warp as wp
 
+from .. import fastmath as fmath
+
 N_TH, N_TD, N_PD = 90, 90, 180   # N_PD: phi_d bins of a table folded by reciprocity (MERL)
 N_PD_FULL = 360                   # phi_d bins of a full-circle table (no fold)
 
@@ -47,13 +49,13 @@ def half_diff(wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
 
 @wp.func
 def merl_theta_h_index(theta_h: float) -> int:
-    t = wp.max(theta_h, 0.0)
-    return wp.clamp(int(wp.floor(wp.sqrt(t / wp.HALF_PI) * 90.0)), 0, N_TH - 1)
+    t = fmath.fmax(theta_h, 0.0)
+    return fmath.clamp(int(wp.floor(wp.sqrt(t / wp.HALF_PI) * 90.0)), 0, N_TH - 1)
 
 
 @wp.func
 def merl_theta_d_index(theta_d: float) -> int:
-    return wp.clamp(int(wp.floor(theta_d / wp.HALF_PI * 90.0)), 0, N_TD - 1)
+    return fmath.clamp(int(wp.floor(theta_d / wp.HALF_PI * 90.0)), 0, N_TD - 1)
 
 
 @wp.func
@@ -72,4 +74,4 @@ def merl_phi_d_wrap(phi_d: float, n_phi_d: int) -> float:
 @wp.func
 def merl_phi_d_index(phi_d: float, n_phi_d: int) -> int:
     """Bin of ``phi_d`` in (-pi, pi] on a table of ``n_phi_d`` phi_d bins (:func:`merl_phi_d_wrap`)."""
-    return wp.clamp(int(wp.floor(merl_phi_d_wrap(phi_d, n_phi_d) / wp.pi * 180.0)), 0, n_phi_d - 1)
+    return fmath.clamp(int(wp.floor(merl_phi_d_wrap(phi_d, n_phi_d) / wp.pi * 180.0)), 0, n_phi_d - 1)

@@ -19,6 +19,7 @@ import warp as wp
 
 from fit.formats import load_measured
 
+from .. import fastmath as fmath
 from ..errors import SceneError
 from .data import LoadedMaterial, Materials
 from .frame import (
@@ -72,11 +73,11 @@ def measured_trilinear(mats: Materials, base: int, a: wp.vec3, n_pd: int) -> wp.
     trilinear_corners`): theta_h and theta_d clamped to the first and last centres, phi_d
     periodic over the table's n_pd bins; a channel's bins below 0 (no sample) are left out and
     the other weights renormalised."""
-    u = wp.clamp(wp.sqrt(wp.max(a[0], 0.0) / wp.HALF_PI) * 90.0 - 0.5, 0.0, float(N_TH - 1))
-    v = wp.clamp(a[1] / wp.HALF_PI * 90.0 - 0.5, 0.0, float(N_TD - 1))
+    u = fmath.clamp(wp.sqrt(fmath.fmax(a[0], 0.0) / wp.HALF_PI) * 90.0 - 0.5, 0.0, float(N_TH - 1))
+    v = fmath.clamp(a[1] / wp.HALF_PI * 90.0 - 0.5, 0.0, float(N_TD - 1))
     w = merl_phi_d_wrap(a[2], n_pd) / wp.pi * 180.0 - 0.5
-    i0 = wp.min(int(wp.floor(u)), N_TH - 2)
-    j0 = wp.min(int(wp.floor(v)), N_TD - 2)
+    i0 = fmath.fmin(int(wp.floor(u)), N_TH - 2)
+    j0 = fmath.fmin(int(wp.floor(v)), N_TD - 2)
     kf = wp.floor(w)
     fu = u - float(i0)
     fv = v - float(j0)

@@ -46,7 +46,9 @@ _C = [repr(1.0 / math.factorial(k)) for k in range(14)]
 #: clamped to [-708, 709.4], module docstring). The
 #: polynomial by Estrin's scheme (depth four multiply-adds instead of Horner's thirteen)
 EXP_SOURCE = f"""auto rbrdf_exp = [](rbrdf_v4d x) -> rbrdf_v4d {{
-    rbrdf_v4d c = __builtin_elementwise_min(__builtin_elementwise_max(x, (rbrdf_v4d)(-708.0)), (rbrdf_v4d)(709.4));
+    const rbrdf_v4d lo = -708.0, hi = 709.4;
+    rbrdf_v4d c = x > lo ? x : lo;                          /* one select each way (a NaN lane: lo) */
+    c = c < hi ? c : hi;
     const rbrdf_v4d shifter = 6755399441055744.0;          /* 1.5 * 2^52: rounds to an integer */
     rbrdf_v4d ks = c * 1.4426950408889634 + shifter;        /* k's bits: those of the shifter + k */
     rbrdf_v4d k = ks - shifter;
@@ -72,16 +74,20 @@ EXP_SOURCE = f"""auto rbrdf_exp = [](rbrdf_v4d x) -> rbrdf_v4d {{
 #: ``wp::vec_t<3, float> out`` (needs the typedefs and ``rbrdf_exp`` of :data:`VECTOR_PRELUDE`)
 VECTOR_STEPS = f"""rbrdf_v4d y = p / q;
 if (flags & {LEAF_LOG}) {{
-    if (flags & {LEAF_MAX}) y = __builtin_elementwise_min(y, (rbrdf_v4d)(hd[{FH_LOGMAX}]));
+    if (flags & {LEAF_MAX}) {{ const rbrdf_v4d b = hd[{FH_LOGMAX}]; y = y < b ? y : b; }}
     y = rbrdf_exp(y) - hd[{FH_OFFSET}];
 }}
-if (flags & {LEAF_MIN}) y = __builtin_elementwise_max(y, (rbrdf_v4d)(hd[{FH_MIN}]));
-if (flags & {LEAF_MAX}) y = __builtin_elementwise_min(y, (rbrdf_v4d)(hd[{FH_MAX}]));
+if (flags & {LEAF_MIN}) {{ const rbrdf_v4d b = hd[{FH_MIN}]; y = y > b ? y : b; }}
+if (flags & {LEAF_MAX}) {{ const rbrdf_v4d b = hd[{FH_MAX}]; y = y < b ? y : b; }}
 const int modes[3] = {{m0, m1, m2}};
 wp::vec_t<3, float> out;
 for (int c = 0; c < 3; ++c) {{
     double v = (modes[c] & {CH_TABLE}) ? (double)tab.c[c] : y[c];
-    if (modes[c] & {CH_RANGE}) v = wp::clamp(v, hd[{FH_RANGES} + 2 * c], hd[{FH_RANGES} + 2 * c + 1]);
+    if (modes[c] & {CH_RANGE}) {{   /* one select each way (warp_rbrdf.fastmath.clamp) */
+        const double lo = hd[{FH_RANGES} + 2 * c], hi = hd[{FH_RANGES} + 2 * c + 1];
+        v = v > lo ? v : lo;
+        v = v < hi ? v : hi;
+    }}
     out.c[c] = (float)v;
 }}
 """

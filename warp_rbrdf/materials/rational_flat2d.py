@@ -135,6 +135,15 @@ def angles_2d_numpy(wi, wo) -> np.ndarray:
     return np.stack(out + [s[:, 2] * sw / (ls2 * li)], -1).astype(f)
 
 
+#: C++ statements: ``rb_min``, ``rb_max``, ``rb_clamp`` of two (three) numbers of one type, one
+#: select each, as :func:`warp_rbrdf.fastmath.fmin` / ``fmax`` / ``clamp`` (Warp's ``wp::min`` /
+#: ``wp::max`` / ``wp::clamp`` of floats take two compares and two selects: fmin's NaN rule)
+MINMAX_SOURCE = """auto rb_min = [](auto a, auto b) { return a < b ? a : b; };
+auto rb_max = [](auto a, auto b) { return a > b ? a : b; };
+auto rb_clamp = [](auto x, auto lo, auto hi) { const auto y = x > lo ? x : lo; return y < hi ? y : hi; };
+"""
+
+
 def flat_source(keys: tuple, margin: float, scalar: bool = False, n_vars: int = 2) -> str:
     """The C++ body of :func:`make_flat2d`'s function for the ``n_vars``-variable classes
     ``keys`` (3: :func:`.rational_flat3d.make_flat3d`'s): the vector form on the CPU and the
@@ -180,11 +189,11 @@ double p0 = 0.0, p1 = 0.0, p2 = 0.0, q0 = 0.0, q1 = 0.0, q2 = 0.0;
     if n_vars == 2:
         inputs = f"""double xh = th, xd = td;
 if (flags & {LEAF_CLAMP}) {{
-    xh = wp::clamp(xh, hd[{FH_VARS}], hd[{FH_VARS + 1}]);
-    xd = wp::clamp(xd, hd[{FH_VARS + 4}], hd[{FH_VARS + 5}]);
+    xh = rb_clamp(xh, hd[{FH_VARS}], hd[{FH_VARS + 1}]);
+    xd = rb_clamp(xd, hd[{FH_VARS + 4}], hd[{FH_VARS + 5}]);
 }}
-if (P[1] & 1) xh = wp::sqrt(wp::max(xh, 0.0));
-if (P[1] & 2) xd = wp::sqrt(wp::max(xd, 0.0));
+if (P[1] & 1) xh = wp::sqrt(rb_max(xh, 0.0));
+if (P[1] & 2) xd = wp::sqrt(rb_max(xd, 0.0));
 const double tb = (2.0 * xh - hd[{FH_VARS + 2}]) * hd[{FH_VARS + 3}];
 const double tc = (2.0 * xd - hd[{FH_VARS + 6}]) * hd[{FH_VARS + 7}];
 """
@@ -192,30 +201,30 @@ const double tc = (2.0 * xd - hd[{FH_VARS + 6}]) * hd[{FH_VARS + 7}];
     else:
         inputs = f"""double xh = th, xd = td, xp = (double)ang.c[2];
 if (flags & {LEAF_CLAMP}) {{
-    xh = wp::clamp(xh, hd[{FH_VARS}], hd[{FH_VARS + 1}]);
-    xd = wp::clamp(xd, hd[{FH_VARS + 4}], hd[{FH_VARS + 5}]);
-    xp = wp::clamp(xp, hd[{FH_VARS + 8}], hd[{FH_VARS + 9}]);
+    xh = rb_clamp(xh, hd[{FH_VARS}], hd[{FH_VARS + 1}]);
+    xd = rb_clamp(xd, hd[{FH_VARS + 4}], hd[{FH_VARS + 5}]);
+    xp = rb_clamp(xp, hd[{FH_VARS + 8}], hd[{FH_VARS + 9}]);
 }}
-if (P[1] & 1) xh = wp::sqrt(wp::max(xh, 0.0));
-if (P[1] & 2) xd = wp::sqrt(wp::max(xd, 0.0));
-if (P[1] & 4) xp = wp::sqrt(wp::max(xp, 0.0));
+if (P[1] & 1) xh = wp::sqrt(rb_max(xh, 0.0));
+if (P[1] & 2) xd = wp::sqrt(rb_max(xd, 0.0));
+if (P[1] & 4) xp = wp::sqrt(rb_max(xp, 0.0));
 const double ta = (2.0 * xh - hd[{FH_VARS + 2}]) * hd[{FH_VARS + 3}];
 const double tb = (2.0 * xd - hd[{FH_VARS + 6}]) * hd[{FH_VARS + 7}];
 const double tc = (2.0 * xp - hd[{FH_VARS + 10}]) * hd[{FH_VARS + 11}];
 """
         factor = f"""if (flags & {LEAF_INV_COS}) {{
-    const float c = wp::max(cos_i, {COS_FLOOR_F32!r}f);
+    const float c = rb_max(cos_i, {COS_FLOOR_F32!r}f);
     out.c[0] = out.c[0] / c; out.c[1] = out.c[1] / c; out.c[2] = out.c[2] / c;
 }}
 """
-    return (prelude + f"""const double* F = (const double*)fptr;
+    return (prelude + MINMAX_SOURCE + f"""const double* F = (const double*)fptr;
 const int* I = (const int*)iptr;
 double th = (double)ang.c[0], td = (double)ang.c[1];
 if ((double)ang.c[{cos_prod}] < F[{FF_COS_CUT}] + {margin!r}) {{
-    const double t = wp::min(th, F[{FF_CUT}]);
-    const double lim = wp::acos(wp::min(F[{FF_COS_CUT}] / wp::cos(t), 1.0));
+    const double t = rb_min(th, F[{FF_CUT}]);
+    const double lim = wp::acos(rb_min(F[{FF_COS_CUT}] / wp::cos(t), 1.0));
     th = (double)(float)t;
-    td = (double)(float)wp::min(td, lim);
+    td = (double)(float)rb_min(td, lim);
 }}
 const double x = var ? td : th;
 const int {"k1" if n_vars == 2 else "k"} = {pick};
@@ -224,9 +233,9 @@ const int* P = I + {FLAT_NI} * k;
 const int flags = P[0];
 """ + inputs + sums + switch + f"""wp::vec3 tab(0.0f);
 if (flags & {LEAF_TABLE}) {{
-    const float bh = (float)wp::clamp(th, hd[{FH_BOX}], hd[{FH_BOX + 1}]);
-    const float bd = (float)wp::clamp(td, hd[{FH_BOX + 2}], hd[{FH_BOX + 3}]);
-    const int ih = wp::clamp((int)wp::floor(wp::sqrt(wp::max(bh, 0.0f) / 1.5707963267948966f) * 90.0f), 0, 89);
+    const float bh = (float)rb_clamp(th, hd[{FH_BOX}], hd[{FH_BOX + 1}]);
+    const float bd = (float)rb_clamp(td, hd[{FH_BOX + 2}], hd[{FH_BOX + 3}]);
+    const int ih = wp::clamp((int)wp::floor(wp::sqrt(rb_max(bh, 0.0f) / 1.5707963267948966f) * 90.0f), 0, 89);
     const int jd = wp::clamp((int)wp::floor(bd / 1.5707963267948966f * 90.0f), 0, 89);
     const float* T = (const float*)tptr + 3 * (ih * 90 + jd);
     tab = wp::vec3(T[0], T[1], T[2]);

@@ -112,9 +112,9 @@ def _mapped_input(ci: wp.array(dtype=int), cf: wp.array(dtype=wp.float64), code:
     if src == 2:
         x = wp.float64(wp.abs(a[2]))
     if (flags & LEAF_CLAMP) != 0:
-        x = wp.clamp(x, cf[b], cf[b + 1])
+        x = fmath.clamp(x, cf[b], cf[b + 1])
     if (code >> 2) == 1:
-        x = wp.sqrt(wp.max(x, wp.float64(0.0)))
+        x = wp.sqrt(fmath.fmax(x, wp.float64(0.0)))
     return (wp.float64(2.0) * x - cf[b + 2]) * cf[b + 3]
 
 
@@ -131,14 +131,14 @@ def _channel(cf: wp.array(dtype=wp.float64), mode: int, h: int, flags: int, c: i
         y = p / q
         if (flags & LEAF_LOG) != 0:
             if (flags & LEAF_MAX) != 0:
-                y = wp.min(y, cf[h + FH_LOGMAX])
+                y = fmath.fmin(y, cf[h + FH_LOGMAX])
             y = wp.exp(y) - cf[h + FH_OFFSET]
         if (flags & LEAF_MIN) != 0:
-            y = wp.max(y, cf[h + FH_MIN])
+            y = fmath.fmax(y, cf[h + FH_MIN])
         if (flags & LEAF_MAX) != 0:
-            y = wp.min(y, cf[h + FH_MAX])
+            y = fmath.fmin(y, cf[h + FH_MAX])
     if (mode & CH_RANGE) != 0:
-        y = wp.clamp(y, cf[h + FH_RANGES + 2 * c], cf[h + FH_RANGES + 2 * c + 1])
+        y = fmath.clamp(y, cf[h + FH_RANGES + 2 * c], cf[h + FH_RANGES + 2 * c + 1])
     return float(y)
 
 
@@ -146,16 +146,16 @@ def _channel(cf: wp.array(dtype=wp.float64), mode: int, h: int, flags: int, c: i
 def _onto_domain(a: wp.vec3, cos_cut: wp.float64, cut: wp.float64) -> wp.vec3:
     """Rusinkiewicz angles ``a`` (theta_h, theta_d, phi_d) moved onto the measured domain
     ``cos theta_h cos theta_d >= cos_cut`` (:func:`onto_measured_domain`, in float64)."""
-    th = wp.min(wp.float64(a[0]), cut)
-    lim = wp.acos(wp.min(cos_cut / wp.cos(th), wp.float64(1.0)))
-    return wp.vec3(float(th), float(wp.min(wp.float64(a[1]), lim)), a[2])
+    th = fmath.fmin(wp.float64(a[0]), cut)
+    lim = wp.acos(fmath.fmin(cos_cut / wp.cos(th), wp.float64(1.0)))
+    return wp.vec3(float(th), float(fmath.fmin(wp.float64(a[1]), lim)), a[2])
 
 
 @wp.func
 def _fallback_table(mats: Materials, m: int, cf: wp.array(dtype=wp.float64), h: int, a: wp.vec3) -> wp.vec3:
     """The projected table's cluster at (theta_h, theta_d) clamped onto the leaf's box."""
-    ih = F.merl_theta_h_index(float(wp.clamp(wp.float64(a[0]), cf[h + FH_BOX], cf[h + FH_BOX + 1])))
-    jd = F.merl_theta_d_index(float(wp.clamp(wp.float64(a[1]), cf[h + FH_BOX + 2], cf[h + FH_BOX + 3])))
+    ih = F.merl_theta_h_index(float(fmath.clamp(wp.float64(a[0]), cf[h + FH_BOX], cf[h + FH_BOX + 1])))
+    jd = F.merl_theta_d_index(float(fmath.clamp(wp.float64(a[1]), cf[h + FH_BOX + 2], cf[h + FH_BOX + 3])))
     return mats.tables[mats.param[m] + ih * N_THETA_D + jd]
 
 
@@ -220,7 +220,7 @@ def rational_eval(mats: Materials, m: int, wi: wp.vec3, wo: wp.vec3) -> wp.vec3:
                 _channel(cf, ci[r + 1], h, flags, 1, pq[1], pq[4], tab[1]),
                 _channel(cf, ci[r + 2], h, flags, 2, pq[2], pq[5], tab[2]))
     if (flags & LEAF_INV_COS) != 0:     # step 8: the value factor 1 / cos theta_i
-        y = y / wp.max(wi[2], COS_FLOOR_F32)
+        y = y / fmath.fmax(wi[2], COS_FLOOR_F32)
     return wp.cw_mul(y, mats.scale[m])
 
 
@@ -407,7 +407,7 @@ def make_rational_eval(classes: tuple):
         r = n + LEAF_MODES
         y = channels(pq, wp.address_of(cf[h]), flags, ci[r], ci[r + 1], ci[r + 2], tab)
         if (flags & LEAF_INV_COS) != 0:     # step 8: the value factor 1 / cos theta_i
-            y = y / wp.max(wi[2], COS_FLOOR_F32)
+            y = y / fmath.fmax(wi[2], COS_FLOOR_F32)
         return wp.cw_mul(y, mats.scale[m])
 
     return rational_eval_classes

@@ -162,7 +162,7 @@ def elevation(w: wp.vec3) -> float:
 
 @wp.func
 def theta_to_u(theta: float) -> float:
-    return wp.sqrt(wp.max(theta, 0.0) * (2.0 / wp.pi))
+    return wp.sqrt(fmath.fmax(theta, 0.0) * (2.0 / wp.pi))
 
 
 @wp.func
@@ -181,7 +181,7 @@ def theta_interval(mats: Materials, off: int, n: int, x: float) -> wp.vec2:
     t0 = find_interval(mats.rgl_f, off, n, x)
     p0 = mats.rgl_f[off + t0]
     p1 = mats.rgl_f[off + t0 + 1]
-    w1 = wp.clamp((x - p0) / (p1 - p0), 0.0, 1.0)
+    w1 = fmath.clamp((x - p0) / (p1 - p0), 0.0, 1.0)
     return wp.vec2(float(t0), w1)
 
 
@@ -230,17 +230,17 @@ def _value(mats: Materials, h: int, n: int, t0: int, w1: float, theta_t: float, 
         sig = bilinear_lerp(mats.rgl_f, mats.rgl_i[h + RGL_SIGMA], mats.rgl_i[h + RGL_SIGMA_NY],
                             mats.rgl_i[h + RGL_SIGMA_NX], 0, 0.0, theta_to_u(theta_t), phi_to_u(phi_t))
         v = v * (ndf / (4.0 * sig))
-    return wp.vec3(wp.max(v[0], 0.0), wp.max(v[1], 0.0), wp.max(v[2], 0.0))
+    return wp.vec3(fmath.fmax(v[0], 0.0), fmath.fmax(v[1], 0.0), fmath.fmax(v[2], 0.0))
 
 
 @wp.func
 def _pdf_at(st: float, umx: float, cos_tm: float, p_vndf: float, p_lum: float) -> float:
     """The sample's density in 1/sr from the warps' densities: the Jacobians of the (theta_m,
     phi_m) parametrization (``st`` = sin theta_m) and of the reflection (``cos_tm`` = wt . wm)."""
-    jac = wp.max(2.0 * wp.pi * wp.pi * umx * st, MIN_JACOBIAN) * 4.0 * cos_tm
+    jac = fmath.fmax(2.0 * wp.pi * wp.pi * umx * st, MIN_JACOBIAN) * 4.0 * cos_tm
     if jac <= 0.0:
         return 0.0
-    return wp.max(p_vndf * p_lum / jac, 0.0)
+    return fmath.fmax(p_vndf * p_lum / jac, 0.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -310,7 +310,7 @@ def _draw(phi_t: float, wo: wp.vec3, s: wp.vec3, u: wp.vec3):
     st = sct[0]
     wm = wp.vec3(scp[1] * st, scp[0] * st, sct[1])
     c = wp.dot(wm, wo)
-    jac = wp.max(2.0 * wp.pi * wp.pi * u[0] * st, MIN_JACOBIAN) * 4.0 * c
+    jac = fmath.fmax(2.0 * wp.pi * wp.pi * u[0] * st, MIN_JACOBIAN) * 4.0 * c
     p = u[2] * s[2] / jac
     wi = wm * (2.0 * c) - wo
     ok = int(1)  # noqa: UP018, RUF046 - a Warp variable assigned in a branch

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .. import fastmath as fmath
 from ..materials.data import Materials
 
 
@@ -12,12 +13,12 @@ from ..materials.data import Materials
 def sample_cosine_hemisphere(u: wp.vec2) -> wp.vec3:
     r = wp.sqrt(u[0])
     phi = 2.0 * wp.pi * u[1]
-    return wp.vec3(r * wp.cos(phi), r * wp.sin(phi), wp.sqrt(wp.max(0.0, 1.0 - u[0])))
+    return wp.vec3(r * wp.cos(phi), r * wp.sin(phi), wp.sqrt(fmath.fmax(0.0, 1.0 - u[0])))
 
 
 @wp.func
 def pdf_cosine_hemisphere(w: wp.vec3) -> float:
-    return wp.max(w[2], 0.0) / wp.pi
+    return fmath.fmax(w[2], 0.0) / wp.pi
 
 
 @wp.func

@@ -30,6 +30,7 @@ import warp as wp
 
 from fit.formats.angles import direction_to_spherical, spherical_to_direction
 
+from .. import fastmath as fmath
 from ..chebyshev import cheb_sum2_d
 from ..materials.data import (
     CDF_LAYOUT,
@@ -95,38 +96,37 @@ def pieces_sample(pw: wp.array(dtype=float), off: int, n_v: int, n_mu: int, n_u:
     """(wi, alpha): the direction of (theta_l, phi_l) of fit.sampling.pieces.sample_pieces in the
     view frame ``va`` (:func:`view_frame`) and alpha, on rational row ``v`` (the caller sends
     table rows to the table). Piece of mu: floor(mu n_mu), no search; sin and cos of
-    theta_l computed once (end pieces: from y = sin^2 theta_l, no sin/cos at all). Theta pieces:
+    theta_l and of phi_l by the inline :func:`warp_rbrdf.fastmath.sincos` (end pieces of theta:
+    from y = sin^2 theta_l, no sin/cos at all). Theta pieces:
     4 floats each (:func:`rq_piece`); phi maps: knots (:func:`rq_knots`, see
     :func:`.cdf_data.pack_pieces`)."""
     xs = mu * float(n_mu)
-    k = wp.clamp(int(xs), 0, n_mu - 1)
-    F = rq_piece(pw, off + (v * n_mu + k) * 4, wp.clamp(xs - float(k), 0.0, 1.0))
-    tl = float(0.0)
+    k = fmath.clamp(int(xs), 0, n_mu - 1)
+    F = rq_piece(pw, off + (v * n_mu + k) * 4, fmath.clamp(xs - float(k), 0.0, 1.0))
     st = float(0.0)
     ct = float(0.0)
     at = float(0.0)                  # dtheta_l/dmu * sin(theta_l)
     if k == 0 or k == n_mu - 1:      # end pieces in y = sin^2 theta_l
-        y = wp.clamp(F[0], 0.0, 1.0)
+        y = fmath.clamp(F[0], 0.0, 1.0)
         st = wp.sqrt(y)
         ct = wp.sqrt(1.0 - y)
-        tl = wp.asin(st)
-        at = F[1] * float(n_mu) / (2.0 * wp.max(ct, 1.0e-20))
+        at = F[1] * float(n_mu) / (2.0 * fmath.fmax(ct, 1.0e-20))
     else:
-        tl = wp.clamp(F[0], 0.0, wp.HALF_PI)
-        st = wp.sin(tl)
-        ct = wp.cos(tl)
+        sc = fmath.sincos(fmath.clamp(F[0], 0.0, wp.HALF_PI))
+        st = sc[0]
+        ct = sc[1]
         at = F[1] * float(n_mu) * st
     s = 1.0
     if tau < 0.5:
         s = -1.0
     u = wp.abs(2.0 * tau - 1.0)
     us = u * float(n_u)
-    kp = wp.clamp(int(us), 0, n_u - 1)
+    kp = fmath.clamp(int(us), 0, n_u - 1)
     G = rq_knots(pw, off + n_v * n_mu * 4 + ((v * n_mu + k) * (n_u + 1) + kp) * 2,
-                 wp.clamp(us - float(kp), 0.0, 1.0))
-    ph = wp.clamp(G[0], 0.0, wp.pi)
-    cp = wp.cos(ph)
-    sp = s * wp.sin(ph)
+                 fmath.clamp(us - float(kp), 0.0, 1.0))
+    sph = fmath.sincos(fmath.clamp(G[0], 0.0, wp.pi))
+    cp = sph[1]
+    sp = s * sph[0]
     return wp.vec4(st * (cp * va[1] - sp * va[2]), st * (sp * va[1] + cp * va[2]), ct,
                    at * 2.0 * G[1] * float(n_u))
 
@@ -174,7 +174,7 @@ def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), gq: w
     half_pi = wp.float64(1.5707963267948966)
     pi = wp.float64(3.141592653589793)
     zero = wp.float64(0.0)
-    tv = wp.float64(wp.clamp(theta_v, 0.0, 1.5707963267948966))
+    tv = wp.float64(fmath.clamp(theta_v, 0.0, 1.5707963267948966))
     d = gi[g + GLOBAL_THETA + 2]
     f = _normalized(gf, gi, gq, g + GLOBAL_THETA, zero, _map_input(gf, d, 0, tv),
                     _map_input(gf, d, 1, wp.float64(mu)), half_pi)
@@ -182,7 +182,7 @@ def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), gq: w
     inside = 1
     if tl < zero or tl > half_pi:
         inside = 0
-    tl = wp.clamp(tl, zero, half_pi)
+    tl = fmath.clamp(tl, zero, half_pi)
     s = wp.float64(1.0)
     if tau < 0.5:
         s = wp.float64(-1.0)
@@ -193,7 +193,7 @@ def global_sample(gf: wp.array(dtype=wp.float64), gi: wp.array(dtype=int), gq: w
     ph = h[0]
     if ph < zero or ph > pi:
         inside = 0
-    ph = wp.clamp(ph, zero, pi)
+    ph = fmath.clamp(ph, zero, pi)
     alpha = zero
     if inside == 1:
         alpha = f[1] * wp.float64(2.0) * h[1] * wp.sin(tl)

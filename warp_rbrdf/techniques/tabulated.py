@@ -32,7 +32,7 @@ from ..materials.data import (
 
 @wp.func
 def tab_row(theta_v: float, n_v: int) -> int:
-    return wp.clamp(int(wp.floor(theta_v / wp.HALF_PI * float(n_v))), 0, n_v - 1)
+    return fmath.clamp(int(wp.floor(theta_v / wp.HALF_PI * float(n_v))), 0, n_v - 1)
 
 
 @wp.func
@@ -62,7 +62,7 @@ def tab_sample_cells(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float),
     frac_p, m_p = pc1d_in_cell(cdf_p, off_p + (v * n_t + j) * (n_p + 1), k, u)
     dp = wp.pi / float(n_p)
     phi_l = s * (float(k) + frac_p) * dp
-    pdf = (m_t / dt) * (0.5 * m_p / dp) / wp.max(wp.sin(theta_l), 1.0e-30)
+    pdf = (m_t / dt) * (0.5 * m_p / dp) / fmath.fmax(wp.sin(theta_l), 1.0e-30)
     return wp.vec3(theta_l, phi_l, pdf)
 
 
@@ -77,13 +77,13 @@ def tab_pdf(cdf_t: wp.array(dtype=float), cdf_p: wp.array(dtype=float), off_t: i
     v = tab_row(theta_v, n_v)
     dt = wp.HALF_PI / float(n_t)
     dp = wp.pi / float(n_p)
-    j = wp.clamp(int(wp.floor(theta_l / dt)), 0, n_t - 1)
-    k = wp.clamp(int(wp.floor(phi_abs / dp)), 0, n_p - 1)
+    j = fmath.clamp(int(wp.floor(theta_l / dt)), 0, n_t - 1)
+    k = fmath.clamp(int(wp.floor(phi_abs / dp)), 0, n_p - 1)
     st = off_t + v * (n_t + 1)
     sp = off_p + (v * n_t + j) * (n_p + 1)
     m_t = pc1d_mass(cdf_t, st, j)
     m_p = pc1d_mass(cdf_p, sp, k)
-    return (m_t / dt) * (0.5 * m_p / dp) / wp.max(sin_l, 1.0e-30)
+    return (m_t / dt) * (0.5 * m_p / dp) / fmath.fmax(sin_l, 1.0e-30)
 
 
 @wp.func

@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+from .. import fastmath as fmath
 from ..materials.data import Materials
 
 
 @wp.func
 def sample_uniform_hemisphere(u: wp.vec2) -> wp.vec3:
     z = u[0]
-    r = wp.sqrt(wp.max(0.0, 1.0 - z * z))
+    r = wp.sqrt(fmath.fmax(0.0, 1.0 - z * z))
     phi = 2.0 * wp.pi * u[1]
     return wp.vec3(r * wp.cos(phi), r * wp.sin(phi), z)
 
