@@ -39,6 +39,55 @@ from __future__ import annotations
 import numpy as np
 import warp as wp
 
+# --- min / max / clamp --------------------------------------------------------------------------
+@wp.func
+def fmin(a: wp.float32, b: wp.float32) -> wp.float32:
+    """``a < b ? a : b`` (one ``minss``; module docstring)."""
+    return wp.where(a < b, a, b)
+
+
+@wp.func
+def fmin(a: wp.float64, b: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
+    return wp.where(a < b, a, b)
+
+
+@wp.func
+def fmin(a: int, b: int) -> int:  # noqa: F811 - a Warp overload
+    return wp.min(a, b)
+
+
+@wp.func
+def fmax(a: wp.float32, b: wp.float32) -> wp.float32:
+    """``a > b ? a : b`` (one ``maxss``; module docstring)."""
+    return wp.where(a > b, a, b)
+
+
+@wp.func
+def fmax(a: wp.float64, b: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
+    return wp.where(a > b, a, b)
+
+
+@wp.func
+def fmax(a: int, b: int) -> int:  # noqa: F811 - a Warp overload
+    return wp.max(a, b)
+
+
+@wp.func
+def clamp(x: wp.float32, lo: wp.float32, hi: wp.float32) -> wp.float32:
+    """``fmin(fmax(x, lo), hi)``: ``lo`` for a NaN ``x`` (module docstring)."""
+    return fmin(fmax(x, lo), hi)
+
+
+@wp.func
+def clamp(x: wp.float64, lo: wp.float64, hi: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
+    return fmin(fmax(x, lo), hi)
+
+
+@wp.func
+def clamp(x: int, lo: int, hi: int) -> int:  # noqa: F811 - a Warp overload
+    return wp.clamp(x, lo, hi)
+
+
 #: coefficients of P (increasing powers of a^2)
 ATAN_COEFFS = (0.9999999842426359, -0.3333306678069136, 0.19992483578497855, -0.1420257051166726,
                0.10636754097973429, -0.07495445442966431, 0.04258760746076035, -0.016005030500485688,
@@ -51,8 +100,8 @@ def atan2(y: float, x: float) -> float:
     """atan2(y, x) in [-pi, pi] (radians), as ``wp.atan2`` up to 2.7e-7; (0, 0) -> 0."""
     ax = wp.abs(x)
     ay = wp.abs(y)
-    mx = wp.max(ax, ay)
-    a = wp.min(ax, ay) / wp.max(mx, 1.0e-37)
+    mx = fmax(ax, ay)
+    a = fmin(ax, ay) / fmax(mx, 1.0e-37)
     s = a * a
     p = wp.static(_C[8])
     p = p * s + wp.static(_C[7])
@@ -138,52 +187,3 @@ def sincos_numpy(x) -> tuple[np.ndarray, np.ndarray]:
     sn = np.select([q == 0, q == 1, q == 2], [sr, cr, -sr], -cr)
     cs = np.select([q == 0, q == 1, q == 2], [cr, -sr, -cr], sr)
     return sn.astype(np.float32), cs.astype(np.float32)
-
-
-# --- min / max / clamp --------------------------------------------------------------------------
-@wp.func
-def fmin(a: wp.float32, b: wp.float32) -> wp.float32:
-    """``a < b ? a : b`` (one ``minss``; module docstring)."""
-    return wp.where(a < b, a, b)
-
-
-@wp.func
-def fmin(a: wp.float64, b: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
-    return wp.where(a < b, a, b)
-
-
-@wp.func
-def fmin(a: int, b: int) -> int:  # noqa: F811 - a Warp overload
-    return wp.min(a, b)
-
-
-@wp.func
-def fmax(a: wp.float32, b: wp.float32) -> wp.float32:
-    """``a > b ? a : b`` (one ``maxss``; module docstring)."""
-    return wp.where(a > b, a, b)
-
-
-@wp.func
-def fmax(a: wp.float64, b: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
-    return wp.where(a > b, a, b)
-
-
-@wp.func
-def fmax(a: int, b: int) -> int:  # noqa: F811 - a Warp overload
-    return wp.max(a, b)
-
-
-@wp.func
-def clamp(x: wp.float32, lo: wp.float32, hi: wp.float32) -> wp.float32:
-    """``fmin(fmax(x, lo), hi)``: ``lo`` for a NaN ``x`` (module docstring)."""
-    return fmin(fmax(x, lo), hi)
-
-
-@wp.func
-def clamp(x: wp.float64, lo: wp.float64, hi: wp.float64) -> wp.float64:  # noqa: F811 - a Warp overload
-    return fmin(fmax(x, lo), hi)
-
-
-@wp.func
-def clamp(x: int, lo: int, hi: int) -> int:  # noqa: F811 - a Warp overload
-    return wp.clamp(x, lo, hi)
