@@ -132,3 +132,21 @@ def test_min_max_clamp_equal_warps_on_numbers_and_follow_the_stated_nan_rule():
     np.testing.assert_array_equal(oi[:, 0], np.minimum(k, 2))
     np.testing.assert_array_equal(oi[:, 1], np.maximum(k, 2))
     np.testing.assert_array_equal(oi[:, 2], np.clip(k, -1, 2))
+
+
+def test_the_kernels_take_min_max_clamp_from_fastmath():
+    """The render kernels' modules call fastmath's fmin / fmax / clamp, not Warp's scalar
+    wp.min / wp.max / wp.clamp (two compares and two selects each on the CPU: module docstring
+    of warp_rbrdf.fastmath); Warp's vector forms (an argument ``wp.vec3(...)``) stay."""
+    import re
+    from pathlib import Path
+
+    root = Path(fastmath.__file__).parent
+    found = []
+    for path in sorted(root.rglob("*.py")):
+        if path.name == "fastmath.py":
+            continue
+        for n, line in enumerate(path.read_text().splitlines(), 1):
+            if re.search(r"\bwp\.(min|max|clamp)\(", line) and "wp.vec3(" not in line:
+                found.append(f"{path.relative_to(root)}:{n}: {line.strip()}")
+    assert not found, "\n".join(found)
