@@ -32,7 +32,7 @@ first); a NaN in the first operand gives the second, as Warp's does, so ``fmax(x
 NaN to 0. ``clamp(x, lo, hi)`` is ``fmin(fmax(x, lo), hi)``: ``lo`` for a NaN ``x``, as Warp's.
 The native snippets of the rational evaluation use the same selects
 (:data:`warp_rbrdf.materials.rational_flat2d.MINMAX_SOURCE`). What it buys is measured in
-``docs/cpu_lanes.md`` (the rational fits' renders, not ``rgl``'s).
+``docs/rendering.md`` (per-sample cost) and ``docs/bench_eval.md``.
 """
 from __future__ import annotations
 
