@@ -25,25 +25,15 @@ def test_the_variable_names_the_device_and_a_named_device_wins(monkeypatch):
         get_device()
 
 
-def test_cli_reports_a_bad_variable_in_one_line(monkeypatch, tmp_path, capsys):
+@pytest.mark.parametrize("var, value", [("RBRDF_DEVICE", "tpu"), ("RBRDF_CPU_ISA", "avx9000")])
+def test_cli_reports_a_bad_variable_in_one_line(monkeypatch, tmp_path, capsys, var, value):
+    """A bad ``$RBRDF_DEVICE`` or ``$RBRDF_CPU_ISA`` (the render kernels' ISA level cap): one
+    line naming the variable and its value, exit status 2, nothing written."""
     from warp_rbrdf.cli import main
 
-    monkeypatch.setenv("RBRDF_DEVICE", "tpu")
+    monkeypatch.setenv(var, value)
     out = tmp_path / "x.exr"
     assert main(["render", "--spp", "1", "--resolution", "8", "8", "--out", str(out), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "RBRDF_DEVICE" in err[0] and "tpu" in err[0], err
-    assert not out.exists()
-
-
-def test_cli_reports_a_bad_isa_cap_in_one_line(monkeypatch, tmp_path, capsys):
-    """``$RBRDF_CPU_ISA`` (the render kernels' ISA level cap) naming no level: one line naming
-    the variable, exit status 2, nothing written."""
-    from warp_rbrdf.cli import main
-
-    monkeypatch.setenv("RBRDF_CPU_ISA", "avx9000")
-    out = tmp_path / "x.exr"
-    assert main(["render", "--spp", "1", "--resolution", "8", "8", "--out", str(out), "--no-progress"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "RBRDF_CPU_ISA" in err[0] and "avx9000" in err[0], err
+    assert len(err) == 1 and var in err[0] and value in err[0], err
     assert not out.exists()
