@@ -31,7 +31,7 @@ where Warp's gives the first) and a NaN in the second operand (NaN, where Warp's
 first); a NaN in the first operand gives the second, as Warp's does, so ``fmax(x, 0.0)`` maps a
 NaN to 0. ``clamp(x, lo, hi)`` is ``fmin(fmax(x, lo), hi)``: ``lo`` for a NaN ``x``, as Warp's.
 The native snippets of the rational evaluation use the same selects
-(:data:`warp_rbrdf.materials.rational_flat2d.MINMAX_SOURCE`). What it buys is measured in
+(:data:`warp_rbrdf.materials.rational_channels.MINMAX_SOURCE`). What it buys is measured in
 ``docs/rendering.md`` (per-sample cost) and ``docs/bench_eval.md``.
 """
 from __future__ import annotations

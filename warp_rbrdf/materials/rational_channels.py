@@ -69,9 +69,18 @@ EXP_SOURCE = f"""auto rbrdf_exp = [](rbrdf_v4d x) -> rbrdf_v4d {{
 }};
 """
 
+#: C++ statements: ``rb_min``, ``rb_max``, ``rb_clamp`` of two (three) numbers of one type, one
+#: select each, as :func:`warp_rbrdf.fastmath.fmin` / ``fmax`` / ``clamp`` (Warp's ``wp::min`` /
+#: ``wp::max`` / ``wp::clamp`` of floats take two compares and two selects: fmin's NaN rule)
+MINMAX_SOURCE = """auto rb_min = [](auto a, auto b) { return a < b ? a : b; };
+auto rb_max = [](auto a, auto b) { return a > b ? a : b; };
+auto rb_clamp = [](auto x, auto lo, auto hi) { const auto y = x > lo ? x : lo; return y < hi ? y : hi; };
+"""
+
 #: the vector steps on ``p``, ``q`` (``rbrdf_v4d``: P and Q of R, G, B and a fourth lane), ``hd``
 #: (the leaf header), ``flags``, ``m0``, ``m1``, ``m2`` and ``tab`` (the table's value) into
-#: ``wp::vec_t<3, float> out`` (needs the typedefs and ``rbrdf_exp`` of :data:`VECTOR_PRELUDE`)
+#: ``wp::vec_t<3, float> out`` (needs the typedefs and ``rbrdf_exp`` of :data:`VECTOR_PRELUDE`
+#: and ``rb_clamp`` of :data:`MINMAX_SOURCE`)
 VECTOR_STEPS = f"""rbrdf_v4d y = p / q;
 if (flags & {LEAF_LOG}) {{
     if (flags & {LEAF_MAX}) {{ const rbrdf_v4d b = hd[{FH_LOGMAX}]; y = y < b ? y : b; }}
@@ -83,11 +92,7 @@ const int modes[3] = {{m0, m1, m2}};
 wp::vec_t<3, float> out;
 for (int c = 0; c < 3; ++c) {{
     double v = (modes[c] & {CH_TABLE}) ? (double)tab.c[c] : y[c];
-    if (modes[c] & {CH_RANGE}) {{   /* one select each way (warp_rbrdf.fastmath.clamp) */
-        const double lo = hd[{FH_RANGES} + 2 * c], hi = hd[{FH_RANGES} + 2 * c + 1];
-        v = v > lo ? v : lo;
-        v = v < hi ? v : hi;
-    }}
+    if (modes[c] & {CH_RANGE}) v = rb_clamp(v, hd[{FH_RANGES} + 2 * c], hd[{FH_RANGES} + 2 * c + 1]);
     out.c[c] = (float)v;
 }}
 """
@@ -100,7 +105,7 @@ typedef long long rbrdf_v4l __attribute__((ext_vector_type(4)));
 #: the vector types and the inline ``exp`` the steps use
 VECTOR_PRELUDE = VECTOR_TYPES + EXP_SOURCE
 
-_VECTOR = (VECTOR_PRELUDE + """const double* hd = (const double*)head;
+_VECTOR = (VECTOR_PRELUDE + MINMAX_SOURCE + """const double* hd = (const double*)head;
 rbrdf_v4d p = {pq.c[0], pq.c[1], pq.c[2], 0.0};
 rbrdf_v4d q = {pq.c[3], pq.c[4], pq.c[5], 1.0};
 """ + VECTOR_STEPS + "return out;\n")

@@ -40,7 +40,7 @@ from fit.rational.model import COS_FLOOR
 
 from .. import fastmath
 from ..chebyshev_dense import Native, class_of_key, dense_block, dense_block_scalar
-from .rational_channels import SCALAR_STEPS, VECTOR_PRELUDE, VECTOR_STEPS
+from .rational_channels import MINMAX_SOURCE, SCALAR_STEPS, VECTOR_PRELUDE, VECTOR_STEPS
 from .rational_records import (
     FF_BASES,
     FF_COS_CUT,
@@ -133,15 +133,6 @@ def angles_2d_numpy(wi, wo) -> np.ndarray:
     for a in (np.sqrt(rs2) / (ls + s[:, 2]), np.sqrt((c * c).sum(-1, dtype=f)) / (ls * li + sw)):
         out.append(f(2) * (a * atan_poly_numpy(a * a)))
     return np.stack(out + [s[:, 2] * sw / (ls2 * li)], -1).astype(f)
-
-
-#: C++ statements: ``rb_min``, ``rb_max``, ``rb_clamp`` of two (three) numbers of one type, one
-#: select each, as :func:`warp_rbrdf.fastmath.fmin` / ``fmax`` / ``clamp`` (Warp's ``wp::min`` /
-#: ``wp::max`` / ``wp::clamp`` of floats take two compares and two selects: fmin's NaN rule)
-MINMAX_SOURCE = """auto rb_min = [](auto a, auto b) { return a < b ? a : b; };
-auto rb_max = [](auto a, auto b) { return a > b ? a : b; };
-auto rb_clamp = [](auto x, auto lo, auto hi) { const auto y = x > lo ? x : lo; return y < hi ? y : hi; };
-"""
 
 
 def flat_source(keys: tuple, margin: float, scalar: bool = False, n_vars: int = 2) -> str:
